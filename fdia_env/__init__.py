@@ -1,0 +1,14 @@
+"""fdia_env: Gymnasium and PettingZoo environments for false data injection attacks on Kalman filters."""
+
+from fdia_env import scenarios
+from fdia_env.episode import EpisodeSpec
+from fdia_env.registration import register_envs
+from fdia_env.systems import LinearSystem, Sensor, position_sensor, pv_sensor, tracking_system
+
+register_envs()
+
+__version__ = "0.1.0"
+__all__ = [
+    "EpisodeSpec", "LinearSystem", "Sensor", "position_sensor", "pv_sensor", "register_envs",
+    "scenarios", "tracking_system",
+]

@@ -1,0 +1,122 @@
+"""Input checks shared by every public constructor: clear errors that name the parameter."""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+
+_SYM_RTOL = 1e-9
+
+
+def as_matrix(name: str, value: Any, shape: tuple[int | None, int | None] | None = None) -> np.ndarray:
+    """Convert ``value`` to a finite, read-only float64 2-D array or raise ``ValueError``.
+
+    Args:
+        name: Parameter name used in error messages.
+        value: Anything ``np.asarray`` accepts; scalars become 1x1 and vectors 1xn.
+        shape: Required shape; ``None`` entries are free.
+
+    Returns:
+        A read-only float64 copy of shape ``(rows, cols)``.
+    """
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric matrix, got {value!r}") from exc
+    if arr.ndim == 0:
+        arr = arr.reshape(1, 1)
+    elif arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D matrix, got an array of shape {arr.shape}")
+    if shape is not None:
+        for axis, want in enumerate(shape):
+            if want is not None and arr.shape[axis] != want:
+                raise ValueError(f"{name} must have shape {_fmt_shape(shape)}, got {arr.shape}")
+    check_finite(name, arr)
+    arr.setflags(write=False)
+    return arr
+
+
+def as_vector(name: str, value: Any, size: int) -> np.ndarray:
+    """Convert ``value`` to a finite, read-only float64 vector of length ``size``."""
+    try:
+        arr = np.array(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric vector, got {value!r}") from exc
+    if arr.size != size:
+        raise ValueError(f"{name} must have {size} entries, got {arr.size}")
+    check_finite(name, arr)
+    arr.setflags(write=False)
+    return arr
+
+
+def check_finite(name: str, arr: np.ndarray) -> None:
+    """Raise ``ValueError`` if ``arr`` holds NaN or infinity."""
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite (no NaN or inf), got {np.asarray(arr).tolist()}")
+
+
+def check_square(name: str, arr: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``arr`` is square."""
+    if arr.shape[-1] != arr.shape[-2]:
+        raise ValueError(f"{name} must be square, got shape {arr.shape}")
+
+
+def check_symmetric(name: str, arr: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``arr`` is symmetric to a relative tolerance."""
+    check_square(name, arr)
+    scale = max(1.0, float(np.max(np.abs(arr))))
+    if not np.allclose(arr, np.swapaxes(arr, -1, -2), rtol=0.0, atol=_SYM_RTOL * scale):
+        raise ValueError(f"{name} must be symmetric, got {np.asarray(arr).tolist()}")
+
+
+def check_psd(name: str, arr: np.ndarray, *, strict: bool = False) -> None:
+    """Raise ``ValueError`` unless ``arr`` is symmetric positive semidefinite (definite if strict)."""
+    check_symmetric(name, arr)
+    eig = np.linalg.eigvalsh(arr)
+    scale = max(1.0, float(np.max(np.abs(eig)))) if eig.size else 1.0
+    lowest = float(eig.min()) if eig.size else 0.0
+    if strict and lowest <= 0.0:
+        raise ValueError(
+            f"{name} must be positive definite; its smallest eigenvalue is {lowest:.6g}"
+        )
+    if not strict and lowest < -1e-10 * scale:
+        raise ValueError(
+            f"{name} must be positive semidefinite; its smallest eigenvalue is {lowest:.6g}"
+        )
+
+
+def check_int(name: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    """Return ``value`` as int if it is an integer within bounds, else raise ``ValueError``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    value = int(value)
+    if minimum is not None and value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {value}")
+    return value
+
+
+def check_positive(name: str, value: Any) -> float:
+    """Return ``value`` as float if it is finite and > 0, else raise ``ValueError``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    value = float(value)
+    if not np.isfinite(value) or value <= 0.0:
+        raise ValueError(f"{name} must be a finite number > 0, got {value}")
+    return value
+
+
+def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
+    """Return ``value`` if it is one of ``choices``, else raise ``ValueError`` listing them."""
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
+    return value
+
+
+def _fmt_shape(shape: tuple[int | None, ...]) -> str:
+    return "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"

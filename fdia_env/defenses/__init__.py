@@ -1,0 +1,6 @@
+"""Defense models: which data the filter trusts."""
+
+from fdia_env.defenses.base import DefenseModel, FilterInput
+from fdia_env.defenses.perfect_detection import PerfectDetection
+
+__all__ = ["DefenseModel", "FilterInput", "PerfectDetection"]

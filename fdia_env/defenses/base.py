@@ -1,0 +1,60 @@
+"""The defense-model interface: which data the filter trusts."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from fdia_env.attacks.base import AttackEffect
+from fdia_env.episode import EpisodeSpec
+from fdia_env.systems import LinearSystem
+
+
+@dataclass(frozen=True)
+class FilterInput:
+    """What reaches the filter in one step.
+
+    Attributes:
+        used: (M,) bool, sensors whose measurements the filter incorporates (nominal gain).
+        leaked_sigma: (nz, nz) covariance of the bias that reaches the filter through used
+            sensors, or None if no bias gets through.
+    """
+
+    used: np.ndarray
+    leaked_sigma: np.ndarray | None = None
+
+
+class DefenseModel(ABC):
+    """Owns the defender's action space (if any) and turns an attack into the filter's input.
+
+    A *passive* model takes no action; its environments have only the attacker.
+    """
+
+    name: str = "defense"
+    passive: bool = True
+    action_space: spaces.Space | None = None
+    feature_low: np.ndarray = np.zeros(0, dtype=np.float32)
+    feature_high: np.ndarray = np.zeros(0, dtype=np.float32)
+
+    @abstractmethod
+    def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
+        """Attach to a system and episode; build spaces here, once."""
+
+    def reset(self) -> None:  # noqa: B027 - optional hook
+        """Start an episode."""
+
+    def features(self) -> np.ndarray:
+        """Model-specific observation features."""
+        return np.zeros(0)
+
+    def action_mask(self) -> np.ndarray | None:
+        """Legal discrete actions or None."""
+        return None
+
+    @abstractmethod
+    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
+        """Decide what the filter uses given the defender's action and the attack."""

@@ -1,0 +1,27 @@
+"""Perfect detection: every attacked measurement is detected and dropped (MATH.md §4)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fdia_env.attacks.base import AttackEffect
+from fdia_env.defenses.base import DefenseModel, FilterInput
+from fdia_env.episode import EpisodeSpec
+from fdia_env.systems import LinearSystem
+
+
+class PerfectDetection(DefenseModel):
+    """Passive defender that drops exactly the attacked measurements; no bias gets through."""
+
+    name = "perfect_detection"
+    passive = True
+
+    def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
+        """Nothing to build: the model has no action."""
+        self._all = np.ones(system.M, dtype=bool)
+
+    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
+        """Use every sensor that was not attacked."""
+        return FilterInput(used=~effect.attacked)

@@ -1,0 +1,7 @@
+"""Environments: the simulation engine, the PettingZoo env and the Gymnasium view."""
+
+from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.simulation import Simulation
+from fdia_env.envs.single_agent import Policy, SingleAgentEnv, make_single_agent
+
+__all__ = ["FdiaParallelEnv", "Policy", "Simulation", "SingleAgentEnv", "make_single_agent"]

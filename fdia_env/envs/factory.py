@@ -1,0 +1,45 @@
+"""Build environments from keyword arguments, filling defaults from the scenario preset."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fdia_env.episode import EpisodeSpec
+from fdia_env.scenarios import Scenario, resolve
+from fdia_env.systems import LinearSystem
+
+
+def episode_spec(
+    scenario: str | Scenario | LinearSystem,
+    *,
+    horizon: int | None = None,
+    warmup: int | str | None = None,
+    objective: str = "trace",
+    reward_mode: str = "terminal",
+    dynamics: str = "expected",
+) -> tuple[Scenario, EpisodeSpec]:
+    """Resolve the scenario and build the :class:`EpisodeSpec`, defaults taken from the preset.
+
+    ``horizon`` defaults to the preset's window length; ``warmup`` to ``"steady"`` when the
+    preset starts in steady state, else to its attack step (or 0).
+    """
+    sc = resolve(scenario)
+    if horizon is None:
+        if sc.horizon is None:
+            raise ValueError(f"horizon is required: scenario {sc.name!r} does not define one")
+        horizon = sc.horizon
+    if warmup is None:
+        warmup = "steady" if sc.steady_state else (sc.attack_step or 0)
+    spec = EpisodeSpec(horizon=horizon, warmup=warmup, objective=objective,
+                       reward_mode=reward_mode, dynamics=dynamics)
+    return sc, spec
+
+
+def scenario_default(sc: Scenario, name: str, value: Any) -> Any:
+    """``value`` if given, else the preset's attribute ``name``; raise if neither exists."""
+    if value is not None:
+        return value
+    preset = getattr(sc, name, None)
+    if preset is None:
+        raise ValueError(f"{name} is required: scenario {sc.name!r} does not define one")
+    return preset

@@ -1,0 +1,101 @@
+"""Single-agent Gymnasium view of a two-player env: one player learns, the other is fixed."""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Protocol
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from fdia_env.envs.parallel import FdiaParallelEnv
+
+
+class Policy(Protocol):
+    """Anything with stable-baselines3's ``predict`` signature (SB3 models, baseline policies)."""
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = False
+    ) -> tuple[Any, Any]:
+        """Return ``(action, state)``."""
+        ...
+
+
+class SingleAgentEnv(gym.Env):
+    """Gymnasium view of :class:`FdiaParallelEnv` for one ``agent``.
+
+    The other player, if the env has one, is played by ``opponent`` (a fixed :class:`Policy`).
+    Observations are the agent's feature ``Box``; where the agent has illegal discrete actions
+    the mask is in ``info["action_mask"]`` and :meth:`action_masks` (sb3-contrib's MaskablePPO
+    reads the latter).
+
+    Args:
+        parallel: The two-player env.
+        agent: ``"attacker"`` or ``"defender"``.
+        opponent: Policy for the other player (required when the env has one).
+    """
+
+    def __init__(self, parallel: FdiaParallelEnv, agent: str = "attacker", opponent: Policy | None = None) -> None:
+        if agent not in parallel.possible_agents:
+            raise ValueError(f"agent must be one of {parallel.possible_agents}, got {agent!r}")
+        others = [a for a in parallel.possible_agents if a != agent]
+        if others and opponent is None:
+            raise ValueError(f"opponent is required: the env also has {others[0]!r}")
+        self.parallel = parallel
+        self.agent = agent
+        self.other = others[0] if others else None
+        self.opponent = opponent
+        self.render_mode = parallel.render_mode
+        self.metadata = {"render_modes": list(parallel.metadata["render_modes"]), "render_fps": 4}
+        space = parallel.observation_space(agent)
+        self._masked = isinstance(space, spaces.Dict)
+        self.observation_space = space["observation"] if self._masked else space
+        self.action_space = parallel.action_space(agent)
+        self._mask: np.ndarray | None = None
+        self._other_obs: Any = None
+
+    def _split(self, obs: Any) -> tuple[np.ndarray, dict]:
+        if self._masked:
+            self._mask = obs["action_mask"]
+            return obs["observation"], {"action_mask": obs["action_mask"]}
+        return obs, {}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        """Reset the underlying env; ``seed`` seeds every draw of the episode."""
+        super().reset(seed=seed)
+        obs, infos = self.parallel.reset(seed=seed, options=options)
+        if self.other is not None:
+            self._other_obs = obs[self.other]
+        own, extra = self._split(obs[self.agent])
+        return own, {**infos[self.agent], **extra}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Play ``action`` against the opponent's response for one step."""
+        actions = {self.agent: action}
+        if self.other is not None:
+            actions[self.other], _ = self.opponent.predict(self._other_obs, deterministic=True)
+        obs, rewards, terms, truncs, infos = self.parallel.step(actions)
+        if self.other is not None:
+            self._other_obs = obs[self.other]
+        own, extra = self._split(obs[self.agent])
+        return own, float(rewards[self.agent]), bool(terms[self.agent]), bool(truncs[self.agent]), {
+            **infos[self.agent], **extra}
+
+    def action_masks(self) -> np.ndarray:
+        """Legal actions now (all legal when the agent's model has no mask)."""
+        mask = self.parallel.action_masks(self.agent)
+        if mask is None:
+            return np.ones(getattr(self.action_space, "n", 1), dtype=bool)
+        return mask.astype(bool)
+
+    def render(self) -> str | np.ndarray | None:
+        """Delegate to the two-player env."""
+        return self.parallel.render()
+
+
+def make_single_agent(module: str, agent: str = "attacker", opponent: Policy | None = None,
+                      **kwargs: Any) -> SingleAgentEnv:
+    """Gymnasium entry point: ``fdia_env.<module>.parallel_env(**kwargs)`` seen by ``agent``."""
+    mod = importlib.import_module(module)
+    return SingleAgentEnv(mod.parallel_env(**kwargs), agent=agent, opponent=opponent)

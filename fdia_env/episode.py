@@ -1,0 +1,46 @@
+"""Episode specification: what one episode of any fdia_env environment is."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fdia_env._validation import check_choice, check_int
+
+OBJECTIVES = ("trace", "logdet")
+REWARD_MODES = ("terminal", "shaped", "per_step")
+DYNAMICS = ("expected", "sampled")
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """How an episode runs.
+
+    Attributes:
+        horizon: Number of attack-window steps N (the agents act once per step), >= 1.
+        warmup: ``"steady"`` to start the window with the filter in steady state (all sensors),
+            or the number of unattacked steps to run from the system's prior first.
+        objective: Φ: ``"trace"`` or ``"logdet"`` of the actual error covariance.
+        reward_mode: ``"terminal"`` pays Φ at the end only; ``"shaped"`` pays the per-step
+            increments (their sum is Φ_N − Φ_0); ``"per_step"`` pays Φ every step.
+        dynamics: ``"expected"`` uses the covariance recursions; ``"sampled"`` draws states,
+            noises and biases and pays the squared estimation error (trace objective only).
+    """
+
+    horizon: int
+    warmup: int | str = "steady"
+    objective: str = "trace"
+    reward_mode: str = "terminal"
+    dynamics: str = "expected"
+
+    def __post_init__(self) -> None:
+        check_int("horizon", self.horizon, minimum=1)
+        if self.warmup != "steady":
+            check_int("warmup", self.warmup, minimum=0)
+        check_choice("objective", self.objective, OBJECTIVES)
+        check_choice("reward_mode", self.reward_mode, REWARD_MODES)
+        check_choice("dynamics", self.dynamics, DYNAMICS)
+        if self.dynamics == "sampled" and self.objective != "trace":
+            raise ValueError(
+                "objective='logdet' is only defined for dynamics='expected': a single sampled "
+                "error has no log-determinant; use objective='trace' with dynamics='sampled'"
+            )

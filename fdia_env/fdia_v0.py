@@ -1,0 +1,78 @@
+"""``fdia_v0``: any attack model against any defense model on any scenario.
+
+>>> from fdia_env import fdia_v0
+>>> env = fdia_v0.parallel_env(scenario="ch4-position", attack="sparse", defense="perfect_detection",
+...                            attack_kwargs={"budget": 2}, horizon=3)
+>>> env.possible_agents
+['attacker']
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+
+from fdia_env.attacks import AttackModel, SparseAttack
+from fdia_env.defenses import DefenseModel, PerfectDetection
+from fdia_env.envs.factory import episode_spec
+from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.scenarios import Scenario
+from fdia_env.systems import LinearSystem
+
+NAME = "fdia_v0"
+ATTACKS: dict[str, type[AttackModel]] = {"sparse": SparseAttack}
+DEFENSES: dict[str, type[DefenseModel]] = {"perfect_detection": PerfectDetection}
+
+
+def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None) -> Any:
+    if isinstance(value, str):
+        if value not in registry:
+            raise ValueError(f"{kind} must be one of {sorted(registry)} or a model instance, got {value!r}")
+        return registry[value](**(kwargs or {}))
+    if kwargs:
+        raise ValueError(f"{kind}_kwargs only apply when {kind} is given by name")
+    return value
+
+
+def parallel_env(
+    scenario: str | Scenario | LinearSystem = "ch4-position",
+    attack: str | AttackModel = "sparse",
+    defense: str | DefenseModel = "perfect_detection",
+    attack_kwargs: dict | None = None,
+    defense_kwargs: dict | None = None,
+    horizon: int | None = None,
+    objective: str = "trace",
+    reward_mode: str = "terminal",
+    dynamics: str = "expected",
+    warmup: int | str | None = None,
+    render_mode: str | None = None,
+) -> FdiaParallelEnv:
+    """Compose a scenario, an attack model, a defense model and an episode spec.
+
+    Models are given by name (with ``*_kwargs``) or as instances; names: attacks
+    ``ATTACKS``, defenses ``DEFENSES``.
+    """
+    sc, spec = episode_spec(scenario, horizon=horizon, warmup=warmup, objective=objective,
+                            reward_mode=reward_mode, dynamics=dynamics)
+    if attack == "sparse" and not (attack_kwargs or {}).get("budget") and sc.budget is not None:
+        attack_kwargs = {**(attack_kwargs or {}), "budget": sc.budget}
+    return FdiaParallelEnv(
+        sc,
+        _model("attack", attack, ATTACKS, attack_kwargs),
+        _model("defense", defense, DEFENSES, defense_kwargs),
+        spec,
+        render_mode=render_mode,
+        name=NAME,
+    )
+
+
+def raw_env(**kwargs: Any) -> parallel_to_aec_wrapper:
+    """The AEC view without wrappers."""
+    return parallel_to_aec_wrapper(parallel_env(**kwargs))
+
+
+def env(**kwargs: Any) -> OrderEnforcingWrapper:
+    """The AEC view with PettingZoo's order-enforcing wrapper."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))

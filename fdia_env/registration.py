@@ -1,0 +1,22 @@
+"""Gymnasium registration of the single-agent views (``gymnasium.make("fdia_env/...")``)."""
+
+from __future__ import annotations
+
+import gymnasium
+
+# id -> (module whose parallel_env builds the env, learning agent)
+GYM_IDS: dict[str, tuple[str, str]] = {
+    "fdia_env/SparseAttack-v0": ("fdia_env.sparse_attack_v0", "attacker"),
+}
+
+
+def register_envs() -> None:
+    """Register every id in :data:`GYM_IDS` (idempotent)."""
+    for env_id, (module, agent) in GYM_IDS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point="fdia_env.envs.single_agent:make_single_agent",
+            kwargs={"module": module, "agent": agent},
+        )

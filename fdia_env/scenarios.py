@@ -1,0 +1,172 @@
+"""Named parameter sets from the literature (MATH.md §6).
+
+>>> from fdia_env import scenarios
+>>> sc = scenarios.get("ch4-position")
+>>> sc.system.M, sc.budget, sc.horizon
+(3, 5, 6)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fdia_env._validation import check_int
+from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A system plus the experiment defaults the literature used with it.
+
+    Attributes:
+        name: Preset name.
+        system: The linear Gaussian system.
+        description: One line on where the parameters come from.
+        budget: Sparsity budget c (sparse attacks), if the source states one.
+        horizon: Attack window length N, if stated.
+        power: Attack power a², if stated.
+        attack_step: Time step of the attack, if stated.
+        steady_state: Whether the filter starts the window in steady state.
+        extra: Other stated values (probabilities, sweeps, run counts).
+    """
+
+    name: str
+    system: LinearSystem
+    description: str
+    budget: int | None = None
+    horizon: int | None = None
+    power: float | None = None
+    attack_step: int | None = None
+    steady_state: bool = True
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _ch2_position() -> Scenario:
+    sys = tracking_system(0.5, [np.sqrt(3.0), 2.0], name="ch2-position")
+    return Scenario("ch2-position", sys, "2 position sensors, σ_w² = 3, 4 (ch. 2)", power=3000.0)
+
+
+def _ch2_pv(two: bool) -> Callable[[], Scenario]:
+    def build() -> Scenario:
+        sensors = [pv_sensor(np.sqrt(3.0), 2.0, 0.0, name="z1")]
+        if two:
+            sensors.append(pv_sensor(2.0, np.sqrt(5.0), 0.0, name="z2"))
+        name = "ch2-pv-2" if two else "ch2-pv-1"
+        sys = tracking_system(0.5, sensors=sensors, name=name)
+        return Scenario(name, sys, f"{len(sensors)} position+velocity sensor(s) (ch. 2)", power=3000.0)
+
+    return build
+
+
+def _ch3_tracking() -> Scenario:
+    sys = tracking_system(0.5, sensors=[pv_sensor(np.sqrt(3.0), 2.0, 0.0, name="z1")], name="ch3-tracking")
+    return Scenario(
+        "ch3-tracking", sys, "1 position+velocity sensor, R = diag(3, 4) (ch. 3)",
+        attack_step=100, horizon=200, steady_state=False,
+        extra={"p1": 0.85, "power_range": (7.5, 120.0), "mc_runs": 10_000},
+    )
+
+
+def _ch3_static() -> Scenario:
+    sensor = Sensor(H=np.eye(2), R=np.diag([3.0, 4.0]), name="z1")
+    sys = LinearSystem(
+        F=np.eye(2), Q=np.zeros((2, 2)), sensors=(sensor,),
+        x0=[10.0, 5.0], P0=100.0 * np.eye(2), name="ch3-static",
+    )
+    return Scenario(
+        "ch3-static", sys, "static parameter, prior N([10, 5], 100 I) (ch. 3)", steady_state=False,
+        extra={"p1": 0.85, "power_range": (0.0, 400.0), "Pbb": "diag(a², 0)"},
+    )
+
+
+def _ch4_position(horizon: int = 6) -> Scenario:
+    sys = tracking_system(0.02, [0.2, 0.4, 0.5], name="ch4-position")
+    return Scenario("ch4-position", sys, "3 position sensors (ch. 4)", budget=5, horizon=horizon)
+
+
+def _ch4_pv(case: int) -> Callable[[], Scenario]:
+    def build() -> Scenario:
+        sigma_v = 0.02 if case == 1 else 0.001
+        sig = [0.5, 0.2 if case == 3 else 0.5, 0.5]
+        rho = [0.5, 0.0, -0.5]
+        sensors = [pv_sensor(s, s, r, name=f"z{i + 1}") for i, (s, r) in enumerate(zip(sig, rho, strict=True))]
+        name = f"ch4-pv-case{case}"
+        sys = tracking_system(sigma_v, sensors=sensors, name=name)
+        return Scenario(name, sys, f"3 position+velocity sensors, case {case} (ch. 4)",
+                        budget=5, horizon=6, extra={"objective": "logdet"})
+
+    return build
+
+
+def _ch4_random(seed: int = 0, sigma_v: float = 0.1) -> Scenario:
+    rng = np.random.default_rng(seed)
+    sigma_w = rng.uniform(0.0, 1.0, size=10)
+    sigma_w = np.maximum(sigma_w, 1e-6)  # U(0, 1) can return exactly 0; a sensor needs R > 0
+    sys = tracking_system(sigma_v, list(sigma_w), name="ch4-random")
+    return Scenario("ch4-random", sys, f"10 position sensors, σ_w ~ U(0, 1) (seed {seed})",
+                    budget=10, horizon=6, extra={"seed": seed})
+
+
+def _ch5_game() -> Scenario:
+    sys = tracking_system(0.5, [3.0, 4.0, 5.0], x0=[1.0, 1.0],
+                          P0=np.array([[0.25, 0.25], [0.25, 0.5]]), name="ch5-game")
+    return Scenario("ch5-game", sys, "3 position sensors, sensor-selection game (ch. 5)",
+                    power=100.0, attack_step=100)
+
+
+_PRESETS: dict[str, Callable[..., Scenario]] = {
+    "ch2-position": _ch2_position,
+    "ch2-pv-1": _ch2_pv(two=False),
+    "ch2-pv-2": _ch2_pv(two=True),
+    "ch3-tracking": _ch3_tracking,
+    "ch3-static": _ch3_static,
+    "ch4-position": _ch4_position,
+    "ch4-pv-case1": _ch4_pv(1),
+    "ch4-pv-case2": _ch4_pv(2),
+    "ch4-pv-case3": _ch4_pv(3),
+    "ch4-random": _ch4_random,
+    "ch5-game": _ch5_game,
+}
+
+
+def names() -> list[str]:
+    """The known preset names."""
+    return list(_PRESETS)
+
+
+def get(name: str, **kwargs: Any) -> Scenario:
+    """Build the named preset.
+
+    Args:
+        name: One of :func:`names`.
+        **kwargs: Preset options: ``horizon`` for ``ch4-position``; ``seed`` and ``sigma_v`` for
+            ``ch4-random``.
+
+    Raises:
+        ValueError: For an unknown name (the message lists the known ones) or unknown options.
+    """
+    if name not in _PRESETS:
+        raise ValueError(f"unknown scenario {name!r}; known scenarios: {', '.join(_PRESETS)}")
+    if "horizon" in kwargs:
+        check_int("horizon", kwargs["horizon"], minimum=1)
+    try:
+        return _PRESETS[name](**kwargs)
+    except TypeError as exc:
+        raise ValueError(f"scenario {name!r} does not take options {sorted(kwargs)}") from exc
+
+
+def resolve(scenario: str | Scenario | LinearSystem) -> Scenario:
+    """Accept a preset name, a :class:`Scenario` or a bare :class:`LinearSystem`."""
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, LinearSystem):
+        return Scenario(scenario.name, scenario, "user-supplied system")
+    if isinstance(scenario, str):
+        return get(scenario)
+    raise ValueError(
+        f"scenario must be a preset name, a Scenario or a LinearSystem, got {type(scenario).__name__}"
+    )

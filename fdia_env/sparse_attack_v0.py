@@ -1,0 +1,110 @@
+"""``sparse_attack_v0``: sparse sensor-time attacks against a perfectly detecting filter.
+
+## Description
+
+A Kalman filter tracks a system observed by M sensors and has reached steady state at time
+K. Over the window K+1..K+N the attacker corrupts measurements; the defender detects every
+corrupted measurement and drops it (perfect detection, MATH.md §4), so the filter runs on the
+remaining sensors. The attacker may corrupt at most ``budget`` (c) sensor-time pairs in total
+and wants the filter's error covariance at K+N as large as possible. The defender is passive:
+the env has the single agent ``"attacker"``.
+
+## Action Space
+
+``Discrete(2**M)``: action ``a`` attacks the sensors whose bits are set (bit 0 = sensor 1);
+``0`` attacks nothing. Over-budget rule: a subset larger than the budget left is trimmed to its
+lowest-numbered sensors that fit, so an episode never spends more than ``budget``.
+
+## Observation Space
+
+``Dict(observation=Box(float32), action_mask=Box(0, 1, (2**M,), int8))``, where
+``action_mask[a] = 1`` iff subset ``a`` fits the budget left. ``observation`` holds:
+
+| index | feature | range |
+|---|---|---|
+| 0 | steps left / N | [0, 1] |
+| 1..n | log(M_ii / P_ii at window start) (error variance growth) | [-30, 30] |
+| next n(n−1)/2 | correlations of the error covariance (i < j) | [-1, 1] |
+| (sampled only) | normalised innovation squared per measurement, last step | [0, 1000] |
+| last | budget left / budget | [0, 1] |
+
+## Rewards
+
+Φ = tr or log det of the actual error covariance (``dynamics="expected"``) or the squared
+estimation error (``"sampled"``). ``reward_mode="terminal"`` pays Φ(P[K+N|K+N]) at the last
+step, so the episode return is the objective of MATH.md §4; ``"shaped"`` pays increments;
+``"per_step"`` pays Φ every step.
+
+## Starting State
+
+The filter covariance is the steady state with all sensors (``warmup="steady"``), or the prior
+run ``warmup`` clean steps. In sampled dynamics the true state is drawn around the estimate.
+
+## Episode End
+
+Terminates after N steps. No truncation.
+
+## Arguments
+
+``scenario`` (preset name, Scenario or LinearSystem; default ``"ch4-position"``), ``budget``
+(c, default the preset's), ``horizon`` (N, default the preset's), ``objective``,
+``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"ansi"`` | ``"rgb_array"``).
+
+## Version History
+
+- v0: initial release.
+
+## Example
+
+>>> from fdia_env import sparse_attack_v0
+>>> env = sparse_attack_v0.parallel_env(scenario="ch4-position", budget=5, horizon=6)
+>>> obs, infos = env.reset(seed=0)
+>>> plan = [0, 0, 1, 1, 1, 3]  # sensor 1 at K+3..K+6, sensor 2 at K+6
+>>> for a in plan:
+...     obs, rewards, terms, truncs, infos = env.step({"attacker": a})
+>>> round(rewards["attacker"], 4)
+0.0328
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+
+from fdia_env.attacks import SparseAttack
+from fdia_env.defenses import PerfectDetection
+from fdia_env.envs.factory import episode_spec, scenario_default
+from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.scenarios import Scenario
+from fdia_env.systems import LinearSystem
+
+NAME = "sparse_attack_v0"
+
+
+def parallel_env(
+    scenario: str | Scenario | LinearSystem = "ch4-position",
+    budget: int | None = None,
+    horizon: int | None = None,
+    objective: str = "trace",
+    reward_mode: str = "terminal",
+    dynamics: str = "expected",
+    warmup: int | str | None = None,
+    render_mode: str | None = None,
+) -> FdiaParallelEnv:
+    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
+    sc, spec = episode_spec(scenario, horizon=horizon, warmup=warmup, objective=objective,
+                            reward_mode=reward_mode, dynamics=dynamics)
+    attack = SparseAttack(scenario_default(sc, "budget", budget))
+    return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, render_mode=render_mode, name=NAME)
+
+
+def raw_env(**kwargs: Any) -> parallel_to_aec_wrapper:
+    """The AEC view without wrappers."""
+    return parallel_to_aec_wrapper(parallel_env(**kwargs))
+
+
+def env(**kwargs: Any) -> OrderEnforcingWrapper:
+    """The AEC view with PettingZoo's order-enforcing wrapper."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))
