@@ -1,6 +1,6 @@
 """Attack models: what the attacker's action means."""
 
-from fdia_env.attacks.base import AttackEffect, AttackModel
-from fdia_env.attacks.sparse import SparseAttack, mask_to_subset, subset_to_mask
+from fdia_env.attacks.base import AttackEffect, AttackModel, bits_to_mask, mask_to_bits
+from fdia_env.attacks.sparse import SparseAttack, trim_to_budget
 
-__all__ = ["AttackEffect", "AttackModel", "SparseAttack", "mask_to_subset", "subset_to_mask"]
+__all__ = ["AttackEffect", "AttackModel", "SparseAttack", "bits_to_mask", "mask_to_bits", "trim_to_budget"]

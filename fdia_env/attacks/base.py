@@ -18,13 +18,24 @@ class AttackEffect:
     """What an attack does to one filter step.
 
     Attributes:
-        attacked: (M,) bool, sensors whose measurement carries a bias this step.
+        attacked: Bitmask of the sensors whose measurement carries a bias this step (bit i set =
+            sensor i, 0-based); see :func:`bits_to_mask`.
         sigma: (nz, nz) bias covariance over the stacked measurement, or None when the bias
             value never matters (e.g. it is always detected and dropped) or is zero.
     """
 
-    attacked: np.ndarray
+    attacked: int
     sigma: np.ndarray | None = None
+
+
+def bits_to_mask(bits: int, M: int) -> np.ndarray:
+    """Bit ``i`` of ``bits`` set means sensor ``i``: returns an (M,) bool array."""
+    return (int(bits) >> np.arange(M)) & 1 == 1
+
+
+def mask_to_bits(mask: np.ndarray) -> int:
+    """Inverse of :func:`bits_to_mask`."""
+    return sum(1 << int(i) for i in np.flatnonzero(mask))
 
 
 class AttackModel(ABC):
@@ -48,7 +59,7 @@ class AttackModel(ABC):
         """Start an episode."""
 
     @abstractmethod
-    def features(self) -> np.ndarray:
+    def features(self) -> list[float]:
         """Model-specific observation features, scaled to order one."""
 
     def action_mask(self) -> np.ndarray | None:

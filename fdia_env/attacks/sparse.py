@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from typing import Any
 
 import numpy as np
@@ -15,14 +16,15 @@ from fdia_env.systems import LinearSystem
 MAX_SENSORS = 16
 
 
-def subset_to_mask(action: int, M: int) -> np.ndarray:
-    """Bit ``i`` of ``action`` set means sensor ``i`` is attacked: (M,) bool."""
-    return (int(action) >> np.arange(M)) & 1 == 1
-
-
-def mask_to_subset(mask: np.ndarray) -> int:
-    """Inverse of :func:`subset_to_mask`."""
-    return int(np.dot(np.asarray(mask, dtype=np.int64), 1 << np.arange(len(mask))))
+def trim_to_budget(bits: int, remaining: int) -> int:
+    """Over-budget rule: keep the lowest-numbered selected sensors that fit ``remaining``."""
+    kept = 0
+    while bits and remaining > 0:
+        low = bits & -bits  # lowest set bit
+        kept |= low
+        bits ^= low
+        remaining -= 1
+    return kept
 
 
 class SparseAttack(AttackModel):
@@ -43,7 +45,7 @@ class SparseAttack(AttackModel):
     def __init__(self, budget: int) -> None:
         self.budget = check_int("budget", budget, minimum=0)
         self.remaining = self.budget
-        self.last_attacked: np.ndarray | None = None
+        self.last_attacked = 0
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Build the action space for ``system`` and check the budget fits the window."""
@@ -58,45 +60,50 @@ class SparseAttack(AttackModel):
                 f"(every sensor-time pair of the window), got {self.budget}"
             )
         self.M = system.M
-        self.action_space = spaces.Discrete(2**system.M)
-        self._sizes = np.array([bin(a).count("1") for a in range(2**system.M)])
+        self.n_actions = 2**system.M
+        self.action_space = spaces.Discrete(self.n_actions)
+        sizes = np.array([a.bit_count() for a in range(self.n_actions)])
+        self._masks = [(sizes <= r).astype(np.int8) for r in range(self.budget + 1)]  # per budget left
         self.feature_low = np.zeros(1, dtype=np.float32)
         self.feature_high = np.ones(1, dtype=np.float32)
 
     def reset(self) -> None:
         """Restore the full budget."""
         self.remaining = self.budget
-        self.last_attacked = np.zeros(self.M, dtype=bool)
+        self.last_attacked = 0
 
-    def features(self) -> np.ndarray:
+    def features(self) -> list[float]:
         """Remaining budget fraction."""
-        return np.array([self.remaining / self.budget if self.budget else 0.0])
+        return [self.remaining / self.budget if self.budget else 0.0]
 
     def action_mask(self) -> np.ndarray:
-        """Subsets whose size fits the remaining budget."""
-        return (self._sizes <= self.remaining).astype(np.int8)
+        """Subsets whose size fits the remaining budget (int8, 1 = legal); a new array per call."""
+        return self._masks[self.remaining].copy()
 
     def apply(self, action: Any) -> AttackEffect:
         """Attack the chosen subset, trimmed to the remaining budget."""
-        if not self.action_space.contains(_as_int(action)):
+        a = _as_index(action)
+        if a is None or not 0 <= a < self.n_actions:
             raise ValueError(
-                f"attacker action must be an integer in [0, {self.action_space.n}), got {action!r}"
+                f"attacker action must be an integer in [0, {self.n_actions}) (a sensor bitmask), "
+                f"got {action!r}"
             )
-        attacked = subset_to_mask(int(action), self.M)
-        chosen = np.flatnonzero(attacked)
-        if chosen.size > self.remaining:  # over-budget rule: keep the lowest-numbered sensors
-            attacked[chosen[self.remaining :]] = False
-        self.remaining -= int(attacked.sum())
-        self.last_attacked = attacked
-        return AttackEffect(attacked=attacked)
+        if a.bit_count() > self.remaining:
+            a = trim_to_budget(a, self.remaining)
+        self.remaining -= a.bit_count()
+        self.last_attacked = a
+        return AttackEffect(attacked=a)
 
     def info(self) -> dict[str, Any]:
         """The sensors attacked this step (0-based) and the budget left."""
-        return {"attacked": np.flatnonzero(self.last_attacked).tolist(), "budget_left": self.remaining}
+        a = self.last_attacked
+        return {"attacked": [i for i in range(self.M) if a >> i & 1], "budget_left": self.remaining}
 
 
-def _as_int(action: Any) -> Any:
-    """Accept numpy integer scalars and 0-d/1-element arrays as Discrete actions."""
+def _as_index(action: Any) -> int | None:
+    """An integer action as int (numpy integers and 1-element integer arrays too), else None."""
+    if isinstance(action, numbers.Integral) and not isinstance(action, bool):
+        return int(action)
     if isinstance(action, np.ndarray) and action.size == 1 and np.issubdtype(action.dtype, np.integer):
-        return np.int64(action.reshape(()))
-    return action
+        return int(action.reshape(()))
+    return None

@@ -19,12 +19,13 @@ class FilterInput:
     """What reaches the filter in one step.
 
     Attributes:
-        used: (M,) bool, sensors whose measurements the filter incorporates (nominal gain).
+        used: Bitmask of the sensors whose measurements the filter incorporates with its nominal
+            gain (bit i set = sensor i, 0-based).
         leaked_sigma: (nz, nz) covariance of the bias that reaches the filter through used
             sensors, or None if no bias gets through.
     """
 
-    used: np.ndarray
+    used: int
     leaked_sigma: np.ndarray | None = None
 
 
@@ -47,9 +48,9 @@ class DefenseModel(ABC):
     def reset(self) -> None:  # noqa: B027 - optional hook
         """Start an episode."""
 
-    def features(self) -> np.ndarray:
+    def features(self) -> list[float]:
         """Model-specific observation features."""
-        return np.zeros(0)
+        return []
 
     def action_mask(self) -> np.ndarray | None:
         """Legal discrete actions or None."""

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from fdia_env.attacks.base import AttackEffect
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
@@ -20,8 +18,8 @@ class PerfectDetection(DefenseModel):
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Nothing to build: the model has no action."""
-        self._all = np.ones(system.M, dtype=bool)
+        self._all = (1 << system.M) - 1
 
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Use every sensor that was not attacked."""
-        return FilterInput(used=~effect.attacked)
+        return FilterInput(used=self._all & ~effect.attacked)

@@ -163,7 +163,7 @@ class FdiaParallelEnv(ParallelEnv):
 
     def _observe(self, agent: str) -> Any:
         model = self._models[agent]
-        box = np.concatenate([self.sim.features(), model.features()]).astype(np.float32)
+        box = np.array(self.sim.features() + model.features(), dtype=np.float32)
         mask = model.action_mask()
         if mask is None:
             return box
@@ -186,4 +186,4 @@ class FdiaParallelEnv(ParallelEnv):
 
     def state(self) -> np.ndarray:
         """Global state: the common features (the same information every player sees)."""
-        return self.sim.features().astype(np.float32)
+        return np.array(self.sim.features(), dtype=np.float32)

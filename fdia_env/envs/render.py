@@ -18,7 +18,7 @@ def render_ansi(env: FdiaParallelEnv) -> str:
         attacked = "-"
     else:
         names = [s.name or f"z{i + 1}" for i, s in enumerate(env.system.sensors)]
-        attacked = ", ".join(names[i] for i in np.flatnonzero(effect.attacked)) or "none"
+        attacked = ", ".join(n for i, n in enumerate(names) if effect.attacked >> i & 1) or "none"
     return (
         f"step {sim.k}/{env.spec.horizon}  attacked: {attacked}  "
         f"Φ({env.spec.objective}) = {sim.phi[-1]:.6g}\n"

@@ -3,12 +3,19 @@
 It keeps the filter's own covariance ``P`` (what the filter believes), the actual error
 covariance ``M`` (what the attack makes it), and in sampled mode the true state and the
 estimate. The environments put a PettingZoo / Gymnasium face on it.
+
+Two paths compute the same recursion: a generic numpy path for any state size, and for the
+2-state tracking model, while no bias reaches the filter, the closed-form kernels of
+:mod:`fdia_env.kalman.small` (tested against the generic path).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from fdia_env.attacks.base import bits_to_mask
 from fdia_env.defenses.base import FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
@@ -21,6 +28,7 @@ from fdia_env.kalman import (
     sampled_step,
     steady_state,
 )
+from fdia_env.kalman import small
 from fdia_env.systems import LinearSystem
 
 
@@ -33,18 +41,24 @@ class Simulation:
         x, x_hat: (n,) true state and estimate (sampled dynamics only).
         k: Window steps taken.
         phi: Φ after each window step (index 0 = window start).
+        nis: Normalised innovation squared per used measurement, last step (sampled only).
     """
 
-    def __init__(self, system: LinearSystem, spec: EpisodeSpec) -> None:
+    def __init__(self, system: LinearSystem, spec: EpisodeSpec, *, fast: bool = True) -> None:
         self.system = system
         self.spec = spec
-        self._all = np.ones(system.M, dtype=bool)
-        self._J_flat = system.J.reshape(system.M, -1)
+        self.sampled = spec.dynamics == "sampled"
+        self._full = (1 << system.M) - 1
         self._Q_factor = psd_sqrt(system.Q)
         self._R_factor = psd_sqrt(system.R)
         self.P_start = self._start_covariance()
-        self._P_scale = np.sqrt(np.diag(self.P_start))
-        self.sampled = spec.dynamics == "sampled"
+        self._iu = np.triu_indices(system.n, 1)
+        self._fast = fast and system.n == 2
+        if self._fast:
+            self._f2 = small.to_mat2(system.F)
+            self._q2 = small.to_sym2(system.Q)
+            self._start2 = small.to_sym2(self.P_start)
+            self._j2: dict[int, small.Sym2] = {}
         self.k = 0
 
     def _start_covariance(self) -> np.ndarray:
@@ -56,10 +70,24 @@ class Simulation:
             P = information_update(predict_cov(P, self.system.F, self.system.Q), self.system.J)
         return P
 
+    # --- state -------------------------------------------------------------------------------
+    @property
+    def P(self) -> np.ndarray:
+        """The filter's covariance P[k|k]."""
+        return small.from_sym2(self._p2) if self._p2 is not None else self._P
+
+    @property
+    def M(self) -> np.ndarray:
+        """The actual error covariance."""
+        if self.consistent:
+            return self.P
+        return self._M
+
     def reset(self, rng: np.random.Generator) -> None:
         """Put the filter at the window start; draw the true state in sampled mode."""
-        self.P = self.P_start.copy()
-        self.M = self.P  # shared until a bias leaks in (then M is recomputed separately)
+        self._P = self.P_start.copy()
+        self._p2 = self._start2 if self._fast else None
+        self._M = self._P
         self.consistent = True
         self.k = 0
         self.nis = 0.0
@@ -69,11 +97,10 @@ class Simulation:
 
     def _reset_sampled(self, rng: np.random.Generator) -> None:
         sys = self.system
+        self.x_hat = np.array(sys.x0)
         if self.spec.warmup == "steady":
-            self.x_hat = np.array(sys.x0)
             self.x = self.x_hat + psd_sqrt(self.P_start) @ rng.standard_normal(sys.n)
             return
-        self.x_hat = np.array(sys.x0)
         self.x = self.x_hat + psd_sqrt(sys.P0) @ rng.standard_normal(sys.n)
         P = np.array(sys.P0)
         for _ in range(int(self.spec.warmup)):
@@ -83,6 +110,7 @@ class Simulation:
                 rng, sys, self.x, self.x_hat, W, Q_factor=self._Q_factor, R_factor=self._R_factor
             )
 
+    # --- step --------------------------------------------------------------------------------
     def step(self, filter_input: FilterInput, rng: np.random.Generator | None = None) -> float:
         """Advance one step with the sensors and leaked bias the defense model decided.
 
@@ -90,58 +118,88 @@ class Simulation:
             Φ after the step (expected: of the actual error covariance; sampled: the squared
             estimation error).
         """
-        sys = self.system
         used, leak = filter_input.used, filter_input.leaked_sigma
-        P_pred = predict_cov(self.P, sys.F, sys.Q)
-        info = _inverse(P_pred) + (used.astype(float) @ self._J_flat).reshape(sys.n, sys.n)
-        P_new = _inverse(info)  # P[k|k]⁻¹ = P[k|k−1]⁻¹ + Σ_used H_i' R_i⁻¹ H_i
-        W = None
-        if leak is not None or not self.consistent or self.sampled:
-            W = masked_gain(P_new, sys, used)
-        if leak is None and self.consistent:
-            self.M = P_new
-        else:  # the nominal gain is not optimal for R + Σ: Joseph form for the actual error
-            noise = sys.R if leak is None else sys.R + leak
-            self.M = joseph_update(predict_cov(self.M, sys.F, sys.Q), W, sys.H, noise)
-            self.consistent = False
-        self.P = P_new
-        if self.sampled:
-            bias = None if leak is None else psd_sqrt(leak)
-            self.x, self.x_hat, _, innovation = sampled_step(
-                rng, sys, self.x, self.x_hat, W,
-                Q_factor=self._Q_factor, R_factor=self._R_factor, bias_factor=bias,
-            )
-            rows = sys.row_mask(used)
-            S = sys.H[rows] @ P_pred @ sys.H[rows].T + sys.R[np.ix_(rows, rows)]
-            nu = innovation[rows]
-            self.nis = float(nu @ np.linalg.solve(S, nu)) / max(int(rows.sum()), 1) if rows.any() else 0.0
+        if self._fast and leak is None and self.consistent and not self.sampled:
+            self._p2 = small.info_update2(small.predict2(self._p2, self._f2, self._q2), self._j2_of(used))
+        else:
+            self._generic_step(used, leak, rng)
         self.k += 1
         value = self.measure()
         self.phi.append(value)
         return value
 
+    def _j2_of(self, used: int) -> small.Sym2:
+        j = self._j2.get(used)
+        if j is None:
+            J = self.system.J[bits_to_mask(used, self.system.M)].sum(axis=0)
+            j = self._j2[used] = small.to_sym2(J)
+        return j
+
+    def _generic_step(self, used: int, leak: np.ndarray | None, rng: np.random.Generator | None) -> None:
+        sys = self.system
+        mask = bits_to_mask(used, sys.M)
+        P_prev, M_prev = self.P, self.M
+        P_pred = predict_cov(P_prev, sys.F, sys.Q)
+        P_new = information_update(P_pred, sys.J, mask)  # P[k|k]⁻¹ = P[k|k−1]⁻¹ + Σ_used J_i
+        W = masked_gain(P_new, sys, mask)  # nominal gain: zero columns for dropped sensors
+        if leak is not None or not self.consistent:
+            # the nominal gain is not optimal for R + Σ: Joseph form for the actual error
+            noise = sys.R if leak is None else sys.R + leak
+            self._M = joseph_update(predict_cov(M_prev, sys.F, sys.Q), W, sys.H, noise)
+            self.consistent = False
+        self._P = P_new
+        self._p2 = None
+        if self._fast:
+            self._p2 = small.to_sym2(P_new)
+        if self.sampled:
+            self._sampled_step(rng, mask, P_pred, W, leak)
+
+    def _sampled_step(self, rng, mask, P_pred, W, leak) -> None:
+        sys = self.system
+        bias = None if leak is None else psd_sqrt(leak)
+        self.x, self.x_hat, _, innovation = sampled_step(
+            rng, sys, self.x, self.x_hat, W,
+            Q_factor=self._Q_factor, R_factor=self._R_factor, bias_factor=bias,
+        )
+        rows = sys.row_mask(mask)
+        if not rows.any():
+            self.nis = 0.0
+            return
+        H = sys.H[rows]
+        S = H @ P_pred @ H.T + sys.R[np.ix_(rows, rows)]
+        nu = innovation[rows]
+        self.nis = float(nu @ np.linalg.solve(S, nu)) / int(rows.sum())
+
+    # --- outputs -----------------------------------------------------------------------------
     def measure(self) -> float:
         """Φ now: of the actual covariance (expected) or the squared error (sampled)."""
         if self.sampled:
             e = self.x - self.x_hat
             return float(e @ e)
+        if self._p2 is not None and self.consistent:
+            if self.spec.objective == "trace":
+                return small.trace2(self._p2)
+            return small.logdet2(self._p2)
         return float(objective(self.M, self.spec.objective))
 
-    def features(self) -> np.ndarray:
+    def features(self) -> list[float]:
         """Common observation features, order one.
 
         ``[steps_left / horizon, log(M_ii / P_start_ii) for each i, correlations of M (i < j)]``,
         plus the last normalised innovation squared (NIS per measurement) in sampled mode.
         """
-        n = self.system.n
-        d = np.sqrt(np.diag(self.M))
-        logvar = np.clip(2.0 * np.log(d / self._P_scale), -30.0, 30.0)
-        iu = np.triu_indices(n, 1)
-        corr = np.clip(self.M[iu] / (d[iu[0]] * d[iu[1]]), -1.0, 1.0)
-        base = [np.array([(self.spec.horizon - self.k) / self.spec.horizon]), logvar, corr]
+        out = [(self.spec.horizon - self.k) / self.spec.horizon]
+        if self._p2 is not None and self.consistent:
+            out += small.shape_features2(self._p2, self._start2)
+        else:
+            M = self.M
+            var = np.diag(M)
+            out += np.clip(np.log(var / np.diag(self.P_start)), -30.0, 30.0).tolist()
+            i, j = self._iu
+            out += np.clip(M[i, j] / np.sqrt(var[i] * var[j]), -1.0, 1.0).tolist()
         if self.sampled:
-            base.append(np.array([min(self.nis, 1e3)]))
-        return np.concatenate(base)
+            out.append(min(self.nis, 1e3) if math.isfinite(self.nis) else 1e3)
+        return out
 
     def feature_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of :meth:`features`."""
@@ -150,12 +208,3 @@ class Simulation:
         low = [0.0] + [-30.0] * n + [-1.0] * n_corr + ([0.0] if self.sampled else [])
         high = [1.0] + [30.0] * n + [1.0] * n_corr + ([1e3] if self.sampled else [])
         return np.array(low), np.array(high)
-
-
-def _inverse(a: np.ndarray) -> np.ndarray:
-    """Inverse of one small SPD matrix; closed form for 2×2 (the tracking model)."""
-    if a.shape == (2, 2):
-        p, q, s = a[0, 0], a[0, 1], a[1, 1]
-        det = p * s - q * q
-        return np.array([[s / det, -q / det], [-q / det, p / det]])
-    return np.linalg.inv(a)

@@ -70,7 +70,7 @@ def tracking_system(
     T = check_positive("T", T)
     all_sensors: list[Sensor] = []
     for i, s in enumerate(sigma_w or ()):
-        all_sensors.append(position_sensor(s, name=f"z{i + 1}"))
+        all_sensors.append(position_sensor(check_positive(f"sigma_w[{i}]", s), name=f"z{i + 1}"))
     all_sensors.extend(sensors or ())
     if not all_sensors:
         raise ValueError("tracking_system needs sigma_w or sensors: got no sensor at all")

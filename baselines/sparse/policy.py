@@ -1,0 +1,76 @@
+"""A solver's attack plan as a policy for ``sparse_attack_v0`` (stable-baselines3 signature)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from fdia_env._validation import check_int
+from baselines.sparse.result import SparseResult
+
+
+class SparsePolicy:
+    """Plays a fixed open-loop plan: at window step k, attack the sensors of ``actions[k]``.
+
+    The step is recovered from the observation: ``observation[0] = steps_left / N`` in
+    ``sparse_attack_v0``, so ``k = N − round(observation[0] · N)``. Steps outside the window
+    (the terminal observation) get action 0.
+
+    Args:
+        actions: (N,) bitmask per step (bit 0 = sensor 1), e.g. :meth:`SparseResult.actions`.
+
+    Example:
+        >>> policy = SparsePolicy([0, 0, 1, 1, 1, 3])
+        >>> policy.predict({"observation": np.array([4 / 6, 0.0]), "action_mask": None})[0]
+        np.int64(1)
+    """
+
+    def __init__(self, actions: Sequence[int] | np.ndarray) -> None:
+        arr = np.asarray(actions)
+        if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(f"actions must be a non-empty 1-D sequence of ints, got {actions!r}")
+        if (arr < 0).any():
+            raise ValueError(f"actions must be non-negative bitmasks, got {arr.tolist()}")
+        self.actions = arr.astype(np.int64)
+        self.actions.setflags(write=False)
+        self.horizon = check_int("horizon", arr.size, minimum=1)
+
+    @classmethod
+    def from_result(cls, result: SparseResult) -> SparsePolicy:
+        """The policy that plays ``result.attacks``."""
+        return cls(result.actions())
+
+    def step_of(self, observation: Any) -> np.ndarray:
+        """Window step(s) encoded in a (d,) or (B, d) observation (dict or plain Box)."""
+        obs = observation["observation"] if isinstance(observation, dict) else observation
+        obs = np.asarray(obs, dtype=np.float64)
+        steps_left = np.rint(obs[..., 0] * self.horizon).astype(np.int64)
+        return self.horizon - steps_left
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[Any, Any]:
+        """Return ``(action, state)``: the bitmask for the current step and ``state`` unchanged.
+
+        Args:
+            observation: The env's dict observation (``{"observation", "action_mask"}``) or the
+                Gymnasium view's Box, unbatched (d,) or batched (B, d).
+            state: Ignored (the plan is open loop); returned as given.
+            episode_start: Ignored.
+            deterministic: Ignored (the policy is deterministic).
+
+        Returns:
+            An ``np.int64`` action for one observation, a (B,) array for a batch.
+        """
+        step = self.step_of(observation)
+        inside = (step >= 0) & (step < self.horizon)
+        action = np.where(inside, self.actions[np.clip(step, 0, self.horizon - 1)], 0)
+        if action.ndim == 0:
+            return np.int64(action), state
+        return action, state

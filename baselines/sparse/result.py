@@ -1,0 +1,76 @@
+"""What every sparse-attack solver returns."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from baselines.sparse.problem import Pair
+
+
+@dataclass(frozen=True)
+class SparseResult:
+    """A solver's attack set and its objective value.
+
+    Attributes:
+        value: Φ(P[K+N|K+N]) of ``attacks``, recomputed by the reference recursion
+            (:meth:`SparseProblem.evaluate`), so two solvers that find the same set report the
+            identical number.
+        attacks: The attacked ``(step, sensor)`` pairs, both 0-based (step 0 = K+1), sorted.
+        solver: Name of the solver (``"exs"``, ``"sfs"``, ``"sbs"``, ``"sfs_ss"``, ``"dp"``).
+        horizon: Window length N the set was computed for.
+        num_sensors: Number of sensors M.
+        objective: ``"trace"`` or ``"logdet"``.
+        order: SFS only: the pairs in pick order (the first ``b`` picks are SFS's answer for
+            budget ``b``). ``None`` for every other solver.
+        evaluations: Number of objective evaluations of candidate sets (for EXS the number of
+            sets, ``C(M·N, c)``; for DP the number of one-step candidates ``(s, r)`` tried).
+    """
+
+    value: float
+    attacks: tuple[Pair, ...]
+    solver: str
+    horizon: int
+    num_sensors: int
+    objective: str = "trace"
+    order: tuple[Pair, ...] | None = None
+    evaluations: int | None = None
+
+    def __post_init__(self) -> None:
+        attacks = tuple(sorted((int(k), int(i)) for k, i in self.attacks))
+        object.__setattr__(self, "attacks", attacks)
+        if self.order is not None:
+            object.__setattr__(self, "order", tuple((int(k), int(i)) for k, i in self.order))
+
+    @property
+    def budget(self) -> int:
+        """Number of attacked pairs."""
+        return len(self.attacks)
+
+    def actions(self) -> np.ndarray:
+        """(N,) the env action per window step: bitmask of attacked sensors (bit 0 = sensor 1)."""
+        out = np.zeros(self.horizon, dtype=np.int64)
+        for k, i in self.attacks:
+            out[k] |= 1 << i
+        return out
+
+    def grid(self) -> np.ndarray:
+        """(M, N) ints: pick number (1-based) where SFS's ``order`` has a pair, else 0.
+
+        For solvers without an order, 1 marks an attacked pair.
+        """
+        out = np.zeros((self.num_sensors, self.horizon), dtype=int)
+        if self.order is None:
+            for k, i in self.attacks:
+                out[i, k] = 1
+        else:
+            for rank, (k, i) in enumerate(self.order, start=1):
+                out[i, k] = rank
+        return out
+
+    def policy(self) -> SparsePolicy:
+        """This answer as a policy that plays ``sparse_attack_v0``."""
+        from baselines.sparse.policy import SparsePolicy
+
+        return SparsePolicy.from_result(self)

@@ -1,0 +1,109 @@
+"""Steps per second of sparse_attack_v0 against reference loops measured in the same run.
+
+Run: ``python benchmarks/env_step.py``. Prints the rates and the ratios the project tracks:
+the Gymnasium view (through ``gymnasium.make`` with its default wrappers) against 50,000
+steps/s, and the PettingZoo parallel env against PettingZoo's own ``rps_v2`` parallel env.
+"""
+
+from __future__ import annotations
+
+import platform
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import rate  # noqa: E402
+
+import fdia_env  # noqa: E402, F401
+from fdia_env import scenarios, sparse_attack_v0  # noqa: E402
+
+
+def parallel_runner(dynamics: str):
+    env = sparse_attack_v0.parallel_env(scenario="ch4-position", dynamics=dynamics)
+    rng = np.random.default_rng(0)
+    actions = rng.integers(0, 8, size=100_000)
+
+    def run(steps: int) -> None:
+        env.reset(seed=0)
+        for i in range(steps):
+            if not env.agents:
+                env.reset()
+            env.step({"attacker": int(actions[i % actions.size])})
+
+    return run
+
+
+def gym_runner(dynamics: str):
+    env = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", dynamics=dynamics)
+    actions = np.random.default_rng(0).integers(0, 8, size=100_000)
+
+    def run(steps: int) -> None:
+        env.reset(seed=0)
+        for i in range(steps):
+            _, _, term, trunc, _ = env.step(int(actions[i % actions.size]))
+            if term or trunc:
+                env.reset()
+
+    return run
+
+
+def filterpy_runner():
+    from filterpy.kalman import KalmanFilter
+
+    system = scenarios.get("ch4-position").system
+    kf = KalmanFilter(dim_x=system.n, dim_z=system.nz)
+    kf.F, kf.Q, kf.H, kf.R = (np.array(a) for a in (system.F, system.Q, system.H, system.R))
+    zs = np.random.default_rng(0).standard_normal((1000, system.nz))
+
+    def run(steps: int) -> None:
+        for i in range(steps):
+            kf.predict()
+            kf.update(zs[i % 1000])
+
+    return run
+
+
+def rps_runner():
+    from pettingzoo.classic import rps_v2
+
+    env = rps_v2.parallel_env()
+    acts = np.random.default_rng(0).integers(0, 3, size=(100_000, 2))
+
+    def run(steps: int) -> None:
+        env.reset(seed=0)
+        for i in range(steps):
+            if not env.agents:
+                env.reset()
+            a = acts[i % acts.shape[0]]
+            env.step({"player_0": int(a[0]), "player_1": int(a[1])})
+
+    return run
+
+
+def main() -> None:
+    steps = 20_000
+    results = {
+        "parallel env (expected)": rate(parallel_runner("expected"), steps),
+        "parallel env (sampled)": rate(parallel_runner("sampled"), steps),
+        "gymnasium.make view (expected)": rate(gym_runner("expected"), steps),
+        "gymnasium.make view (sampled)": rate(gym_runner("sampled"), steps),
+        "filterpy KalmanFilter predict+update": rate(filterpy_runner(), steps),
+        "pettingzoo rps_v2 parallel": rate(rps_runner(), steps),
+    }
+    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    for name, r in results.items():
+        print(f"{name:40s} {r:12,.0f} steps/s")
+    rps = results["pettingzoo rps_v2 parallel"]
+    fp = results["filterpy KalmanFilter predict+update"]
+    print()
+    print(f"parallel env / rps_v2:            {results['parallel env (expected)'] / rps:6.2f}x  (target >= 3)")
+    print(f"gymnasium view / 50,000 steps/s:  {results['gymnasium.make view (expected)'] / 50_000:6.2f}x  (target >= 1)")
+    print(f"gymnasium view / filterpy step:   {results['gymnasium.make view (expected)'] / fp:6.2f}x")
+    print(f"sampled parallel / filterpy step: {results['parallel env (sampled)'] / fp:6.2f}x")
+
+
+if __name__ == "__main__":
+    main()
