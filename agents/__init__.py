@@ -1,0 +1,1 @@
+"""Agents: stable-baselines3 training, evaluation and the demo."""

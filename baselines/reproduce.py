@@ -21,9 +21,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+# The solvers' only LAPACK calls are tiny (the steady-state DARE solve); a multi-threaded OpenBLAS
+# pool gains nothing there and, on a 2-core machine, spins against any other process and
+# inflates the timings tenfold. Time single-threaded unless the caller says otherwise (this only
+# takes effect when numpy is not imported yet, i.e. when run as ``python -m``).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 
-from baselines.sparse import SOLVERS, SparseResult, dp, exhaustive, sfs
+from baselines.sparse import SOLVERS, SparseResult, dp, sfs
 from fdia_env import scenarios
 
 DEFAULT_OUTPUT = Path("docs/reproduction.md")
@@ -64,15 +70,23 @@ def machine() -> str:
                 break
     except OSError:
         pass
+    threads = os.environ.get("OPENBLAS_NUM_THREADS", "default")
     return (
         f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
-        f"Python {platform.python_version()}, numpy {np.__version__}"
+        f"Python {platform.python_version()}, numpy {np.__version__}, "
+        f"OPENBLAS_NUM_THREADS={threads}"
     )
 
 
-def timed(run: Callable[[], SparseResult], repeats: int) -> tuple[SparseResult, float]:
-    """The result of ``run`` and its median wall time in seconds over ``repeats`` calls."""
-    times, result = [], None
+def timed(
+    run: Callable[[], SparseResult], repeats: int, warmup: bool = True
+) -> tuple[SparseResult, float]:
+    """The result of ``run`` and its median wall time in seconds over ``repeats`` calls.
+
+    With ``warmup``, one untimed call first, so imports and caches do not count.
+    """
+    result = run() if warmup else None
+    times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         result = run()
@@ -103,11 +117,13 @@ def pairs_text(result: SparseResult) -> str:
 # --- chapter 4 ------------------------------------------------------------------------------
 
 # REFERENCE.md, Chapter 4: SFS pick order for ch4-position, N = 6 (rows sensors, columns K+1..).
-CH4_LITERATURE_GRID = np.array([
-    [0, 0, 5, 3, 2, 1],
-    [0, 0, 0, 0, 0, 4],
-    [0, 0, 0, 0, 0, 0],
-])
+CH4_LITERATURE_GRID = np.array(
+    [
+        [0, 0, 5, 3, 2, 1],
+        [0, 0, 0, 0, 0, 4],
+        [0, 0, 0, 0, 0, 0],
+    ]
+)
 CH4_LITERATURE_VALUE = 0.0328
 # Matlab run times (s) at sizes M·N = 18 / 30 / 60; None = "not feasible".
 CH4_LITERATURE_TIMES = {
@@ -124,36 +140,55 @@ def ch4_table1() -> str:
     """Table 1: SFS pick order for N = 6 beside the literature's."""
     result = sfs("ch4-position", budget=5, horizon=6)
     same = np.array_equal(result.grid(), CH4_LITERATURE_GRID)
-    return "\n\n".join([
-        "### Table 1: SFS pick order, ch4-position, c = 5, N = 6",
-        "This implementation (1 = first pick):",
-        grid_table(result.grid()),
-        "Literature:",
-        grid_table(CH4_LITERATURE_GRID),
-        f"Identical: **{'yes' if same else 'NO'}**. tr P[K+N|K+N] = {result.value:.10g}.",
-    ])
+    return "\n\n".join(
+        [
+            "### Table 1: SFS pick order, ch4-position, c = 5, N = 6",
+            "This implementation (1 = first pick):",
+            grid_table(result.grid()),
+            "Literature:",
+            grid_table(CH4_LITERATURE_GRID),
+            f"Identical: **{'yes' if same else 'NO'}**. tr P[K+N|K+N] = {result.value:.10g}.",
+        ]
+    )
 
 
-def ch4_table2(repeats: int) -> str:
+def ch4_table2(repeats: int, warmup: bool = True) -> str:
     """Table 2: value and run time of every solver at sizes 18 / 30 / 60."""
     rows = []
     for col, N in enumerate((6, 10, 20)):
         for name, solver in SOLVERS.items():
-            result, seconds = timed(lambda s=solver, n=N: s("ch4-position", 5, n), repeats)
+            result, seconds = timed(lambda s=solver, n=N: s("ch4-position", 5, n), repeats, warmup)
             lit = CH4_LITERATURE_TIMES[name][col]
-            rows.append([
-                3 * N, SOLVER_LABELS[name], f"{result.value:.10f}", f"{seconds:.4f}",
-                "not feasible" if lit is None else f"{lit:.3f}",
-                "–" if lit is None else f"{lit / seconds:.1f}×",
-            ])
-    return "\n\n".join([
-        "### Table 2: objective and run time per solver, ch4-position, c = 5",
-        f"Times are the median of {repeats} call(s) of the whole solver (including the "
-        "steady-state solve); literature times are Matlab's.",
-        table(["size M·N", "solver", "tr P[K+N|K+N]", "time (s)", "literature time (s)",
-               "speed-up"], rows),
-        f"Literature value for every solver and size: {CH4_LITERATURE_VALUE}.",
-    ])
+            rows.append(
+                [
+                    3 * N,
+                    SOLVER_LABELS[name],
+                    f"{result.value:.10f}",
+                    f"{seconds:.4f}",
+                    "not feasible" if lit is None else f"{lit:.3f}",
+                    "–" if lit is None else f"{lit / seconds:.1f}×",
+                ]
+            )
+    return "\n\n".join(
+        [
+            "### Table 2: objective and run time per solver, ch4-position, c = 5",
+            f"Times are the median of {repeats} call(s) of the whole solver (including the "
+            f"steady-state solve){', after one warm-up call' if warmup else ''}; literature "
+            "times are Matlab's.",
+            table(
+                [
+                    "size M·N",
+                    "solver",
+                    "tr P[K+N\\|K+N]",
+                    "time (s)",
+                    "literature time (s)",
+                    "speed-up",
+                ],
+                rows,
+            ),
+            f"Literature value for every solver and size: {CH4_LITERATURE_VALUE}.",
+        ]
+    )
 
 
 def ch4_pv_cases() -> str:
@@ -163,13 +198,24 @@ def ch4_pv_cases() -> str:
     for case in (1, 2, 3):
         name = f"ch4-pv-case{case}"
         results = {s: f(name, 5, 6, "logdet") for s, f in SOLVERS.items()}
-        parts += [f"**{name}** ({scenarios.get(name).description}): SFS pick order",
-                  grid_table(results["sfs"].grid())]
+        parts += [
+            f"**{name}** ({scenarios.get(name).description}): SFS pick order",
+            grid_table(results["sfs"].grid()),
+        ]
         best = results["exs"].value
         for s, r in results.items():
-            gap = "optimal" if r.value >= best - 1e-12 * abs(best) else f"{np.exp(r.value - best):.6f}"
-            rows.append([case, SOLVER_LABELS[s], f"{np.exp(r.value):.6e}", f"{r.value:.8f}", gap,
-                         pairs_text(r)])
+            optimal = r.value >= best - 1e-12 * abs(best)
+            gap = "optimal" if optimal else f"{np.exp(r.value - best):.6f}"
+            rows.append(
+                [
+                    case,
+                    SOLVER_LABELS[s],
+                    f"{np.exp(r.value):.6e}",
+                    f"{r.value:.8f}",
+                    gap,
+                    pairs_text(r),
+                ]
+            )
     parts += [
         "Objective per solver (det P[K+N|K+N]; `det / EXS` is the ratio to the optimum):",
         table(["case", "solver", "det P", "log det P", "det / EXS", "attacked pairs"], rows),
@@ -187,15 +233,17 @@ def ch4_dp_vs_sfs(sigmas: np.ndarray, trials: int) -> tuple[str, Callable[[Path]
             tol = 1e-9 * max(abs(v_dp), abs(v_sfs))
             counts[row, 0 if abs(v_dp - v_sfs) <= tol else (1 if v_dp > v_sfs else 2)] += 1
     rows = [[f"{s:.4g}", *counts[i]] for i, s in enumerate(sigmas)]
-    text = "\n\n".join([
-        "### DP against SFS, ch4-random (10 position sensors, σ_w ~ U(0, 1), c = 10, N = 6)",
-        f"{trials} trials per σ_v, trial t uses seed t; values equal within 1e-9 (relative) "
-        "count as the same.",
-        table(["σ_v", "same", "DP better", "SFS better"], rows),
-        f"Total over {len(sigmas) * trials} trials: same {counts[:, 0].sum()}, DP better "
-        f"{counts[:, 1].sum()}, SFS better {counts[:, 2].sum()}.",
-        "![DP against SFS](figures/ch4_dp_vs_sfs.png)",
-    ])
+    text = "\n\n".join(
+        [
+            "### DP against SFS, ch4-random (10 position sensors, σ_w ~ U(0, 1), c = 10, N = 6)",
+            f"{trials} trials per σ_v, trial t uses seed t; values equal within 1e-9 (relative) "
+            "count as the same.",
+            table(["σ_v", "same", "DP better", "SFS better"], rows),
+            f"Total over {len(sigmas) * trials} trials: same {counts[:, 0].sum()}, DP better "
+            f"{counts[:, 1].sum()}, SFS better {counts[:, 2].sum()}.",
+            "![DP against SFS](figures/ch4_dp_vs_sfs.png)",
+        ]
+    )
 
     def plot(path: Path) -> None:
         import matplotlib
@@ -223,14 +271,16 @@ def chapter4(args: argparse.Namespace) -> Section:
     sigmas = np.logspace(-2, 0, 3 if quick else 10)
     trials = 5 if quick else 100
     dp_text, plot = ch4_dp_vs_sfs(sigmas, trials)
-    body = "\n\n".join([
-        "Sparse attacks under perfect detection (MATH.md §4; solvers in `baselines/sparse`). "
-        "Pairs are written zi@K+k (sensor i attacked at time K+k).",
-        ch4_table1(),
-        ch4_table2(repeats=1 if quick else 3),
-        ch4_pv_cases(),
-        dp_text,
-    ])
+    body = "\n\n".join(
+        [
+            "Sparse attacks under perfect detection (MATH.md §4; solvers in `baselines/sparse`). "
+            "Pairs are written zi@K+k (sensor i attacked at time K+k).",
+            ch4_table1(),
+            ch4_table2(repeats=1 if quick else 5, warmup=not quick),
+            ch4_pv_cases(),
+            dp_text,
+        ]
+    )
     return Section("Chapter 4: sparse attacks", body, {"ch4_dp_vs_sfs.png": plot})
 
 
@@ -253,8 +303,9 @@ def replace_section(document: str, title: str, body: str) -> str:
     if start is None:
         lines = [*lines, "", *new]
     else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")),
-                   len(lines))
+        end = next(
+            (i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines)
+        )
         lines = [*lines[:start], *new, *lines[end:]]
     return "\n".join(lines).rstrip() + "\n"
 
@@ -266,19 +317,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, (_, help_text) in CHAPTERS.items():
         p = sub.add_parser(name, help=help_text)
         p.add_argument("--quick", action="store_true", help="smaller run (smoke test)")
-        p.add_argument("--output", type=Path, default=None,
-                       help=f"markdown file to update (default {DEFAULT_OUTPUT}; with --quick, "
-                            "nothing is written unless given)")
+        p.add_argument(
+            "--output",
+            type=Path,
+            default=None,
+            help=f"markdown file to update (default {DEFAULT_OUTPUT}; with --quick, "
+            "nothing is written unless given)",
+        )
     args = parser.parse_args(argv)
     run, _ = CHAPTERS[args.chapter]
     command = "python -m baselines.reproduce " + shlex.join(
-        list(sys.argv[1:] if argv is None else argv))
+        list(sys.argv[1:] if argv is None else argv)
+    )
     t0 = time.perf_counter()
     section = run(args)
     elapsed = time.perf_counter() - t0
     stamp = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
-    header = (f"Command: `{command}` ({elapsed:.0f} s)  \nMachine: {machine()}  \n"
-              f"Generated: {stamp}")
+    header = f"Command: `{command}` ({elapsed:.0f} s)  \nMachine: {machine()}  \nGenerated: {stamp}"
     body = header + "\n\n" + section.body
     print(f"## {section.title}\n\n{body}")
     output = args.output if args.output is not None or args.quick else DEFAULT_OUTPUT
@@ -286,11 +341,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         output.parent.mkdir(parents=True, exist_ok=True)
         old = output.read_text() if output.exists() else ""
         output.write_text(replace_section(old, section.title, body))
+        figures = output.parent / "figures"
         for filename, save in section.figures.items():
-            figure = output.parent / "figures" / filename
-            figure.parent.mkdir(parents=True, exist_ok=True)
-            save(figure)
-        print(f"\nwrote {output} and {len(section.figures)} figure(s) under {output.parent / 'figures'}")
+            figures.mkdir(parents=True, exist_ok=True)
+            save(figures / filename)
+        print(f"\nwrote {output} and {len(section.figures)} figure(s) in {figures}")
     return 0
 
 

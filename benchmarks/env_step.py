@@ -15,10 +15,10 @@ import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import rate  # noqa: E402
+from _timing import rate
 
-import fdia_env  # noqa: E402, F401
-from fdia_env import scenarios, sparse_attack_v0  # noqa: E402
+import fdia_env  # noqa: F401
+from fdia_env import scenarios, sparse_attack_v0
 
 
 def parallel_runner(dynamics: str):
@@ -93,15 +93,18 @@ def main() -> None:
         "filterpy KalmanFilter predict+update": rate(filterpy_runner(), steps),
         "pettingzoo rps_v2 parallel": rate(rps_runner(), steps),
     }
-    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}"
+    )
     for name, r in results.items():
         print(f"{name:40s} {r:12,.0f} steps/s")
     rps = results["pettingzoo rps_v2 parallel"]
+    par, view = results["parallel env (expected)"], results["gymnasium.make view (expected)"]
     fp = results["filterpy KalmanFilter predict+update"]
     print()
-    print(f"parallel env / rps_v2:            {results['parallel env (expected)'] / rps:6.2f}x  (target >= 3)")
-    print(f"gymnasium view / 50,000 steps/s:  {results['gymnasium.make view (expected)'] / 50_000:6.2f}x  (target >= 1)")
-    print(f"gymnasium view / filterpy step:   {results['gymnasium.make view (expected)'] / fp:6.2f}x")
+    print(f"parallel env / rps_v2:            {par / rps:6.2f}x  (target >= 3)")
+    print(f"gymnasium view / 50,000 steps/s:  {view / 50_000:6.2f}x  (target >= 1)")
+    print(f"gymnasium view / filterpy step:   {view / fp:6.2f}x")
     print(f"sampled parallel / filterpy step: {results['parallel env (sampled)'] / fp:6.2f}x")
 
 

@@ -1,4 +1,7 @@
-"""fdia_env: Gymnasium and PettingZoo environments for false data injection attacks on Kalman filters."""
+"""fdia_env: Gymnasium and PettingZoo environments for false data injection on Kalman filters.
+
+See the README for the environments, the scenarios and the baselines.
+"""
 
 from fdia_env import scenarios
 from fdia_env.episode import EpisodeSpec
@@ -9,6 +12,12 @@ register_envs()
 
 __version__ = "0.1.0"
 __all__ = [
-    "EpisodeSpec", "LinearSystem", "Sensor", "position_sensor", "pv_sensor", "register_envs",
-    "scenarios", "tracking_system",
+    "EpisodeSpec",
+    "LinearSystem",
+    "Sensor",
+    "position_sensor",
+    "pv_sensor",
+    "register_envs",
+    "scenarios",
+    "tracking_system",
 ]

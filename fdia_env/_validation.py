@@ -10,7 +10,9 @@ import numpy as np
 _SYM_RTOL = 1e-9
 
 
-def as_matrix(name: str, value: Any, shape: tuple[int | None, int | None] | None = None) -> np.ndarray:
+def as_matrix(
+    name: str, value: Any, shape: tuple[int | None, int | None] | None = None
+) -> np.ndarray:
     """Convert ``value`` to a finite, read-only float64 2-D array or raise ``ValueError``.
 
     Args:
@@ -74,7 +76,7 @@ def check_symmetric(name: str, arr: np.ndarray) -> None:
 
 
 def check_psd(name: str, arr: np.ndarray, *, strict: bool = False) -> None:
-    """Raise ``ValueError`` unless ``arr`` is symmetric positive semidefinite (definite if strict)."""
+    """Raise ``ValueError`` unless ``arr`` is symmetric PSD (positive definite if ``strict``)."""
     check_symmetric(name, arr)
     eig = np.linalg.eigvalsh(arr)
     scale = max(1.0, float(np.max(np.abs(eig)))) if eig.size else 1.0
@@ -89,7 +91,9 @@ def check_psd(name: str, arr: np.ndarray, *, strict: bool = False) -> None:
         )
 
 
-def check_int(name: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
+def check_int(
+    name: str, value: Any, *, minimum: int | None = None, maximum: int | None = None
+) -> int:
     """Return ``value`` as int if it is an integer within bounds, else raise ``ValueError``."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{name} must be an integer, got {value!r}")

@@ -1,7 +1,8 @@
 """``fdia_v0``: any attack model against any defense model on any scenario.
 
 >>> from fdia_env import fdia_v0
->>> env = fdia_v0.parallel_env(scenario="ch4-position", attack="sparse", defense="perfect_detection",
+>>> env = fdia_v0.parallel_env(scenario="ch4-position", attack="sparse",
+...                            defense="perfect_detection",
 ...                            attack_kwargs={"budget": 2}, horizon=3)
 >>> env.possible_agents
 ['attacker']
@@ -29,7 +30,9 @@ DEFENSES: dict[str, type[DefenseModel]] = {"perfect_detection": PerfectDetection
 def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None) -> Any:
     if isinstance(value, str):
         if value not in registry:
-            raise ValueError(f"{kind} must be one of {sorted(registry)} or a model instance, got {value!r}")
+            raise ValueError(
+                f"{kind} must be one of {sorted(registry)} or a model instance, got {value!r}"
+            )
         return registry[value](**(kwargs or {}))
     if kwargs:
         raise ValueError(f"{kind}_kwargs only apply when {kind} is given by name")
@@ -54,8 +57,14 @@ def parallel_env(
     Models are given by name (with ``*_kwargs``) or as instances; names: attacks
     ``ATTACKS``, defenses ``DEFENSES``.
     """
-    sc, spec = episode_spec(scenario, horizon=horizon, warmup=warmup, objective=objective,
-                            reward_mode=reward_mode, dynamics=dynamics)
+    sc, spec = episode_spec(
+        scenario,
+        horizon=horizon,
+        warmup=warmup,
+        objective=objective,
+        reward_mode=reward_mode,
+        dynamics=dynamics,
+    )
     if attack == "sparse" and not (attack_kwargs or {}).get("budget") and sc.budget is not None:
         attack_kwargs = {**(attack_kwargs or {}), "budget": sc.budget}
     return FdiaParallelEnv(

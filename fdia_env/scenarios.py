@@ -57,16 +57,24 @@ def _ch2_pv(two: bool) -> Callable[[], Scenario]:
             sensors.append(pv_sensor(2.0, np.sqrt(5.0), 0.0, name="z2"))
         name = "ch2-pv-2" if two else "ch2-pv-1"
         sys = tracking_system(0.5, sensors=sensors, name=name)
-        return Scenario(name, sys, f"{len(sensors)} position+velocity sensor(s) (ch. 2)", power=3000.0)
+        return Scenario(
+            name, sys, f"{len(sensors)} position+velocity sensor(s) (ch. 2)", power=3000.0
+        )
 
     return build
 
 
 def _ch3_tracking() -> Scenario:
-    sys = tracking_system(0.5, sensors=[pv_sensor(np.sqrt(3.0), 2.0, 0.0, name="z1")], name="ch3-tracking")
+    sys = tracking_system(
+        0.5, sensors=[pv_sensor(np.sqrt(3.0), 2.0, 0.0, name="z1")], name="ch3-tracking"
+    )
     return Scenario(
-        "ch3-tracking", sys, "1 position+velocity sensor, R = diag(3, 4) (ch. 3)",
-        attack_step=100, horizon=200, steady_state=False,
+        "ch3-tracking",
+        sys,
+        "1 position+velocity sensor, R = diag(3, 4) (ch. 3)",
+        attack_step=100,
+        horizon=200,
+        steady_state=False,
         extra={"p1": 0.85, "power_range": (7.5, 120.0), "mc_runs": 10_000},
     )
 
@@ -74,11 +82,18 @@ def _ch3_tracking() -> Scenario:
 def _ch3_static() -> Scenario:
     sensor = Sensor(H=np.eye(2), R=np.diag([3.0, 4.0]), name="z1")
     sys = LinearSystem(
-        F=np.eye(2), Q=np.zeros((2, 2)), sensors=(sensor,),
-        x0=[10.0, 5.0], P0=100.0 * np.eye(2), name="ch3-static",
+        F=np.eye(2),
+        Q=np.zeros((2, 2)),
+        sensors=(sensor,),
+        x0=[10.0, 5.0],
+        P0=100.0 * np.eye(2),
+        name="ch3-static",
     )
     return Scenario(
-        "ch3-static", sys, "static parameter, prior N([10, 5], 100 I) (ch. 3)", steady_state=False,
+        "ch3-static",
+        sys,
+        "static parameter, prior N([10, 5], 100 I) (ch. 3)",
+        steady_state=False,
         extra={"p1": 0.85, "power_range": (0.0, 400.0), "Pbb": "diag(a², 0)"},
     )
 
@@ -93,11 +108,20 @@ def _ch4_pv(case: int) -> Callable[[], Scenario]:
         sigma_v = 0.02 if case == 1 else 0.001
         sig = [0.5, 0.2 if case == 3 else 0.5, 0.5]
         rho = [0.5, 0.0, -0.5]
-        sensors = [pv_sensor(s, s, r, name=f"z{i + 1}") for i, (s, r) in enumerate(zip(sig, rho, strict=True))]
+        sensors = [
+            pv_sensor(s, s, r, name=f"z{i + 1}")
+            for i, (s, r) in enumerate(zip(sig, rho, strict=True))
+        ]
         name = f"ch4-pv-case{case}"
         sys = tracking_system(sigma_v, sensors=sensors, name=name)
-        return Scenario(name, sys, f"3 position+velocity sensors, case {case} (ch. 4)",
-                        budget=5, horizon=6, extra={"objective": "logdet"})
+        return Scenario(
+            name,
+            sys,
+            f"3 position+velocity sensors, case {case} (ch. 4)",
+            budget=5,
+            horizon=6,
+            extra={"objective": "logdet"},
+        )
 
     return build
 
@@ -107,15 +131,31 @@ def _ch4_random(seed: int = 0, sigma_v: float = 0.1) -> Scenario:
     sigma_w = rng.uniform(0.0, 1.0, size=10)
     sigma_w = np.maximum(sigma_w, 1e-6)  # U(0, 1) can return exactly 0; a sensor needs R > 0
     sys = tracking_system(sigma_v, list(sigma_w), name="ch4-random")
-    return Scenario("ch4-random", sys, f"10 position sensors, σ_w ~ U(0, 1) (seed {seed})",
-                    budget=10, horizon=6, extra={"seed": seed})
+    return Scenario(
+        "ch4-random",
+        sys,
+        f"10 position sensors, σ_w ~ U(0, 1) (seed {seed})",
+        budget=10,
+        horizon=6,
+        extra={"seed": seed},
+    )
 
 
 def _ch5_game() -> Scenario:
-    sys = tracking_system(0.5, [3.0, 4.0, 5.0], x0=[1.0, 1.0],
-                          P0=np.array([[0.25, 0.25], [0.25, 0.5]]), name="ch5-game")
-    return Scenario("ch5-game", sys, "3 position sensors, sensor-selection game (ch. 5)",
-                    power=100.0, attack_step=100)
+    sys = tracking_system(
+        0.5,
+        [3.0, 4.0, 5.0],
+        x0=[1.0, 1.0],
+        P0=np.array([[0.25, 0.25], [0.25, 0.5]]),
+        name="ch5-game",
+    )
+    return Scenario(
+        "ch5-game",
+        sys,
+        "3 position sensors, sensor-selection game (ch. 5)",
+        power=100.0,
+        attack_step=100,
+    )
 
 
 _PRESETS: dict[str, Callable[..., Scenario]] = {
@@ -168,5 +208,6 @@ def resolve(scenario: str | Scenario | LinearSystem) -> Scenario:
     if isinstance(scenario, str):
         return get(scenario)
     raise ValueError(
-        f"scenario must be a preset name, a Scenario or a LinearSystem, got {type(scenario).__name__}"
+        "scenario must be a preset name, a Scenario or a LinearSystem, "
+        f"got {type(scenario).__name__}"
     )

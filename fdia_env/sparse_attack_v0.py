@@ -94,8 +94,14 @@ def parallel_env(
     render_mode: str | None = None,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
-    sc, spec = episode_spec(scenario, horizon=horizon, warmup=warmup, objective=objective,
-                            reward_mode=reward_mode, dynamics=dynamics)
+    sc, spec = episode_spec(
+        scenario,
+        horizon=horizon,
+        warmup=warmup,
+        objective=objective,
+        reward_mode=reward_mode,
+        dynamics=dynamics,
+    )
     attack = SparseAttack(scenario_default(sc, "budget", budget))
     return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, render_mode=render_mode, name=NAME)
 

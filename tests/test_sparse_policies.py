@@ -61,8 +61,7 @@ def test_policy_return_equals_solver_value_through_gymnasium_make(name):
 def test_policy_return_equals_solver_value_with_logdet_on_pv_cases(name, case):
     scenario = f"ch4-pv-case{case}"
     result = SOLVERS[name](scenario, budget=5, horizon=6, objective="logdet")
-    ret = play_parallel(result.policy(), scenario=scenario, budget=5, horizon=6,
-                        objective="logdet")
+    ret = play_parallel(result.policy(), scenario=scenario, budget=5, horizon=6, objective="logdet")
     assert abs(ret - result.value) <= RTOL * abs(result.value)
 
 
@@ -83,8 +82,9 @@ def test_policies_reproduce_values_on_random_problems(system_and_objective, hori
     budget = data.draw(st.integers(0, min(4, system.M * horizon)))
     for name, solver in SOLVERS.items():
         result = solver(system, budget, horizon, objective)
-        ret = play_parallel(result.policy(), scenario=system, budget=budget, horizon=horizon,
-                            objective=objective)
+        ret = play_parallel(
+            result.policy(), scenario=system, budget=budget, horizon=horizon, objective=objective
+        )
         assert abs(ret - result.value) <= RTOL * max(abs(result.value), 1e-300), name
 
 
@@ -96,7 +96,8 @@ def test_predict_reads_the_step_from_dict_box_and_batched_observations():
     box[:, 0] = (6 - np.arange(6)) / 6  # steps left / N at steps 0..5
     for k in range(6):
         assert policy.predict(box[k])[0] == result.actions()[k]
-        assert policy.predict({"observation": box[k], "action_mask": None})[0] == result.actions()[k]
+        as_dict = {"observation": box[k], "action_mask": None}
+        assert policy.predict(as_dict)[0] == result.actions()[k]
     actions, state = policy.predict(box, state="kept")
     np.testing.assert_array_equal(actions, result.actions())
     assert state == "kept"

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from baselines.sparse import SOLVERS, dp, exhaustive, make_problem, sbs, sfs, sfs_ss
+from baselines.sparse import SOLVERS, dp, exhaustive, make_problem, sfs, sfs_ss
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
 
 # tr P[K+N|K+N] of the optimal ch4-position attack (REFERENCE.md prints 0.0328 / 0.03279),
@@ -73,11 +73,13 @@ def test_every_solver_finds_the_literature_optimum(name, horizon):
 
 def test_sfs_reproduces_the_literature_pick_order():
     result = sfs("ch4-position", budget=5, horizon=6)
-    expected = np.array([
-        [0, 0, 5, 3, 2, 1],
-        [0, 0, 0, 0, 0, 4],
-        [0, 0, 0, 0, 0, 0],
-    ])
+    expected = np.array(
+        [
+            [0, 0, 5, 3, 2, 1],
+            [0, 0, 0, 0, 0, 4],
+            [0, 0, 0, 0, 0, 0],
+        ]
+    )
     np.testing.assert_array_equal(result.grid(), expected)
     assert result.order == ((5, 0), (4, 0), (3, 0), (5, 1), (2, 0))
 
@@ -168,8 +170,9 @@ def small_problems(draw):
     N = draw(st.integers(1, 4))
     c = draw(st.integers(0, min(4, M * N)))
     if draw(st.booleans()):
-        system = tracking_system(rng.uniform(0.01, 1.0), list(rng.uniform(0.05, 2.0, M)),
-                                 T=rng.uniform(0.2, 2.0))
+        system = tracking_system(
+            rng.uniform(0.01, 1.0), list(rng.uniform(0.05, 2.0, M)), T=rng.uniform(0.2, 2.0)
+        )
         objective = draw(st.sampled_from(["trace", "logdet"]))
     else:
         sensors = [pv_sensor(*rng.uniform(0.1, 1.0, 2), rng.uniform(-0.8, 0.8)) for _ in range(M)]
@@ -185,10 +188,12 @@ def scalar_problems(draw):
     M = draw(st.integers(1, 3))
     N = draw(st.integers(1, 4))
     c = draw(st.integers(0, min(4, M * N)))
-    sensors = tuple(Sensor(H=[[rng.uniform(0.2, 2.0)]], R=[[rng.uniform(0.05, 3.0)]])
-                    for _ in range(M))
-    system = LinearSystem(F=[[rng.uniform(-1.5, 1.5)]], Q=[[rng.uniform(0.01, 2.0)]],
-                          sensors=sensors)
+    sensors = tuple(
+        Sensor(H=[[rng.uniform(0.2, 2.0)]], R=[[rng.uniform(0.05, 3.0)]]) for _ in range(M)
+    )
+    system = LinearSystem(
+        F=[[rng.uniform(-1.5, 1.5)]], Q=[[rng.uniform(0.01, 2.0)]], sensors=sensors
+    )
     return system, c, N, draw(st.sampled_from(["trace", "logdet"]))
 
 
@@ -249,10 +254,33 @@ def test_attacking_one_more_pair_never_lowers_the_objective(args, seed):
 
 def test_generic_path_handles_a_three_state_system():
     F = np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]])
-    sensors = (Sensor(H=[[1.0, 0.0, 0.0]], R=[[0.09]]), Sensor(H=[[1.0, 0.0, 0.0]], R=[[0.25]]),
-               Sensor(H=[[0.0, 1.0, 0.0]], R=[[0.2]]))
+    sensors = (
+        Sensor(H=[[1.0, 0.0, 0.0]], R=[[0.09]]),
+        Sensor(H=[[1.0, 0.0, 0.0]], R=[[0.25]]),
+        Sensor(H=[[0.0, 1.0, 0.0]], R=[[0.2]]),
+    )
     system = LinearSystem(F=F, Q=0.01 * np.eye(3), sensors=sensors)
     result = exhaustive(system, 3, 3)
     assert rel(result.value, brute_force(make_problem(system, 3, 3))) < 1e-12
     for solver in HEURISTICS.values():
         assert at_least(result.value, solver(system, 3, 3).value)
+
+
+# --- the reproduction script --------------------------------------------------------------
+
+
+def test_reproduce_ch4_quick_writes_its_section(tmp_path, capsys):
+    from baselines import reproduce
+
+    output = tmp_path / "reproduction.md"
+    output.write_text("# Title\n\n## Chapter 5: games\n\nkept\n")
+    assert reproduce.main(["ch4", "--quick", "--output", str(output)]) == 0
+    text = output.read_text()
+    assert "## Chapter 5: games\n\nkept" in text
+    assert "## Chapter 4: sparse attacks" in text
+    assert "Identical: **yes**" in text
+    assert (tmp_path / "figures" / "ch4_dp_vs_sfs.png").stat().st_size > 0
+    assert "Table 2" in capsys.readouterr().out
+    # rerunning replaces the section rather than appending a second one
+    reproduce.main(["ch4", "--quick", "--output", str(output)])
+    assert output.read_text().count("## Chapter 4") == 1

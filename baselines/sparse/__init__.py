@@ -24,6 +24,14 @@ from baselines.sparse.result import SparseResult
 SOLVERS = {"exs": exhaustive, "sfs": sfs, "sbs": sbs, "sfs_ss": sfs_ss, "dp": dp}
 
 __all__ = [
-    "SOLVERS", "SparsePolicy", "SparseProblem", "SparseResult", "dp", "exhaustive", "make_problem",
-    "sbs", "sfs", "sfs_ss",
+    "SOLVERS",
+    "SparsePolicy",
+    "SparseProblem",
+    "SparseResult",
+    "dp",
+    "exhaustive",
+    "make_problem",
+    "sbs",
+    "sfs",
+    "sfs_ss",
 ]

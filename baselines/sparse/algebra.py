@@ -54,8 +54,10 @@ class CovarianceAlgebra(Protocol):
         ...
 
 
-def algebra_for(F: np.ndarray, Q: np.ndarray, objective: str, fast: bool = True) -> CovarianceAlgebra:
-    """The fast 2×2 algebra when the state has two components (and ``fast``), else the generic one."""
+def algebra_for(
+    F: np.ndarray, Q: np.ndarray, objective: str, fast: bool = True
+) -> CovarianceAlgebra:
+    """The 2×2 component algebra for a two-component state (when ``fast``), else the generic one."""
     if fast and F.shape == (2, 2):
         return Components2(F, Q, objective)
     return MatrixAlgebra(F, Q, objective)

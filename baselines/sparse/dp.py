@@ -60,8 +60,8 @@ def dp(
         0.0328
     """
     problem = make_problem(system_or_scenario, budget, horizon, objective)
-    sys, c, M, N = problem.system, problem.budget, problem.M, problem.horizon
-    ranking = attack_ranking(sys.J)
+    system, c, M, N = problem.system, problem.budget, problem.M, problem.horizon
+    ranking = attack_ranking(system.J)
     used = np.ones((M + 1, M), dtype=bool)  # used[r]: sensors left after attacking r of them
     for r in range(1, M + 1):
         used[r:, ranking[r - 1]] = False
@@ -75,12 +75,14 @@ def dp(
         valid = (r_grid <= s_grid) & (s_grid - r_grid < len(states))
         s_idx, r_idx = s_grid[valid], r_grid[valid]
         # KF(P_DP(s − r, k − 1), r) for every candidate (s, r) at once
-        P = information_update(predict_cov(states[s_idx - r_idx], sys.F, sys.Q), sys.J, used[r_idx])
+        P = information_update(
+            predict_cov(states[s_idx - r_idx], system.F, system.Q), system.J, used[r_idx]
+        )
         phi = np.full(s_grid.shape, -np.inf)
         phi[valid] = phi_of(P, objective)
         evaluations += len(s_idx)
         choice[k, : reach + 1] = np.argmax(phi, axis=1)  # first maximum: the smallest r
-        P_grid = np.empty((*s_grid.shape, sys.n, sys.n))
+        P_grid = np.empty((*s_grid.shape, system.n, system.n))
         P_grid[valid] = P
         states = P_grid[np.arange(reach + 1), choice[k, : reach + 1]]
 

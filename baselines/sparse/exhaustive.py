@@ -117,8 +117,9 @@ class _FrontierSearch:
     def _children_per_row(self, level: _Level) -> list[int]:
         """Number of feasible children of a parent row with attack count s, for each s."""
         t_min, t_max = self._count_range(level.depth + 1)
+        sizes = [len(codes) for codes in self.subsets]  # subsets of r sensors, r = 0..min(M, c)
         return [
-            sum(len(self.subsets[t - s]) for t in range(t_min, t_max + 1) if 0 <= t - s < len(self.subsets))
+            sum(sizes[t - s] for t in range(t_min, t_max + 1) if 0 <= t - s < len(sizes))
             for s in range(self.c + 1)
         ]
 
@@ -143,11 +144,9 @@ class _FrontierSearch:
     def _blocks(self, level: _Level, lo: int, hi: int, t: int):
         """``(r, parent_lo, parent_hi)`` for the children with count t from parent rows lo:hi."""
         for r in range(len(self.subsets)):
-            s = t - r
+            s = t - r  # attacks before this step
             if s < 0:
                 break
-            if s > self.c:
-                continue
             a = max(int(level.bounds[s]), lo)
             b = min(int(level.bounds[s + 1]), hi)
             if a < b:
@@ -187,7 +186,8 @@ class _FrontierSearch:
                 j = int(np.argmax(values))
                 if values[j] > self.best_value:
                     self.best_value = float(values[j])
-                    self.best_pairs = code_pairs(level.depth, code, self.M) + self._trace(level, a + j)
+                    last = code_pairs(level.depth, code, self.M)
+                    self.best_pairs = last + self._trace(level, a + j)
 
     def _trace(self, level: _Level, row: int) -> list[Pair]:
         """The attacked pairs of the pattern at ``row`` of ``level``, back to the window start."""
@@ -221,8 +221,9 @@ def exhaustive(
         chunk_rows: Most states held per level (bounds memory; larger is slightly faster).
 
     Returns:
-        The optimal :class:`SparseResult` (``evaluations = C(M·N, c)``). Ties go to the set
-        found first (attacks as late and on as low-numbered sensors as the walk meets them).
+        The optimal :class:`SparseResult` (``evaluations = C(M·N, c)``). Among sets with equal
+        Φ the first one the walk meets is kept. Cost grows like ``C(M·N, c)``: about 10⁷ sets/s
+        on one core with the 2×2 path (M·N = 60, c = 5 in about half a second).
 
     Raises:
         ValueError: For a bad budget, horizon, objective or scenario (naming the parameter).

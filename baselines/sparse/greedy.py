@@ -34,8 +34,13 @@ def _toggle_each(problem: SparseProblem, attacked: np.ndarray, flats: np.ndarray
     return problem.evaluate_masks(masks.reshape(-1, problem.horizon, problem.M))
 
 
-def _result(problem: SparseProblem, pairs: list[Pair], solver: str, evaluations: int,
-            order: list[Pair] | None = None) -> SparseResult:
+def _result(
+    problem: SparseProblem,
+    pairs: list[Pair],
+    solver: str,
+    evaluations: int,
+    order: list[Pair] | None = None,
+) -> SparseResult:
     return SparseResult(
         value=problem.evaluate(pairs),
         attacks=tuple(pairs),
@@ -63,8 +68,12 @@ def _sfs_order(problem: SparseProblem) -> tuple[list[Pair], int]:
     return order, evaluations
 
 
-def sfs(system_or_scenario: Scenarioish, budget: int | None = None, horizon: int | None = None,
-        objective: str = "trace") -> SparseResult:
+def sfs(
+    system_or_scenario: Scenarioish,
+    budget: int | None = None,
+    horizon: int | None = None,
+    objective: str = "trace",
+) -> SparseResult:
     """Sequential forward selection: add, one at a time, the pair whose attack raises Φ most.
 
     ``c·M·N`` candidate evaluations at most. The pick order (``result.order``) is itself a
@@ -88,8 +97,12 @@ def sfs(system_or_scenario: Scenarioish, budget: int | None = None, horizon: int
     return _result(problem, order, "sfs", evaluations, order=order)
 
 
-def sbs(system_or_scenario: Scenarioish, budget: int | None = None, horizon: int | None = None,
-        objective: str = "trace") -> SparseResult:
+def sbs(
+    system_or_scenario: Scenarioish,
+    budget: int | None = None,
+    horizon: int | None = None,
+    objective: str = "trace",
+) -> SparseResult:
     """Sequential backward selection: attack every pair, then un-attack one pair at a time.
 
     Each round restores the pair whose restoration lowers Φ least, until ``c`` pairs are left.
@@ -116,8 +129,12 @@ def sbs(system_or_scenario: Scenarioish, budget: int | None = None, horizon: int
     return _result(problem, pairs, "sbs", evaluations)
 
 
-def sfs_ss(system_or_scenario: Scenarioish, budget: int | None = None, horizon: int | None = None,
-           objective: str = "trace") -> SparseResult:
+def sfs_ss(
+    system_or_scenario: Scenarioish,
+    budget: int | None = None,
+    horizon: int | None = None,
+    objective: str = "trace",
+) -> SparseResult:
     """SFS improved by single swaps (the "simplex" step of MATH.md §4).
 
     Start from the SFS set in pick order, at the last pick (position ``c−1``, 0-based). At a

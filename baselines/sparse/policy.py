@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env._validation import check_int
 from baselines.sparse.result import SparseResult
+from fdia_env._validation import check_int
 
 
 class SparsePolicy:

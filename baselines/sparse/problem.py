@@ -63,8 +63,12 @@ class SparseProblem:
         check_choice("objective", self.objective, OBJECTIVES)
         P_start = steady_state(self.system)[1]
         P_start.setflags(write=False)
-        for name, value in (("budget", budget), ("horizon", horizon), ("P_start", P_start),
-                            ("size", size)):
+        for name, value in (
+            ("budget", budget),
+            ("horizon", horizon),
+            ("P_start", P_start),
+            ("size", size),
+        ):
             object.__setattr__(self, name, value)
 
     @property

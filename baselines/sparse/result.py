@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from baselines.sparse.problem import Pair
+
+if TYPE_CHECKING:
+    from baselines.sparse.policy import SparsePolicy
 
 
 @dataclass(frozen=True)

@@ -63,7 +63,9 @@ class SparseAttack(AttackModel):
         self.n_actions = 2**system.M
         self.action_space = spaces.Discrete(self.n_actions)
         sizes = np.array([a.bit_count() for a in range(self.n_actions)])
-        self._masks = [(sizes <= r).astype(np.int8) for r in range(self.budget + 1)]  # per budget left
+        self._masks = [
+            (sizes <= r).astype(np.int8) for r in range(self.budget + 1)
+        ]  # per budget left
         self.feature_low = np.zeros(1, dtype=np.float32)
         self.feature_high = np.ones(1, dtype=np.float32)
 
@@ -104,6 +106,10 @@ def _as_index(action: Any) -> int | None:
     """An integer action as int (numpy integers and 1-element integer arrays too), else None."""
     if isinstance(action, numbers.Integral) and not isinstance(action, bool):
         return int(action)
-    if isinstance(action, np.ndarray) and action.size == 1 and np.issubdtype(action.dtype, np.integer):
+    if (
+        isinstance(action, np.ndarray)
+        and action.size == 1
+        and np.issubdtype(action.dtype, np.integer)
+    ):
         return int(action.reshape(()))
     return None

@@ -30,8 +30,13 @@ def episode_spec(
         horizon = sc.horizon
     if warmup is None:
         warmup = "steady" if sc.steady_state else (sc.attack_step or 0)
-    spec = EpisodeSpec(horizon=horizon, warmup=warmup, objective=objective,
-                       reward_mode=reward_mode, dynamics=dynamics)
+    spec = EpisodeSpec(
+        horizon=horizon,
+        warmup=warmup,
+        objective=objective,
+        reward_mode=reward_mode,
+        dynamics=dynamics,
+    )
     return sc, spec
 
 

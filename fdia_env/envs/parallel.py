@@ -1,9 +1,9 @@
-"""One PettingZoo ``ParallelEnv`` that composes scenario × attack model × defense model × episode."""
+"""One PettingZoo ``ParallelEnv``: scenario × attack model × defense model × episode spec."""
 
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -43,7 +43,11 @@ class FdiaParallelEnv(ParallelEnv):
         name: ``metadata["name"]`` of the env.
     """
 
-    metadata = {"name": "fdia_v0", "render_modes": list(RENDER_MODES), "is_parallelizable": True}
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "fdia_v0",
+        "render_modes": list(RENDER_MODES),
+        "is_parallelizable": True,
+    }
 
     def __init__(
         self,
@@ -94,12 +98,12 @@ class FdiaParallelEnv(ParallelEnv):
             {"observation": box, "action_mask": spaces.Box(0, 1, shape=mask.shape, dtype=np.int8)}
         )
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019 - spaces are fixed per instance, as PettingZoo requires
+    @functools.cache  # noqa: B019 - spaces are fixed per instance, as PettingZoo requires
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
         return self._observation_spaces[agent]
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019
+    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object on every call)."""
         return self._action_spaces[agent]
@@ -129,7 +133,9 @@ class FdiaParallelEnv(ParallelEnv):
         if not self._reset_called:
             raise RuntimeError("step() called before reset(): call reset() first")
         if self._done:
-            raise RuntimeError("step() called after the episode ended: call reset() to start a new one")
+            raise RuntimeError(
+                "step() called after the episode ended: call reset() to start a new one"
+            )
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"actions must include every live agent; missing {missing}")
@@ -174,7 +180,7 @@ class FdiaParallelEnv(ParallelEnv):
         return self._models[agent].action_mask()
 
     def render(self) -> str | np.ndarray | None:
-        """``"ansi"``: a text line for the last step; ``"rgb_array"``: Φ over time and the error ellipse."""
+        """``"ansi"``: a line for the last step; ``"rgb_array"``: Φ over time, error ellipse."""
         if self.render_mode is None:
             return None
         if self.render_mode == "ansi":

@@ -26,9 +26,9 @@ from fdia_env.kalman import (
     predict_cov,
     psd_sqrt,
     sampled_step,
+    small,
     steady_state,
 )
-from fdia_env.kalman import small
 from fdia_env.systems import LinearSystem
 
 
@@ -120,7 +120,9 @@ class Simulation:
         """
         used, leak = filter_input.used, filter_input.leaked_sigma
         if self._fast and leak is None and self.consistent and not self.sampled:
-            self._p2 = small.info_update2(small.predict2(self._p2, self._f2, self._q2), self._j2_of(used))
+            self._p2 = small.info_update2(
+                small.predict2(self._p2, self._f2, self._q2), self._j2_of(used)
+            )
         else:
             self._generic_step(used, leak, rng)
         self.k += 1
@@ -135,7 +137,9 @@ class Simulation:
             j = self._j2[used] = small.to_sym2(J)
         return j
 
-    def _generic_step(self, used: int, leak: np.ndarray | None, rng: np.random.Generator | None) -> None:
+    def _generic_step(
+        self, used: int, leak: np.ndarray | None, rng: np.random.Generator | None
+    ) -> None:
         sys = self.system
         mask = bits_to_mask(used, sys.M)
         P_prev, M_prev = self.P, self.M
@@ -158,8 +162,14 @@ class Simulation:
         sys = self.system
         bias = None if leak is None else psd_sqrt(leak)
         self.x, self.x_hat, _, innovation = sampled_step(
-            rng, sys, self.x, self.x_hat, W,
-            Q_factor=self._Q_factor, R_factor=self._R_factor, bias_factor=bias,
+            rng,
+            sys,
+            self.x,
+            self.x_hat,
+            W,
+            Q_factor=self._Q_factor,
+            R_factor=self._R_factor,
+            bias_factor=bias,
         )
         rows = sys.row_mask(mask)
         if not rows.any():

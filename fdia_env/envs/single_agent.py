@@ -16,7 +16,11 @@ class Policy(Protocol):
     """Anything with stable-baselines3's ``predict`` signature (SB3 models, baseline policies)."""
 
     def predict(
-        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = False
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = False,
     ) -> tuple[Any, Any]:
         """Return ``(action, state)``."""
         ...
@@ -36,7 +40,9 @@ class SingleAgentEnv(gym.Env):
         opponent: Policy for the other player (required when the env has one).
     """
 
-    def __init__(self, parallel: FdiaParallelEnv, agent: str = "attacker", opponent: Policy | None = None) -> None:
+    def __init__(
+        self, parallel: FdiaParallelEnv, agent: str = "attacker", opponent: Policy | None = None
+    ) -> None:
         if agent not in parallel.possible_agents:
             raise ValueError(f"agent must be one of {parallel.possible_agents}, got {agent!r}")
         others = [a for a in parallel.possible_agents if a != agent]
@@ -61,7 +67,9 @@ class SingleAgentEnv(gym.Env):
             return obs["observation"], {"action_mask": obs["action_mask"]}
         return obs, {}
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict]:
         """Reset the underlying env; ``seed`` seeds every draw of the episode."""
         super().reset(seed=seed)
         obs, infos = self.parallel.reset(seed=seed, options=options)
@@ -79,8 +87,13 @@ class SingleAgentEnv(gym.Env):
         if self.other is not None:
             self._other_obs = obs[self.other]
         own, extra = self._split(obs[self.agent])
-        return own, float(rewards[self.agent]), bool(terms[self.agent]), bool(truncs[self.agent]), {
-            **infos[self.agent], **extra}
+        return (
+            own,
+            float(rewards[self.agent]),
+            bool(terms[self.agent]),
+            bool(truncs[self.agent]),
+            {**infos[self.agent], **extra},
+        )
 
     def action_masks(self) -> np.ndarray:
         """Legal actions now (all legal when the agent's model has no mask)."""
@@ -94,8 +107,9 @@ class SingleAgentEnv(gym.Env):
         return self.parallel.render()
 
 
-def make_single_agent(module: str, agent: str = "attacker", opponent: Policy | None = None,
-                      **kwargs: Any) -> SingleAgentEnv:
+def make_single_agent(
+    module: str, agent: str = "attacker", opponent: Policy | None = None, **kwargs: Any
+) -> SingleAgentEnv:
     """Gymnasium entry point: ``fdia_env.<module>.parallel_env(**kwargs)`` seen by ``agent``."""
     mod = importlib.import_module(module)
     return SingleAgentEnv(mod.parallel_env(**kwargs), agent=agent, opponent=opponent)

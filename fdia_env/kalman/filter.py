@@ -43,7 +43,9 @@ def covariance_update(
     return P_post, W, S
 
 
-def information_update(P_pred: np.ndarray, J: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+def information_update(
+    P_pred: np.ndarray, J: np.ndarray, mask: np.ndarray | None = None
+) -> np.ndarray:
     """Information-form update for a sensor subset.
 
     ``P[k|k]⁻¹ = P[k|k−1]⁻¹ + Σ_{i used} H_i' R_i⁻¹ H_i``.
@@ -60,7 +62,9 @@ def information_update(P_pred: np.ndarray, J: np.ndarray, mask: np.ndarray | Non
     return spd_inv(spd_inv(P_pred) + info_gain)
 
 
-def masked_gain(P_post: np.ndarray, system: LinearSystem, mask: np.ndarray | None = None) -> np.ndarray:
+def masked_gain(
+    P_post: np.ndarray, system: LinearSystem, mask: np.ndarray | None = None
+) -> np.ndarray:
     """Gain over the stacked measurement with zero columns for unused sensors.
 
     ``W = P[k|k] H' R⁻¹`` restricted to the used rows; equal to the covariance-form gain of
@@ -78,7 +82,7 @@ def masked_gain(P_post: np.ndarray, system: LinearSystem, mask: np.ndarray | Non
 def subset_update(
     P_pred: np.ndarray, system: LinearSystem, mask: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Update for a (batched) sensor subset: returns ``(P_post, W)`` with W of shape (..., n, nz)."""
+    """Update for a (batched) sensor subset: ``(P_post, W)``, W of shape (..., n, nz)."""
     P_post = information_update(P_pred, system.J, mask)
     return P_post, masked_gain(P_post, system, mask)
 

@@ -38,7 +38,11 @@ def predict2(p: Sym2, f: Mat2, q: Sym2) -> Sym2:
     f11, f12, f21, f22 = f
     x11, x12 = f11 * a + f12 * b, f11 * b + f12 * d  # first row of F P
     x21, x22 = f21 * a + f22 * b, f21 * b + f22 * d  # second row of F P
-    return (x11 * f11 + x12 * f12 + q[0], x11 * f21 + x12 * f22 + q[1], x21 * f21 + x22 * f22 + q[2])
+    return (
+        x11 * f11 + x12 * f12 + q[0],
+        x11 * f21 + x12 * f22 + q[1],
+        x21 * f21 + x22 * f22 + q[2],
+    )
 
 
 def inv2(p: Sym2) -> Sym2:

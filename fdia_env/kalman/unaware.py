@@ -23,7 +23,10 @@ def actual_covariance_step(
 
     Args:
         M_prev: (..., n, n) actual error covariance at k−1.
-        F, Q, H, R: System matrices (stacked H and block-diagonal R).
+        F: (n, n) transition.
+        Q: (n, n) process noise covariance.
+        H: (nz, n) stacked measurement matrix.
+        R: (nz, nz) block-diagonal measurement noise covariance.
         W: (..., n, nz) the filter's nominal gain at k (zero columns for unused rows).
         Sigma: (..., nz, nz) bias covariance injected at k (None = no attack).
     """
@@ -37,7 +40,10 @@ def transition_matrices(F: np.ndarray, H: np.ndarray, W: np.ndarray) -> np.ndarr
 
 
 def extra_mse(
-    F: np.ndarray, H: np.ndarray, gains: Sequence[np.ndarray] | np.ndarray, sigmas: Sequence[np.ndarray] | np.ndarray
+    F: np.ndarray,
+    H: np.ndarray,
+    gains: Sequence[np.ndarray] | np.ndarray,
+    sigmas: Sequence[np.ndarray] | np.ndarray,
 ) -> np.ndarray:
     """Extra MSE ``A[K+N] = Σ_{m=0..N} D_m Σ[K+N−m] D_m'`` caused by biases from K on.
 
@@ -56,7 +62,8 @@ def extra_mse(
     sigmas = np.asarray(sigmas, dtype=float)
     if gains.shape[0] != sigmas.shape[0]:
         raise ValueError(
-            f"gains and sigmas must cover the same steps, got {gains.shape[0]} and {sigmas.shape[0]}"
+            "gains and sigmas must cover the same steps, "
+            f"got {gains.shape[0]} and {sigmas.shape[0]}"
         )
     B = transition_matrices(F, H, gains)
     N = gains.shape[0] - 1

@@ -3,4 +3,11 @@
 from fdia_env.systems.system import LinearSystem, Sensor
 from fdia_env.systems.tracking import position_sensor, power_weight, pv_sensor, tracking_system
 
-__all__ = ["LinearSystem", "Sensor", "position_sensor", "power_weight", "pv_sensor", "tracking_system"]
+__all__ = [
+    "LinearSystem",
+    "Sensor",
+    "position_sensor",
+    "power_weight",
+    "pv_sensor",
+    "tracking_system",
+]

@@ -92,7 +92,9 @@ class LinearSystem:
             raise ValueError("LinearSystem.sensors must hold at least one Sensor")
         for i, s in enumerate(sensors):
             if not isinstance(s, Sensor):
-                raise ValueError(f"LinearSystem.sensors[{i}] must be a Sensor, got {type(s).__name__}")
+                raise ValueError(
+                    f"LinearSystem.sensors[{i}] must be a Sensor, got {type(s).__name__}"
+                )
             if s.H.shape[1] != n:
                 raise ValueError(
                     f"LinearSystem.sensors[{i}].H must have {n} columns to match F, "
@@ -107,7 +109,9 @@ class LinearSystem:
             Gu = np.zeros(n)
         else:
             G = as_matrix("LinearSystem.G", self.G, shape=(n, None))
-            u = as_vector("LinearSystem.u", np.zeros(G.shape[1]) if self.u is None else self.u, G.shape[1])
+            u = as_vector(
+                "LinearSystem.u", np.zeros(G.shape[1]) if self.u is None else self.u, G.shape[1]
+            )
             object.__setattr__(self, "G", G)
             object.__setattr__(self, "u", u)
             Gu = G @ u
@@ -120,10 +124,20 @@ class LinearSystem:
         J = np.stack([s.H.T @ np.linalg.solve(s.R, s.H) for s in sensors])
         row_sensor = np.concatenate([np.full(s.dim, i) for i, s in enumerate(sensors)])
         for name, value in (
-            ("F", F), ("Q", Q), ("sensors", sensors), ("x0", x0), ("P0", P0),
-            ("n", n), ("M", len(sensors)), ("nz", H.shape[0]), ("H", H), ("R", R),
-            ("J", 0.5 * (J + J.transpose(0, 2, 1))), ("HtRinv", H.T @ Rinv),
-            ("row_sensor", row_sensor), ("Gu", Gu),
+            ("F", F),
+            ("Q", Q),
+            ("sensors", sensors),
+            ("x0", x0),
+            ("P0", P0),
+            ("n", n),
+            ("M", len(sensors)),
+            ("nz", H.shape[0]),
+            ("H", H),
+            ("R", R),
+            ("J", 0.5 * (J + J.transpose(0, 2, 1))),
+            ("HtRinv", H.T @ Rinv),
+            ("row_sensor", row_sensor),
+            ("Gu", Gu),
         ):
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)

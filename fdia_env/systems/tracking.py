@@ -16,9 +16,7 @@ def position_sensor(sigma: float, name: str = "") -> Sensor:
     return Sensor(H=np.array([[1.0, 0.0]]), R=np.array([[sigma**2]]), name=name)
 
 
-def pv_sensor(
-    sigma_p: float, sigma_vel: float, rho: float = 0.0, name: str = ""
-) -> Sensor:
+def pv_sensor(sigma_p: float, sigma_vel: float, rho: float = 0.0, name: str = "") -> Sensor:
     """A position+velocity sensor ``H = I₂`` with std devs and position/velocity correlation.
 
     Args:
@@ -69,7 +67,7 @@ def tracking_system(
     sigma_v = check_positive("sigma_v", sigma_v)
     T = check_positive("T", T)
     all_sensors: list[Sensor] = []
-    for i, s in enumerate(sigma_w or ()):
+    for i, s in enumerate(() if sigma_w is None else sigma_w):
         all_sensors.append(position_sensor(check_positive(f"sigma_w[{i}]", s), name=f"z{i + 1}"))
     all_sensors.extend(sensors or ())
     if not all_sensors:
