@@ -12,12 +12,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from pettingzoo.utils.conversions import parallel_to_aec_wrapper
-from pettingzoo.utils.wrappers import OrderEnforcingWrapper
-
 from fdia_env.attacks import AttackModel, SparseAttack
 from fdia_env.defenses import DefenseModel, PerfectDetection
-from fdia_env.envs.factory import episode_spec
+from fdia_env.envs.factory import aec_views, episode_spec
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -77,11 +74,4 @@ def parallel_env(
     )
 
 
-def raw_env(**kwargs: Any) -> parallel_to_aec_wrapper:
-    """The AEC view without wrappers."""
-    return parallel_to_aec_wrapper(parallel_env(**kwargs))
-
-
-def env(**kwargs: Any) -> OrderEnforcingWrapper:
-    """The AEC view with PettingZoo's order-enforcing wrapper."""
-    return OrderEnforcingWrapper(raw_env(**kwargs))
+raw_env, env = aec_views(parallel_env)

@@ -68,14 +68,9 @@ Terminates after N steps. No truncation.
 
 from __future__ import annotations
 
-from typing import Any
-
-from pettingzoo.utils.conversions import parallel_to_aec_wrapper
-from pettingzoo.utils.wrappers import OrderEnforcingWrapper
-
 from fdia_env.attacks import SparseAttack
 from fdia_env.defenses import PerfectDetection
-from fdia_env.envs.factory import episode_spec, scenario_default
+from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -106,11 +101,4 @@ def parallel_env(
     return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, render_mode=render_mode, name=NAME)
 
 
-def raw_env(**kwargs: Any) -> parallel_to_aec_wrapper:
-    """The AEC view without wrappers."""
-    return parallel_to_aec_wrapper(parallel_env(**kwargs))
-
-
-def env(**kwargs: Any) -> OrderEnforcingWrapper:
-    """The AEC view with PettingZoo's order-enforcing wrapper."""
-    return OrderEnforcingWrapper(raw_env(**kwargs))
+raw_env, env = aec_views(parallel_env)

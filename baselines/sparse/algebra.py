@@ -19,6 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
+from fdia_env.kalman import small
 from fdia_env.kalman.linalg import sym
 
 
@@ -63,17 +64,6 @@ def algebra_for(
     return MatrixAlgebra(F, Q, objective)
 
 
-def _sym2_inverse(a: np.ndarray, b: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Components of ``[[a, b], [b, d]]⁻¹ = [[d, −b], [−b, a]] / (a d − b²)`` as a (3, R) array."""
-    inv_det = 1.0 / (a * d - b * b)
-    out = np.empty((3, a.shape[0]))
-    np.multiply(d, inv_det, out=out[0])
-    np.multiply(b, inv_det, out=out[1])
-    np.negative(out[1], out=out[1])
-    np.multiply(a, inv_det, out=out[2])
-    return out
-
-
 class Components2:
     """2×2 symmetric matrices stored as (3, R) component arrays ``[m00, m01, m11]``.
 
@@ -87,6 +77,8 @@ class Components2:
         self.F = np.asarray(F, dtype=float)
         self.Q = np.asarray(Q, dtype=float)
         self.objective = objective
+        self._f = small.to_mat2(self.F)
+        self._q = small.to_sym2(self.Q)
 
     def start(self, P: np.ndarray) -> np.ndarray:
         """A one-row batch holding ``P``."""
@@ -106,22 +98,12 @@ class Components2:
 
     def predicted_information(self, batch: np.ndarray) -> np.ndarray:
         """``Y = (F P F' + Q)⁻¹`` on components."""
-        (f00, f01), (f10, f11) = self.F
-        p00, p01, p11 = batch
-        # A = F P (rows of A), then F P F' + Q: only the upper triangle is needed
-        a00 = f00 * p00 + f01 * p01
-        a01 = f00 * p01 + f01 * p11
-        a10 = f10 * p00 + f11 * p01
-        a11 = f10 * p01 + f11 * p11
-        pp00 = a00 * f00 + a01 * f01 + self.Q[0, 0]
-        pp01 = a00 * f10 + a01 * f11 + 0.5 * (self.Q[0, 1] + self.Q[1, 0])
-        pp11 = a10 * f10 + a11 * f11 + self.Q[1, 1]
-        return _sym2_inverse(pp00, pp01, pp11)
+        return np.stack(small.inv2(small.predict2(tuple(batch), self._f, self._q)))
 
     def posterior(self, info: np.ndarray, J: np.ndarray) -> np.ndarray:
         """``P = (Y + J)⁻¹`` on components."""
         y00, y01, y11 = info
-        return _sym2_inverse(y00 + J[0, 0], y01 + J[0, 1], y11 + J[1, 1])
+        return np.stack(small.inv2((y00 + J[0, 0], y01 + J[0, 1], y11 + J[1, 1])))
 
     def posterior_objective(self, info: np.ndarray, J: np.ndarray) -> np.ndarray:
         """``tr (Y + J)⁻¹ = (a + d) / (a d − b²)`` or ``log det (Y + J)⁻¹ = −log(a d − b²)``."""

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
+
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario, resolve
@@ -48,3 +52,19 @@ def scenario_default(sc: Scenario, name: str, value: Any) -> Any:
     if preset is None:
         raise ValueError(f"{name} is required: scenario {sc.name!r} does not define one")
     return preset
+
+
+def aec_views(
+    parallel_env: Callable[..., Any],
+) -> tuple[Callable[..., parallel_to_aec_wrapper], Callable[..., OrderEnforcingWrapper]]:
+    """PettingZoo's ``raw_env`` (AEC, unwrapped) and ``env`` (order-enforcing) for a module."""
+
+    def raw_env(**kwargs: Any) -> parallel_to_aec_wrapper:
+        """The AEC view without wrappers."""
+        return parallel_to_aec_wrapper(parallel_env(**kwargs))
+
+    def env(**kwargs: Any) -> OrderEnforcingWrapper:
+        """The AEC view with PettingZoo's order-enforcing wrapper."""
+        return OrderEnforcingWrapper(raw_env(**kwargs))
+
+    return raw_env, env

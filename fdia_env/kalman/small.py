@@ -1,9 +1,11 @@
-"""Closed-form kernels for one 2-state filter (the tracking model), on plain Python floats.
+"""Closed-form kernels for 2-state filters (the tracking model), one formula per function.
 
-A symmetric 2×2 matrix ``[[a, b], [b, d]]`` is the tuple ``(a, b, d)``. For a single
-environment these formulas run several times faster than numpy calls on 2×2 arrays, whose
-per-call overhead dominates; the batched numpy functions in :mod:`fdia_env.kalman.filter` are
-the reference they are tested against.
+A symmetric 2×2 matrix ``[[a, b], [b, d]]`` is the tuple ``(a, b, d)``. The components may be
+plain Python floats (one environment: several times faster than numpy calls on 2×2 arrays,
+whose per-call overhead dominates) or equally shaped numpy arrays (a batch stored as component
+arrays, as the exhaustive search does). :func:`predict2`, :func:`inv2`, :func:`info_update2` and
+:func:`trace2` are pure arithmetic and work on both; the batched numpy functions in
+:mod:`fdia_env.kalman.filter` are the reference they are tested against.
 """
 
 from __future__ import annotations
