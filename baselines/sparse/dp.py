@@ -69,9 +69,10 @@ def dp(
     states = problem.P_start[None]  # P_DP(s, 0): only s = 0 is reachable
     choice = np.zeros((N, c + 1), dtype=int)  # C(s, k): sensors attacked at step k
     evaluations = 0
+    s_full, r_full = np.meshgrid(np.arange(c + 1), np.arange(M + 1), indexing="ij")
     for k in range(N):
         reach = min(c, M * (k + 1))  # most attacks possible after step k
-        s_grid, r_grid = np.meshgrid(np.arange(reach + 1), np.arange(M + 1), indexing="ij")
+        s_grid, r_grid = s_full[: reach + 1], r_full[: reach + 1]
         valid = (r_grid <= s_grid) & (s_grid - r_grid < len(states))
         s_idx, r_idx = s_grid[valid], r_grid[valid]
         # KF(P_DP(s − r, k − 1), r) for every candidate (s, r) at once

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import scipy.linalg
 
@@ -21,6 +23,10 @@ def _sensor_rows(system: LinearSystem, mask: np.ndarray | None) -> np.ndarray:
     return system.row_mask(mask)
 
 
+# system -> {used-sensor key: (P_pred, P_post, W)}; systems are immutable, so results are too
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def steady_state(
     system: LinearSystem, mask: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -28,7 +34,8 @@ def steady_state(
 
     ``scipy.linalg.solve_discrete_are(F', H', Q, R)`` gives the predicted covariance; one
     update gives the filtered one. Falls back to :func:`steady_state_iterate` when the DARE
-    solver fails (e.g. Q = 0, where the filtered covariance tends to zero).
+    solver fails (e.g. Q = 0, where the filtered covariance tends to zero). Results are cached
+    per (system, subset) and returned as read-only arrays: a :class:`LinearSystem` is immutable.
 
     Args:
         system: The system.
@@ -39,6 +46,19 @@ def steady_state(
         for unused sensors.
     """
     rows = _sensor_rows(system, mask)
+    key = rows.tobytes()
+    cached = _CACHE.setdefault(system, {})
+    if key not in cached:
+        result = _solve_dare(system, mask, rows)
+        for a in result:
+            a.setflags(write=False)
+        cached[key] = result
+    return cached[key]
+
+
+def _solve_dare(
+    system: LinearSystem, mask: np.ndarray | None, rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     H, R = system.H[rows], system.R[np.ix_(rows, rows)]
     try:
         P_pred = sym(scipy.linalg.solve_discrete_are(system.F.T, H.T, system.Q, R))
