@@ -7,10 +7,12 @@ steps/s, and the PettingZoo parallel env against PettingZoo's own ``rps_v2`` par
 
 from __future__ import annotations
 
+import os
 import platform
 import sys
 from pathlib import Path
 
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as benchmarks/sparse.py: tiny LAPACK calls
 import gymnasium as gym
 import numpy as np
 
