@@ -96,7 +96,9 @@ def main() -> None:
         "pettingzoo rps_v2 parallel": rate(rps_runner(), steps),
     }
     print(
-        f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}"
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, "
+        f"python {platform.python_version()}, numpy {np.__version__}, "
+        f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}"
     )
     for name, r in results.items():
         print(f"{name:40s} {r:12,.0f} steps/s")
