@@ -78,6 +78,10 @@ class FdiaParallelEnv(ParallelEnv):
         self._models = {"attacker": attack, "defender": defense}
         self._observation_spaces = {a: self._build_obs_space(a) for a in self.possible_agents}
         self._action_spaces = {a: self._models[a].action_space for a in self.possible_agents}
+        low, high = self.sim.feature_bounds()
+        self.state_space = spaces.Box(
+            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
+        )
         self.np_random, self.np_random_seed = seeding.np_random(None)
         self._done = True
         self._reset_called = False
