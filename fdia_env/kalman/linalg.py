@@ -22,20 +22,18 @@ def spd_inv(a: np.ndarray) -> np.ndarray:
     return sym(np.linalg.inv(a))
 
 
-def inv2(a: np.ndarray) -> np.ndarray:
-    """Closed-form inverse of (..., 2, 2) matrices: ``[[d, -b], [-c, a]] / (ad - bc)``.
+_COFACTOR_SIGNS = np.array([[1.0, -1.0], [-1.0, 1.0]])
 
-    Written out on component arrays: for tiny matrices this is many times faster than
+
+def inv2(a: np.ndarray) -> np.ndarray:
+    """Closed-form inverse of (..., 2, 2) matrices: ``[[d, −b], [−c, a]] / (ad − bc)``.
+
+    ``a[..., ::-1, ::-1]`` transposed is ``[[d, b], [c, a]]``; the sign pattern and the
+    determinant finish the adjugate formula. On component views this is many times faster than
     ``np.linalg.inv``'s per-matrix LAPACK call, and exact to rounding.
     """
-    p, q, r, s = a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1]
-    det = p * s - q * r
-    out = np.empty_like(a)
-    out[..., 0, 0] = s / det
-    out[..., 0, 1] = -q / det
-    out[..., 1, 0] = -r / det
-    out[..., 1, 1] = p / det
-    return out
+    det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / det[..., None, None])
 
 
 def trace(a: np.ndarray) -> np.ndarray:
