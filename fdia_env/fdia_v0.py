@@ -12,16 +12,21 @@ from __future__ import annotations
 
 from typing import Any
 
-from fdia_env.attacks import AttackModel, SparseAttack
-from fdia_env.defenses import DefenseModel, PerfectDetection
+from fdia_env.attacks import AttackModel, CovarianceAttack, SparseAttack
+from fdia_env.defenses import DefenseModel, PerfectDetection, UnawareFilter
 from fdia_env.envs.factory import aec_views, episode_spec
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 NAME = "fdia_v0"
-ATTACKS: dict[str, type[AttackModel]] = {"sparse": SparseAttack}
-DEFENSES: dict[str, type[DefenseModel]] = {"perfect_detection": PerfectDetection}
+ATTACKS: dict[str, type[AttackModel]] = {"sparse": SparseAttack, "covariance": CovarianceAttack}
+# attack-model parameters filled from the scenario preset when not given
+SCENARIO_DEFAULTS: dict[str, tuple[str, ...]] = {"sparse": ("budget",), "covariance": ("power",)}
+DEFENSES: dict[str, type[DefenseModel]] = {
+    "perfect_detection": PerfectDetection,
+    "unaware": UnawareFilter,
+}
 
 
 def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None) -> Any:
@@ -62,8 +67,11 @@ def parallel_env(
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
-    if attack == "sparse" and not (attack_kwargs or {}).get("budget") and sc.budget is not None:
-        attack_kwargs = {**(attack_kwargs or {}), "budget": sc.budget}
+    if isinstance(attack, str):  # model parameters the preset defines, unless given
+        attack_kwargs = dict(attack_kwargs or {})
+        for param in SCENARIO_DEFAULTS.get(attack, ()):
+            if param not in attack_kwargs and getattr(sc, param, None) is not None:
+                attack_kwargs[param] = getattr(sc, param)
     return FdiaParallelEnv(
         sc,
         _model("attack", attack, ATTACKS, attack_kwargs),

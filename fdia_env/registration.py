@@ -7,6 +7,7 @@ import gymnasium
 # id -> (module whose parallel_env builds the env, learning agent)
 GYM_IDS: dict[str, tuple[str, str]] = {
     "fdia_env/SparseAttack-v0": ("fdia_env.sparse_attack_v0", "attacker"),
+    "fdia_env/CovarianceAttack-v0": ("fdia_env.covariance_attack_v0", "attacker"),
 }
 
 

@@ -2,5 +2,6 @@
 
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.defenses.perfect_detection import PerfectDetection
+from fdia_env.defenses.unaware import UnawareFilter
 
-__all__ = ["DefenseModel", "FilterInput", "PerfectDetection"]
+__all__ = ["DefenseModel", "FilterInput", "PerfectDetection", "UnawareFilter"]

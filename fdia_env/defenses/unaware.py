@@ -1,0 +1,29 @@
+"""The unaware filter: it keeps its nominal gains and incorporates every biased measurement."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fdia_env.attacks.base import AttackEffect
+from fdia_env.defenses.base import DefenseModel, FilterInput
+from fdia_env.episode import EpisodeSpec
+from fdia_env.systems import LinearSystem
+
+
+class UnawareFilter(DefenseModel):
+    """Passive defender: uses every sensor with gains computed from R (MATH.md §2.1).
+
+    The injected bias covariance reaches the filter in full; the actual error covariance then
+    follows the Joseph form ``M = (I − W H) M⁻ (I − W H)' + W (R + Σ) W'``.
+    """
+
+    name = "unaware"
+    passive = True
+
+    def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
+        """Nothing to build: the model has no action."""
+        self._all = (1 << system.M) - 1
+
+    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
+        """Every sensor is used; the bias leaks through."""
+        return FilterInput(used=self._all, leaked_sigma=effect.sigma)
