@@ -8,6 +8,8 @@ import gymnasium
 GYM_IDS: dict[str, tuple[str, str]] = {
     "fdia_env/SparseAttack-v0": ("fdia_env.sparse_attack_v0", "attacker"),
     "fdia_env/CovarianceAttack-v0": ("fdia_env.covariance_attack_v0", "attacker"),
+    "fdia_env/SensorGameAttacker-v0": ("fdia_env.sensor_game_v0", "attacker"),
+    "fdia_env/SensorGameDefender-v0": ("fdia_env.sensor_game_v0", "defender"),
 }
 
 

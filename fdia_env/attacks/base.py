@@ -62,6 +62,9 @@ class AttackModel(ABC):
     def features(self) -> list[float]:
         """Model-specific observation features, scaled to order one."""
 
+    def observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
+        """Called after each step with the other player's model (repeated games use it)."""
+
     def action_mask(self) -> np.ndarray | None:
         """Legal discrete actions (int8, 1 = legal) or None when every action is legal."""
         return None

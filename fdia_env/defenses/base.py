@@ -23,10 +23,14 @@ class FilterInput:
             gain (bit i set = sensor i, 0-based).
         leaked_sigma: (nz, nz) covariance of the bias that reaches the filter through used
             sensors, or None if no bias gets through.
+        steady: The filter has been running on ``used`` long enough to be in its steady state
+            before this step (the one-shot setting of the sensor-selection game): P and the
+            actual error covariance restart there.
     """
 
     used: int
     leaked_sigma: np.ndarray | None = None
+    steady: bool = False
 
 
 class DefenseModel(ABC):
@@ -51,6 +55,9 @@ class DefenseModel(ABC):
     def features(self) -> list[float]:
         """Model-specific observation features."""
         return []
+
+    def observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
+        """Called after each step with the other player's model (repeated games use it)."""
 
     def action_mask(self) -> np.ndarray | None:
         """Legal discrete actions or None."""

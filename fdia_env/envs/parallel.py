@@ -146,6 +146,9 @@ class FdiaParallelEnv(ParallelEnv):
         effect = self.attack.apply(actions["attacker"])
         filter_input = self.defense.apply(actions.get("defender"), effect)
         self._last_effect = effect
+        if not self.defense.passive:
+            self.attack.observe_opponent(self.defense)
+            self.defense.observe_opponent(self.attack)
         phi_prev = self.sim.phi[-1]
         phi = self.sim.step(filter_input, self.np_random)
         done = self.sim.k >= self.spec.horizon

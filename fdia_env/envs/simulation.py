@@ -119,6 +119,8 @@ class Simulation:
             estimation error).
         """
         used, leak = filter_input.used, filter_input.leaked_sigma
+        if filter_input.steady:
+            self._restart_steady(used, rng)
         if self._fast and leak is None and self.consistent and not self.sampled:
             self._p2 = small.info_update2(
                 small.predict2(self._p2, self._f2, self._q2), self._j2_of(used)
@@ -129,6 +131,15 @@ class Simulation:
         value = self.measure()
         self.phi.append(value)
         return value
+
+    def _restart_steady(self, used: int, rng: np.random.Generator | None) -> None:
+        """The filter has been running on ``used`` long enough: P = M = its steady state."""
+        P = np.array(steady_state(self.system, bits_to_mask(used, self.system.M))[1])
+        self._P = self._M = P
+        self._p2 = small.to_sym2(P) if self._fast else None
+        self.consistent = True
+        if self.sampled:  # a fresh error drawn from the steady-state covariance
+            self.x = self.x_hat + psd_sqrt(P) @ rng.standard_normal(self.system.n)
 
     def _j2_of(self, used: int) -> small.Sym2:
         j = self._j2.get(used)

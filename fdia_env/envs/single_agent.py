@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv
 
 
@@ -73,6 +74,8 @@ class SingleAgentEnv(gym.Env):
         """Reset the underlying env; ``seed`` seeds every draw of the episode."""
         super().reset(seed=seed)
         obs, infos = self.parallel.reset(seed=seed, options=options)
+        if seed is not None and hasattr(self.opponent, "reset"):
+            self.opponent.reset(seed=seed + 1)  # the opponent's draws are seeded too
         if self.other is not None:
             self._other_obs = obs[self.other]
         own, extra = self._split(obs[self.agent])
@@ -110,6 +113,17 @@ class SingleAgentEnv(gym.Env):
 def make_single_agent(
     module: str, agent: str = "attacker", opponent: Policy | None = None, **kwargs: Any
 ) -> SingleAgentEnv:
-    """Gymnasium entry point: ``fdia_env.<module>.parallel_env(**kwargs)`` seen by ``agent``."""
+    """Gymnasium entry point: ``fdia_env.<module>.parallel_env(**kwargs)`` seen by ``agent``.
+
+    When the env has another player and no ``opponent`` is given, it plays the uniform mixed
+    strategy over its discrete actions (:class:`~fdia_env.envs.opponents.FixedMix`).
+    """
     mod = importlib.import_module(module)
-    return SingleAgentEnv(mod.parallel_env(**kwargs), agent=agent, opponent=opponent)
+    parallel = mod.parallel_env(**kwargs)
+    others = [a for a in parallel.possible_agents if a != agent]
+    if others and opponent is None:
+        space = parallel.action_space(others[0])
+        if not hasattr(space, "n"):
+            raise ValueError(f"opponent is required: {others[0]!r} has no discrete action space")
+        opponent = FixedMix.uniform(int(space.n))
+    return SingleAgentEnv(parallel, agent=agent, opponent=opponent)

@@ -1,0 +1,93 @@
+"""``sensor_game_v0``: the zero-sum sensor-selection game of MATH.md §5.
+
+## Description
+
+Both players pick a non-empty subset of the M sensors. The defender's filter runs on its subset
+D and is in steady state when the attack comes; the attacker spends its power a² on its subset A
+by the ``allocation`` rule (``"independent"``: all on the smallest-variance sensor of A;
+``"dependent"``: correlation 1 with ``σ_b,i ∝ 1/σ_i²``); only the biases on A ∩ D reach the
+filter, which is unaware of them. The attacker is paid ``L[D, A] = tr(P_D + W_D Σ_{A∩D} W_D')``
+and the defender minus that. By default the game is one-shot (``rounds=1``); with ``rounds > 1``
+it is repeated and each player observes the other's last subset. The analytic solution is the LP
+equilibrium of ``baselines.game``.
+
+## Action Space
+
+``Discrete(2**M − 1)`` for each player: index j is the j-th subset by size then lexicographic
+(for M = 3: z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3; see ``fdia_env.attacks.subsets``).
+
+## Observation Space
+
+``Box(float32)``: steps left / rounds, log variance growth and correlations of the actual error
+covariance after the last round (as in every fdia_env env; NIS too in sampled mode), then the
+other player's last subset as a 0/1 indicator per sensor.
+
+## Rewards
+
+``reward_mode="per_step"`` (default) pays ±L[D, A] every round (expected dynamics) or ± the
+squared estimation error (sampled); ``"terminal"`` pays the last round only.
+
+## Episode End
+
+Terminates after ``rounds`` rounds.
+
+## Arguments
+
+``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``,
+``rounds`` (default 1), ``reward_mode``, ``dynamics``, ``render_mode``.
+
+Gymnasium views: ``fdia_env/SensorGameAttacker-v0`` and ``fdia_env/SensorGameDefender-v0``, the
+other player fixed to ``opponent=`` (any SB3-style policy, e.g.
+``fdia_env.envs.opponents.FixedMix(probs)``), by default the uniform mix.
+
+## Version History
+
+- v0: initial release.
+
+## Example
+
+>>> from fdia_env import sensor_game_v0
+>>> env = sensor_game_v0.parallel_env(scenario="ch5-game")
+>>> _ = env.reset(seed=0)
+>>> _, rewards, *_ = env.step({"attacker": 0, "defender": 0})  # both pick z1
+>>> round(rewards["attacker"], 1)
+25.4
+"""
+
+from __future__ import annotations
+
+from fdia_env._validation import check_int
+from fdia_env.attacks.subset import SubsetAttack
+from fdia_env.defenses.selection import SensorSelection
+from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
+from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.scenarios import Scenario
+from fdia_env.systems import LinearSystem
+
+NAME = "sensor_game_v0"
+
+
+def parallel_env(
+    scenario: str | Scenario | LinearSystem = "ch5-game",
+    power: float | None = None,
+    allocation: str = "independent",
+    rounds: int = 1,
+    reward_mode: str = "per_step",
+    dynamics: str = "expected",
+    render_mode: str | None = None,
+) -> FdiaParallelEnv:
+    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
+    rounds = check_int("rounds", rounds, minimum=1)
+    sc, spec = episode_spec(
+        scenario,
+        horizon=rounds,
+        warmup="steady",
+        objective="trace",
+        reward_mode=reward_mode,
+        dynamics=dynamics,
+    )
+    attack = SubsetAttack(scenario_default(sc, "power", power), allocation=allocation)
+    return FdiaParallelEnv(sc, attack, SensorSelection(), spec, render_mode=render_mode, name=NAME)
+
+
+raw_env, env = aec_views(parallel_env)
