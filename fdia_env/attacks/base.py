@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any
@@ -76,3 +77,16 @@ class AttackModel(ABC):
     def info(self) -> dict[str, Any]:
         """Per-step information for the ``infos`` dict."""
         return {}
+
+
+def as_index(action: Any) -> int | None:
+    """An integer action as int (numpy integers and 1-element integer arrays too), else None."""
+    if isinstance(action, numbers.Integral) and not isinstance(action, bool):
+        return int(action)
+    if (
+        isinstance(action, np.ndarray)
+        and action.size == 1
+        and np.issubdtype(action.dtype, np.integer)
+    ):
+        return int(action.reshape(()))
+    return None

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import numbers
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_int
-from fdia_env.attacks.base import AttackEffect, AttackModel
+from fdia_env.attacks.base import AttackEffect, AttackModel, as_index
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -84,7 +83,7 @@ class SparseAttack(AttackModel):
 
     def apply(self, action: Any) -> AttackEffect:
         """Attack the chosen subset, trimmed to the remaining budget."""
-        a = _as_index(action)
+        a = as_index(action)
         if a is None or not 0 <= a < self.n_actions:
             raise ValueError(
                 f"attacker action must be an integer in [0, {self.n_actions}) (a sensor bitmask), "
@@ -100,16 +99,3 @@ class SparseAttack(AttackModel):
         """The sensors attacked this step (0-based) and the budget left."""
         a = self.last_attacked
         return {"attacked": [i for i in range(self.M) if a >> i & 1], "budget_left": self.remaining}
-
-
-def _as_index(action: Any) -> int | None:
-    """An integer action as int (numpy integers and 1-element integer arrays too), else None."""
-    if isinstance(action, numbers.Integral) and not isinstance(action, bool):
-        return int(action)
-    if (
-        isinstance(action, np.ndarray)
-        and action.size == 1
-        and np.issubdtype(action.dtype, np.integer)
-    ):
-        return int(action.reshape(()))
-    return None

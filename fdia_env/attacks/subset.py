@@ -18,8 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_positive
-from fdia_env.attacks.base import AttackEffect, AttackModel
-from fdia_env.attacks.sparse import _as_index
+from fdia_env.attacks.base import AttackEffect, AttackModel, as_index
 from fdia_env.attacks.subsets import subset_bits, subsets
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -118,7 +117,7 @@ class SubsetAttack(AttackModel):
 
     def apply(self, action: Any) -> AttackEffect:
         """Attack subset ``action``."""
-        j = _as_index(action)
+        j = as_index(action)
         if j is None or not 0 <= j < len(self.subsets):
             raise ValueError(
                 f"attacker action must be an integer in [0, {len(self.subsets)}) (a subset index), "

@@ -7,8 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env.attacks.base import AttackEffect, bits_to_mask
-from fdia_env.attacks.sparse import _as_index
+from fdia_env.attacks.base import AttackEffect, as_index, bits_to_mask
 from fdia_env.attacks.subsets import subset_bits, subsets
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
@@ -59,7 +58,7 @@ class SensorSelection(DefenseModel):
 
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Use subset ``action``; the bias on attacked sensors outside it is not seen."""
-        j = _as_index(action)
+        j = as_index(action)
         if j is None or not 0 <= j < len(self.subsets):
             raise ValueError(
                 f"defender action must be an integer in [0, {len(self.subsets)}) (a subset index), "
