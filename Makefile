@@ -18,8 +18,10 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# single-threaded BLAS: the tiny LAPACK calls of the suite run several times slower with two
+# threads on a 2-core machine that is doing anything else
 test: lint
-	$(BIN)/python -m pytest -q
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
 
 demo: $(STAMP)
 	$(BIN)/python -m agents.demo
