@@ -12,6 +12,7 @@ Both give ``tr Σ_A = a²``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -27,36 +28,98 @@ ALLOCATIONS = ("independent", "dependent")
 MAX_GAME_SENSORS = 16
 
 
+def sensor_sigmas(system: LinearSystem) -> np.ndarray:
+    """(M,) noise standard deviations σ_i of a system of scalar sensors.
+
+    Raises:
+        ValueError: If a sensor has more than one measurement component.
+    """
+    for i, s in enumerate(system.sensors):
+        if s.dim != 1:
+            raise ValueError(
+                "the game's allocation rules are defined for scalar sensors (one measurement "
+                f"each); system.sensors[{i}] ({s.name or 'unnamed'}) has {s.dim} components. "
+                "Use position sensors, or compute Σ with the trace-optimal rank-one attack "
+                "(MATH.md §2.2) yourself"
+            )
+    return np.sqrt(np.array([s.R[0, 0] for s in system.sensors]))
+
+
+def attack_directions(system: LinearSystem, masks: np.ndarray, allocation: str) -> np.ndarray:
+    """Unit vectors ``u_A`` with ``Σ_A = a² u_A u_A'`` for a batch of attacked subsets.
+
+    Args:
+        system: A system of scalar sensors (so measurement row i is sensor i).
+        masks: (k, M) booleans, each row a non-empty attacked subset.
+        allocation: ``"independent"`` or ``"dependent"``.
+
+    Returns:
+        (k, M) directions: one-hot (independent) or ``∝ 1/σ_i²`` on A (dependent).
+    """
+    check_choice("allocation", allocation, ALLOCATIONS)
+    sigma = sensor_sigmas(system)
+    masks = np.asarray(masks, dtype=bool)
+    if masks.ndim != 2 or masks.shape[1] != system.M or not masks.any(axis=1).all():
+        raise ValueError(f"masks must be (k, {system.M}) booleans, every row non-empty")
+    if allocation == "independent":
+        # Prop. 2: the smallest-σ sensor of A takes all the power (argmin: the first on ties)
+        u = np.zeros(masks.shape)
+        u[np.arange(len(masks)), np.argmin(np.where(masks, sigma, np.inf), axis=1)] = 1.0
+        return u
+    # Prop. 3: σ_b,i = c_i a / ||c||, c ∝ 1/σ_i² on A; the normalisation of c cancels
+    w = np.where(masks, 1.0 / sigma**2, 0.0)
+    return w / np.linalg.norm(w, axis=1, keepdims=True)
+
+
+def as_subset(subset: Sequence[int], M: int) -> tuple[int, ...]:
+    """``subset`` as a sorted tuple of distinct sensor indices in [0, M), or ValueError."""
+    try:
+        items = tuple(int(i) for i in subset)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"subset must be a sequence of sensor indices, got {subset!r}") from exc
+    if not items:
+        raise ValueError("subset must hold at least one sensor index, got an empty subset")
+    if any(i < 0 or i >= M for i in items) or len(set(items)) != len(items):
+        raise ValueError(
+            f"subset must hold distinct 0-based sensor indices in [0, {M - 1}], got {subset!r}"
+        )
+    return tuple(sorted(items))
+
+
 def allocation_covariance(
-    system: LinearSystem, subset: tuple[int, ...], power: float, allocation: str
+    system: LinearSystem, subset: Sequence[int], power: float, allocation: str = "independent"
 ) -> np.ndarray:
     """Σ_A over the stacked measurement (nz, nz) for attacked ``subset`` (0-based sensors).
 
+    Args:
+        system: A system of scalar sensors.
+        subset: Attacked sensors, 0-based indices (e.g. ``(0, 2)`` for z1z3), non-empty.
+        power: a² = tr Σ_A (> 0).
+        allocation: ``"independent"`` (Prop. 2) or ``"dependent"`` (Prop. 3).
+
+    Returns:
+        (nz, nz) rank-one ``a² u_A u_A'``, zero outside A.
+
     Raises:
-        ValueError: For an empty subset, an unknown rule, or sensors that are not scalar.
+        ValueError: Naming the parameter: an empty or out-of-range subset, power ≤ 0, an
+            unknown allocation, a sensor that is not scalar.
+
+    Example:
+        >>> from fdia_env import scenarios
+        >>> sys = scenarios.get("ch5-game").system
+        >>> allocation_covariance(sys, (1, 2), 100.0).tolist()
+        [[0.0, 0.0, 0.0], [0.0, 100.0, 0.0], [0.0, 0.0, 0.0]]
+        >>> S = allocation_covariance(sys, (0, 1), 100.0, "dependent")
+        >>> S.round(2).tolist()  # correlation 1, σ_b ∝ (1/9, 1/16)
+        [[75.96, 42.73, 0.0], [42.73, 24.04, 0.0], [0.0, 0.0, 0.0]]
     """
-    check_choice("allocation", allocation, ALLOCATIONS)
     power = check_positive("power", power)
-    if not subset:
-        raise ValueError("subset must hold at least one sensor")
-    if any(not 0 <= i < system.M for i in subset):
-        raise ValueError(f"subset must hold sensor indices in [0, {system.M}), got {subset}")
-    if system.nz != system.M:
-        raise ValueError(
-            "the independent and dependent allocation rules are defined for scalar sensors; "
-            f"this system stacks {system.nz} measurements from {system.M} sensors"
-        )
-    idx = np.array(sorted(subset))
-    variances = np.diag(system.R)[idx]
-    sigma = np.zeros((system.nz, system.nz))
-    if allocation == "independent":
-        best = idx[int(np.argmin(variances))]  # first of any ties
-        sigma[best, best] = power
-        return sigma
-    c = (1.0 / variances) / np.sum(1.0 / variances)
-    s = c * np.sqrt(power) / np.linalg.norm(c)  # σ_b,i = c_i a / ||c||, correlation 1
-    sigma[np.ix_(idx, idx)] = np.outer(s, s)
-    return sigma
+    check_choice("allocation", allocation, ALLOCATIONS)
+    sensor_sigmas(system)
+    mask = np.zeros((1, system.M), dtype=bool)
+    mask[0, list(as_subset(subset, system.M))] = True
+    u = attack_directions(system, mask, allocation)[0]
+    return power * np.outer(u, u)
 
 
 class SubsetAttack(AttackModel):
