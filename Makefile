@@ -29,6 +29,7 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_step.py
 	$(BIN)/python benchmarks/sparse.py
+	$(BIN)/python benchmarks/game.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
