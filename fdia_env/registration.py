@@ -21,5 +21,6 @@ def register_envs() -> None:
         gymnasium.register(
             id=env_id,
             entry_point="fdia_env.envs.single_agent:make_single_agent",
+            vector_entry_point="fdia_env.vector.env:make_vector",
             kwargs={"module": module, "agent": agent},
         )

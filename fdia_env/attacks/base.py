@@ -78,6 +78,29 @@ class AttackModel(ABC):
         """Per-step information for the ``infos`` dict."""
         return {}
 
+    # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
+    # The batch state lives in attributes prefixed ``b_``; it is independent of the single-env
+    # state above, and each batch method must equal its single-env twin member by member.
+
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Start episodes for the batch members ``where`` (all when None) of ``batch``."""
+        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
+
+    def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
+        """Batched :meth:`observe_opponent`."""
+
+    def batch_features(self) -> np.ndarray:
+        """(B, f) features of every batch member."""
+        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
+
+    def batch_action_mask(self) -> np.ndarray | None:
+        """(B, A) legal actions (int8) or None."""
+        return None
+
+    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Validate (B, ...) actions and act: ``(attacked bits (B,), Σ (B, nz, nz) or None)``."""
+        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
+
 
 def as_index(action: Any) -> int | None:
     """An integer action as int (numpy integers and 1-element integer arrays too), else None."""
@@ -90,3 +113,16 @@ def as_index(action: Any) -> int | None:
     ):
         return int(action.reshape(()))
     return None
+
+
+def as_index_array(actions: Any, n: int, who: str, what: str) -> np.ndarray:
+    """(B,) integer actions in [0, n) as int64, or ``ValueError`` naming ``who``."""
+    a = np.asarray(actions)
+    if a.ndim != 1 or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool):
+        if a.ndim == 1 and np.issubdtype(a.dtype, np.floating) and np.all(a == np.round(a)):
+            a = a.astype(np.int64)
+        else:
+            raise ValueError(f"{who} actions must be a 1-D integer array ({what}), got {actions!r}")
+    if a.size and (a.min() < 0 or a.max() >= n):
+        raise ValueError(f"{who} actions must be integers in [0, {n}) ({what}), got {a.tolist()}")
+    return a.astype(np.int64)

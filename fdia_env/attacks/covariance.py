@@ -59,6 +59,21 @@ class CovarianceMap:
         shape = np.eye(self.nz) / self.nz if total <= 0.0 else shape / total
         return sym(power * (self.w_inv_half @ shape @ self.w_inv_half))
 
+    def to_sigma_batch(self, entries: np.ndarray, power: np.ndarray) -> np.ndarray:
+        """(B, nz, nz) covariances from (B, size) entries and (B,) powers (as :meth:`to_sigma`)."""
+        B = entries.shape[0]
+        L = np.zeros((B, self.nz, self.nz))
+        start = 0
+        for block, (r, c) in zip(self.blocks, self._tril, strict=True):
+            L[:, block.start + r, block.start + c] = entries[:, start : start + len(r)]
+            start += len(r)
+        shape = L @ np.swapaxes(L, -1, -2)
+        total = np.trace(shape, axis1=-2, axis2=-1)
+        empty = total <= 0.0
+        shape = np.where(empty[:, None, None], np.eye(self.nz) / self.nz, shape)
+        shape = shape / np.where(empty, 1.0, total)[:, None, None]
+        return sym(power[:, None, None] * (self.w_inv_half @ shape @ self.w_inv_half))
+
     def to_action(self, sigma: np.ndarray) -> np.ndarray:
         """Factor entries whose :meth:`to_sigma` is ``sigma`` (up to its power)."""
         shape = sym(self.w_half @ sigma @ self.w_half)
@@ -187,6 +202,49 @@ class CovarianceAttack(AttackModel):
     def info(self) -> dict[str, Any]:
         """Power spent this step and power left."""
         return {"power": getattr(self, "last_power", 0.0), "power_left": self.remaining}
+
+    # --- batched (see AttackModel) ---------------------------------------------------------
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Restore the full power of the members ``where``."""
+        if where is None:
+            self.b_remaining = np.full(batch, self.power)
+        else:
+            self.b_remaining[where] = self.power
+
+    def batch_features(self) -> np.ndarray:
+        """(B, 1) power left / a² in budget mode, (B, 0) per step."""
+        if self._budget:
+            return (self.b_remaining / self.power)[:, None]
+        return np.zeros((self.b_remaining.shape[0], 0))
+
+    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Map (B, d) actions to covariances, spending power as :meth:`apply` does."""
+        a = np.asarray(actions, dtype=np.float64) if _numeric(actions) else None
+        if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
+            raise ValueError(
+                f"attacker actions must be an array of shape (B, {self.action_space.shape[0]}) "
+                f"in [-1, 1], got {actions!r}"
+            )
+        if not np.all(np.isfinite(a)):
+            raise ValueError("attacker actions must be finite (no NaN or inf)")
+        if np.any(np.abs(a) > 1.0 + 1e-6):
+            raise ValueError("attacker actions must lie in [-1, 1]")
+        a = np.clip(a, -1.0, 1.0)
+        if self._budget:
+            spend = 0.5 * (a[:, 0] + 1.0) * self.b_remaining
+            entries = a[:, 1:]
+            self.b_remaining = np.maximum(self.b_remaining - spend, 0.0)
+        else:
+            spend, entries = np.full(a.shape[0], self.power), a
+        sigma = self.map.to_sigma_batch(entries, spend)
+        rows = np.diagonal(sigma, axis1=-2, axis2=-1) > 0.0  # (B, nz)
+        weights = np.zeros(self._row_sensor.size, dtype=np.int64)
+        weights[:] = 1 << self._row_sensor
+        # a sensor is attacked when any of its rows carries bias: OR of its row bits
+        attacked = np.zeros(a.shape[0], dtype=np.int64)
+        for r in range(weights.size):
+            attacked |= np.where(rows[:, r], weights[r], 0)
+        return attacked, sigma
 
 
 def _numeric(action: Any) -> bool:

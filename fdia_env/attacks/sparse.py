@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_int
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index
+from fdia_env.attacks.base import AttackEffect, AttackModel, as_index, as_index_array
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -62,6 +62,8 @@ class SparseAttack(AttackModel):
         self.n_actions = 2**system.M
         self.action_space = spaces.Discrete(self.n_actions)
         sizes = np.array([a.bit_count() for a in range(self.n_actions)])
+        self._sizes = sizes
+        self._trim_table: np.ndarray | None = None  # built on first batched use
         self._masks = [
             (sizes <= r).astype(np.int8) for r in range(self.budget + 1)
         ]  # per budget left
@@ -99,3 +101,44 @@ class SparseAttack(AttackModel):
         """The sensors attacked this step (0-based) and the budget left."""
         a = self.last_attacked
         return {"attacked": [i for i in range(self.M) if a >> i & 1], "budget_left": self.remaining}
+
+    # --- batched (see AttackModel) ---------------------------------------------------------
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Restore the full budget of the members ``where``."""
+        if where is None:
+            self.b_remaining = np.full(batch, self.budget, dtype=np.int64)
+        else:
+            self.b_remaining[where] = self.budget
+
+    def batch_features(self) -> np.ndarray:
+        """(B, 1) remaining budget fraction."""
+        scale = 1.0 / self.budget if self.budget else 0.0
+        return (self.b_remaining * scale)[:, None]
+
+    def _batch_tables(self) -> None:
+        """Tables indexed by [action, min(budget left, M)]: the trimmed action, and masks."""
+        actions = np.arange(self.n_actions)[:, None]
+        left = np.arange(self.M + 1)[None, :]
+        kept = np.zeros((self.n_actions, self.M + 1), dtype=np.int64)
+        count = np.zeros_like(kept)
+        for i in range(self.M):  # keep the lowest-numbered selected sensors that fit
+            take = ((actions >> i) & 1) & (count < left)
+            kept |= take << i
+            count += take
+        self._trim_table = kept.reshape(-1)  # flat: index action * (M + 1) + left
+        self._mask_table = (self._sizes[None, :] <= left.T).astype(np.int8)
+
+    def batch_action_mask(self) -> np.ndarray:
+        """(B, 2**M) subsets within each member's budget left."""
+        if self._trim_table is None:
+            self._batch_tables()
+        return np.take(self._mask_table, np.minimum(self.b_remaining, self.M), axis=0)
+
+    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
+        """Attack each member's subset, trimmed to its budget (same rule as :meth:`apply`)."""
+        a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
+        if self._trim_table is None:
+            self._batch_tables()
+        a = np.take(self._trim_table, a * (self.M + 1) + np.minimum(self.b_remaining, self.M))
+        self.b_remaining = self.b_remaining - np.take(self._sizes, a)
+        return a, None

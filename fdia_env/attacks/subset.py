@@ -19,7 +19,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_positive
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index
+from fdia_env.attacks.base import AttackEffect, AttackModel, as_index, as_index_array
 from fdia_env.attacks.subsets import subset_bits, subsets
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -192,3 +192,29 @@ class SubsetAttack(AttackModel):
     def info(self) -> dict[str, Any]:
         """The attacked subset (0-based sensors)."""
         return {"attacked": list(self.subsets[self.last])}
+
+    # --- batched (see AttackModel) ---------------------------------------------------------
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Forget the last round of the members ``where``."""
+        if where is None:
+            self.b_last = np.zeros(batch, dtype=np.int64)
+            self.b_opponent = np.zeros((batch, self.M))
+            self._masks = np.array([[i in s for i in range(self.M)] for s in self.subsets])
+            self._bits_arr = np.array(self.bits, dtype=np.int64)
+        else:
+            self.b_opponent[where] = 0.0
+
+    def batch_observe_opponent(self, other: Any) -> None:
+        """Remember every member's opponent subset (same subset order on both sides)."""
+        self.b_opponent = self._masks[other.b_last].astype(float)
+
+    def batch_features(self) -> np.ndarray:
+        """(B, M) the defender's last subsets as indicators."""
+        return self.b_opponent
+
+    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Σ_A of each member's subset (rank one, from the allocation directions)."""
+        j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")
+        self.b_last = j
+        u = attack_directions(self._system, self._masks[j], self.allocation)
+        return self._bits_arr[j], self.power * (u[:, :, None] * u[:, None, :])

@@ -49,6 +49,8 @@ class DefenseModel(ABC):
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Attach to a system and episode; build spaces here, once."""
 
+    _batch: int = 0
+
     def reset(self) -> None:  # noqa: B027 - optional hook
         """Start an episode."""
 
@@ -66,3 +68,27 @@ class DefenseModel(ABC):
     @abstractmethod
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Decide what the filter uses given the defender's action and the attack."""
+
+    # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
+
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:  # noqa: B027
+        """Start episodes for the batch members ``where`` (all when None)."""
+
+    def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
+        """Batched :meth:`observe_opponent`."""
+
+    def batch_features(self) -> np.ndarray:
+        """(B, f) features of every batch member (none by default)."""
+        return np.zeros((self._batch, 0))
+
+    def batch_apply(
+        self, actions: np.ndarray | None, attacked: np.ndarray, sigma: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, bool]:
+        """Batched :meth:`apply`.
+
+        Returns:
+            ``(used bits (B,), leaked Σ (B, nz, nz) or None, leak present (B,) bool or None,
+            steady restart)``; "present" marks the members whose single-env twin would get a
+            ``leaked_sigma`` that is not None.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")

@@ -23,3 +23,11 @@ class PerfectDetection(DefenseModel):
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Use every sensor that was not attacked."""
         return FilterInput(used=self._all & ~effect.attacked)
+
+    def batch_reset(self, batch: int, where=None) -> None:
+        """Remember the batch size."""
+        self._batch = batch
+
+    def batch_apply(self, actions, attacked, sigma):
+        """Every un-attacked sensor, no leak."""
+        return self._all & ~attacked, None, None, False

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env.attacks.base import AttackEffect, as_index, bits_to_mask
+from fdia_env.attacks.base import AttackEffect, as_index, as_index_array, bits_to_mask
 from fdia_env.attacks.subsets import subset_bits, subsets
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
@@ -71,3 +71,37 @@ class SensorSelection(DefenseModel):
             rows = bits_to_mask(used, self.M)[self._row_sensor]
             leak = effect.sigma * np.outer(rows, rows)  # Σ restricted to A ∩ D
         return FilterInput(used=used, leaked_sigma=leak, steady=True)
+
+    # --- batched (see DefenseModel) --------------------------------------------------------
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Forget the last round of the members ``where``."""
+        if where is None:
+            self._batch = batch
+            self.b_last = np.zeros(batch, dtype=np.int64)
+            self.b_opponent = np.zeros((batch, self.M))
+            self._bits_arr = np.array(self.bits, dtype=np.int64)
+            self._masks = np.array([[i in s for i in range(self.M)] for s in self.subsets])
+            self._row_masks = np.array(
+                [[(b >> int(i)) & 1 for i in self._row_sensor] for b in self.bits], dtype=float
+            )
+        else:
+            self.b_opponent[where] = 0.0
+
+    def batch_observe_opponent(self, other: Any) -> None:
+        """Remember every member's opponent subset (same subset order on both sides)."""
+        self.b_opponent = self._masks[other.b_last].astype(float)
+
+    def batch_features(self) -> np.ndarray:
+        """(B, M) the attacker's last subsets as indicators."""
+        return self.b_opponent
+
+    def batch_apply(self, actions, attacked, sigma):
+        """Each member's subset; Σ restricted to A ∩ D leaks; every round restarts steady."""
+        j = as_index_array(actions, len(self.subsets), "defender", "subset indices")
+        self.b_last = j
+        rows = self._row_masks[j]
+        used = self._bits_arr[j]
+        if sigma is None:
+            return used, None, None, True
+        leak = sigma * rows[:, :, None] * rows[:, None, :]
+        return used, leak, (used & attacked) != 0, True

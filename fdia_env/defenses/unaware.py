@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from fdia_env.attacks.base import AttackEffect
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
@@ -27,3 +29,12 @@ class UnawareFilter(DefenseModel):
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Every sensor is used; the bias leaks through."""
         return FilterInput(used=self._all, leaked_sigma=effect.sigma)
+
+    def batch_reset(self, batch: int, where=None) -> None:
+        """Remember the batch size."""
+        self._batch = batch
+
+    def batch_apply(self, actions, attacked, sigma):
+        """Every sensor; the whole bias leaks."""
+        present = None if sigma is None else np.ones(attacked.shape, dtype=bool)
+        return np.full(attacked.shape, self._all, dtype=np.int64), sigma, present, False

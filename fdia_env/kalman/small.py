@@ -77,3 +77,39 @@ def shape_features2(p: Sym2, scale: Sym2) -> list[float]:
     lv1 = min(max(math.log(a / scale[0]), -30.0), 30.0)
     lv2 = min(max(math.log(d / scale[2]), -30.0), 30.0)
     return [lv1, lv2, min(max(b / math.sqrt(a * d), -1.0), 1.0)]
+
+
+# --- stacked components: a batch as one (3, B) array [a; b; d] -----------------------------
+
+
+def predict_matrix2(f: Mat2) -> np.ndarray:
+    """The 3×3 matrix C with ``vech(F P F') = C vech(P)`` for ``vech(P) = [a, b, d]``.
+
+    ``F P F'`` is linear in (a, b, d): its entries are
+    ``f11² a + 2 f11 f12 b + f12² d``, ``f11 f21 a + (f11 f22 + f12 f21) b + f12 f22 d`` and
+    ``f21² a + 2 f21 f22 b + f22² d``, so a whole batch predicts with one matrix product.
+    """
+    f11, f12, f21, f22 = f
+    return np.array([
+        [f11 * f11, 2.0 * f11 * f12, f12 * f12],
+        [f11 * f21, f11 * f22 + f12 * f21, f12 * f22],
+        [f21 * f21, 2.0 * f21 * f22, f22 * f22],
+    ])  # fmt: skip
+
+
+def predict2_stacked(comp: np.ndarray, C: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``P[k+1|k] = F P F' + Q`` for (3, B) components: ``C comp + q``."""
+    out = C @ comp
+    out += q[:, None]
+    return out
+
+
+def inv2_stacked(comp: np.ndarray) -> np.ndarray:
+    """``[[a, b], [b, d]]⁻¹ = [[d, −b], [−b, a]] / (a d − b²)`` for (3, B) components."""
+    a, b, d = comp
+    inv_det = 1.0 / (a * d - b * b)
+    out = np.empty_like(comp)
+    np.multiply(d, inv_det, out=out[0])
+    np.multiply(b, -inv_det, out=out[1])
+    np.multiply(a, inv_det, out=out[2])
+    return out

@@ -1,0 +1,175 @@
+"""Native vector envs: identical to B single envs, Gymnasium autoreset, the SB3 adapter."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from sb3_contrib import MaskablePPO
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import VecCheckNan
+
+from fdia_env import LinearSystem, Sensor
+from fdia_env.envs.opponents import FixedMix
+from fdia_env.vector import FdiaVectorEnv
+from fdia_env.vector.sb3 import SB3VecEnv, make_sb3_vec_env
+
+THREE_STATE = LinearSystem(
+    F=np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 0.9]]),
+    Q=0.01 * np.eye(3),
+    sensors=(Sensor(H=[[1.0, 0.0, 0.0]], R=[[0.2]]), Sensor(H=[[0.0, 1.0, 1.0]], R=[[0.5]])),
+    name="three-state",
+)
+
+CASES = {
+    "sparse-expected": ("fdia_env/SparseAttack-v0", {}),
+    "sparse-sampled": ("fdia_env/SparseAttack-v0", {"dynamics": "sampled"}),
+    "sparse-shaped-3state": (
+        "fdia_env/SparseAttack-v0",
+        {"scenario": THREE_STATE, "budget": 3, "horizon": 4, "reward_mode": "shaped"},
+    ),
+    "sparse-warmup-sampled": ("fdia_env/SparseAttack-v0", {"warmup": 3, "dynamics": "sampled"}),
+    "covariance-pv": (
+        "fdia_env/CovarianceAttack-v0",
+        {"scenario": "ch2-pv-2", "horizon": 3, "reward_mode": "per_step"},
+    ),
+    "covariance-budget-sampled": (
+        "fdia_env/CovarianceAttack-v0",
+        {"horizon": 4, "power_mode": "budget", "dynamics": "sampled", "reward_mode": "per_step"},
+    ),
+    "game-attacker": ("fdia_env/SensorGameAttacker-v0", {"rounds": 3}),
+    "game-defender-sampled": ("fdia_env/SensorGameDefender-v0", {"dynamics": "sampled"}),
+}
+
+
+def opponent_for(env_id):
+    if "SensorGame" in env_id:  # deterministic, so B separate copies and one batch agree
+        return {"opponent": FixedMix([0, 0, 0, 0, 0, 1.0, 0])}
+    return {}
+
+
+def random_actions(space, rng, mask=None):
+    if isinstance(space, gym.spaces.Discrete):
+        if mask is None:
+            return rng.integers(0, space.n, size=len(mask) if mask is not None else None)
+        return np.array([rng.choice(np.flatnonzero(m)) for m in mask])
+    return rng.uniform(-1, 1, size=space.shape).astype(np.float32)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_vector_env_equals_sync_vector_env_of_single_envs(case):
+    env_id, kwargs = CASES[case]
+    B = 5
+    kwargs = {**kwargs, **opponent_for(env_id)}
+    native = gym.make_vec(env_id, num_envs=B, vectorization_mode="vector_entry_point", **kwargs)
+    assert isinstance(native, FdiaVectorEnv)
+    sync = SyncVectorEnv([lambda: gym.make(env_id, **kwargs) for _ in range(B)])
+    obs_n, info_n = native.reset(seed=11)
+    obs_s, info_s = sync.reset(seed=11)
+    np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-7)
+    rng = np.random.default_rng(0)
+    single = native.single_action_space
+    for _ in range(14):  # several episodes, including the autoreset steps
+        if isinstance(single, gym.spaces.Discrete):
+            mask = info_s.get("action_mask")
+            if mask is not None:
+                np.testing.assert_array_equal(info_n["action_mask"], mask)
+            actions = np.array(
+                [
+                    rng.choice(np.flatnonzero(m)) if mask is not None else rng.integers(single.n)
+                    for m in (mask if mask is not None else [None] * B)
+                ]
+            )
+        else:
+            actions = rng.uniform(-1, 1, size=(B, *single.shape)).astype(np.float32)
+        obs_n, r_n, te_n, tr_n, info_n = native.step(actions)
+        obs_s, r_s, te_s, tr_s, info_s = sync.step(actions)
+        np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(r_n, r_s, rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(te_n, te_s)
+        np.testing.assert_array_equal(tr_n, tr_s)
+
+
+def test_same_step_autoreset_reports_the_final_observation():
+    kwargs = {"num_envs": 3, "vectorization_mode": "vector_entry_point"}
+    nxt = gym.make_vec("fdia_env/SparseAttack-v0", **kwargs)
+    same = gym.make_vec(
+        "fdia_env/SparseAttack-v0", autoreset_mode=AutoresetMode.SAME_STEP, **kwargs
+    )
+    nxt.reset(seed=0)
+    first, _ = same.reset(seed=0)
+    actions = np.array([1, 2, 4])
+    for _ in range(5):
+        nxt.step(actions)
+        same.step(actions)
+    last_n, r_n, te_n, _, _ = nxt.step(actions)
+    obs_s, r_s, te_s, _, info = same.step(actions)
+    assert te_n.all() and te_s.all()
+    np.testing.assert_array_equal(r_n, r_s)
+    np.testing.assert_array_equal(info["final_obs"], last_n)
+    assert info["_final_obs"].all()
+    np.testing.assert_array_equal(obs_s, first)  # already reset
+
+
+def test_sb3_adapter_passes_checks_and_trains():
+    venv = make_sb3_vec_env("fdia_env/SparseAttack-v0", num_envs=8)
+    checked = VecCheckNan(venv, raise_exception=True)
+    checked.seed(5)
+    obs = checked.reset()
+    assert obs.shape == (8, 5) and obs.dtype == np.float32
+    rng = np.random.default_rng(0)
+    for t in range(12):
+        masks = np.stack(venv.env_method("action_masks"))
+        actions = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+        obs, rewards, dones, infos = checked.step(actions)
+        assert rewards.shape == (8,) and len(infos) == 8
+        if t == 5:
+            assert dones.all() and all("terminal_observation" in i for i in infos)
+            assert all(i["terminal_observation"][0] == 0.0 for i in infos)  # no steps left
+    PPO("MlpPolicy", venv, n_steps=32, batch_size=64, seed=0).learn(256)
+    MaskablePPO("MlpPolicy", venv, n_steps=32, batch_size=64, seed=0).learn(256)
+    box = make_sb3_vec_env("fdia_env/CovarianceAttack-v0", num_envs=4)
+    PPO("MlpPolicy", box, n_steps=32, batch_size=64, seed=0).learn(128)
+
+
+def test_sb3_seeds_reproduce_sampled_rollouts():
+    def run():
+        venv = make_sb3_vec_env("fdia_env/SparseAttack-v0", num_envs=4, dynamics="sampled")
+        venv.seed(9)
+        out = [venv.reset()]
+        for _ in range(8):
+            out.append(venv.step(np.array([1, 0, 3, 7]))[0])
+        return np.concatenate(out)
+
+    np.testing.assert_array_equal(run(), run())
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"num_envs": 0}, "num_envs must be >= 1"),
+        ({"num_envs": 2, "autoreset_mode": AutoresetMode.DISABLED}, "NEXT_STEP or SAME_STEP"),
+        ({"num_envs": 2, "render_mode": "ansi"}, "render_mode is not supported"),
+    ],
+)
+def test_bad_vector_arguments_raise(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make_vec("fdia_env/SparseAttack-v0", vectorization_mode="vector_entry_point", **kwargs)
+
+
+def test_vector_step_before_reset_and_bad_actions_raise():
+    venv = gym.make_vec(
+        "fdia_env/SparseAttack-v0", num_envs=2, vectorization_mode="vector_entry_point"
+    )
+    with pytest.raises(RuntimeError, match="before reset"):
+        venv.step(np.array([0, 0]))
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"integers in \[0, 8\)"):
+        venv.step(np.array([0, 9]))
+    cov = gym.make_vec(
+        "fdia_env/CovarianceAttack-v0", num_envs=2, vectorization_mode="vector_entry_point"
+    )
+    cov.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        cov.step(np.full((2, 3), np.nan, dtype=np.float32))
+    with pytest.raises(ValueError, match="SAME_STEP"):
+        SB3VecEnv(venv)
