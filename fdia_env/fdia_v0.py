@@ -13,8 +13,10 @@ from __future__ import annotations
 from typing import Any
 
 from fdia_env.attacks import AttackModel, CovarianceAttack, SparseAttack
+from fdia_env.attacks.probabilistic import ProbabilisticAttack
 from fdia_env.attacks.subset import SubsetAttack
 from fdia_env.defenses import DefenseModel, PerfectDetection, UnawareFilter
+from fdia_env.defenses.detector import ThresholdDetector
 from fdia_env.defenses.selection import SensorSelection
 from fdia_env.envs.factory import aec_views, episode_spec
 from fdia_env.envs.parallel import FdiaParallelEnv
@@ -26,17 +28,20 @@ ATTACKS: dict[str, type[AttackModel]] = {
     "sparse": SparseAttack,
     "covariance": CovarianceAttack,
     "subset": SubsetAttack,
+    "probabilistic": ProbabilisticAttack,
 }
 # attack-model parameters filled from the scenario preset when not given
 SCENARIO_DEFAULTS: dict[str, tuple[str, ...]] = {
     "sparse": ("budget",),
     "covariance": ("power",),
     "subset": ("power",),
+    "probabilistic": ("power",),
 }
 DEFENSES: dict[str, type[DefenseModel]] = {
     "perfect_detection": PerfectDetection,
     "unaware": UnawareFilter,
     "sensor_selection": SensorSelection,
+    "threshold_detector": ThresholdDetector,
 }
 
 

@@ -6,11 +6,16 @@ import gymnasium
 
 # id -> (module whose parallel_env builds the env, learning agent)
 GYM_IDS: dict[str, tuple[str, str]] = {
+    "fdia_env/DetectionDefender-v0": ("fdia_env.detection_game_v0", "defender"),
+    "fdia_env/DetectionAttacker-v0": ("fdia_env.detection_game_v0", "attacker"),
     "fdia_env/SparseAttack-v0": ("fdia_env.sparse_attack_v0", "attacker"),
     "fdia_env/CovarianceAttack-v0": ("fdia_env.covariance_attack_v0", "attacker"),
     "fdia_env/SensorGameAttacker-v0": ("fdia_env.sensor_game_v0", "attacker"),
     "fdia_env/SensorGameDefender-v0": ("fdia_env.sensor_game_v0", "defender"),
 }
+
+# envs whose models have no batched implementation (``make_vec`` uses SyncVectorEnv for them)
+UNBATCHED = {"fdia_env.detection_game_v0"}
 
 
 def register_envs() -> None:
@@ -18,9 +23,10 @@ def register_envs() -> None:
     for env_id, (module, agent) in GYM_IDS.items():
         if env_id in gymnasium.registry:
             continue
+        batched = module not in UNBATCHED
         gymnasium.register(
             id=env_id,
             entry_point="fdia_env.envs.single_agent:make_single_agent",
-            vector_entry_point="fdia_env.vector.env:make_vector",
+            vector_entry_point="fdia_env.vector.env:make_vector" if batched else None,
             kwargs={"module": module, "agent": agent},
         )

@@ -103,12 +103,13 @@ def test_single_agent_view_rejects_unknown_agent():
 
 def test_fdia_v0_rejects_unknown_models():
     with pytest.raises(
-        ValueError, match=r"attack must be one of \['covariance', 'sparse', 'subset'\]"
+        ValueError,
+        match=r"attack must be one of \['covariance', 'probabilistic', 'sparse', 'subset'\]",
     ):
         fdia_v0.parallel_env(attack="laser")
     with pytest.raises(
         ValueError,
-        match=r"defense must be one of \['perfect_detection', 'sensor_selection', 'unaware'\]",
+        match=r"defense must be one of \[.*'threshold_detector', 'unaware'\]",
     ):
         fdia_v0.parallel_env(defense="moat")
     with pytest.raises(ValueError, match="attack must be an AttackModel"):

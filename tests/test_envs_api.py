@@ -8,10 +8,16 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import fdia_env
-from fdia_env import covariance_attack_v0, fdia_v0, sensor_game_v0, sparse_attack_v0
+from fdia_env import (
+    covariance_attack_v0,
+    detection_game_v0,
+    fdia_v0,
+    sensor_game_v0,
+    sparse_attack_v0,
+)
 from fdia_env.registration import GYM_IDS
 
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, fdia_v0]
+MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
 DYNAMICS = ["expected", "sampled"]
 
 

@@ -23,10 +23,13 @@ class AttackEffect:
             sensor i, 0-based); see :func:`bits_to_mask`.
         sigma: (nz, nz) bias covariance over the stacked measurement, or None when the bias
             value never matters (e.g. it is always detected and dropped) or is zero.
+        probability: Probability that the bias is injected at all this step (nature draws
+            H1 with it; 1 = always).
     """
 
     attacked: int
     sigma: np.ndarray | None = None
+    probability: float = 1.0
 
 
 def bits_to_mask(bits: int, M: int) -> np.ndarray:

@@ -26,11 +26,37 @@ class FilterInput:
         steady: The filter has been running on ``used`` long enough to be in its steady state
             before this step (the one-shot setting of the sensor-selection game): P and the
             actual error covariance restart there.
+        detection: A detector that decides, from the measurement, whether the filter uses it
+            (the detection game); None for the other models.
+        attack_probability: Probability that the bias is present this step.
     """
 
     used: int
     leaked_sigma: np.ndarray | None = None
     steady: bool = False
+    detection: Detection | None = None
+    attack_probability: float = 1.0
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A detector on the innovation ``y = z − H x̂[k|k−1]`` (MATH.md §3).
+
+    Attributes:
+        statistic: ``"chi2"`` (``y' Pzz0⁻¹ y``) or ``"quadratic"`` (``y'(Pzz0⁻¹ − Pzz1⁻¹)y``).
+        threshold: τ: D1 when the statistic exceeds it (may be ``inf``).
+        on_detect: ``"discard"`` (keep the prediction) or ``"incorporate"`` (update with the
+            attack model, ``Pzz1 = Pzz0 + assumed_sigma``).
+        assumed_sigma: (nz, nz) the defender's model of the bias covariance.
+        fresh_prior: Every step starts from the system's prior (a static parameter estimated
+            afresh each round) instead of continuing the filter.
+    """
+
+    statistic: str
+    threshold: float
+    on_detect: str
+    assumed_sigma: np.ndarray
+    fresh_prior: bool = False
 
 
 class DefenseModel(ABC):

@@ -159,7 +159,7 @@ class FdiaParallelEnv(ParallelEnv):
         rewards = {a: rewards[a] for a in agents}
         terminations = dict.fromkeys(agents, done)
         truncations = dict.fromkeys(agents, False)
-        info = {"phi": phi, "step": self.sim.k, **self.attack.info()}
+        info = {"phi": phi, "step": self.sim.k, **self.attack.info(), **self.sim.info()}
         infos = {a: dict(info) for a in agents}
         if done:
             self._done = True

@@ -17,6 +17,7 @@ import numpy as np
 
 from fdia_env.attacks.base import bits_to_mask
 from fdia_env.defenses.base import FilterInput
+from fdia_env.detection.step import detection_step
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
     information_update,
@@ -91,6 +92,7 @@ class Simulation:
         self.consistent = True
         self.k = 0
         self.nis = 0.0
+        self.last_detection: dict = {}
         if self.sampled:
             self._reset_sampled(rng)
         self.phi = [self.measure()]
@@ -119,6 +121,12 @@ class Simulation:
             estimation error).
         """
         used, leak = filter_input.used, filter_input.leaked_sigma
+        if filter_input.detection is not None:
+            self._detection_step(filter_input, rng)
+            self.k += 1
+            value = self.measure()
+            self.phi.append(value)
+            return value
         if filter_input.steady:
             self._restart_steady(used, rng)
         if self._fast and leak is None and self.consistent and not self.sampled:
@@ -131,6 +139,29 @@ class Simulation:
         value = self.measure()
         self.phi.append(value)
         return value
+
+    def _detection_step(self, fi: FilterInput, rng: np.random.Generator | None) -> None:
+        """A step of the detection game (see :mod:`fdia_env.detection.step`)."""
+        out = detection_step(
+            self.system,
+            fi.detection,
+            fi.leaked_sigma,
+            fi.attack_probability,
+            self.P,
+            rng=rng if self.sampled else None,
+            x=getattr(self, "x", None),
+            x_hat=getattr(self, "x_hat", None),
+            factors=(self._Q_factor, self._R_factor),
+        )
+        self._P = out.P
+        self._p2 = small.to_sym2(out.P) if self._fast else None
+        if out.error_cov is not None:
+            self._M = out.error_cov
+            self.consistent = False
+        else:
+            self._M, self.consistent = out.P, True
+            self.x, self.x_hat = out.x, out.x_hat
+        self.last_detection = out.info
 
     def _restart_steady(self, used: int, rng: np.random.Generator | None) -> None:
         """The filter has been running on ``used`` long enough: P = M = its steady state."""
@@ -192,6 +223,10 @@ class Simulation:
         self.nis = float(nu @ np.linalg.solve(S, nu)) / int(rows.sum())
 
     # --- outputs -----------------------------------------------------------------------------
+    def info(self) -> dict:
+        """Per-step details of the engine (the detector's decision or probabilities)."""
+        return dict(self.last_detection) if self.last_detection else {}
+
     def measure(self) -> float:
         """Φ now: of the actual covariance (expected) or the squared error (sampled)."""
         if self.sampled:

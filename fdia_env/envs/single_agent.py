@@ -121,6 +121,8 @@ def make_single_agent(
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     others = [a for a in parallel.possible_agents if a != agent]
+    if others and opponent is None and hasattr(mod, "default_opponent"):
+        opponent = mod.default_opponent(parallel, agent)
     if others and opponent is None:
         space = parallel.action_space(others[0])
         if not hasattr(space, "n"):

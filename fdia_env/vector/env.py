@@ -206,7 +206,10 @@ def make_vector(
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
-    parallel = importlib.import_module(module).parallel_env(**kwargs)
+    mod = importlib.import_module(module)
+    parallel = mod.parallel_env(**kwargs)
+    if opponent is None and hasattr(mod, "default_opponent") and len(parallel.possible_agents) > 1:
+        opponent = mod.default_opponent(parallel, agent)
     return FdiaVectorEnv(
         parallel, num_envs, agent=agent, opponent=opponent, autoreset_mode=autoreset_mode
     )

@@ -1,0 +1,75 @@
+"""Probabilistic attack: attack with probability p and bias covariance Σ under power a² (ch. 3)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from fdia_env.attacks.base import AttackEffect
+from fdia_env.attacks.covariance import CovarianceAttack
+from fdia_env.episode import EpisodeSpec
+from fdia_env.systems import LinearSystem
+
+
+class ProbabilisticAttack(CovarianceAttack):
+    """Each step nature draws H1 with probability p; under H1 the bias is ``b ~ N(0, Σ)``.
+
+    Action: ``Box(-1, 1, (1 + d,), float32)``: entry 0 maps to ``p = (a₀ + 1) / 2``, the rest to
+    Σ exactly as :class:`CovarianceAttack` (per-step power a², ``tr(Ω Σ) = a²``).
+
+    Args:
+        power: a² (> 0).
+        structure: ``"full"`` or ``"diagonal"`` (see :class:`CovarianceAttack`).
+        weight: Power weighting Ω (default :func:`~fdia_env.systems.power_weight`).
+    """
+
+    name = "probabilistic"
+
+    def __init__(self, power: float, structure: str = "full", weight: np.ndarray | None = None):
+        super().__init__(power, structure=structure, power_mode="per_step", weight=weight)
+        self.last_probability = 1.0
+
+    def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
+        """Covariance map plus the probability entry."""
+        super().bind(system, spec)
+        self._cov_space = self.action_space
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(self.map.size + 1,), dtype=np.float32)
+
+    def to_action(self, probability: float, sigma: np.ndarray) -> np.ndarray:
+        """The action that attacks with ``probability`` and covariance ``sigma`` (float32)."""
+        if not 0.0 <= float(probability) <= 1.0:
+            raise ValueError(f"probability must lie in [0, 1], got {probability}")
+        cov = super().sigma_to_action(sigma)
+        return np.concatenate([[2.0 * float(probability) - 1.0], cov]).astype(np.float32)
+
+    def apply(self, action: Any) -> AttackEffect:
+        """Attack with the probability and covariance the action maps to."""
+        a = np.asarray(action, dtype=np.float64) if _is_vector(action) else None
+        if a is None or a.shape != self.action_space.shape:
+            raise ValueError(
+                f"attacker action must be an array of shape {self.action_space.shape} in [-1, 1], "
+                f"got {action!r}"
+            )
+        if not np.isfinite(a[0]) or abs(a[0]) > 1.0 + 1e-6:
+            raise ValueError(f"attacker action must be finite and in [-1, 1], got {a.tolist()}")
+        self.action_space, space = self._cov_space, self.action_space
+        try:
+            effect = super().apply(a[1:])
+        finally:
+            self.action_space = space
+        self.last_probability = 0.5 * (float(np.clip(a[0], -1.0, 1.0)) + 1.0)
+        return AttackEffect(effect.attacked, effect.sigma, probability=self.last_probability)
+
+    def info(self) -> dict[str, Any]:
+        """Attack probability and power."""
+        return {**super().info(), "attack_probability": self.last_probability}
+
+
+def _is_vector(action: Any) -> bool:
+    try:
+        np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return action is not None

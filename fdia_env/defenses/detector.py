@@ -1,0 +1,105 @@
+"""Threshold detector: the defender chooses the threshold of a test on the innovation (ch. 3)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from fdia_env._validation import as_matrix, check_choice, check_positive, check_psd
+from fdia_env.attacks.base import AttackEffect
+from fdia_env.defenses.base import DefenseModel, Detection, FilterInput
+from fdia_env.episode import EpisodeSpec
+from fdia_env.systems import LinearSystem
+
+STATISTICS = ("chi2", "quadratic")
+ON_DETECT = ("discard", "incorporate")
+
+
+class ThresholdDetector(DefenseModel):
+    """Decide "attacked" when the statistic of the innovation exceeds the chosen threshold τ.
+
+    Action: ``Box(-1, 1, (1,), float32)`` mapped to ``τ = s (1 + a) / (1 − a)``: a bijection of
+    [-1, 1] onto [0, ∞] (a = 0 gives τ = s; a = 1 never detects). ``s`` is ``threshold_scale``,
+    by default nz for ``"chi2"`` (the statistic's mean under H0) and 1 for ``"quadratic"``.
+    :meth:`threshold_to_action` inverts the map.
+
+    Args:
+        statistic: ``"chi2"`` or ``"quadratic"`` (the optimal-Bayesian statistic of MATH.md §3).
+        on_detect: ``"discard"`` or ``"incorporate"``.
+        assumed_sigma: The defender's model of the bias covariance (nz, nz), PSD; used by the
+            quadratic statistic and by ``"incorporate"``.
+        fresh_prior: Start every step from the system's prior (static estimation).
+        threshold_scale: s (> 0).
+    """
+
+    name = "threshold_detector"
+    passive = False
+
+    def __init__(
+        self,
+        assumed_sigma: np.ndarray,
+        statistic: str = "quadratic",
+        on_detect: str = "discard",
+        fresh_prior: bool = False,
+        threshold_scale: float | None = None,
+    ) -> None:
+        self.statistic = check_choice("statistic", statistic, STATISTICS)
+        self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
+        self._assumed = assumed_sigma
+        self.fresh_prior = bool(fresh_prior)
+        self._scale = (
+            None if threshold_scale is None else check_positive("threshold_scale", threshold_scale)
+        )
+        self.last_threshold = float("nan")
+
+    def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
+        """Check the assumed covariance against the stacked measurement."""
+        assumed = as_matrix("assumed_sigma", self._assumed)
+        if assumed.shape != (system.nz, system.nz):
+            raise ValueError(
+                f"assumed_sigma must be ({system.nz}, {system.nz}), got shape {assumed.shape}"
+            )
+        check_psd("assumed_sigma", assumed)
+        self.assumed_sigma = assumed
+        self.scale = self._scale or (float(system.nz) if self.statistic == "chi2" else 1.0)
+        self._all = (1 << system.M) - 1
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+
+    def action_to_threshold(self, action: Any) -> float:
+        """``τ = s (1 + a) / (1 − a)``; validates the action."""
+        try:
+            a = np.asarray(action, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"defender action must be a number in [-1, 1], got {action!r}"
+            ) from exc
+        if a.size != 1 or not np.isfinite(a[0]) or abs(a[0]) > 1.0 + 1e-6:
+            raise ValueError(
+                f"defender action must be one finite number in [-1, 1], got {action!r}"
+            )
+        x = float(np.clip(a[0], -1.0, 1.0))
+        return float("inf") if x >= 1.0 else self.scale * (1.0 + x) / (1.0 - x)
+
+    def threshold_to_action(self, threshold: float) -> np.ndarray:
+        """The action whose threshold is ``threshold`` (negative thresholds map to a = -1)."""
+        t = float(threshold)
+        if np.isnan(t):
+            raise ValueError("threshold must not be NaN")
+        if t == np.inf:
+            return np.ones(1, dtype=np.float32)
+        t = max(t, 0.0)
+        return np.array([(t - self.scale) / (t + self.scale)], dtype=np.float32)
+
+    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
+        """Every sensor is measured; the detector decides per measurement."""
+        tau = self.action_to_threshold(action)
+        self.last_threshold = tau
+        rule = Detection(self.statistic, tau, self.on_detect, self.assumed_sigma, self.fresh_prior)
+        return FilterInput(
+            used=self._all,
+            leaked_sigma=effect.sigma,
+            detection=rule,
+            attack_probability=effect.probability,
+        )
