@@ -30,6 +30,9 @@ by Imhof's method on generalized chi-square tails, :mod:`fdia_env.detection.expe
 dynamics pay ± the squared error of the draw, whose mean agrees with it. (The literature's Bayes
 cost, built from fixed costs c1..c4, is not the true MSE; ``baselines.detection`` reports both.)
 
+``criterion="bayes_cost"`` pays the literature's Bayes cost instead: the fixed cost c1..c4 of
+the (hypothesis, decision) case, so that a threshold sweep recovers OBDD's α.
+
 ## Episode End
 
 After ``horizon`` attack steps (default 1). Expected dynamics need ``horizon=1`` in the tracking
@@ -39,7 +42,8 @@ the prior every round, so any horizon works.
 ## Arguments
 
 ``scenario`` (``"ch3-static"`` default, ``"ch3-tracking"`` or a system), ``power`` (a², default
-100), ``statistic``, ``on_detect``, ``assumed_sigma`` (default: the c2-maximising Σ of the power,
+100), ``statistic``, ``on_detect``, ``criterion`` (``"mse"`` | ``"bayes_cost"``),
+``assumed_sigma`` (default: the c2-maximising Σ of the power,
 MATH.md §3), ``horizon``, ``warmup``, ``objective``, ``reward_mode``, ``dynamics``,
 ``render_mode``. The Gymnasium views ``fdia_env/DetectionDefender-v0`` (the attacker fixed to
 p1 of the preset and the c2-maximising Σ) and ``fdia_env/DetectionAttacker-v0`` (the defender
@@ -69,7 +73,7 @@ import numpy as np
 
 from fdia_env.attacks.probabilistic import ProbabilisticAttack
 from fdia_env.defenses.detector import ThresholdDetector
-from fdia_env.detection.attack import c2_optimal_sigma
+from fdia_env.detection.attack import c2_optimal_pbb
 from fdia_env.envs.factory import aec_views, episode_spec
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.simulation import Simulation
@@ -87,6 +91,7 @@ def parallel_env(
     statistic: str = "quadratic",
     on_detect: str = "discard",
     assumed_sigma: np.ndarray | None = None,
+    criterion: str = "mse",
     horizon: int = 1,
     warmup: int | str | None = None,
     objective: str = "trace",
@@ -110,11 +115,15 @@ def parallel_env(
             "detection the estimation error is no longer Gaussian); use dynamics='sampled'"
         )
     attack = ProbabilisticAttack(power)
-    sigma = c2_optimal_sigma(_prior(sc.system, spec), sc.system.H, sc.system.R, attack.power)
+    sigma = c2_optimal_pbb(_prior(sc.system, spec), sc.system.H, sc.system.R, attack.power)
     if assumed_sigma is None:
         assumed_sigma = sigma
     defense = ThresholdDetector(
-        assumed_sigma, statistic=statistic, on_detect=on_detect, fresh_prior=static
+        assumed_sigma,
+        statistic=statistic,
+        on_detect=on_detect,
+        fresh_prior=static,
+        criterion=criterion,
     )
     env = FdiaParallelEnv(sc, attack, defense, spec, render_mode=render_mode, name=NAME)
     env.default_sigma = sigma

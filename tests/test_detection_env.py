@@ -146,3 +146,34 @@ def test_bad_actions_raise():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="attacker action must be finite"):
         env.step({"attacker": np.array([np.nan, 0, 0, 0], dtype=np.float32), "defender": [0.0]})
+
+
+@pytest.mark.parametrize("power", [220.0, 240.0, 260.0])
+def test_threshold_sweep_under_the_bayes_cost_recovers_obdd_alpha(power):
+    from baselines.detection import bayes_cost, expected_mse, obdd, static_problem
+
+    detector = obdd(static_problem("ch3-static", power=power))
+    env = detection_game_v0.parallel_env(scenario="ch3-static", power=power, criterion="bayes_cost")
+    attack = literature_attack(env)
+    step = 0.05
+    taus = np.arange(0.0, 6.0, step)
+    costs = [play(env, attack, t)[0] for t in taus]
+    assert abs(taus[int(np.argmin(costs))] - detector.threshold) <= step  # the sweep's resolution
+    at_alpha, _ = play(env, attack, detector.threshold)
+    assert at_alpha == pytest.approx(bayes_cost(detector).value, rel=1e-7)
+    mse_env = detection_game_v0.parallel_env(scenario="ch3-static", power=power)
+    assert play(mse_env, attack, detector.threshold)[0] == pytest.approx(
+        expected_mse(detector), rel=1e-7
+    )  # and the env's exact true MSE equals the baseline's independent closed form
+
+
+def test_sampled_bayes_cost_averages_to_the_expected_bayes_cost():
+    kw = {"scenario": "ch3-static", "power": 240.0, "criterion": "bayes_cost"}
+    env = detection_game_v0.parallel_env(**kw)
+    attack = literature_attack(env)
+    exact, _ = play(env, attack, 1.2)
+    samples = monte_carlo(
+        detection_game_v0.parallel_env(dynamics="sampled", **kw), attack, 1.2, 3000, seed=4
+    )
+    half = 4.5 * samples.std(ddof=1) / np.sqrt(samples.size)
+    assert abs(samples.mean() - exact) < half < 0.15 * exact

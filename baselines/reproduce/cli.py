@@ -12,12 +12,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from baselines.reproduce.ch2 import chapter2
+from baselines.reproduce.ch3 import chapter3
 from baselines.reproduce.ch4 import chapter4
 from baselines.reproduce.ch5 import chapter5
 from baselines.reproduce.common import DEFAULT_OUTPUT, DOC_INTRO, DOC_TITLE, Section, machine
 
 CHAPTERS: dict[str, tuple[Callable[[argparse.Namespace], Section], str]] = {
     "ch2": (chapter2, "attack covariances: literature strategies, pv optima, ellipses, errata"),
+    "ch3": (chapter3, "detection with minimum MSE: Bayes cost vs Monte-Carlo MSE, robustness"),
     "ch4": (chapter4, "sparse attacks: SFS order, solver table, pv cases, DP vs SFS"),
     "ch5": (chapter5, "sensor-selection game: payoffs, equilibria, incomplete information"),
 }

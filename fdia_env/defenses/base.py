@@ -50,6 +50,8 @@ class Detection:
         assumed_sigma: (nz, nz) the defender's model of the bias covariance.
         fresh_prior: Every step starts from the system's prior (a static parameter estimated
             afresh each round) instead of continuing the filter.
+        criterion: What a step costs: ``"mse"`` (the squared error) or ``"bayes_cost"`` (the
+            fixed cost c1..c4 of the case, MATH.md §3).
     """
 
     statistic: str
@@ -57,6 +59,7 @@ class Detection:
     on_detect: str
     assumed_sigma: np.ndarray
     fresh_prior: bool = False
+    criterion: str = "mse"
 
 
 class DefenseModel(ABC):

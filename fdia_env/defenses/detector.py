@@ -15,6 +15,7 @@ from fdia_env.systems import LinearSystem
 
 STATISTICS = ("chi2", "quadratic")
 ON_DETECT = ("discard", "incorporate")
+CRITERIA = ("mse", "bayes_cost")
 
 
 class ThresholdDetector(DefenseModel):
@@ -32,6 +33,8 @@ class ThresholdDetector(DefenseModel):
             quadratic statistic and by ``"incorporate"``.
         fresh_prior: Start every step from the system's prior (static estimation).
         threshold_scale: s (> 0).
+        criterion: ``"mse"`` pays the squared estimation error; ``"bayes_cost"`` the fixed cost
+            of the (hypothesis, decision) case, ``tr`` of its error covariance (MATH.md §3).
     """
 
     name = "threshold_detector"
@@ -44,11 +47,13 @@ class ThresholdDetector(DefenseModel):
         on_detect: str = "discard",
         fresh_prior: bool = False,
         threshold_scale: float | None = None,
+        criterion: str = "mse",
     ) -> None:
         self.statistic = check_choice("statistic", statistic, STATISTICS)
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
         self._assumed = assumed_sigma
         self.fresh_prior = bool(fresh_prior)
+        self.criterion = check_choice("criterion", criterion, CRITERIA)
         self._scale = (
             None if threshold_scale is None else check_positive("threshold_scale", threshold_scale)
         )
@@ -96,7 +101,14 @@ class ThresholdDetector(DefenseModel):
         """Every sensor is measured; the detector decides per measurement."""
         tau = self.action_to_threshold(action)
         self.last_threshold = tau
-        rule = Detection(self.statistic, tau, self.on_detect, self.assumed_sigma, self.fresh_prior)
+        rule = Detection(
+            self.statistic,
+            tau,
+            self.on_detect,
+            self.assumed_sigma,
+            self.fresh_prior,
+            self.criterion,
+        )
         return FilterInput(
             used=self._all,
             leaked_sigma=effect.sigma,

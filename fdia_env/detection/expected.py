@@ -119,3 +119,46 @@ def expected_squared_error(
         probs.append(p_d1)
     cov = 0.5 * (cov + cov.T)
     return DetectorOutcome(error_cov=cov, p_false_alarm=probs[0], p_detection=probs[1])
+
+
+def case_covariance(Pxx: np.ndarray, Pxz: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Error covariance of ``x̂ = x̄ + K y`` when ``y ~ N(0, C)``: ``Pxx − K Pxz' − Pxz K' + K C K'``.
+
+    Its trace is one of the fixed costs c1..c4 of MATH.md §3 (K and C of the case).
+    """
+    cov = Pxx - K @ Pxz.T - Pxz @ K.T + K @ C @ K.T
+    return 0.5 * (cov + cov.T)
+
+
+def bayes_cost_covariance(
+    Pxx: np.ndarray,
+    H: np.ndarray,
+    Pww: np.ndarray,
+    sigma: np.ndarray,
+    p1: float,
+    A: np.ndarray,
+    tau: float,
+    gain_d0: np.ndarray,
+    gain_d1: np.ndarray,
+) -> DetectorOutcome:
+    """The Bayes-cost counterpart of :func:`expected_squared_error` (same arguments).
+
+    ``Σ_h p_h [P(D1|h) C(K_D1, h) + P(D0|h) C(K_D0, h)]`` with the fixed case covariances of
+    :func:`case_covariance`; its trace is
+    ``p1 [P_d c1 + (1 − P_d) c2] + p0 [P_fa c3 + (1 − P_fa) c4]``.
+    """
+    Pxz = Pxx @ H.T
+    cov = np.zeros_like(Pxx, dtype=float)
+    probs = []
+    for h, prob in ((0, 1.0 - p1), (1, p1)):
+        C = H @ Pxz + Pww + (sigma if h else 0.0)
+        C = 0.5 * (C + C.T)
+        L = psd_sqrt(C)
+        B = L.T @ A @ L
+        p_d1 = tail(np.clip(np.linalg.eigvalsh(0.5 * (B + B.T)), 0.0, None), tau)
+        cov += prob * (
+            p_d1 * case_covariance(Pxx, Pxz, C, gain_d1)
+            + (1.0 - p_d1) * case_covariance(Pxx, Pxz, C, gain_d0)
+        )
+        probs.append(p_d1)
+    return DetectorOutcome(error_cov=cov, p_false_alarm=probs[0], p_detection=probs[1])

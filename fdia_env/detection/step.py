@@ -8,7 +8,11 @@ from typing import Any
 import numpy as np
 
 from fdia_env.defenses.base import Detection
-from fdia_env.detection.expected import expected_squared_error
+from fdia_env.detection.expected import (
+    bayes_cost_covariance,
+    case_covariance,
+    expected_squared_error,
+)
 from fdia_env.kalman import predict_cov, psd_sqrt, sym
 from fdia_env.systems import LinearSystem
 
@@ -22,6 +26,7 @@ class DetectionStep:
         error_cov: (n, n) the exact expected error covariance (expected dynamics), else None.
         x, x_hat: (n,) true state and estimate (sampled dynamics), else None.
         info: Decision details for ``infos``.
+        value: Sampled ``"bayes_cost"`` criterion: the fixed cost of the realised case, else None.
     """
 
     P: np.ndarray
@@ -29,6 +34,7 @@ class DetectionStep:
     x: np.ndarray | None
     x_hat: np.ndarray | None
     info: dict[str, Any]
+    value: float | None = None
 
 
 def detection_step(
@@ -72,9 +78,8 @@ def detection_step(
     P_d1 = sym(P_pred - K1 @ Pzz1 @ K1.T) if incorporate else P_pred
     true_sigma = np.zeros((nz, nz)) if sigma is None else sigma
     if not sampled:
-        out = expected_squared_error(
-            P_pred, sys.H, sys.R, true_sigma, probability, A, rule.threshold, K0, gain_d1
-        )
+        exact = expected_squared_error if rule.criterion == "mse" else bayes_cost_covariance
+        out = exact(P_pred, sys.H, sys.R, true_sigma, probability, A, rule.threshold, K0, gain_d1)
         info = {
             "p_false_alarm": out.p_false_alarm,
             "p_detection": out.p_detection,
@@ -98,4 +103,8 @@ def detection_step(
         "statistic": statistic,
         "threshold": rule.threshold,
     }
-    return DetectionStep(P_d1 if detected else P_d0, None, x_next, x_hat_new, info)
+    value = None
+    if rule.criterion == "bayes_cost":  # the fixed cost of the case that happened
+        C = Pzz0 + (true_sigma if attacked else 0.0)
+        value = float(np.trace(case_covariance(P_pred, Pxz, C, gain_d1 if detected else K0)))
+    return DetectionStep(P_d1 if detected else P_d0, None, x_next, x_hat_new, info, value)

@@ -93,6 +93,7 @@ class Simulation:
         self.k = 0
         self.nis = 0.0
         self.last_detection: dict = {}
+        self._value_override: float | None = None
         if self.sampled:
             self._reset_sampled(rng)
         self.phi = [self.measure()]
@@ -162,6 +163,7 @@ class Simulation:
             self._M, self.consistent = out.P, True
             self.x, self.x_hat = out.x, out.x_hat
         self.last_detection = out.info
+        self._value_override = out.value
 
     def _restart_steady(self, used: int, rng: np.random.Generator | None) -> None:
         """The filter has been running on ``used`` long enough: P = M = its steady state."""
@@ -230,6 +232,8 @@ class Simulation:
     def measure(self) -> float:
         """Φ now: of the actual covariance (expected) or the squared error (sampled)."""
         if self.sampled:
+            if self._value_override is not None:  # a detection step's fixed Bayes cost
+                return self._value_override
             e = self.x - self.x_hat
             return float(e @ e)
         if self._p2 is not None and self.consistent:
