@@ -128,4 +128,4 @@ def as_index_array(actions: Any, n: int, who: str, what: str) -> np.ndarray:
             raise ValueError(f"{who} actions must be a 1-D integer array ({what}), got {actions!r}")
     if a.size and (a.min() < 0 or a.max() >= n):
         raise ValueError(f"{who} actions must be integers in [0, {n}) ({what}), got {a.tolist()}")
-    return a.astype(np.int64)
+    return a.astype(np.int64, copy=False)

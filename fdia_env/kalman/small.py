@@ -110,6 +110,7 @@ def inv2_stacked(comp: np.ndarray) -> np.ndarray:
     inv_det = 1.0 / (a * d - b * b)
     out = np.empty_like(comp)
     np.multiply(d, inv_det, out=out[0])
-    np.multiply(b, -inv_det, out=out[1])
+    np.multiply(b, inv_det, out=out[1])
+    out[1] *= -1.0
     np.multiply(a, inv_det, out=out[2])
     return out

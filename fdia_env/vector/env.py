@@ -165,7 +165,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
                 self._reset_members(idx)
                 obs = self._observe(self.agent)
         infos.update(self._infos(resetting))
-        return obs, reward.astype(np.float64), done, truncated, infos
+        return obs, reward, done, truncated, infos
 
     # --- observations ----------------------------------------------------------------------------
     def _observe(self, agent: str) -> np.ndarray:
@@ -175,7 +175,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         return out
 
     def _infos(self, reset_now: np.ndarray) -> dict[str, Any]:
-        infos: dict[str, Any] = {"phi": self.sim.phi.copy(), "step": self.sim.k.copy()}
+        # phi is a fresh array every step; k is updated in place, so it is copied
+        infos: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
         if self._masked:
             infos["action_mask"] = self._models[self.agent].batch_action_mask()
             infos["_action_mask"] = np.ones(self.num_envs, dtype=bool)

@@ -249,8 +249,9 @@ class BatchedSimulation:
         if self._comp is not None and self.consistent.all():
             a, b, d = self._comp
             a0, _, d0 = self._start2
-            out[:, 1] = _clip(np.log(a * (1.0 / a0)), 30.0)
-            out[:, 2] = _clip(np.log(d * (1.0 / d0)), 30.0)
+            f32 = np.float32  # the observation is float32: compute its transcendental parts so
+            out[:, 1] = _clip(np.log(a * (1.0 / a0), dtype=f32), 30.0)
+            out[:, 2] = _clip(np.log(d * (1.0 / d0), dtype=f32), 30.0)
             out[:, 3] = _clip(b / np.sqrt(a * d), 1.0)
             col = 4
         else:
