@@ -16,11 +16,10 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_positive
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index, as_index_array
-from fdia_env.attacks.subsets import subset_bits, subsets
+from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array
+from fdia_env.attacks.subsets import SubsetChoice
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -122,7 +121,7 @@ def allocation_covariance(
     return power * np.outer(u, u)
 
 
-class SubsetAttack(AttackModel):
+class SubsetAttack(SubsetChoice, AttackModel):
     """Attack a non-empty sensor subset with power a² split by ``allocation``.
 
     Action: ``Discrete(2**M − 1)``, index ``j`` = the j-th subset by size then lexicographic
@@ -135,8 +134,6 @@ class SubsetAttack(AttackModel):
     def __init__(self, power: float, allocation: str = "independent") -> None:
         self.power = check_positive("power", power)
         self.allocation = check_choice("allocation", allocation, ALLOCATIONS)
-        self.last = 0
-        self.opponent_last: tuple[int, ...] = ()
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Precompute every subset's bias covariance."""
@@ -144,31 +141,9 @@ class SubsetAttack(AttackModel):
             raise ValueError(
                 f"the subset action supports at most {MAX_GAME_SENSORS} sensors, got {system.M}"
             )
-        self.M = system.M
-        self.subsets = subsets(system.M)
-        self.bits = subset_bits(system.M)
+        self.bind_subsets(system.M)
         self._sigmas: dict[int, np.ndarray] = {}
         self._system = system
-        self.action_space = spaces.Discrete(len(self.subsets))
-        self.feature_low = np.zeros(system.M, dtype=np.float32)
-        self.feature_high = np.ones(system.M, dtype=np.float32)
-
-    def reset(self) -> None:
-        """Forget the last round."""
-        self.opponent_last = ()
-
-    @property
-    def last_subset(self) -> tuple[int, ...]:
-        """The subset chosen in the last step (0-based sensors)."""
-        return self.subsets[self.last]
-
-    def observe_opponent(self, other: Any) -> None:
-        """Remember the defender's last subset for the next observation."""
-        self.opponent_last = getattr(other, "last_subset", ())
-
-    def features(self) -> list[float]:
-        """The defender's last subset as indicators."""
-        return [1.0 if i in self.opponent_last else 0.0 for i in range(self.M)]
 
     def sigma(self, j: int) -> np.ndarray:
         """Σ of subset index ``j`` (cached)."""
@@ -180,13 +155,7 @@ class SubsetAttack(AttackModel):
 
     def apply(self, action: Any) -> AttackEffect:
         """Attack subset ``action``."""
-        j = as_index(action)
-        if j is None or not 0 <= j < len(self.subsets):
-            raise ValueError(
-                f"attacker action must be an integer in [0, {len(self.subsets)}) (a subset index), "
-                f"got {action!r}"
-            )
-        self.last = j
+        j = self.last = self.subset_index(action, "attacker")
         return AttackEffect(attacked=self.bits[j], sigma=self.sigma(j))
 
     def info(self) -> dict[str, Any]:
@@ -194,24 +163,6 @@ class SubsetAttack(AttackModel):
         return {"attacked": list(self.subsets[self.last])}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
-        """Forget the last round of the members ``where``."""
-        if where is None:
-            self.b_last = np.zeros(batch, dtype=np.int64)
-            self.b_opponent = np.zeros((batch, self.M))
-            self._masks = np.array([[i in s for i in range(self.M)] for s in self.subsets])
-            self._bits_arr = np.array(self.bits, dtype=np.int64)
-        else:
-            self.b_opponent[where] = 0.0
-
-    def batch_observe_opponent(self, other: Any) -> None:
-        """Remember every member's opponent subset (same subset order on both sides)."""
-        self.b_opponent = self._masks[other.b_last].astype(float)
-
-    def batch_features(self) -> np.ndarray:
-        """(B, M) the defender's last subsets as indicators."""
-        return self.b_opponent
-
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Σ_A of each member's subset (rank one, from the allocation directions)."""
         j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")

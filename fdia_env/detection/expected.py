@@ -24,6 +24,7 @@ eigenvectors V of ``L'AL`` (eigenvalues λ) gives independent ``v_i ~ N(0, 1)`` 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,6 +82,16 @@ def tail_second_moment(A: np.ndarray, C: np.ndarray, tau: float) -> tuple[float,
     return tail(lam, tau), (T * m) @ T.T
 
 
+def hypotheses(
+    Pxx: np.ndarray, H: np.ndarray, Pww: np.ndarray, sigma: np.ndarray, p1: float
+) -> Iterator[tuple[float, np.ndarray, np.ndarray]]:
+    """``(p_h, Pxz, C_h)`` for H0 and H1, ``C_h = H Pxx H' + Pww + h Σ`` (innovation covariance)."""
+    Pxz = Pxx @ H.T
+    for h, prob in ((0, 1.0 - p1), (1, p1)):
+        C = H @ Pxz + Pww + (sigma if h else 0.0)
+        yield prob, Pxz, 0.5 * (C + C.T)
+
+
 def expected_squared_error(
     Pxx: np.ndarray,
     H: np.ndarray,
@@ -105,12 +116,9 @@ def expected_squared_error(
         gain_d0: (n, nz) estimator gain after D0.
         gain_d1: (n, nz) estimator gain after D1 (zero to discard).
     """
-    Pxz = Pxx @ H.T
     cov = np.zeros_like(Pxx, dtype=float)
     probs = []
-    for h, prob in ((0, 1.0 - p1), (1, p1)):
-        C = H @ Pxz + Pww + (sigma if h else 0.0)
-        C = 0.5 * (C + C.T)
+    for prob, Pxz, C in hypotheses(Pxx, H, Pww, sigma, p1):
         K = Pxz @ np.linalg.inv(C)  # posterior-mean gain under hypothesis h
         p_d1, Y1 = tail_second_moment(A, C, tau)  # E[y y' 1{D1}]
         D0, D1 = K - gain_d0, K - gain_d1  # error = (K − K_D) y + posterior noise
@@ -147,12 +155,9 @@ def bayes_cost_covariance(
     :func:`case_covariance`; its trace is
     ``p1 [P_d c1 + (1 − P_d) c2] + p0 [P_fa c3 + (1 − P_fa) c4]``.
     """
-    Pxz = Pxx @ H.T
     cov = np.zeros_like(Pxx, dtype=float)
     probs = []
-    for h, prob in ((0, 1.0 - p1), (1, p1)):
-        C = H @ Pxz + Pww + (sigma if h else 0.0)
-        C = 0.5 * (C + C.T)
+    for prob, Pxz, C in hypotheses(Pxx, H, Pww, sigma, p1):
         L = psd_sqrt(C)
         B = L.T @ A @ L
         p_d1 = tail(np.clip(np.linalg.eigvalsh(0.5 * (B + B.T)), 0.0, None), tau)
