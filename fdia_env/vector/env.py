@@ -102,17 +102,18 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if self.sim is None:
             self.sim = BatchedSimulation(self.parallel.sim, B)
         self.sim.rngs = self._rngs
-        self.sim.reset(np.arange(B), self._rngs)
+        self.sim.reset(None, self._rngs)
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
         self._prev_done = np.zeros(B, dtype=bool)
         return self._observe(self.agent), self._infos(np.zeros(B, dtype=bool))
 
-    def _reset_members(self, idx: np.ndarray) -> None:
-        rngs = [self._rngs[i] for i in idx] if self.sim.sampled else None
-        self.sim.reset(idx, rngs)
-        self.attack.batch_reset(self.num_envs, idx)
-        self.defense.batch_reset(self.num_envs, idx)
+    def _reset_members(self, where: np.ndarray) -> None:
+        """Reset the members of the (B,) boolean mask ``where``."""
+        rngs = [self._rngs[i] for i in np.flatnonzero(where)] if self.sim.sampled else None
+        self.sim.reset(where, rngs)
+        self.attack.batch_reset(self.num_envs, where)
+        self.defense.batch_reset(self.num_envs, where)
 
     # --- step ----------------------------------------------------------------------------------
     def step(self, actions: Any):
@@ -150,19 +151,17 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         infos: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
             if resetting.any():
-                idx = np.flatnonzero(resetting)
-                self._reset_members(idx)
-                reward[idx] = 0.0
-                done[idx] = False
+                self._reset_members(resetting)
+                reward[resetting] = 0.0
+                done[resetting] = False
             self._prev_done = done.copy()
             obs = self._observe(self.agent)
         else:  # SAME_STEP: finished members restart now; their last observation goes in infos
             obs = self._observe(self.agent)
             if done.any():
-                idx = np.flatnonzero(done)
                 infos["final_obs"] = obs.copy()
                 infos["_final_obs"] = done.copy()
-                self._reset_members(idx)
+                self._reset_members(done.copy())
                 obs = self._observe(self.agent)
         infos.update(self._infos(resetting))
         return obs, reward, done, truncated, infos

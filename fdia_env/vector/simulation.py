@@ -61,7 +61,7 @@ class BatchedSimulation:
                     [self._jtab[:, 0, 0], self._jtab[:, 0, 1], self._jtab[:, 1, 1]]
                 )
         self.rngs: list[np.random.Generator] = []
-        self.reset(np.arange(batch), None)  # the env's reset draws the sampled states
+        self.reset(None, None)  # the env's reset draws the sampled states
 
     # --- state -------------------------------------------------------------------------------
     @property
@@ -77,8 +77,9 @@ class BatchedSimulation:
     @property
     def M(self) -> np.ndarray:
         """(B, n, n) actual error covariances (P where no bias leaked)."""
-        P = self.P
-        return np.where(self.consistent[:, None, None], P, self._M)
+        if self.consistent.all():  # no member's filter has seen a bias: M is P
+            return self.P
+        return np.where(self.consistent[:, None, None], self.P, self._M)
 
     def _set_P(self, P: np.ndarray) -> None:
         if self.fast:
@@ -87,18 +88,27 @@ class BatchedSimulation:
             self._comp = None
             self._P = P
 
-    def reset(self, where: np.ndarray, rngs: list[np.random.Generator] | None) -> None:
-        """Put the members ``where`` at the window start; ``rngs`` are their generators."""
+    def reset(self, where: np.ndarray | None, rngs: list[np.random.Generator] | None) -> None:
+        """Put the members ``where`` (a (B,) boolean mask; None = all) at the window start.
+
+        Args:
+            where: Members to reset.
+            rngs: Their generators, in member order (sampled dynamics), or None.
+        """
         B, n = self.B, self.system.n
-        if len(where) == B:
-            self._set_P(np.broadcast_to(self._start, (B, n, n)).copy())
-            self._M = self.P.copy()
+        if where is None or where.all():
+            if self.fast:
+                self._comp = np.repeat(self._start_comp, B, axis=1)
+            else:
+                self._set_P(np.broadcast_to(self._start, (B, n, n)).copy())
+            self._M = None  # only read where a member is inconsistent
             self.consistent = np.ones(B, dtype=bool)
             self.k = np.zeros(B, dtype=np.int64)
             self.nis = np.zeros(B)
             if self.sampled:
                 self.x = np.zeros((B, n))
                 self.x_hat = np.zeros((B, n))
+            members = np.arange(B)
         else:
             if self._comp is not None:
                 self._comp[:, where] = self._start_comp
@@ -109,14 +119,13 @@ class BatchedSimulation:
             self.consistent[where] = True
             self.k[where] = 0
             self.nis[where] = 0.0
+            members = np.flatnonzero(where)
         if self.sampled and rngs is not None:
-            for i, rng in zip(where, rngs, strict=True):  # one generator per member
+            for i, rng in zip(members, rngs, strict=True):  # one generator per member
                 self.single._reset_sampled(rng)
                 self.x[i], self.x_hat[i] = self.single.x, self.single.x_hat
         phi0 = self._measure_all()
-        self.phi = (
-            phi0 if len(where) == B else np.where(np.isin(np.arange(B), where), phi0, self.phi)
-        )
+        self.phi = phi0 if where is None or where.all() else np.where(where, phi0, self.phi)
 
     # --- step --------------------------------------------------------------------------------
     def step(
