@@ -168,10 +168,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
 
     # --- observations ----------------------------------------------------------------------------
     def _observe(self, agent: str) -> np.ndarray:
-        out = np.empty((self.num_envs, self._dims[agent]), dtype=np.float32)
-        col = self.sim.features(out)
-        out[:, col:] = self._models[agent].batch_features()
-        return out
+        """(B, d) float32 observations of ``agent``, a transposed view of a (d, B) buffer."""
+        rows = np.empty((self._dims[agent], self.num_envs), dtype=np.float32)
+        col = self.sim.features(rows)
+        rows[col:] = self._models[agent].batch_features().T
+        return rows.T
 
     def _infos(self, reset_now: np.ndarray) -> dict[str, Any]:
         # phi is a fresh array every step; k is updated in place, so it is copied

@@ -249,30 +249,33 @@ class BatchedSimulation:
         return objective(self.M, self.spec.objective)
 
     def features(self, out: np.ndarray) -> int:
-        """Write the common features into ``out[:, :f]`` (float32); returns f.
+        """Write the common features into the rows ``out[:f]`` of a (d, B) float32 buffer.
 
-        Same layout as :meth:`Simulation.features`.
+        Same features as :meth:`Simulation.features`, one row per feature (rows are contiguous,
+        so the batch is written without strided stores); returns f.
         """
         n = self.system.n
-        out[:, 0] = (self.spec.horizon - self.k) / self.spec.horizon
+        out[0] = (self.spec.horizon - self.k) / self.spec.horizon
         if self._comp is not None and self.consistent.all():
             a, b, d = self._comp
             a0, _, d0 = self._start2
             f32 = np.float32  # the observation is float32: compute its transcendental parts so
-            out[:, 1] = _clip(np.log(a * (1.0 / a0), dtype=f32), 30.0)
-            out[:, 2] = _clip(np.log(d * (1.0 / d0), dtype=f32), 30.0)
-            out[:, 3] = _clip(b / np.sqrt(a * d), 1.0)
+            np.log(a * (1.0 / a0), dtype=f32, out=out[1])
+            np.log(d * (1.0 / d0), dtype=f32, out=out[2])
+            _clip(out[1:3], 30.0)
+            np.divide(b, np.sqrt(a * d), out=out[3], casting="same_kind")
+            _clip(out[3], 1.0)
             col = 4
         else:
             M = self.M
             var = np.diagonal(M, axis1=-2, axis2=-1)
-            out[:, 1 : 1 + n] = np.clip(np.log(var / self._start_diag), -30.0, 30.0)
+            out[1 : 1 + n] = np.clip(np.log(var / self._start_diag), -30.0, 30.0).T
             i, j = self._iu
             corr = M[:, i, j] / np.sqrt(var[:, i] * var[:, j])
-            out[:, 1 + n : 1 + n + len(i)] = np.clip(corr, -1.0, 1.0)
+            out[1 + n : 1 + n + len(i)] = np.clip(corr, -1.0, 1.0).T
             col = 1 + n + len(i)
         if self.sampled:
-            out[:, col] = np.where(np.isfinite(self.nis), np.minimum(self.nis, 1e3), 1e3)
+            out[col] = np.where(np.isfinite(self.nis), np.minimum(self.nis, 1e3), 1e3)
             col += 1
         return col
 
