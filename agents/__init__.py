@@ -1,1 +1,13 @@
-"""Agents: stable-baselines3 training, evaluation and the demo."""
+"""Agents: stable-baselines3 training, self-play and scoring against the analytic optima.
+
+- :mod:`agents.config`: hyperparameters and run settings (dataclasses, per-algorithm defaults);
+- :mod:`agents.seeding`: :func:`~agents.seeding.seed_everything`;
+- :mod:`agents.registry`: the trainable envs, their scenarios, algorithms and references;
+- :mod:`agents.evaluate`: :func:`~agents.evaluate.evaluate`, the one evaluation loop;
+- :mod:`agents.training`: model building, TensorBoard, atomic checkpoints, resume;
+- :mod:`agents.selfplay`: iterated best response, fictitious self-play and PSRO;
+- :mod:`agents.runs`, :mod:`agents.plots`: run folders and learning curves;
+- :mod:`agents.demo`: ``make demo``.
+
+``train.py`` at the repository root is the command line over these.
+"""

@@ -1,0 +1,275 @@
+"""Hyperparameters and run settings, one dataclass per command, docstring per field.
+
+``train.py`` parses these with tyro (``python train.py attacker --help`` shows every field with
+its docstring and default). Hyperparameters left at ``None`` take the algorithm's default from
+:data:`ALGO_DEFAULTS`, tuned for these short episodic envs (a window of a few steps, so no
+discounting: ``gamma = 1``); :func:`algo_kwargs` resolves them into stable-baselines3 kwargs.
+
+>>> kwargs = algo_kwargs("DQN", Hyperparameters(learning_rate=5e-4))
+>>> kwargs["learning_rate"], kwargs["buffer_size"], kwargs["policy_kwargs"]
+(0.0005, 50000, {'net_arch': [64, 64]})
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import tyro
+
+_PPO = {
+    "learning_rate": 1e-3,
+    "gamma": 1.0,
+    "n_steps": 512,
+    "batch_size": 128,
+    "n_epochs": 10,
+    "ent_coef": 0.01,
+    "gae_lambda": 0.95,
+    "clip_range": 0.2,
+    "lr_schedule": "linear",
+    "net_arch": (64, 64),
+}
+
+# Per algorithm: every hyperparameter that applies to it, with its default.
+ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
+    "PPO": dict(_PPO),
+    "MaskablePPO": dict(_PPO),
+    "A2C": {
+        "learning_rate": 7e-4,
+        "gamma": 1.0,
+        "n_steps": 16,
+        "ent_coef": 0.01,
+        "gae_lambda": 1.0,
+        "lr_schedule": "linear",
+        "net_arch": (64, 64),
+    },
+    "DQN": {
+        "learning_rate": 1e-3,
+        "gamma": 1.0,
+        "batch_size": 64,
+        "buffer_size": 50_000,
+        "learning_starts": 1_000,
+        "train_freq": 4,
+        "target_update_interval": 1_000,
+        "exploration_fraction": 0.3,
+        "exploration_final_eps": 0.02,
+        "lr_schedule": "constant",
+        "net_arch": (64, 64),
+    },
+    "SAC": {
+        "learning_rate": 1e-3,
+        "gamma": 1.0,
+        "batch_size": 256,
+        "buffer_size": 100_000,
+        "learning_starts": 1_000,
+        "train_freq": 1,
+        "tau": 0.005,
+        "lr_schedule": "constant",
+        "net_arch": (64, 64),
+    },
+}
+
+
+@dataclass
+class Hyperparameters:
+    """stable-baselines3 hyperparameters; ``None`` means the algorithm's default."""
+
+    learning_rate: float | None = None
+    """Adam step size (default: 1e-3; A2C 7e-4)."""
+    gamma: float | None = None
+    """Discount factor (default: 1.0, the windows are a few steps long)."""
+    n_steps: int | None = None
+    """PPO/A2C: steps per rollout (default: PPO 512, A2C 16)."""
+    batch_size: int | None = None
+    """PPO minibatch / DQN and SAC replay batch (default: PPO 128, DQN 64, SAC 256)."""
+    n_epochs: int | None = None
+    """PPO: optimisation epochs per rollout (default: 10)."""
+    ent_coef: float | None = None
+    """PPO/A2C: entropy bonus (default: 0.01)."""
+    gae_lambda: float | None = None
+    """PPO/A2C: GAE lambda (default: PPO 0.95, A2C 1.0)."""
+    clip_range: float | None = None
+    """PPO: clipping range (default: 0.2)."""
+    buffer_size: int | None = None
+    """DQN/SAC: replay buffer size (default: DQN 50,000, SAC 100,000)."""
+    learning_starts: int | None = None
+    """DQN/SAC: steps before learning starts (default: 1,000)."""
+    train_freq: int | None = None
+    """DQN/SAC: environment steps per gradient update (default: DQN 4, SAC 1)."""
+    target_update_interval: int | None = None
+    """DQN: steps between target-network updates (default: 1,000)."""
+    exploration_fraction: float | None = None
+    """DQN: fraction of training over which epsilon decays (default: 0.3)."""
+    exploration_final_eps: float | None = None
+    """DQN: final epsilon (default: 0.02)."""
+    tau: float | None = None
+    """SAC: soft target-update rate (default: 0.005)."""
+    lr_schedule: Literal["constant", "linear"] | None = None
+    """Learning rate over training: constant, or linear decay to 0 (default: PPO/A2C linear)."""
+    net_arch: tuple[int, ...] | None = None
+    """Hidden layer sizes of the policy and value networks (default: 64 64)."""
+
+
+HYPERPARAMETERS = tuple(f.name for f in dataclasses.fields(Hyperparameters))
+
+
+class LinearSchedule:
+    """SB3 learning-rate schedule ``lr × progress_remaining`` (1 at the start, 0 at the end).
+
+    A class rather than a closure so that saved models unpickle it by name.
+    """
+
+    def __init__(self, initial: float) -> None:
+        self.initial = float(initial)
+
+    def __call__(self, progress_remaining: float) -> float:
+        """The learning rate at ``progress_remaining`` ∈ [0, 1]."""
+        return self.initial * progress_remaining
+
+    def __repr__(self) -> str:
+        return f"LinearSchedule({self.initial!r})"
+
+
+def resolved_hyperparameters(algo: str, hp: Hyperparameters) -> dict[str, Any]:
+    """Every hyperparameter that applies to ``algo`` with the value used (for config.json).
+
+    Raises:
+        ValueError: For an unknown algorithm, or a hyperparameter set in ``hp`` that does not
+            apply to ``algo`` (naming the algorithms it applies to).
+    """
+    if algo not in ALGO_DEFAULTS:
+        raise ValueError(
+            f"unknown algorithm {algo!r}; valid algorithms: {', '.join(ALGO_DEFAULTS)}"
+        )
+    values = dict(ALGO_DEFAULTS[algo])
+    for name in HYPERPARAMETERS:
+        given = getattr(hp, name)
+        if given is None:
+            continue
+        if name not in values:
+            users = [a for a, d in ALGO_DEFAULTS.items() if name in d]
+            raise ValueError(f"{name} does not apply to {algo}; it applies to: {', '.join(users)}")
+        values[name] = given
+    if values["lr_schedule"] not in ("constant", "linear"):
+        raise ValueError(
+            f"lr_schedule must be 'constant' or 'linear', got {values['lr_schedule']!r}"
+        )
+    values["net_arch"] = list(values["net_arch"])
+    return values
+
+
+def algo_kwargs(algo: str, hp: Hyperparameters) -> dict[str, Any]:
+    """stable-baselines3 constructor kwargs of ``algo``: its defaults updated with ``hp``.
+
+    Raises:
+        ValueError: As :func:`resolved_hyperparameters`.
+    """
+    kwargs = resolved_hyperparameters(algo, hp)
+    if kwargs.pop("lr_schedule") == "linear":
+        kwargs["learning_rate"] = LinearSchedule(kwargs["learning_rate"])
+    kwargs["policy_kwargs"] = {"net_arch": kwargs.pop("net_arch")}
+    return kwargs
+
+
+def parse_env_kwargs(raw: dict[str, str]) -> dict[str, Any]:
+    """CLI env options with each value read as JSON where it parses, else kept as a string.
+
+    >>> parse_env_kwargs({"budget": "4", "power": "1e3", "allocation": "dependent"})
+    {'budget': 4, 'power': 1000.0, 'allocation': 'dependent'}
+    """
+    out: dict[str, Any] = {}
+    for key, value in raw.items():
+        try:
+            out[key] = json.loads(value) if isinstance(value, str) else value
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+@dataclass
+class RunSettings:
+    """Where and how a run is written (shared by every command)."""
+
+    seed: int = 0
+    """Seed of Python, NumPy, torch, the algorithm and the environments."""
+    runs_root: Path = Path("runs")
+    """Folder that holds the run folders."""
+    run_dir: Path | None = None
+    """Run folder (default: <runs-root>/<env>-<algo>-s<seed>-<time>)."""
+    resume: bool = False
+    """Continue --run-dir (default: the latest run of this env, algo, seed) from its checkpoint."""
+    progress_bar: bool = True
+    """Show a progress bar while training."""
+    torch_threads: int = 1
+    """torch CPU threads (these small networks run fastest on one)."""
+    device: str = "cpu"
+    """torch device."""
+    verbose: int = 0
+    """stable-baselines3 verbosity (0: quiet, 1: training statistics)."""
+
+
+@dataclass
+class TrainConfig:
+    """Train one player of a registered env and score it against the analytic optimum.
+
+    In a two-player env the other player is fixed (``--opponent``).
+    """
+
+    env: str = "sparse_attack_v0"
+    """Registered env (a bad name lists the valid ones)."""
+    scenario: str | None = None
+    """Scenario preset (default: the env's first: ch4-position, ch2-position, ch5-game)."""
+    env_kwargs: dict[str, str] = field(default_factory=dict)
+    """Extra env options as name value pairs (JSON values), e.g. --env-kwargs budget 4 horizon 8."""
+    opponent: Literal["uniform", "equilibrium"] = "uniform"
+    """Two-player envs: the fixed other player, the uniform mix or the LP equilibrium mix."""
+    algo: str | None = None
+    """PPO, MaskablePPO, A2C, DQN or SAC, where it fits the env (default: the env's first)."""
+    total_timesteps: int = 100_000
+    """Environment steps to train for, in total across resumes."""
+    eval_freq: int = 10_000
+    """Steps between evaluations during training (0: none)."""
+    eval_episodes: int = 10
+    """Episodes per evaluation during training."""
+    final_eval_episodes: int = 100
+    """Episodes of the final evaluation (the printed table and scores.json)."""
+    checkpoint_freq: int = 10_000
+    """Steps between checkpoints (the final model is always saved)."""
+    run: tyro.conf.OmitArgPrefixes[RunSettings] = field(default_factory=RunSettings)
+    """Run folder, seeding and output."""
+    hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
+    """Hyperparameters (None: the algorithm's default)."""
+    agent: tyro.conf.Suppress[str] = "attacker"
+    """Learning player, set by the command (attacker or defender)."""
+
+
+@dataclass
+class GameConfig:
+    """Find an equilibrium of a two-player game by self-play with learned best responses.
+
+    The exploitability of the current strategies is reported after every iteration.
+    """
+
+    method: Literal["psro", "fsp", "ibr"] = "psro"
+    """psro (LP meta-solver), fsp (average of all best responses), ibr (latest best response)."""
+    env: str = "sensor_game_v0"
+    """Registered two-player env."""
+    scenario: str | None = None
+    """Scenario preset (default: the env's first, ch5-game)."""
+    env_kwargs: dict[str, str] = field(default_factory=dict)
+    """Extra env options as name value pairs (JSON values), e.g. --env-kwargs power 50."""
+    algo: str | None = None
+    """Best-response learner: PPO, A2C or DQN (default: PPO)."""
+    iterations: int = 8
+    """Iterations; each trains one attacker and one defender best response."""
+    steps_per_iteration: int = 3_000
+    """Environment steps per best response."""
+    final_eval_episodes: int = 1_000
+    """Episodes of the final evaluation of each mixed strategy."""
+    run: tyro.conf.OmitArgPrefixes[RunSettings] = field(default_factory=RunSettings)
+    """Run folder, seeding and output."""
+    hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
+    """Hyperparameters of the learner (None: the algorithm's default)."""

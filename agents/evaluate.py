@@ -1,0 +1,336 @@
+"""One evaluation loop for every policy: learned, analytic baseline or random.
+
+:func:`evaluate` plays a policy in a Gymnasium view for ``n_episodes`` seeded episodes and
+scores it against the analytic reference of :mod:`agents.registry`: the ratio to the optimum in
+single-player settings, the exploitability of the policy's mixed strategy in the one-shot game
+(``baselines.game.exploitability`` on the exact payoff matrix).
+
+>>> from baselines.sparse import exhaustive
+>>> best = exhaustive("ch4-position", budget=5, horizon=6)
+>>> result = evaluate(best.policy(), "fdia_env/SparseAttack-v0", n_episodes=2)
+>>> round(result.mean, 10) == round(best.value, 10), round(result.score, 12)
+(True, 1.0)
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import scipy.stats
+from gymnasium import spaces
+
+from agents.registry import Reference, by_gym_id, parallel_of
+from fdia_env.envs.single_agent import Policy
+
+
+class RandomPolicy:
+    """Uniformly random legal actions (SB3 ``predict`` signature, reads ``action_masks``).
+
+    Args:
+        action_space: The env's action space.
+        seed: Seed of the policy's generator (the space is seeded with it).
+    """
+
+    def __init__(self, action_space: spaces.Space, seed: int | None = None) -> None:
+        self.action_space = action_space
+        self.rng = np.random.default_rng(seed)
+        action_space.seed(seed)
+
+    @property
+    def probs(self) -> np.ndarray | None:
+        """Uniform mixed strategy over a Discrete space (None for other spaces)."""
+        if isinstance(self.action_space, spaces.Discrete):
+            return np.full(int(self.action_space.n), 1.0 / int(self.action_space.n))
+        return None
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = False,
+        action_masks: np.ndarray | None = None,
+    ) -> tuple[Any, Any]:
+        """A uniformly random action (among ``action_masks`` when given)."""
+        if action_masks is not None and isinstance(self.action_space, spaces.Discrete):
+            legal = np.flatnonzero(np.asarray(action_masks, dtype=bool))
+            return np.int64(self.rng.choice(legal)), state
+        return self.action_space.sample(), state
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """What :func:`evaluate` returns.
+
+    Attributes:
+        policy: Name of the policy.
+        env_id: Gymnasium id of the env (or its class name).
+        returns: (n_episodes,) undiscounted episode returns.
+        mean: Mean return.
+        ci95: Half-width of the 95 % Student-t interval of the mean (NaN for one episode).
+        reference: Analytic reference value (optimum or game value), None if none applies.
+        reference_name: What the reference is (``"EXS"``, ``"trace-optimal"``, ...).
+        score: Single player: ``mean / reference`` (the determinant ratio for log-det
+            objectives); game: the exploitability of the policy's mixed strategy (0 at an
+            equilibrium). None without a reference.
+        score_name: ``"ratio to optimum"``, ``"ratio to best known"`` or ``"exploitability"``.
+        strategy: Game only: the policy's mixed strategy over the agent's actions.
+        extras: Further numbers: for games the exploitability relative to the value and the
+            best-response value against the env's fixed opponent, when it is a known mix.
+    """
+
+    policy: str
+    env_id: str
+    returns: np.ndarray = field(repr=False)
+    mean: float
+    ci95: float
+    reference: float | None
+    reference_name: str | None
+    score: float | None
+    score_name: str
+    strategy: np.ndarray | None = None
+    extras: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n_episodes(self) -> int:
+        """Number of episodes played."""
+        return int(self.returns.size)
+
+    @property
+    def ci(self) -> tuple[float, float]:
+        """The 95 % confidence interval of the mean return."""
+        return self.mean - self.ci95, self.mean + self.ci95
+
+    def score_text(self) -> str:
+        """The score as printed in tables (``99.8%`` or ``expl 0.012 (0.15%)``)."""
+        if self.score is None:
+            return "-"
+        if self.score_name == "exploitability":
+            rel = self.extras.get("relative_exploitability", math.nan)
+            return f"expl {self.score:.4g} ({rel:.2%})"
+        return f"{self.score:.2%}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (NaN as None)."""
+
+        def clean(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else float(v)
+
+        return {
+            "policy": self.policy,
+            "env_id": self.env_id,
+            "n_episodes": self.n_episodes,
+            "mean": clean(self.mean),
+            "ci95": clean(self.ci95),
+            "ci": [clean(c) for c in self.ci],
+            "reference": clean(self.reference),
+            "reference_name": self.reference_name,
+            "score": clean(self.score),
+            "score_name": self.score_name,
+            "strategy": None if self.strategy is None else self.strategy.tolist(),
+            "extras": {k: clean(v) for k, v in self.extras.items()},
+        }
+
+
+def t_interval(returns: np.ndarray, confidence: float = 0.95) -> float:
+    """Half-width of the Student-t confidence interval of the mean (NaN for one sample)."""
+    n = returns.size
+    if n < 2:
+        return math.nan
+    sem = float(np.std(returns, ddof=1)) / math.sqrt(n)
+    return float(scipy.stats.t.ppf(0.5 + confidence / 2, n - 1)) * sem
+
+
+def policy_name(policy: Any) -> str:
+    """A short name: ``"random"`` or the policy's class name."""
+    return policy if isinstance(policy, str) else type(policy).__name__
+
+
+def _accepts_masks(policy: Any) -> bool:
+    try:
+        return "action_masks" in inspect.signature(policy.predict).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _as_reference(reference: Reference | float | None, env: gym.Env) -> Reference | None:
+    if isinstance(reference, Reference):
+        return reference
+    if reference is not None:
+        return Reference(float(reference), "given")
+    entry = by_gym_id(env.spec.id) if env.spec is not None else None
+    return entry.reference_of(env) if entry is not None else None
+
+
+def play(
+    policy: Policy | RandomPolicy,
+    env: gym.Env,
+    n_episodes: int,
+    seed: int,
+    deterministic: bool = True,
+) -> tuple[np.ndarray, list[Any]]:
+    """Episode returns (n_episodes,) and the first action of each episode.
+
+    Episode ``i`` is reset with ``seed + i``; action masks are passed to policies whose
+    ``predict`` takes ``action_masks`` (sb3-contrib's MaskablePPO, :class:`RandomPolicy`).
+    """
+    masks_fn = getattr(env.unwrapped, "action_masks", None)
+    pass_masks = masks_fn is not None and _accepts_masks(policy)
+    returns, first_actions = np.zeros(n_episodes), []
+    for i in range(n_episodes):
+        obs, _ = env.reset(seed=seed + i)
+        done, total, first = False, 0.0, True
+        while not done:
+            kwargs = {"action_masks": masks_fn()} if pass_masks else {}
+            action, _ = policy.predict(obs, deterministic=deterministic, **kwargs)
+            if first:
+                first_actions.append(action)
+                first = False
+            if isinstance(env.action_space, spaces.Discrete):
+                action = int(action)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            done = terminated or truncated
+        returns[i] = total
+    return returns, first_actions
+
+
+def mixed_strategy(
+    policy: Any,
+    env: gym.Env,
+    seed: int = 0,
+    deterministic: bool = True,
+    played: list[Any] | None = None,
+) -> np.ndarray:
+    """The mixed strategy a policy plays in a one-shot game with ``Discrete(n)`` actions.
+
+    In the one-shot game the observation at the decision is the (constant) initial one, so a
+    policy is its action distribution there: a fixed mix's ``probs``; for an SB3 model its
+    deterministic action (a pure strategy) or, with ``deterministic=False``, its action
+    distribution; for any other policy the frequencies of the actions in ``played``.
+    """
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    n = int(env.action_space.n)
+    probs = getattr(policy, "probs", None)
+    if probs is not None:
+        return np.asarray(probs, dtype=np.float64)
+    if isinstance(policy, BaseAlgorithm):
+        obs, _ = env.reset(seed=seed)
+        if deterministic or not hasattr(policy.policy, "get_distribution"):
+            out = np.zeros(n)
+            out[int(policy.predict(obs, deterministic=True)[0])] = 1.0
+            return out
+        import torch
+
+        obs_t, _ = policy.policy.obs_to_tensor(obs)
+        with torch.no_grad():
+            dist = policy.policy.get_distribution(obs_t).distribution
+        return dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+    if not played:
+        raise ValueError("played actions are needed for a policy without probs")
+    return np.bincount([int(a) for a in played], minlength=n) / len(played)
+
+
+def _game_score(
+    reference: Reference, env: gym.Env, strategy: np.ndarray
+) -> tuple[float, dict[str, float]]:
+    from baselines.game import exploitability, solve_zero_sum
+
+    L = reference.payoff
+    x_eq, y_eq, value = solve_zero_sum(L)
+    parallel = parallel_of(env)
+    agent = env.unwrapped.agent
+    if agent == "attacker":
+        expl = exploitability(L, x_eq, strategy, value).attacker
+    else:
+        expl = exploitability(L, strategy, y_eq, value).defender
+    extras = {"relative_exploitability": expl / abs(value) if value else math.nan}
+    opponent_probs = getattr(env.unwrapped.opponent, "probs", None)
+    if opponent_probs is not None and parallel.spec.horizon == 1:
+        p = np.asarray(opponent_probs)
+        # best response to the fixed mix p: the attacker maximises p'L, the defender minimises Lp
+        br = float((p @ L).max()) if agent == "attacker" else -float((L @ p).min())
+        extras["best_response"] = br
+    return float(expl), extras
+
+
+def evaluate(
+    policy: Policy | str,
+    env_or_id: gym.Env | str,
+    n_episodes: int = 10,
+    seed: int = 0,
+    reference: Reference | float | None = None,
+    deterministic: bool = True,
+    **env_kwargs: Any,
+) -> Evaluation:
+    """Play ``policy`` for ``n_episodes`` and score it against the analytic reference.
+
+    Args:
+        policy: An SB3 model, a baseline policy (anything with SB3's ``predict``) or
+            ``"random"`` (uniform over the legal actions).
+        env_or_id: A Gymnasium env or id (made with ``env_kwargs``; closed afterwards).
+        n_episodes: Episodes to play (episode ``i`` is reset with ``seed + i``).
+        seed: Seed of the first episode (and of the random policy).
+        reference: The reference value or :class:`~agents.registry.Reference`; by default the
+            registry's reference of the env (None when the env's settings have none).
+        deterministic: Passed to ``predict`` (mixed baselines sample whatever it says).
+        **env_kwargs: Passed to ``gymnasium.make`` when ``env_or_id`` is an id.
+
+    Returns:
+        An :class:`Evaluation`. In games the score is the exploitability of the policy's mixed
+        strategy on the exact payoff matrix (lower is better); otherwise the ratio to the
+        optimum.
+
+    Raises:
+        ValueError: For ``n_episodes < 1``, an unknown policy string, or env kwargs given with
+            an env instance.
+    """
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
+        raise ValueError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    own_env = isinstance(env_or_id, str)
+    if not own_env and env_kwargs:
+        raise ValueError(f"env_kwargs {sorted(env_kwargs)} need an env id, not an env instance")
+    env = gym.make(env_or_id, **env_kwargs) if own_env else env_or_id
+    try:
+        if isinstance(policy, str):
+            if policy != "random":
+                raise ValueError(f"policy must be a policy object or 'random', got {policy!r}")
+            player: Any = RandomPolicy(env.action_space, seed)
+        else:
+            player = policy
+        ref = _as_reference(reference, env)
+        returns, first_actions = play(player, env, n_episodes, seed, deterministic)
+        mean = float(returns.mean())
+        strategy, extras = None, {}
+        if ref is None:
+            score, score_name = None, "-"
+        elif ref.is_game:
+            strategy = mixed_strategy(player, env, seed, deterministic, first_actions)
+            score, extras = _game_score(ref, env, strategy)
+            score_name = "exploitability"
+        else:
+            score = ref.ratio(mean)
+            score_name = "ratio to optimum" if ref.exact else "ratio to best known"
+        env_id = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
+        return Evaluation(
+            policy=policy_name(policy),
+            env_id=env_id,
+            returns=returns,
+            mean=mean,
+            ci95=t_interval(returns),
+            reference=None if ref is None else ref.value,
+            reference_name=None if ref is None else ref.name,
+            score=score,
+            score_name=score_name,
+            strategy=strategy,
+            extras=extras,
+        )
+    finally:
+        if own_env:
+            env.close()

@@ -1,0 +1,396 @@
+"""The envs an agent can be trained on, their scenarios, algorithms and analytic references.
+
+One :class:`Trainable` per (env, learning agent): the Gymnasium id of its single-agent view,
+the scenarios it is set up for (with their default env kwargs), the stable-baselines3
+algorithms that fit its action space (the first is the default) and the function that gives the
+analytic optimum of a built env, against which :func:`agents.evaluate.evaluate` scores a policy.
+Adding an env is one :func:`register` call (e.g. ``detection_game_v0`` with the OBDD threshold
+as its reference).
+
+>>> entry = get("sparse_attack_v0")
+>>> entry.gym_id, entry.algorithms
+('fdia_env/SparseAttack-v0', ('MaskablePPO', 'PPO', 'A2C', 'DQN'))
+>>> round(entry.reference_of(entry.make()).value, 4)
+0.0328
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import fdia_env  # noqa: F401 - registers the Gymnasium ids
+from fdia_env.envs.parallel import FdiaParallelEnv
+
+AGENTS = ("attacker", "defender")
+
+# Every algorithm the training code knows; a Trainable lists the ones that fit its action space.
+ALGORITHMS = ("PPO", "MaskablePPO", "A2C", "DQN", "SAC")
+DISCRETE_ALGORITHMS = ("PPO", "A2C", "DQN")
+MASKED_ALGORITHMS = ("MaskablePPO", *DISCRETE_ALGORITHMS)
+BOX_ALGORITHMS = ("SAC", "PPO", "A2C")
+
+# EXS is exact but costs C(M·N, c) evaluations (~10⁷/s); above this the reference is the best
+# of the polynomial heuristics ("best known heuristic where the optimum is out of reach").
+EXS_MAX_SETS = 20_000_000
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The analytic answer a learned policy is scored against.
+
+    Attributes:
+        value: The optimal episode return (for games: the game value, attacker's payoff).
+        name: What it is (``"EXS"``, ``"trace-optimal"``, ``"game value (LP)"``, ...).
+        objective: ``"trace"`` or ``"logdet"``; the single-player score is ``return / value``
+            for ``"trace"`` and the determinant ratio ``exp(return − value)`` for ``"logdet"``.
+        exact: False when the value is the best known heuristic rather than the optimum.
+        payoff: (m, n) game payoff ``L[D, A]`` (defender rows) for games; None otherwise.
+        policy: The analytic answer as a policy for the view (SB3 ``predict``), if there is one:
+            played in the env it returns ``value`` (in a game, in expectation).
+        cost: The returns are negative costs (a defender's): the score is then
+            ``value / return`` (optimal cost over learned cost), at most 1 like the others.
+    """
+
+    value: float
+    name: str
+    objective: str = "trace"
+    exact: bool = True
+    payoff: np.ndarray | None = field(default=None, repr=False)
+    policy: Any = field(default=None, repr=False, compare=False)
+    cost: bool = False
+
+    @property
+    def is_game(self) -> bool:
+        """Whether the score is an exploitability (a game) rather than a ratio."""
+        return self.payoff is not None
+
+    def ratio(self, mean_return: float) -> float:
+        """Single-player score: the return as a fraction of the optimum."""
+        if self.objective == "logdet":
+            return math.exp(mean_return - self.value)  # det ratio
+        if self.cost:
+            return self.value / mean_return  # both negative: optimal cost / learned cost
+        return mean_return / self.value
+
+
+def parallel_of(env: gym.Env) -> FdiaParallelEnv:
+    """The :class:`FdiaParallelEnv` behind a (possibly wrapped) fdia_env Gymnasium view."""
+    parallel = getattr(env.unwrapped, "parallel", None)
+    if not isinstance(parallel, FdiaParallelEnv):
+        raise ValueError(f"not an fdia_env single-agent view: {env.unwrapped!r}")
+    return parallel
+
+
+# ----------------------------------------------------------------------------------------------
+# References: f(parallel env) -> Reference, or None where the env's settings leave no analytic
+# answer comparable with the episode return (e.g. shaped rewards, a non-steady start).
+
+
+def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
+    """EXS for the env's scenario, budget, horizon and objective (or the best heuristic).
+
+    ``baselines.sparse.exhaustive`` when its ``C(M·N, c)`` sets are within
+    :data:`EXS_MAX_SETS`, else the best of SFS, SFS-SS and DP.
+    """
+    from baselines.sparse import dp, exhaustive, sfs, sfs_ss
+
+    spec = env.spec
+    if spec.reward_mode != "terminal" or spec.warmup != "steady":
+        return None  # the solvers' objective is Φ at the window end from steady state
+    args = (env.scenario, env.attack.budget, spec.horizon, spec.objective)
+    if math.comb(env.system.M * spec.horizon, env.attack.budget) <= EXS_MAX_SETS:
+        best = exhaustive(*args)
+        return Reference(best.value, "EXS", spec.objective, policy=best.policy())
+    best = max((f(*args) for f in (sfs, sfs_ss, dp)), key=lambda r: r.value)
+    name = f"best heuristic ({best.solver.upper()})"
+    return Reference(best.value, name, spec.objective, False, policy=best.policy())
+
+
+def covariance_reference(env: FdiaParallelEnv) -> Reference | None:
+    """``trace_optimal`` (or ``det_optimal`` for log-det) of a single injection at steady state."""
+    from baselines.covariance import det_optimal, trace_optimal
+
+    spec, attack = env.spec, env.attack
+    if spec.horizon != 1 or spec.warmup != "steady" or spec.reward_mode == "shaped":
+        return None  # the closed forms are for one injection, paid Φ of that step
+    if spec.objective == "trace":
+        best = trace_optimal(env.scenario, attack.power, attack.structure, attack.weight)
+        return Reference(best.value, "trace-optimal", "trace", policy=best.policy(env))
+    if attack.structure != "full":
+        return None  # water-filling is the full-structure optimum only
+    best = det_optimal(env.scenario, attack.power, weight=attack.weight)
+    return Reference(best.value, "det-optimal", "logdet", policy=best.policy(env))
+
+
+def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference | None:
+    """The LP value of the one-shot sensor-selection game, with its payoff matrix.
+
+    The policy is ``agent``'s equilibrium mix; for the defender the value is its own return −v.
+    """
+    from baselines.game import MixedStrategyPolicy, payoff_matrix, solve_zero_sum
+
+    if env.spec.horizon != 1:
+        return None  # repeated rounds: no exact matrix-game reference here
+    L = payoff_matrix(env.scenario, env.attack.power, env.attack.allocation)
+    x, y, value = solve_zero_sum(L)
+    if agent == "defender":
+        policy = MixedStrategyPolicy(x, seed=0)
+        return Reference(-value, "game value (LP)", "trace", True, L, policy)
+    return Reference(value, "game value (LP)", "trace", True, L, MixedStrategyPolicy(y, seed=0))
+
+
+def detection_reference(env: FdiaParallelEnv, agent: str = "defender") -> Reference | None:
+    """OBDD's threshold α (OBDI's when the defender incorporates) under the Bayes-cost criterion.
+
+    The detectors of MATH.md §3 minimise the Bayes cost built from the fixed costs c1..c4, so
+    with ``criterion="bayes_cost"``, the quadratic statistic, one attack step and the defender's
+    model equal to the attacker's (the env's defaults) the best fixed threshold is α. The
+    attacker's side, and the true-MSE criterion, have no closed-form reference here.
+    """
+    from baselines.detection import bayes_cost, obdd, obdi, static_problem, tracking_problem
+    from fdia_env.detection_game_v0 import FixedAction, _is_static
+
+    det, spec = env.defense, env.spec
+    if (
+        agent != "defender"
+        or det.criterion != "bayes_cost"
+        or det.statistic != "quadratic"
+        or spec.horizon != 1
+        or spec.reward_mode == "shaped"
+    ):
+        return None
+    if not np.allclose(det.assumed_sigma, env.default_sigma):
+        return None  # a mis-specified defender: α is no longer the optimum
+    power = env.attack.power
+    static = _is_static(env.system)
+    problem = (
+        static_problem(env.scenario, power=power)
+        if static
+        else tracking_problem(env.scenario, power=power)
+    )
+    detector = obdd(problem) if det.on_detect == "discard" else obdi(problem)
+    policy = FixedAction(det.threshold_to_action(detector.threshold))
+    name = f"{detector.name} α (Bayes cost)"
+    return Reference(-bayes_cost(detector).value, name, "trace", policy=policy, cost=True)
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Trainable:
+    """One learning agent of one env.
+
+    Attributes:
+        env: Registry name (the PettingZoo module name, e.g. ``"sparse_attack_v0"``).
+        agent: ``"attacker"`` or ``"defender"``.
+        gym_id: Gymnasium id of the agent's single-agent view.
+        scenarios: Scenario preset → its default env kwargs (the first preset is the default).
+        algorithms: stable-baselines3 algorithms that fit the action space (first = default).
+        reference: Analytic reference of a built env, ``f(parallel_env)`` or, for games,
+            ``f(parallel_env, agent)`` (see :class:`Reference`).
+        game: Whether the env is a two-player game (score: exploitability; self-play applies).
+        masked: Whether the agent has illegal actions (``env.action_masks()``).
+    """
+
+    env: str
+    agent: str
+    gym_id: str
+    scenarios: Mapping[str, Mapping[str, Any]]
+    algorithms: tuple[str, ...]
+    reference: Callable[..., Reference | None]
+    game: bool = False
+    masked: bool = False
+
+    @property
+    def default_scenario(self) -> str:
+        """The first scenario of :attr:`scenarios`."""
+        return next(iter(self.scenarios))
+
+    @property
+    def default_algorithm(self) -> str:
+        """The first algorithm of :attr:`algorithms`."""
+        return self.algorithms[0]
+
+    def env_kwargs(self, scenario: str | None = None, **overrides: Any) -> dict[str, Any]:
+        """``gym.make`` kwargs: the scenario's defaults updated with ``overrides``.
+
+        Raises:
+            ValueError: For a scenario this env is not set up for (listing the valid ones).
+        """
+        scenario = self.default_scenario if scenario is None else scenario
+        if scenario not in self.scenarios:
+            raise ValueError(
+                f"unknown scenario {scenario!r} for {self.env} ({self.agent}); "
+                f"valid scenarios: {', '.join(self.scenarios)}"
+            )
+        return {"scenario": scenario, **self.scenarios[scenario], **overrides}
+
+    def algorithm(self, name: str | None) -> str:
+        """Canonical algorithm name (case and ``_``/``-`` insensitive); None gives the default.
+
+        Raises:
+            ValueError: For an algorithm unknown or not applicable here (listing the valid ones).
+        """
+        if name is None:
+            return self.default_algorithm
+        key = name.replace("_", "").replace("-", "").lower()
+        for algo in self.algorithms:
+            if algo.lower() == key:
+                return algo
+        why = "unknown algorithm" if key not in {a.lower() for a in ALGORITHMS} else "algorithm"
+        raise ValueError(
+            f"{why} {name!r} does not apply to {self.env} ({self.agent}); "
+            f"valid algorithms: {', '.join(self.algorithms)}"
+        )
+
+    def make(self, scenario: str | None = None, **overrides: Any) -> gym.Env:
+        """``gymnasium.make`` the view with :meth:`env_kwargs`."""
+        return gym.make(self.gym_id, **self.env_kwargs(scenario, **overrides))
+
+    def view(self, opponent: Any = None, **env_kwargs: Any) -> gym.Env:
+        """The view built directly, without ``gymnasium.make``.
+
+        For an ``opponent`` that cannot be deep-copied into the env spec (an SB3 model):
+        ``gymnasium.make`` copies its kwargs and warns when it cannot.
+        """
+        from fdia_env.envs.single_agent import make_single_agent
+        from fdia_env.registration import GYM_IDS
+
+        module, agent = GYM_IDS[self.gym_id]
+        return make_single_agent(module, agent=agent, opponent=opponent, **env_kwargs)
+
+    def reference_of(self, env: gym.Env) -> Reference | None:
+        """The analytic reference of a built view (None where none applies)."""
+        if self.game:
+            return self.reference(parallel_of(env), self.agent)
+        return self.reference(parallel_of(env))
+
+
+REGISTRY: dict[tuple[str, str], Trainable] = {}
+
+
+def register(entry: Trainable) -> Trainable:
+    """Add ``entry`` under ``(entry.env, entry.agent)`` (replacing one already there)."""
+    if entry.agent not in AGENTS:
+        raise ValueError(f"agent must be one of {list(AGENTS)}, got {entry.agent!r}")
+    unknown = [a for a in entry.algorithms if a not in ALGORITHMS]
+    if unknown or not entry.algorithms:
+        raise ValueError(f"algorithms must be a non-empty subset of {ALGORITHMS}, got {unknown}")
+    if not entry.scenarios:
+        raise ValueError(f"{entry.env} needs at least one scenario")
+    REGISTRY[entry.env, entry.agent] = entry
+    return entry
+
+
+def names(agent: str = "attacker") -> list[str]:
+    """Registered env names that have a learning ``agent``."""
+    return [env for env, a in REGISTRY if a == agent]
+
+
+def game_names() -> list[str]:
+    """Registered two-player games (both sides registered): the self-play envs."""
+    return [
+        env
+        for (env, agent), e in REGISTRY.items()
+        if agent == "attacker" and e.game and (env, "defender") in REGISTRY
+    ]
+
+
+def get(env: str, agent: str = "attacker") -> Trainable:
+    """The entry of ``env`` (registry name or Gymnasium id) for ``agent``.
+
+    Raises:
+        ValueError: For an unknown agent, or an env that has no such learning agent (listing the
+            envs that have one).
+    """
+    if agent not in AGENTS:
+        raise ValueError(f"agent must be one of {list(AGENTS)}, got {agent!r}")
+    for entry in REGISTRY.values():
+        if entry.gym_id == env:
+            if entry.agent != agent:
+                raise ValueError(f"{env} is the {entry.agent}'s view, not the {agent}'s")
+            return entry
+    if (env, agent) in REGISTRY:
+        return REGISTRY[env, agent]
+    known = {e for e, _ in REGISTRY}
+    what = f"{env!r} has no learning {agent}" if env in known else f"unknown env {env!r}"
+    raise ValueError(f"{what}; envs with a learning {agent}: {', '.join(names(agent))}")
+
+
+def by_gym_id(gym_id: str) -> Trainable | None:
+    """The entry whose view is ``gym_id``, or None."""
+    return next((e for e in REGISTRY.values() if e.gym_id == gym_id), None)
+
+
+_SPARSE_SCENARIOS = {
+    "ch4-position": {"budget": 5, "horizon": 6},
+    "ch4-pv-case1": {"budget": 5, "horizon": 6, "objective": "logdet"},
+    "ch4-pv-case2": {"budget": 5, "horizon": 6, "objective": "logdet"},
+    "ch4-pv-case3": {"budget": 5, "horizon": 6, "objective": "logdet"},
+    "ch4-random": {"budget": 10, "horizon": 6},
+}
+_COVARIANCE_SCENARIOS = {
+    "ch2-position": {"power": 3000.0},
+    "ch2-pv-1": {"power": 3000.0},
+    "ch2-pv-2": {"power": 3000.0},
+}
+_GAME_SCENARIOS = {"ch5-game": {"power": 100.0, "allocation": "independent"}}
+
+register(
+    Trainable(
+        "sparse_attack_v0",
+        "attacker",
+        "fdia_env/SparseAttack-v0",
+        _SPARSE_SCENARIOS,
+        MASKED_ALGORITHMS,
+        sparse_reference,
+        masked=True,
+    )
+)
+register(
+    Trainable(
+        "covariance_attack_v0",
+        "attacker",
+        "fdia_env/CovarianceAttack-v0",
+        _COVARIANCE_SCENARIOS,
+        BOX_ALGORITHMS,
+        covariance_reference,
+    )
+)
+for _agent, _gym_id in (
+    ("attacker", "fdia_env/SensorGameAttacker-v0"),
+    ("defender", "fdia_env/SensorGameDefender-v0"),
+):
+    register(
+        Trainable(
+            "sensor_game_v0",
+            _agent,
+            _gym_id,
+            _GAME_SCENARIOS,
+            DISCRETE_ALGORITHMS,
+            game_reference,
+            game=True,
+        )
+    )
+
+_DETECTION_SCENARIOS = {
+    "ch3-static": {"power": 240.0, "criterion": "bayes_cost"},
+    "ch3-tracking": {"power": 7.5, "criterion": "bayes_cost"},
+}
+register(
+    Trainable(
+        "detection_game_v0",
+        "defender",
+        "fdia_env/DetectionDefender-v0",
+        _DETECTION_SCENARIOS,
+        BOX_ALGORITHMS,
+        detection_reference,
+    )
+)

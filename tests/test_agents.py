@@ -1,0 +1,174 @@
+"""agents: the evaluation loop against the baselines, the registry, config and seeding."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import scipy.stats
+import torch
+
+from agents import registry
+from agents.config import Hyperparameters, algo_kwargs, parse_env_kwargs
+from agents.evaluate import evaluate, t_interval
+from agents.seeding import seed_everything
+from baselines.covariance import trace_optimal
+from baselines.game import MixedStrategyPolicy, exploitability, payoff_matrix, solve_zero_sum
+from baselines.sparse import dp, exhaustive
+
+
+def test_evaluate_returns_the_exact_exs_value_for_its_policy():
+    best = exhaustive("ch4-position", budget=5, horizon=6)
+    result = evaluate(
+        best.policy(), "fdia_env/SparseAttack-v0", n_episodes=3, scenario="ch4-position"
+    )
+    assert result.mean == pytest.approx(best.value, rel=1e-12)
+    assert result.reference == pytest.approx(best.value, rel=1e-15)
+    assert result.reference_name == "EXS"
+    assert result.score == pytest.approx(1.0, rel=1e-12)
+    assert result.ci95 == pytest.approx(0.0, abs=1e-15)  # expected dynamics: no noise
+
+
+def test_evaluate_scores_a_suboptimal_heuristic_by_its_determinant_ratio():
+    # ch4-pv-case2 (log-det objective): DP is a heuristic for a 2-D state and misses EXS
+    best = exhaustive("ch4-pv-case2", objective="logdet")
+    heuristic = dp("ch4-pv-case2", objective="logdet")
+    result = evaluate(
+        heuristic.policy(),
+        "fdia_env/SparseAttack-v0",
+        1,
+        scenario="ch4-pv-case2",
+        objective="logdet",
+    )
+    assert result.mean == pytest.approx(heuristic.value, rel=1e-12)
+    assert result.reference == pytest.approx(best.value, rel=1e-15)
+    assert result.score == pytest.approx(np.exp(heuristic.value - best.value), rel=1e-12)
+    assert result.score < 1.0
+
+
+def test_evaluate_returns_the_exact_trace_optimal_value_for_its_policy():
+    env = gym.make("fdia_env/CovarianceAttack-v0", scenario="ch2-position", power=3000.0)
+    best = trace_optimal("ch2-position", power=3000.0)
+    result = evaluate(best.policy(env), env, n_episodes=2)
+    assert result.mean == pytest.approx(best.value, rel=1e-12)
+    assert result.reference == pytest.approx(best.value, rel=1e-15)
+    assert result.score == pytest.approx(1.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("scenario", ["ch3-static", "ch3-tracking"])
+def test_evaluate_returns_obdd_bayes_cost_for_its_threshold_policy(scenario):
+    from baselines.detection import bayes_cost, obdd, static_problem, tracking_problem
+
+    entry = registry.get("detection_game_v0", "defender")
+    env = entry.view(scenario=scenario, **entry.scenarios[scenario])
+    ref = entry.reference_of(env)
+    power = entry.scenarios[scenario]["power"]
+    make = static_problem if scenario == "ch3-static" else tracking_problem
+    assert ref.value == pytest.approx(-bayes_cost(obdd(make(scenario, power=power))).value)
+    result = evaluate(ref.policy, env, 2, 0, ref)
+    assert result.mean == pytest.approx(ref.value, rel=1e-7)  # α through a float32 action
+    assert result.score == pytest.approx(1.0, rel=1e-7)
+
+
+def test_game_score_is_the_exploitability_of_the_policy_mix():
+    L = payoff_matrix("ch5-game")
+    _, y, value = solve_zero_sum(L)
+    eq = evaluate(MixedStrategyPolicy(y, seed=0), "fdia_env/SensorGameAttacker-v0", 20)
+    assert eq.score_name == "exploitability"
+    assert eq.reference == pytest.approx(value)
+    assert eq.score == pytest.approx(0.0, abs=1e-9)
+    rand = evaluate("random", "fdia_env/SensorGameDefender-v0", 20)
+    uniform = np.full(7, 1 / 7)
+    assert rand.reference == pytest.approx(-value)  # the defender is paid −L
+    assert rand.score == pytest.approx(exploitability(L, uniform, y, value).defender, rel=1e-12)
+    # the uniform attacker the view plays by default: best response min_i (L u)_i
+    assert rand.extras["best_response"] == pytest.approx(-(L @ uniform).min())
+
+
+class RecordingPolicy:
+    """Takes the largest legal subset; records the masks it was given."""
+
+    def __init__(self):
+        self.masks = []
+
+    def predict(
+        self, observation, state=None, episode_start=None, deterministic=True, action_masks=None
+    ):
+        self.masks.append(np.asarray(action_masks, dtype=bool))
+        legal = np.flatnonzero(action_masks)
+        return legal[np.argmax([bin(a).count("1") for a in legal])], state
+
+
+def test_evaluate_passes_action_masks_to_policies_that_take_them():
+    policy = RecordingPolicy()
+    evaluate(policy, "fdia_env/SparseAttack-v0", n_episodes=1, budget=5, horizon=6)
+    assert len(policy.masks) == 6
+    assert policy.masks[0].all()  # a full budget: every subset of 3 sensors fits
+    assert not policy.masks[-1].any() or policy.masks[-1].sum() < 8  # spent: masked
+
+
+def test_random_policy_respects_the_budget_and_is_seeded():
+    a = evaluate("random", "fdia_env/SparseAttack-v0", n_episodes=5, seed=3)
+    b = evaluate("random", "fdia_env/SparseAttack-v0", n_episodes=5, seed=3)
+    assert np.array_equal(a.returns, b.returns)
+    assert 0 < a.score < 1
+
+
+def test_t_interval_matches_scipy():
+    r = np.array([1.0, 2.0, 4.0, 7.0])
+    lo, hi = scipy.stats.t.interval(0.95, 3, loc=r.mean(), scale=scipy.stats.sem(r))
+    assert t_interval(r) == pytest.approx((hi - lo) / 2, rel=1e-12)
+    assert np.isnan(t_interval(np.array([1.0])))
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: registry.get("nope"), "sparse_attack_v0, covariance_attack_v0, sensor_game_v0"),
+        (lambda: registry.get("sparse_attack_v0", "defender"), "learning defender: sensor_game"),
+        (lambda: registry.get("sparse_attack_v0").env_kwargs("ch5-game"), "ch4-position, ch4-pv"),
+        (lambda: registry.get("sparse_attack_v0").algorithm("SAC"), "MaskablePPO, PPO, A2C, DQN"),
+        (lambda: registry.get("covariance_attack_v0").algorithm("xyz"), "SAC, PPO, A2C"),
+        (lambda: algo_kwargs("SAC", Hyperparameters(n_epochs=3)), "applies to: PPO, MaskablePPO"),
+    ],
+)
+def test_registry_errors_name_the_valid_choices(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_registry_resolves_names_ids_and_algorithm_spellings():
+    entry = registry.get("fdia_env/SensorGameDefender-v0", "defender")
+    assert (entry.env, entry.agent) == ("sensor_game_v0", "defender")
+    assert registry.get("sparse_attack_v0").algorithm("maskable_ppo") == "MaskablePPO"
+    assert registry.game_names() == ["sensor_game_v0"]
+
+
+def test_algo_kwargs_fill_per_algorithm_defaults():
+    kw = algo_kwargs("PPO", Hyperparameters(learning_rate=3e-4, net_arch=(32,)))
+    assert kw["n_steps"] == 512
+    assert (kw["learning_rate"](1.0), kw["learning_rate"](0.5)) == (3e-4, 1.5e-4)  # linear
+    assert algo_kwargs("DQN", Hyperparameters(learning_rate=3e-4))["learning_rate"] == 3e-4
+    assert kw["policy_kwargs"] == {"net_arch": [32]}
+    assert "buffer_size" not in kw
+    assert parse_env_kwargs({"budget": "4", "allocation": "dependent"}) == {
+        "budget": 4,
+        "allocation": "dependent",
+    }
+
+
+def test_seed_everything_reproduces_numpy_and_torch():
+    seed_everything(7)
+    a = (np.random.rand(), torch.rand(1).item())  # noqa: NPY002 - the global it seeds
+    seed_everything(7)
+    assert (np.random.rand(), torch.rand(1).item()) == a  # noqa: NPY002
+    with pytest.raises(ValueError, match="seed"):
+        seed_everything(-1)
+
+
+@pytest.mark.parametrize("module", ["config", "evaluate", "registry", "seeding"])
+def test_docstring_examples_run(module):
+    import doctest
+    import importlib
+
+    mod = importlib.import_module(f"agents.{module}")
+    failed, attempted = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+    assert attempted > 0 and failed == 0
