@@ -177,3 +177,39 @@ def test_sampled_bayes_cost_averages_to_the_expected_bayes_cost():
     )
     half = 4.5 * samples.std(ddof=1) / np.sqrt(samples.size)
     assert abs(samples.mean() - exact) < half < 0.15 * exact
+
+
+@pytest.mark.parametrize(
+    ("name", "statistic", "on_detect"),
+    [("obdd", "quadratic", "discard"), ("obdi", "quadratic", "incorporate"),
+     ("cbd", "quadratic", "discard"), ("csd", "chi2", "discard")],
+)  # fmt: skip
+@pytest.mark.parametrize("criterion", ["bayes_cost", "mse"])
+def test_each_detector_as_a_policy_earns_its_own_cost(name, statistic, on_detect, criterion):
+    import baselines.detection as bd
+
+    detector = getattr(bd, name)(bd.static_problem("ch3-static", power=240.0))
+    env = detection_game_v0.parallel_env(
+        scenario="ch3-static",
+        power=240.0,
+        statistic=statistic,
+        on_detect=on_detect,
+        criterion=criterion,
+    )
+    env.reset(seed=0)
+    defend = bd.as_policy(detector, env).predict(None)[0]
+    _, rewards, *_ = env.step({"attacker": literature_attack(env), "defender": defend})
+    expected = (
+        bd.bayes_cost(detector).value if criterion == "bayes_cost" else bd.expected_mse(detector)
+    )
+    assert rewards["attacker"] == pytest.approx(expected, rel=1e-7)  # τ through a float32 action
+
+
+def test_detector_policy_refuses_a_mismatched_env():
+    import baselines.detection as bd
+
+    detector = bd.csd(bd.static_problem("ch3-static", power=240.0))
+    with pytest.raises(
+        ValueError, match="statistic='chi2' but the env's defender uses 'quadratic'"
+    ):
+        bd.as_policy(detector, detection_game_v0.parallel_env())

@@ -54,6 +54,7 @@ from baselines.detection.evaluate import (
 )
 from baselines.detection.gchisq import gchisq_sf, gchisq_sf_mc, quadratic_form_weights
 from baselines.detection.mmse import MMSEEstimator, MMSEResult, mmse
+from baselines.detection.policy import as_policy
 from baselines.detection.problem import (
     DetectionProblem,
     predicted_covariance,
@@ -75,6 +76,7 @@ __all__ = [
     "MMSEResult",
     "MonteCarlo",
     "MonteCarloStats",
+    "as_policy",
     "bayes_cost",
     "bayes_threshold",
     "c2_gain_matrix",
