@@ -56,7 +56,21 @@ class RandomPolicy:
         deterministic: bool = False,
         action_masks: np.ndarray | None = None,
     ) -> tuple[Any, Any]:
-        """A uniformly random action (among ``action_masks`` when given)."""
+        """A uniformly random action (among ``action_masks`` when given); batched for (B, d)."""
+        obs = np.asarray(observation) if observation is not None else np.zeros(0)
+        batch = obs.shape[0] if obs.ndim >= 2 else None
+        if batch is not None:
+            space = self.action_space
+            if isinstance(space, spaces.Discrete):
+                legal = (
+                    np.ones((batch, int(space.n)), dtype=bool)
+                    if action_masks is None
+                    else np.asarray(action_masks, dtype=bool)
+                )
+                return np.argmax(self.rng.random(legal.shape) * legal, axis=1), state
+            return self.rng.uniform(space.low, space.high, (batch, *space.shape)).astype(
+                space.dtype
+            ), state
         if action_masks is not None and isinstance(self.action_space, spaces.Discrete):
             legal = np.flatnonzero(np.asarray(action_masks, dtype=bool))
             return np.int64(self.rng.choice(legal)), state
@@ -200,6 +214,44 @@ def play(
     return returns, first_actions
 
 
+def play_batched(
+    policy: Policy | RandomPolicy,
+    env: gym.Env,
+    n_episodes: int,
+    seed: int,
+    num_envs: int,
+    deterministic: bool = True,
+) -> tuple[np.ndarray, list[Any]]:
+    """:func:`play` on the native vector env: ``num_envs`` episodes per batched step.
+
+    The vector env is built from ``env``'s own two-player env, models and opponent
+    (:class:`fdia_env.vector.FdiaVectorEnv`); rounds of B episodes are reset with
+    ``seed + r·B`` (member i gets ``seed + r·B + i``), so episode ``i`` is the same as in
+    :func:`play` (every fdia_env episode has the same length). The policy must accept batched
+    (B, d) observations, as SB3 models and the baselines' policies do.
+    """
+    from fdia_env.vector import FdiaVectorEnv
+
+    view = env.unwrapped
+    B = max(1, min(int(num_envs), n_episodes))
+    venv = FdiaVectorEnv(view.parallel, B, agent=view.agent, opponent=view.opponent)
+    pass_masks = _accepts_masks(policy)
+    returns, first_actions = [], []
+    for start in range(0, n_episodes, B):
+        obs, _ = venv.reset(seed=seed + start)
+        total = np.zeros(B)
+        for t in range(view.parallel.spec.horizon):
+            kwargs = {"action_masks": venv.action_masks()} if pass_masks else {}
+            action, _ = policy.predict(obs, deterministic=deterministic, **kwargs)
+            action = np.asarray(action)
+            if t == 0:
+                first_actions.extend(list(action))
+            obs, reward, _, _, _ = venv.step(action)
+            total += reward
+        returns.append(total)
+    return np.concatenate(returns)[:n_episodes], first_actions[:n_episodes]
+
+
 def mixed_strategy(
     policy: Any,
     env: gym.Env,
@@ -267,6 +319,7 @@ def evaluate(
     seed: int = 0,
     reference: Reference | float | None = None,
     deterministic: bool = True,
+    num_envs: int | None = None,
     **env_kwargs: Any,
 ) -> Evaluation:
     """Play ``policy`` for ``n_episodes`` and score it against the analytic reference.
@@ -280,6 +333,9 @@ def evaluate(
         reference: The reference value or :class:`~agents.registry.Reference`; by default the
             registry's reference of the env (None when the env's settings have none).
         deterministic: Passed to ``predict`` (mixed baselines sample whatever it says).
+        num_envs: Play ``num_envs`` episodes at a time on the native vector env (Monte-Carlo
+            evaluation as one batched computation; same episodes as the sequential loop for
+            deterministic policies); None plays them one by one.
         **env_kwargs: Passed to ``gymnasium.make`` when ``env_or_id`` is an id.
 
     Returns:
@@ -305,7 +361,12 @@ def evaluate(
         else:
             player = policy
         ref = _as_reference(reference, env)
-        returns, first_actions = play(player, env, n_episodes, seed, deterministic)
+        if num_envs is None:
+            returns, first_actions = play(player, env, n_episodes, seed, deterministic)
+        else:
+            returns, first_actions = play_batched(
+                player, env, n_episodes, seed, num_envs, deterministic
+            )
         mean = float(returns.mean())
         strategy, extras = None, {}
         if ref is None:

@@ -15,7 +15,7 @@ GYM_IDS: dict[str, tuple[str, str]] = {
 }
 
 # envs whose models have no batched implementation (``make_vec`` uses SyncVectorEnv for them)
-UNBATCHED = {"fdia_env.detection_game_v0"}
+UNBATCHED: set[str] = set()
 
 
 def register_envs() -> None:

@@ -172,3 +172,30 @@ def test_docstring_examples_run(module):
     mod = importlib.import_module(f"agents.{module}")
     failed, attempted = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
     assert attempted > 0 and failed == 0
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs", "make_policy"),
+    [
+        ("fdia_env/SparseAttack-v0", {"dynamics": "sampled"},
+         lambda env: exhaustive("ch4-position", 5, 6).policy()),
+        ("fdia_env/CovarianceAttack-v0", {"dynamics": "sampled", "horizon": 3},
+         lambda env: trace_optimal("ch2-position", 3000.0).policy(env)),
+        ("fdia_env/DetectionDefender-v0",
+         {"dynamics": "sampled", "criterion": "bayes_cost", "power": 240.0},
+         lambda env: registry.get("detection_game_v0", "defender").reference_of(env).policy),
+    ],
+)  # fmt: skip
+def test_batched_monte_carlo_evaluation_plays_the_same_episodes(env_id, kwargs, make_policy):
+    env = registry.by_gym_id(env_id).view(**kwargs)
+    policy = make_policy(env)
+    one_by_one = evaluate(policy, env, 10, seed=3)
+    batched = evaluate(policy, env, 10, seed=3, num_envs=4)  # rounds of 4, 4 and 2 episodes
+    np.testing.assert_allclose(batched.returns, one_by_one.returns, rtol=1e-9, atol=1e-12)
+    assert batched.mean == pytest.approx(one_by_one.mean, rel=1e-9)
+
+
+def test_batched_random_policy_respects_masks():
+    env = registry.get("sparse_attack_v0").view()
+    result = evaluate("random", env, 64, seed=0, num_envs=32)
+    assert result.returns.shape == (64,) and np.all(result.returns > 0)

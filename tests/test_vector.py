@@ -38,6 +38,26 @@ CASES = {
     ),
     "game-attacker": ("fdia_env/SensorGameAttacker-v0", {"rounds": 3}),
     "game-defender-sampled": ("fdia_env/SensorGameDefender-v0", {"dynamics": "sampled"}),
+    "detection-defender-static": ("fdia_env/DetectionDefender-v0", {"horizon": 2}),
+    "detection-defender-sampled-bayes": (
+        "fdia_env/DetectionDefender-v0",
+        {"dynamics": "sampled", "criterion": "bayes_cost", "horizon": 3},
+    ),
+    "detection-attacker-tracking-sampled": (
+        "fdia_env/DetectionAttacker-v0",
+        {
+            "scenario": "ch3-tracking",
+            "warmup": 3,
+            "dynamics": "sampled",
+            "horizon": 2,
+            "on_detect": "incorporate",
+            "statistic": "chi2",
+        },
+    ),
+    "detection-defender-tracking": (
+        "fdia_env/DetectionDefender-v0",
+        {"scenario": "ch3-tracking", "warmup": "steady"},
+    ),
 }
 
 

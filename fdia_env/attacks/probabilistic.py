@@ -66,6 +66,24 @@ class ProbabilisticAttack(CovarianceAttack):
         """Attack probability and power."""
         return {**super().info(), "attack_probability": self.last_probability}
 
+    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Batched :meth:`apply`; the attack probabilities are kept in ``b_probability``."""
+        a = np.asarray(actions, dtype=np.float64) if _is_vector(actions) else None
+        if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
+            raise ValueError(
+                f"attacker actions must be an array of shape (B, {self.action_space.shape[0]}) "
+                f"in [-1, 1], got {actions!r}"
+            )
+        if not np.all(np.isfinite(a[:, 0])) or np.any(np.abs(a[:, 0]) > 1.0 + 1e-6):
+            raise ValueError("attacker actions must be finite and in [-1, 1]")
+        self.action_space, space = self._cov_space, self.action_space
+        try:
+            attacked, sigma = super().batch_apply(a[:, 1:])
+        finally:
+            self.action_space = space
+        self.b_probability = 0.5 * (np.clip(a[:, 0], -1.0, 1.0) + 1.0)
+        return attacked, sigma
+
 
 def _is_vector(action: Any) -> bool:
     try:

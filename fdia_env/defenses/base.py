@@ -62,6 +62,29 @@ class Detection:
     criterion: str = "mse"
 
 
+@dataclass(frozen=True)
+class BatchDetection:
+    """:class:`Detection` for a batch: one threshold per member, the rest shared."""
+
+    statistic: str
+    thresholds: np.ndarray
+    on_detect: str
+    assumed_sigma: np.ndarray
+    fresh_prior: bool
+    criterion: str
+
+    def member(self, i: int) -> Detection:
+        """The single-env rule of member ``i``."""
+        return Detection(
+            self.statistic,
+            float(self.thresholds[i]),
+            self.on_detect,
+            self.assumed_sigma,
+            self.fresh_prior,
+            self.criterion,
+        )
+
+
 class DefenseModel(ABC):
     """Owns the defender's action space (if any) and turns an attack into the filter's input.
 
@@ -99,6 +122,10 @@ class DefenseModel(ABC):
         """Decide what the filter uses given the defender's action and the attack."""
 
     # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
+
+    def batch_detection(self) -> BatchDetection | None:
+        """The detector of the last :meth:`batch_apply`, for the detection game; else None."""
+        return None
 
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:  # noqa: B027
         """Start episodes for the batch members ``where`` (all when None)."""

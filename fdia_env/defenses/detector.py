@@ -9,7 +9,7 @@ from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_positive, check_psd
 from fdia_env.attacks.base import AttackEffect
-from fdia_env.defenses.base import DefenseModel, Detection, FilterInput
+from fdia_env.defenses.base import BatchDetection, DefenseModel, Detection, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -115,3 +115,36 @@ class ThresholdDetector(DefenseModel):
             detection=rule,
             attack_probability=effect.probability,
         )
+
+    # --- batched (see DefenseModel) --------------------------------------------------------
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Remember the batch size."""
+        self._batch = batch
+
+    def batch_apply(self, actions, attacked, sigma):
+        """Every sensor is measured; the per-member thresholds go to :meth:`batch_detection`."""
+        try:
+            a = np.asarray(actions, dtype=np.float64).reshape(self._batch, -1)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"defender actions must be a (B, 1) array in [-1, 1], got {actions!r}"
+            ) from exc
+        if a.shape[1] != 1 or not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1.0 + 1e-6):
+            raise ValueError("defender actions must be one finite number in [-1, 1] per member")
+        x = np.clip(a[:, 0], -1.0, 1.0)
+        with np.errstate(divide="ignore"):
+            tau = np.where(x >= 1.0, np.inf, self.scale * (1.0 + x) / (1.0 - x))
+        self._b_rule = BatchDetection(
+            self.statistic,
+            tau,
+            self.on_detect,
+            self.assumed_sigma,
+            self.fresh_prior,
+            self.criterion,
+        )
+        present = None if sigma is None else np.ones(attacked.shape, dtype=bool)
+        return np.full(attacked.shape, self._all, dtype=np.int64), sigma, present, False
+
+    def batch_detection(self) -> BatchDetection:
+        """The per-member thresholds of the last batched step."""
+        return self._b_rule

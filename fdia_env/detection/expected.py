@@ -31,6 +31,7 @@ import numpy as np
 
 from fdia_env.detection.gchisq import gchisq_sf
 from fdia_env.kalman import psd_sqrt
+from fdia_env.kalman.linalg import mT
 
 
 @dataclass(frozen=True)
@@ -134,8 +135,8 @@ def case_covariance(Pxx: np.ndarray, Pxz: np.ndarray, C: np.ndarray, K: np.ndarr
 
     Its trace is one of the fixed costs c1..c4 of MATH.md §3 (K and C of the case).
     """
-    cov = Pxx - K @ Pxz.T - Pxz @ K.T + K @ C @ K.T
-    return 0.5 * (cov + cov.T)
+    cov = Pxx - K @ mT(Pxz) - Pxz @ mT(K) + K @ C @ mT(K)  # leading batch dimensions allowed
+    return 0.5 * (cov + mT(cov))
 
 
 def bayes_cost_covariance(

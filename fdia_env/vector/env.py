@@ -127,7 +127,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             actions[self.other], _ = self.opponent.predict(
                 self._observe(self.other), deterministic=True
             )
-            actions[self.other] = np.asarray(actions[self.other]).reshape(B)
+            shape = self.parallel.action_space(self.other).shape or ()
+            actions[self.other] = np.asarray(actions[self.other]).reshape(B, *shape)
         attacked, sigma = self.attack.batch_apply(actions["attacker"])
         used, leak, present, steady = self.defense.batch_apply(
             actions.get("defender"), attacked, sigma
@@ -136,7 +137,15 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             self.attack.batch_observe_opponent(self.defense)
             self.defense.batch_observe_opponent(self.attack)
         phi_prev = self.sim.phi
-        phi = self.sim.step(used, leak, present, steady, active=~resetting)
+        phi = self.sim.step(
+            used,
+            leak,
+            present,
+            steady,
+            active=~resetting,
+            detection=self.defense.batch_detection(),
+            probability=getattr(self.attack, "b_probability", None),
+        )
         done = self.sim.k >= self.spec_episode.horizon
         mode = self.spec_episode.reward_mode
         if mode == "terminal":

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fdia_env.defenses.base import BatchDetection
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
@@ -23,6 +24,7 @@ from fdia_env.kalman import (
     small,
     steady_state,
 )
+from fdia_env.vector.detection import batched_detection_step
 
 
 class BatchedSimulation:
@@ -61,6 +63,7 @@ class BatchedSimulation:
                     [self._jtab[:, 0, 0], self._jtab[:, 0, 1], self._jtab[:, 1, 1]]
                 )
         self.rngs: list[np.random.Generator] = []
+        self.value_override: np.ndarray | None = None
         self.reset(None, None)  # the env's reset draws the sampled states
 
     # --- state -------------------------------------------------------------------------------
@@ -124,7 +127,9 @@ class BatchedSimulation:
             for i, rng in zip(members, rngs, strict=True):  # one generator per member
                 self.single._reset_sampled(rng)
                 self.x[i], self.x_hat[i] = self.single.x, self.single.x_hat
+        override, self.value_override = self.value_override, None  # a fresh start: Φ of the state
         phi0 = self._measure_all()
+        self.value_override = None if where is None or where.all() else override
         self.phi = phi0 if where is None or where.all() else np.where(where, phi0, self.phi)
 
     # --- step --------------------------------------------------------------------------------
@@ -135,6 +140,8 @@ class BatchedSimulation:
         present: np.ndarray | None,
         steady: bool,
         active: np.ndarray | None = None,
+        detection: BatchDetection | None = None,
+        probability: np.ndarray | None = None,
     ) -> np.ndarray:
         """Advance every member one step; ``active`` members draw noise (sampled mode).
 
@@ -144,10 +151,18 @@ class BatchedSimulation:
             present: (B,) members with a leak (their single-env twin gets a leaked_sigma).
             steady: Restart each member from the steady state of its ``used`` subset first.
             active: (B,) members whose step counts (the others are about to be reset).
+            detection: The detection game's per-member detector (then ``leak`` is the attacker's
+                Σ and ``probability`` its attack probabilities).
+            probability: (B,) attack probabilities (detection game).
 
         Returns:
             (B,) Φ after the step.
         """
+        if detection is not None:  # the detection game: the detector decides per measurement
+            batched_detection_step(self, detection, leak, probability, active)
+            self.k += 1
+            self.phi = self._measure_all()
+            return self.phi
         if steady:
             self._restart_steady(used, active)
         if self.fast and leak is None and not self.sampled and self.consistent.all():
@@ -237,6 +252,8 @@ class BatchedSimulation:
     # --- outputs -----------------------------------------------------------------------------
     def _measure_all(self) -> np.ndarray:
         if self.sampled:
+            if self.value_override is not None:  # the detection game's fixed Bayes costs
+                return self.value_override
             e = self.x - self.x_hat
             return np.einsum("bi,bi->b", e, e)
         if self._comp is not None and self.consistent.all():
