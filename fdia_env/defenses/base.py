@@ -127,8 +127,9 @@ class DefenseModel(ABC):
         """The detector of the last :meth:`batch_apply`, for the detection game; else None."""
         return None
 
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:  # noqa: B027
-        """Start episodes for the batch members ``where`` (all when None)."""
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Start episodes for the batch members ``where`` (all when None); records B."""
+        self._batch = batch
 
     def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
         """Batched :meth:`observe_opponent`."""

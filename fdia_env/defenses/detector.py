@@ -117,10 +117,6 @@ class ThresholdDetector(DefenseModel):
         )
 
     # --- batched (see DefenseModel) --------------------------------------------------------
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
-        """Remember the batch size."""
-        self._batch = batch
-
     def batch_apply(self, actions, attacked, sigma):
         """Every sensor is measured; the per-member thresholds go to :meth:`batch_detection`."""
         try:

@@ -24,10 +24,6 @@ class PerfectDetection(DefenseModel):
         """Use every sensor that was not attacked."""
         return FilterInput(used=self._all & ~effect.attacked)
 
-    def batch_reset(self, batch: int, where=None) -> None:
-        """Remember the batch size."""
-        self._batch = batch
-
     def batch_apply(self, actions, attacked, sigma):
         """Every un-attacked sensor, no leak."""
         return self._all & ~attacked, None, None, False

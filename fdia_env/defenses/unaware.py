@@ -30,10 +30,6 @@ class UnawareFilter(DefenseModel):
         """Every sensor is used; the bias leaks through."""
         return FilterInput(used=self._all, leaked_sigma=effect.sigma)
 
-    def batch_reset(self, batch: int, where=None) -> None:
-        """Remember the batch size."""
-        self._batch = batch
-
     def batch_apply(self, actions, attacked, sigma):
         """Every sensor; the whole bias leaks."""
         present = None if sigma is None else np.ones(attacked.shape, dtype=bool)

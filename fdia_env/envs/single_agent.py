@@ -59,12 +59,10 @@ class SingleAgentEnv(gym.Env):
         self._masked = isinstance(space, spaces.Dict)
         self.observation_space = space["observation"] if self._masked else space
         self.action_space = parallel.action_space(agent)
-        self._mask: np.ndarray | None = None
         self._other_obs: Any = None
 
     def _split(self, obs: Any) -> tuple[np.ndarray, dict]:
         if self._masked:
-            self._mask = obs["action_mask"]
             return obs["observation"], {"action_mask": obs["action_mask"]}
         return obs, {}
 

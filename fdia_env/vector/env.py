@@ -106,7 +106,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
         self._prev_done = np.zeros(B, dtype=bool)
-        return self._observe(self.agent), self._infos(np.zeros(B, dtype=bool))
+        return self._observe(self.agent), self._infos()
 
     def _reset_members(self, where: np.ndarray) -> None:
         """Reset the members of the (B,) boolean mask ``where``."""
@@ -172,7 +172,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
                 infos["_final_obs"] = done.copy()
                 self._reset_members(done.copy())
                 obs = self._observe(self.agent)
-        infos.update(self._infos(resetting))
+        infos.update(self._infos())
         return obs, reward, done, truncated, infos
 
     # --- observations ----------------------------------------------------------------------------
@@ -183,7 +183,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         rows[col:] = self._models[agent].batch_features().T
         return rows.T
 
-    def _infos(self, reset_now: np.ndarray) -> dict[str, Any]:
+    def _infos(self) -> dict[str, Any]:
         # phi is a fresh array every step; k is updated in place, so it is copied
         infos: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
         if self._masked:
