@@ -85,17 +85,20 @@ def parallel_env(
     structure: str = "full",
     power_mode: str = "per_step",
     weight: np.ndarray | None = None,
-    horizon: int = 1,
+    horizon: int | None = None,
     objective: str = "trace",
     reward_mode: str = "terminal",
     dynamics: str = "expected",
     warmup: int | str | None = None,
     render_mode: str | None = None,
+    max_cycles: int | None = None,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     sc, spec = episode_spec(
         scenario,
         horizon=horizon,
+        max_cycles=max_cycles,
+        default_horizon=1,
         warmup=warmup,
         objective=objective,
         reward_mode=reward_mode,
@@ -107,7 +110,9 @@ def parallel_env(
         power_mode=power_mode,
         weight=weight,
     )
-    return FdiaParallelEnv(sc, attack, UnawareFilter(), spec, render_mode=render_mode, name=NAME)
+    return FdiaParallelEnv(
+        sc, attack, UnawareFilter(), spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles
+    )
 
 
 raw_env, env = aec_views(parallel_env)

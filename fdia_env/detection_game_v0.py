@@ -92,17 +92,20 @@ def parallel_env(
     on_detect: str = "discard",
     assumed_sigma: np.ndarray | None = None,
     criterion: str = "mse",
-    horizon: int = 1,
+    horizon: int | None = None,
     warmup: int | str | None = None,
     objective: str = "trace",
     reward_mode: str = "terminal",
     dynamics: str = "expected",
     render_mode: str | None = None,
+    max_cycles: int | None = None,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     sc, spec = episode_spec(
         scenario,
         horizon=horizon,
+        max_cycles=max_cycles,
+        default_horizon=1,
         warmup=_warmup(scenario, warmup),
         objective=objective,
         reward_mode=reward_mode,
@@ -125,7 +128,9 @@ def parallel_env(
         fresh_prior=static,
         criterion=criterion,
     )
-    env = FdiaParallelEnv(sc, attack, defense, spec, render_mode=render_mode, name=NAME)
+    env = FdiaParallelEnv(
+        sc, attack, defense, spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles
+    )
     env.default_sigma = sigma
     env.default_p1 = float(sc.extra.get("p1", 0.85))
     return env

@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 from fdia_env.attacks import AttackModel, CovarianceAttack, SparseAttack
@@ -46,12 +47,22 @@ DEFENSES: dict[str, type[DefenseModel]] = {
 
 
 def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None) -> Any:
+    if kwargs is not None and not isinstance(kwargs, dict):
+        raise TypeError(
+            f"{kind}_kwargs must be a dict of the {kind} model's parameters or None, "
+            f"got {type(kwargs).__name__}: {kwargs!r}"
+        )
     if isinstance(value, str):
         if value not in registry:
             raise ValueError(
                 f"{kind} must be one of {sorted(registry)} or a model instance, got {value!r}"
             )
-        return registry[value](**(kwargs or {}))
+        cls = registry[value]
+        allowed = [p for p in inspect.signature(cls).parameters if p != "self"]
+        unknown = sorted(set(kwargs or {}) - set(allowed))
+        if unknown:
+            raise ValueError(f"{kind}_kwargs: {value!r} takes {allowed}, got unknown {unknown}")
+        return cls(**(kwargs or {}))
     if kwargs:
         raise ValueError(f"{kind}_kwargs only apply when {kind} is given by name")
     return value
@@ -69,6 +80,7 @@ def parallel_env(
     dynamics: str = "expected",
     warmup: int | str | None = None,
     render_mode: str | None = None,
+    max_cycles: int | None = None,
 ) -> FdiaParallelEnv:
     """Compose a scenario, an attack model, a defense model and an episode spec.
 
@@ -78,6 +90,7 @@ def parallel_env(
     sc, spec = episode_spec(
         scenario,
         horizon=horizon,
+        max_cycles=max_cycles,
         warmup=warmup,
         objective=objective,
         reward_mode=reward_mode,
@@ -95,6 +108,7 @@ def parallel_env(
         spec,
         render_mode=render_mode,
         name=NAME,
+        max_cycles=max_cycles,
     )
 
 

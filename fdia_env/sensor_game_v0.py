@@ -71,23 +71,35 @@ def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch5-game",
     power: float | None = None,
     allocation: str = "independent",
-    rounds: int = 1,
+    rounds: int | None = None,
     reward_mode: str = "per_step",
     dynamics: str = "expected",
     render_mode: str | None = None,
+    max_cycles: int | None = None,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
-    rounds = check_int("rounds", rounds, minimum=1)
+    if rounds is not None:
+        rounds = check_int("rounds", rounds, minimum=1)
     sc, spec = episode_spec(
         scenario,
         horizon=rounds,
+        max_cycles=max_cycles,
+        default_horizon=1,
         warmup="steady",
         objective="trace",
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
     attack = SubsetAttack(scenario_default(sc, "power", power), allocation=allocation)
-    return FdiaParallelEnv(sc, attack, SensorSelection(), spec, render_mode=render_mode, name=NAME)
+    return FdiaParallelEnv(
+        sc,
+        attack,
+        SensorSelection(),
+        spec,
+        render_mode=render_mode,
+        name=NAME,
+        max_cycles=max_cycles,
+    )
 
 
 raw_env, env = aec_views(parallel_env)

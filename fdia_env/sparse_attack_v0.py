@@ -87,18 +87,29 @@ def parallel_env(
     dynamics: str = "expected",
     warmup: int | str | None = None,
     render_mode: str | None = None,
+    max_cycles: int | None = None,
+    illegal_action: str = "trim",
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     sc, spec = episode_spec(
         scenario,
         horizon=horizon,
+        max_cycles=max_cycles,
         warmup=warmup,
         objective=objective,
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
-    attack = SparseAttack(scenario_default(sc, "budget", budget))
-    return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, render_mode=render_mode, name=NAME)
+    attack = SparseAttack(scenario_default(sc, "budget", budget), illegal_action=illegal_action)
+    return FdiaParallelEnv(
+        sc,
+        attack,
+        PerfectDetection(),
+        spec,
+        render_mode=render_mode,
+        name=NAME,
+        max_cycles=max_cycles,
+    )
 
 
 raw_env, env = aec_views(parallel_env)

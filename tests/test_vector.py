@@ -75,24 +75,49 @@ def random_actions(space, rng, mask=None):
     return rng.uniform(-1, 1, size=space.shape).astype(np.float32)
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
-def test_vector_env_equals_sync_vector_env_of_single_envs(case):
-    env_id, kwargs = CASES[case]
-    B = 5
-    kwargs = {**kwargs, **opponent_for(env_id)}
-    native = gym.make_vec(env_id, num_envs=B, vectorization_mode="vector_entry_point", **kwargs)
-    assert isinstance(native, FdiaVectorEnv)
-    sync = SyncVectorEnv([lambda: gym.make(env_id, **kwargs) for _ in range(B)])
+def assert_infos_equal(native, sync, where=""):
+    """Gymnasium vector infos identical key by key (values, dtypes, `_key` masks)."""
+    assert sorted(native) == sorted(sync), f"{where}: keys {sorted(native)} != {sorted(sync)}"
+    for key in sync:
+        n, s = native[key], sync[key]
+        if isinstance(s, dict):
+            assert_infos_equal(n, s, f"{where}/{key}")
+        elif s.dtype == object:  # final_obs: None or the member's observation
+            for a, b in zip(n, s, strict=True):
+                assert (a is None) == (b is None), f"{where}/{key}"
+                if b is not None:
+                    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
+        else:
+            assert n.dtype == s.dtype, f"{where}/{key}: dtype {n.dtype} != {s.dtype}"
+            assert n.shape == s.shape, f"{where}/{key}: shape {n.shape} != {s.shape}"
+            if np.issubdtype(s.dtype, np.floating):
+                np.testing.assert_allclose(n, s, rtol=1e-9, atol=1e-9, err_msg=f"{where}/{key}")
+            else:
+                np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
+
+
+def compare_with_sync(env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEXT_STEP):
+    native = gym.make_vec(
+        env_id,
+        num_envs=B,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=autoreset,
+        **kwargs,
+    )
+    assert isinstance(native, FdiaVectorEnv) and native.autoreset_mode == autoreset
+    sync = SyncVectorEnv(
+        [lambda: gym.make(env_id, **kwargs) for _ in range(B)], autoreset_mode=autoreset
+    )
     obs_n, info_n = native.reset(seed=11)
     obs_s, info_s = sync.reset(seed=11)
     np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-7)
+    assert_infos_equal(info_n, info_s, "reset")
     rng = np.random.default_rng(0)
     single = native.single_action_space
-    for _ in range(14):  # several episodes, including the autoreset steps
+    ended = 0
+    for t in range(steps):  # several episodes, including the autoreset steps
         if isinstance(single, gym.spaces.Discrete):
             mask = info_s.get("action_mask")
-            if mask is not None:
-                np.testing.assert_array_equal(info_n["action_mask"], mask)
             actions = np.array(
                 [
                     rng.choice(np.flatnonzero(m)) if mask is not None else rng.integers(single.n)
@@ -107,6 +132,39 @@ def test_vector_env_equals_sync_vector_env_of_single_envs(case):
         np.testing.assert_allclose(r_n, r_s, rtol=1e-9, atol=1e-12)
         np.testing.assert_array_equal(te_n, te_s)
         np.testing.assert_array_equal(tr_n, tr_s)
+        assert_infos_equal(info_n, info_s, f"step {t}")
+        ended += int((te_s | tr_s).sum())
+    assert ended >= B  # every member went through at least one autoreset
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_vector_env_equals_sync_vector_env_of_single_envs(case):
+    env_id, kwargs = CASES[case]
+    compare_with_sync(env_id, {**kwargs, **opponent_for(env_id)})
+
+
+@pytest.mark.parametrize(
+    "env_id", ["fdia_env/SensorGameAttacker-v0", "fdia_env/SensorGameDefender-v0"]
+)
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+def test_sensor_game_default_random_opponent_replays_each_member(env_id, dynamics):
+    # the uniform FixedMix opponent draws from one generator per member, seeded as the single env
+    compare_with_sync(env_id, {"dynamics": dynamics, "rounds": 2})
+
+
+@pytest.mark.parametrize("autoreset", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize(
+    "env_id, kwargs",
+    [
+        ("fdia_env/SparseAttack-v0", {"max_episode_steps": 4}),  # truncates before N = 6
+        ("fdia_env/SparseAttack-v0", {"max_episode_steps": 6}),  # truncated and terminated
+        ("fdia_env/CovarianceAttack-v0", {"horizon": 5, "max_episode_steps": 3}),
+        ("fdia_env/SensorGameAttacker-v0", {"rounds": 4, "max_episode_steps": 2}),
+        ("fdia_env/SparseAttack-v0", {"max_cycles": 3, "horizon": 6}),  # the env's own limit
+    ],
+)
+def test_vector_env_truncation_and_infos_match_sync(env_id, kwargs, autoreset):
+    compare_with_sync(env_id, kwargs, B=4, steps=13, autoreset=autoreset)
 
 
 def test_same_step_autoreset_reports_the_final_observation():
@@ -125,8 +183,10 @@ def test_same_step_autoreset_reports_the_final_observation():
     obs_s, r_s, te_s, _, info = same.step(actions)
     assert te_n.all() and te_s.all()
     np.testing.assert_array_equal(r_n, r_s)
-    np.testing.assert_array_equal(info["final_obs"], last_n)
-    assert info["_final_obs"].all()
+    assert info["final_obs"].dtype == object  # one entry per member, as SyncVectorEnv
+    np.testing.assert_array_equal(np.stack(info["final_obs"]), last_n)
+    assert info["_final_obs"].all() and info["_final_info"].all()
+    np.testing.assert_array_equal(info["final_info"]["step"], [6, 6, 6])
     np.testing.assert_array_equal(obs_s, first)  # already reset
 
 

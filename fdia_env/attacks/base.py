@@ -78,7 +78,12 @@ class AttackModel(ABC):
         """Validate ``action`` (raise ``ValueError`` if outside the space) and act."""
 
     def info(self) -> dict[str, Any]:
-        """Per-step information for the ``infos`` dict."""
+        """Per-step information for the ``infos`` dict.
+
+        The same keys after :meth:`reset` and after every step, each value a Python scalar or a
+        fixed-shape numpy array (so vector envs and client libraries can batch them); after
+        :meth:`reset` the values describe "nothing happened yet" (zeros, the full budget).
+        """
         return {}
 
     # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
@@ -99,6 +104,10 @@ class AttackModel(ABC):
     def batch_action_mask(self) -> np.ndarray | None:
         """(B, A) legal actions (int8) or None."""
         return None
+
+    def batch_info(self) -> dict[str, np.ndarray]:
+        """Batched :meth:`info`: each key's values of the B members stacked on axis 0."""
+        return {}
 
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Validate (B, ...) actions and act: ``(attacked bits (B,), Σ (B, nz, nz) or None)``."""

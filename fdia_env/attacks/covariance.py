@@ -153,6 +153,7 @@ class CovarianceAttack(AttackModel):
         """Restore the full power."""
         self.remaining = self.power
         self.last_sigma = None
+        self.last_power = 0.0
 
     def features(self) -> list[float]:
         """Power left / a² in budget mode."""
@@ -201,15 +202,17 @@ class CovarianceAttack(AttackModel):
 
     def info(self) -> dict[str, Any]:
         """Power spent this step and power left."""
-        return {"power": getattr(self, "last_power", 0.0), "power_left": self.remaining}
+        return {"power": float(self.last_power), "power_left": float(self.remaining)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Restore the full power of the members ``where``."""
         if where is None:
             self.b_remaining = np.full(batch, self.power)
+            self.b_power = np.zeros(batch)
         else:
             self.b_remaining[where] = self.power
+            self.b_power[where] = 0.0
 
     def batch_features(self) -> np.ndarray:
         """(B, 1) power left / a² in budget mode, (B, 0) per step."""
@@ -236,6 +239,7 @@ class CovarianceAttack(AttackModel):
             self.b_remaining = np.maximum(self.b_remaining - spend, 0.0)
         else:
             spend, entries = np.full(a.shape[0], self.power), a
+        self.b_power = np.asarray(spend, dtype=np.float64).copy()
         sigma = self.map.to_sigma_batch(entries, spend)
         rows = np.diagonal(sigma, axis1=-2, axis2=-1) > 0.0  # (B, nz)
         weights = np.zeros(self._row_sensor.size, dtype=np.int64)
@@ -245,6 +249,10 @@ class CovarianceAttack(AttackModel):
         for r in range(weights.size):
             attacked |= np.where(rows[:, r], weights[r], 0)
         return attacked, sigma
+
+    def batch_info(self) -> dict[str, np.ndarray]:
+        """Batched :meth:`info`."""
+        return {"power": self.b_power.copy(), "power_left": self.b_remaining.copy()}
 
 
 def _numeric(action: Any) -> bool:

@@ -29,7 +29,7 @@ class ProbabilisticAttack(CovarianceAttack):
 
     def __init__(self, power: float, structure: str = "full", weight: np.ndarray | None = None):
         super().__init__(power, structure=structure, power_mode="per_step", weight=weight)
-        self.last_probability = 1.0
+        self.last_probability = 0.0
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Covariance map plus the probability entry."""
@@ -64,7 +64,24 @@ class ProbabilisticAttack(CovarianceAttack):
 
     def info(self) -> dict[str, Any]:
         """Attack probability and power."""
-        return {**super().info(), "attack_probability": self.last_probability}
+        return {**super().info(), "attack_probability": float(self.last_probability)}
+
+    def reset(self) -> None:
+        """Restore the power; no attack drawn yet (``attack_probability`` 0 in the info)."""
+        super().reset()
+        self.last_probability = 0.0
+
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Batched :meth:`reset`."""
+        super().batch_reset(batch, where)
+        if where is None:
+            self.b_probability = np.zeros(batch)
+        else:
+            self.b_probability[where] = 0.0
+
+    def batch_info(self) -> dict[str, np.ndarray]:
+        """Batched :meth:`info`."""
+        return {**super().batch_info(), "attack_probability": self.b_probability.copy()}
 
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Batched :meth:`apply`; the attack probabilities are kept in ``b_probability``."""

@@ -7,12 +7,13 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env._validation import check_int
+from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.base import AttackEffect, AttackModel, as_index, as_index_array
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
 MAX_SENSORS = 16
+ILLEGAL_ACTIONS = ("trim", "error", "noop")
 
 
 def trim_to_budget(bits: int, remaining: int) -> int:
@@ -33,16 +34,24 @@ class SparseAttack(AttackModel):
     (bit 0 = sensor 1), so 0 is "no attack". The observation's ``action_mask`` marks the
     subsets no larger than the remaining budget.
 
-    Over-budget rule: an action that selects more sensors than the budget left is trimmed to
-    the lowest-numbered selected sensors that fit; no episode ever spends more than ``budget``.
+    Over-budget rule (``illegal_action``): an action that selects more sensors than the budget
+    left is an illegal action (its ``action_mask`` entry is 0). ``"trim"`` (default) keeps the
+    lowest-numbered selected sensors that fit, ``"noop"`` attacks nothing, ``"error"`` raises a
+    ``ValueError`` naming the action and the budget left. No episode ever spends more than
+    ``budget``.
 
     Features: the remaining budget as a fraction of ``budget`` (0 when ``budget`` is 0).
+
+    Args:
+        budget: c, the sensor-time pairs the attacker may corrupt over the window (>= 0).
+        illegal_action: ``"trim"``, ``"noop"`` or ``"error"`` (see above).
     """
 
     name = "sparse"
 
-    def __init__(self, budget: int) -> None:
+    def __init__(self, budget: int, illegal_action: str = "trim") -> None:
         self.budget = check_int("budget", budget, minimum=0)
+        self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
         self.remaining = self.budget
         self.last_attacked = 0
 
@@ -92,23 +101,35 @@ class SparseAttack(AttackModel):
                 f"got {action!r}"
             )
         if a.bit_count() > self.remaining:
-            a = trim_to_budget(a, self.remaining)
+            a = self._illegal(a, self.remaining)
         self.remaining -= a.bit_count()
         self.last_attacked = a
         return AttackEffect(attacked=a)
 
+    def _illegal(self, action: int, remaining: int) -> int:
+        """What an over-budget ``action`` does, by the ``illegal_action`` rule."""
+        if self.illegal_action == "error":
+            raise ValueError(
+                f"attacker action {action} (sensors {_sensors(action)}) is illegal: it attacks "
+                f"{action.bit_count()} sensors with {remaining} of the budget left; legal actions "
+                f"are those with action_mask[a] = 1 (at most {remaining} bits set)"
+            )
+        return 0 if self.illegal_action == "noop" else trim_to_budget(action, remaining)
+
     def info(self) -> dict[str, Any]:
-        """The sensors attacked this step (0-based) and the budget left."""
-        a = self.last_attacked
-        return {"attacked": [i for i in range(self.M) if a >> i & 1], "budget_left": self.remaining}
+        """``attacked``: (M,) int8, 1 for each sensor attacked this step; ``budget_left``."""
+        attacked = (self.last_attacked >> np.arange(self.M)) & 1
+        return {"attacked": attacked.astype(np.int8), "budget_left": int(self.remaining)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Restore the full budget of the members ``where``."""
         if where is None:
             self.b_remaining = np.full(batch, self.budget, dtype=np.int64)
+            self.b_attacked = np.zeros(batch, dtype=np.int64)
         else:
             self.b_remaining[where] = self.budget
+            self.b_attacked[where] = 0
 
     def batch_features(self) -> np.ndarray:
         """(B, 1) remaining budget fraction."""
@@ -139,6 +160,23 @@ class SparseAttack(AttackModel):
         a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
         if self._trim_table is None:
             self._batch_tables()
+        if self.illegal_action != "trim":
+            over = np.take(self._sizes, a) > self.b_remaining
+            if over.any():
+                i = int(np.flatnonzero(over)[0])
+                self._illegal(int(a[i]), int(self.b_remaining[i]))  # raises for "error"
+                a = np.where(over, 0, a)
         a = np.take(self._trim_table, a * (self.M + 1) + np.minimum(self.b_remaining, self.M))
         self.b_remaining = self.b_remaining - np.take(self._sizes, a)
+        self.b_attacked = a
         return a, None
+
+    def batch_info(self) -> dict[str, np.ndarray]:
+        """Batched :meth:`info`."""
+        attacked = (self.b_attacked[:, None] >> np.arange(self.M)) & 1
+        return {"attacked": attacked.astype(np.int8), "budget_left": self.b_remaining.copy()}
+
+
+def _sensors(bits: int) -> list[int]:
+    """The 1-based sensor numbers whose bits are set."""
+    return [i + 1 for i in range(bits.bit_length()) if bits >> i & 1]

@@ -153,19 +153,39 @@ class SubsetAttack(SubsetChoice, AttackModel):
             )
         return self._sigmas[j]
 
+    def reset(self) -> None:
+        """Forget the last round (nothing attacked yet)."""
+        super().reset()
+        self.attacked_bits = 0
+
     def apply(self, action: Any) -> AttackEffect:
         """Attack subset ``action``."""
         j = self.last = self.subset_index(action, "attacker")
+        self.attacked_bits = self.bits[j]
         return AttackEffect(attacked=self.bits[j], sigma=self.sigma(j))
 
     def info(self) -> dict[str, Any]:
-        """The attacked subset (0-based sensors)."""
-        return {"attacked": list(self.subsets[self.last])}
+        """``attacked``: (M,) int8, 1 for each sensor of the subset attacked this step."""
+        bits = getattr(self, "attacked_bits", 0)
+        return {"attacked": ((bits >> np.arange(self.M)) & 1).astype(np.int8)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Σ_A of each member's subset (rank one, from the allocation directions)."""
         j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")
         self.b_last = j
+        self.b_attacked = self._masks[j].astype(np.int8)
         u = attack_directions(self._system, self._masks[j], self.allocation)
         return self._bits_arr[j], self.power * (u[:, :, None] * u[:, None, :])
+
+    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+        """Batched :meth:`reset`."""
+        super().batch_reset(batch, where)
+        if where is None:
+            self.b_attacked = np.zeros((batch, self.M), dtype=np.int8)
+        else:
+            self.b_attacked[where] = 0
+
+    def batch_info(self) -> dict[str, np.ndarray]:
+        """Batched :meth:`info`."""
+        return {"attacked": self.b_attacked.copy()}

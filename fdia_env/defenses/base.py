@@ -117,6 +117,13 @@ class DefenseModel(ABC):
         """Legal discrete actions or None."""
         return None
 
+    def info_defaults(self, sampled: bool) -> dict[str, Any]:
+        """The per-step info keys this defense adds, with their values before the first step.
+
+        The same keys come after every step (see ``AttackModel.info``); the engine fills them.
+        """
+        return {}
+
     @abstractmethod
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Decide what the filter uses given the defender's action and the attack."""

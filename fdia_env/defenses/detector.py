@@ -97,6 +97,16 @@ class ThresholdDetector(DefenseModel):
         t = max(t, 0.0)
         return np.array([(t - self.scale) / (t + self.scale)], dtype=np.float32)
 
+    def info_defaults(self, sampled: bool) -> dict[str, Any]:
+        """The detector's info keys (zeros before the first step).
+
+        Expected dynamics: ``p_false_alarm``, ``p_detection``, ``threshold``; sampled:
+        ``attacked_now``, ``detected``, ``statistic``, ``threshold``.
+        """
+        if sampled:
+            return {"attacked_now": False, "detected": False, "statistic": 0.0, "threshold": 0.0}
+        return {"p_false_alarm": 0.0, "p_detection": 0.0, "threshold": 0.0}
+
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Every sensor is measured; the detector decides per measurement."""
         tau = self.action_to_threshold(action)

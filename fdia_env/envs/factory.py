@@ -5,9 +5,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
+from fdia_env._validation import check_int
+from fdia_env.envs.aec import FdiaAECEnv
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario, resolve
 from fdia_env.systems import LinearSystem
@@ -21,13 +22,20 @@ def episode_spec(
     objective: str = "trace",
     reward_mode: str = "terminal",
     dynamics: str = "expected",
+    max_cycles: int | None = None,
+    default_horizon: int | None = None,
 ) -> tuple[Scenario, EpisodeSpec]:
     """Resolve the scenario and build the :class:`EpisodeSpec`, defaults taken from the preset.
 
-    ``horizon`` defaults to the preset's window length; ``warmup`` to ``"steady"`` when the
-    preset starts in steady state, else to its attack step (or 0).
+    ``horizon`` defaults to ``max_cycles`` when that is given (PettingZoo's episode length),
+    else to ``default_horizon`` or the preset's window length; ``warmup`` to ``"steady"`` when
+    the preset starts in steady state, else to its attack step (or 0).
     """
     sc = resolve(scenario)
+    if max_cycles is not None:
+        max_cycles = check_int("max_cycles", max_cycles, minimum=1)
+    if horizon is None:
+        horizon = max_cycles if max_cycles is not None else default_horizon
     if horizon is None:
         if sc.horizon is None:
             raise ValueError(f"horizon is required: scenario {sc.name!r} does not define one")
@@ -56,12 +64,12 @@ def scenario_default(sc: Scenario, name: str, value: Any) -> Any:
 
 def aec_views(
     parallel_env: Callable[..., Any],
-) -> tuple[Callable[..., parallel_to_aec_wrapper], Callable[..., OrderEnforcingWrapper]]:
+) -> tuple[Callable[..., FdiaAECEnv], Callable[..., OrderEnforcingWrapper]]:
     """PettingZoo's ``raw_env`` (AEC, unwrapped) and ``env`` (order-enforcing) for a module."""
 
-    def raw_env(**kwargs: Any) -> parallel_to_aec_wrapper:
+    def raw_env(**kwargs: Any) -> FdiaAECEnv:
         """The AEC view without wrappers."""
-        return parallel_to_aec_wrapper(parallel_env(**kwargs))
+        return FdiaAECEnv(parallel_env(**kwargs))
 
     def env(**kwargs: Any) -> OrderEnforcingWrapper:
         """The AEC view with PettingZoo's order-enforcing wrapper."""

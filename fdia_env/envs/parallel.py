@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import functools
+import sys
+import warnings
 from typing import Any, ClassVar
 
 import numpy as np
@@ -10,16 +11,18 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_choice
+from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.base import AttackModel
 from fdia_env.defenses.base import DefenseModel
+from fdia_env.envs.actions import check_action
 from fdia_env.envs.render import render_ansi, render_rgb
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario, resolve
 from fdia_env.systems import LinearSystem
 
-RENDER_MODES = ("ansi", "rgb_array")
+RENDER_MODES = ("human", "ansi", "rgb_array")
+RENDER_FPS = 4
 
 
 class FdiaParallelEnv(ParallelEnv):
@@ -34,18 +37,28 @@ class FdiaParallelEnv(ParallelEnv):
     ``features``), wrapped as ``{"observation": Box, "action_mask": Box(0, 1, int8)}`` for a
     player whose model has illegal discrete actions.
 
+    Infos: the same keys after :meth:`reset` and after every step, each value a Python scalar
+    or a fixed-shape numpy array: ``phi`` (Φ now), ``step`` (window steps taken), the attack
+    model's keys (e.g. ``attacked`` as an (M,) 0/1 int8 array) and the defense's (the detector's
+    probabilities or decision); before the first step they describe "nothing happened yet".
+
     Args:
         scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
         attack: A bound-able :class:`AttackModel` instance.
         defense: A :class:`DefenseModel` instance.
         spec: The :class:`EpisodeSpec`.
-        render_mode: None, ``"ansi"`` or ``"rgb_array"``.
+        render_mode: None, ``"human"`` (the ``"ansi"`` line printed to stdout; no window),
+            ``"ansi"`` or ``"rgb_array"``.
         name: ``metadata["name"]`` of the env.
+        max_cycles: PettingZoo's episode-length limit: an episode still running after this
+            many steps ends by truncation (``truncations`` True, no terminal reward). The env
+            modules also make it the window length when ``horizon`` (``rounds``) is not given.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
         "name": "fdia_v0",
         "render_modes": list(RENDER_MODES),
+        "render_fps": RENDER_FPS,
         "is_parallelizable": True,
     }
 
@@ -57,13 +70,17 @@ class FdiaParallelEnv(ParallelEnv):
         spec: EpisodeSpec,
         render_mode: str | None = None,
         name: str = "fdia_v0",
+        max_cycles: int | None = None,
     ) -> None:
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES)
         if not isinstance(attack, AttackModel):
-            raise ValueError(f"attack must be an AttackModel, got {type(attack).__name__}")
+            raise TypeError(f"attack must be an AttackModel, got {type(attack).__name__}")
         if not isinstance(defense, DefenseModel):
-            raise ValueError(f"defense must be a DefenseModel, got {type(defense).__name__}")
+            raise TypeError(f"defense must be a DefenseModel, got {type(defense).__name__}")
+        self.max_cycles = (
+            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
+        )
         self.metadata = {**self.metadata, "name": name}
         self.scenario = resolve(scenario)
         self.system = self.scenario.system
@@ -73,6 +90,7 @@ class FdiaParallelEnv(ParallelEnv):
         attack.bind(self.system, spec)
         defense.bind(self.system, spec)
         self.sim = Simulation(self.system, spec)
+        self._info_defaults = defense.info_defaults(self.sim.sampled)
         self.possible_agents = ["attacker"] if defense.passive else ["attacker", "defender"]
         self.agents: list[str] = []
         self._models = {"attacker": attack, "defender": defense}
@@ -102,20 +120,29 @@ class FdiaParallelEnv(ParallelEnv):
             {"observation": box, "action_mask": spaces.Box(0, 1, shape=mask.shape, dtype=np.int8)}
         )
 
-    @functools.cache  # noqa: B019 - spaces are fixed per instance, as PettingZoo requires
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
-        return self._observation_spaces[agent]
+        return self._observation_spaces[self._check_agent(agent)]
 
-    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object on every call)."""
-        return self._action_spaces[agent]
+        return self._action_spaces[self._check_agent(agent)]
+
+    def _check_agent(self, agent: str) -> str:
+        if agent not in self._action_spaces:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
+        return agent
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        """Start an episode at the window start; ``seed`` makes every draw reproducible."""
+        """Start an episode at the window start; ``seed`` makes every draw reproducible.
+
+        Raises:
+            ValueError: For a seed that is not a non-negative integer (``options`` are read by
+                no env: a non-empty dict draws a warning, see :func:`check_reset_args`).
+        """
+        check_reset_args(seed, options)
         if seed is not None:
-            self.np_random, self.np_random_seed = seeding.np_random(seed)
+            self.np_random, self.np_random_seed = seeding.np_random(int(seed))
         self.agents = list(self.possible_agents)
         self.attack.reset()
         self.defense.reset()
@@ -124,15 +151,16 @@ class FdiaParallelEnv(ParallelEnv):
         self._reset_called = True
         self._last_effect = None
         obs = {a: self._observe(a) for a in self.agents}
-        infos = {a: {"phi": self.sim.phi[-1], "step": 0} for a in self.agents}
-        return obs, infos
+        info = self._info()
+        return obs, {a: dict(info) for a in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Apply both players' actions for one window step.
 
         Raises:
             RuntimeError: Before :meth:`reset` or after the episode ended.
-            ValueError: For a missing agent's action or an action outside its space.
+            ValueError: For a missing or unknown agent's action, or an action outside its
+                space; nothing changes before every action has passed.
         """
         if not self._reset_called:
             raise RuntimeError("step() called before reset(): call reset() first")
@@ -140,9 +168,20 @@ class FdiaParallelEnv(ParallelEnv):
             raise RuntimeError(
                 "step() called after the episode ended: call reset() to start a new one"
             )
+        if not isinstance(actions, dict):
+            raise TypeError(
+                f"actions must be a dict {{agent: action}} for agents {self.agents}, "
+                f"got {type(actions).__name__}"
+            )
         missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"actions must include every live agent; missing {missing}")
+        unknown = [a for a in actions if a not in self.agents]
+        if missing or unknown:
+            raise ValueError(
+                f"actions must have exactly one entry per live agent {self.agents}; "
+                f"missing {missing}, unknown {unknown}"
+            )
+        for agent in self.agents:
+            check_action(self._action_spaces[agent], actions[agent], agent)
         effect = self.attack.apply(actions["attacker"])
         filter_input = self.defense.apply(actions.get("defender"), effect)
         self._last_effect = effect
@@ -152,19 +191,31 @@ class FdiaParallelEnv(ParallelEnv):
         phi_prev = self.sim.phi[-1]
         phi = self.sim.step(filter_input, self.np_random)
         done = self.sim.k >= self.spec.horizon
+        truncated = not done and self.max_cycles is not None and self.sim.k >= self.max_cycles
         reward = self._reward(phi, phi_prev, done)
         agents = self.agents
         obs = {a: self._observe(a) for a in agents}
         rewards = {"attacker": reward, "defender": -reward}
         rewards = {a: rewards[a] for a in agents}
         terminations = dict.fromkeys(agents, done)
-        truncations = dict.fromkeys(agents, False)
-        info = {"phi": phi, "step": self.sim.k, **self.attack.info(), **self.sim.info()}
+        truncations = dict.fromkeys(agents, truncated)
+        info = self._info()
         infos = {a: dict(info) for a in agents}
-        if done:
+        if done or truncated:
             self._done = True
             self.agents = []
+        if self.render_mode == "human":
+            self.render()
         return obs, rewards, terminations, truncations, infos
+
+    def _info(self) -> dict[str, Any]:
+        """The step's info: the same keys at reset and at every step (see the class doc)."""
+        info: dict[str, Any] = {"phi": float(self.sim.phi[-1]), "step": int(self.sim.k)}
+        info.update(self.attack.info())
+        engine = self.sim.info()
+        for key, default in self._info_defaults.items():  # the defaults' types, always
+            info[key] = type(default)(engine.get(key, default))
+        return info
 
     def _reward(self, phi: float, phi_prev: float, done: bool) -> float:
         mode = self.spec.reward_mode
@@ -186,12 +237,24 @@ class FdiaParallelEnv(ParallelEnv):
         """Legal actions of ``agent`` now (sb3-contrib's MaskablePPO convention)."""
         return self._models[agent].action_mask()
 
-    def render(self) -> str | np.ndarray | None:
-        """``"ansi"``: a line for the last step; ``"rgb_array"``: Φ over time, error ellipse."""
-        if self.render_mode is None:
+    def render(self, mode: str | None = None) -> str | np.ndarray | None:
+        """Draw the last step in ``mode`` (default: ``render_mode``).
+
+        ``"ansi"``: a line for the last step; ``"rgb_array"``: Φ over time and the error
+        ellipse; ``"human"``: the ansi line printed to stdout (returns None).
+
+        Args:
+            mode: Render in this mode instead of ``render_mode`` (RLlib's
+                ``ParallelPettingZooEnv`` passes one); one of ``metadata["render_modes"]``.
+        """
+        mode = self.render_mode if mode is None else check_choice("mode", mode, RENDER_MODES)
+        if mode is None:
             return None
-        if self.render_mode == "ansi":
+        if mode == "ansi":
             return render_ansi(self)
+        if mode == "human":
+            sys.stdout.write(render_ansi(self))
+            return None
         return render_rgb(self)
 
     def close(self) -> None:
@@ -200,3 +263,26 @@ class FdiaParallelEnv(ParallelEnv):
     def state(self) -> np.ndarray:
         """Global state: the common features (the same information every player sees)."""
         return np.array(self.sim.features(), dtype=np.float32)
+
+
+def check_reset_args(seed: Any, options: Any) -> None:
+    """``reset``'s arguments: a seed in [0, 2**64) or None; options are read by no env.
+
+    Options are not an error, because PettingZoo's own ``parallel_api_test`` resets with
+    ``options={"options": 1}``; a non-empty dict draws a ``UserWarning`` naming its keys, so a
+    setting passed there by mistake (instead of to the constructor) is not silently lost.
+    """
+    if seed is not None:
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        if not 0 <= int(seed) < 2**64:
+            raise ValueError(f"seed must be in [0, 2**64), got {seed}")
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
+    if options:
+        warnings.warn(
+            f"reset options {sorted(map(str, options))} are ignored: fdia_env envs read no "
+            "reset options (pass settings such as budget or horizon to the constructor)",
+            UserWarning,
+            stacklevel=3,
+        )

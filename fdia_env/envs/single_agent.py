@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env.envs.opponents import FixedMix
-from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
 
 
 class Policy(Protocol):
@@ -49,12 +49,17 @@ class SingleAgentEnv(gym.Env):
         others = [a for a in parallel.possible_agents if a != agent]
         if others and opponent is None:
             raise ValueError(f"opponent is required: the env also has {others[0]!r}")
+        if others:
+            check_opponent(opponent, parallel.action_space(others[0]))
         self.parallel = parallel
         self.agent = agent
         self.other = others[0] if others else None
         self.opponent = opponent
         self.render_mode = parallel.render_mode
-        self.metadata = {"render_modes": list(parallel.metadata["render_modes"]), "render_fps": 4}
+        self.metadata = {
+            "render_modes": list(parallel.metadata["render_modes"]),
+            "render_fps": parallel.metadata["render_fps"],
+        }
         space = parallel.observation_space(agent)
         self._masked = isinstance(space, spaces.Dict)
         self.observation_space = space["observation"] if self._masked else space
@@ -70,10 +75,11 @@ class SingleAgentEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
         """Reset the underlying env; ``seed`` seeds every draw of the episode."""
-        super().reset(seed=seed)
+        check_reset_args(seed, options)
+        super().reset(seed=None if seed is None else int(seed))
         obs, infos = self.parallel.reset(seed=seed, options=options)
         if seed is not None and hasattr(self.opponent, "reset"):
-            self.opponent.reset(seed=seed + 1)  # the opponent's draws are seeded too
+            self.opponent.reset(seed=int(seed) + 1)  # the opponent's draws are seeded too
         if self.other is not None:
             self._other_obs = obs[self.other]
         own, extra = self._split(obs[self.agent])
@@ -106,6 +112,27 @@ class SingleAgentEnv(gym.Env):
     def render(self) -> str | np.ndarray | None:
         """Delegate to the two-player env."""
         return self.parallel.render()
+
+
+def check_opponent(opponent: Any, space: spaces.Space) -> None:
+    """Raise ``TypeError``/``ValueError`` unless ``opponent`` can play actions of ``space``.
+
+    Anything with a callable ``predict`` (an SB3 model, a baseline's policy) is accepted; a
+    policy that declares ``n_actions`` (e.g. :class:`FixedMix`) must match a ``Discrete``
+    space's size, so a wrong mix fails here rather than at a random later step.
+    """
+    if not callable(getattr(opponent, "predict", None)):
+        raise TypeError(
+            "opponent must be a policy with stable-baselines3's predict(observation, state, "
+            "episode_start, deterministic) method (an SB3 model, a baselines policy, "
+            f"fdia_env.envs.opponents.FixedMix), got {type(opponent).__name__}"
+        )
+    n = getattr(opponent, "n_actions", None)
+    if n is not None and isinstance(space, spaces.Discrete) and int(n) != int(space.n):
+        raise ValueError(
+            f"opponent plays {n} actions but the other player's action space is {space} "
+            f"({space.n} actions): e.g. FixedMix needs {space.n} probabilities"
+        )
 
 
 def make_single_agent(

@@ -51,7 +51,8 @@ def batched_detection_step(
     if not sim.sampled:
         exact = expected_squared_error if rule.criterion == "mse" else bayes_cost_covariance
         cov = np.empty((B, n, n))
-        cache: dict[bytes, np.ndarray] = {}
+        p_fa, p_d = np.zeros(B), np.zeros(B)
+        cache: dict[bytes, object] = {}
         for i in range(B):  # once per distinct (P[k|k−1], Σ, p, τ)
             key = b"".join(
                 (
@@ -72,8 +73,14 @@ def batched_detection_step(
                     float(rule.thresholds[i]),
                     K0[i],
                     gain_d1[i],
-                ).error_cov
-            cov[i] = cache[key]
+                )
+            out = cache[key]
+            cov[i], p_fa[i], p_d[i] = out.error_cov, out.p_false_alarm, out.p_detection
+        sim.detection_info = {
+            "p_false_alarm": p_fa,
+            "p_detection": p_d,
+            "threshold": np.array(rule.thresholds, dtype=np.float64),
+        }
         sim._set_P(np.array(P_d0))
         sim._M = cov
         sim.consistent = np.zeros(B, dtype=bool)
@@ -95,6 +102,12 @@ def batched_detection_step(
     y = z - x_pred @ sys.H.T
     statistic = np.einsum("bi,bij,bj->b", y, A, y)
     detected = statistic > rule.thresholds
+    sim.detection_info = {
+        "attacked_now": attacked,
+        "detected": detected,
+        "statistic": statistic,
+        "threshold": np.array(rule.thresholds, dtype=np.float64),
+    }
     K = np.where(detected[:, None, None], gain_d1, K0)
     sim.x_hat = x_pred + np.einsum("bij,bj->bi", K, y)
     sim.x = x_next

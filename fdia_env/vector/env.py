@@ -8,11 +8,18 @@ member's noise from its own generator in the single env's order.
 
 Autoreset follows Gymnasium's rules: ``autoreset_mode=AutoresetMode.NEXT_STEP`` (default, as
 ``SyncVectorEnv``) resets a finished member on the next ``step`` (its action is ignored, reward 0,
-not terminated); ``SAME_STEP`` resets it in the same step and puts the last observation in
-``infos["final_obs"]`` (what stable-baselines3 expects; see :mod:`fdia_env.vector.sb3`).
+not terminated); ``SAME_STEP`` resets it in the same step and puts the last observation and info
+in ``infos["final_obs"]`` and ``infos["final_info"]`` (what stable-baselines3 expects; see
+:mod:`fdia_env.vector.sb3`). ``max_episode_steps`` truncates as Gymnasium's ``TimeLimit`` does.
+
+Infos follow Gymnasium's vector convention, key by key as ``SyncVectorEnv`` of the single env
+builds them: each key of the single env's info holds a (B, ...) array of the members' values,
+paired with a boolean ``_key`` mask (all True: every member reports every key).
 
 A fixed opponent (two-player envs) acts for the whole batch with one ``predict`` call on the
-(B, d) observations; a stochastic one draws from its own generator for the batch.
+(B, d) observations, except a :class:`~fdia_env.envs.opponents.FixedMix` (the default of the
+sensor game's views): it draws from one generator per member, seeded as the single env seeds its
+opponent (``seed + i + 1``), so member ``i`` replays the single env seeded ``seed + i``.
 """
 
 from __future__ import annotations
@@ -28,9 +35,10 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_int
+from fdia_env.envs.actions import check_batch_actions
 from fdia_env.envs.opponents import FixedMix
-from fdia_env.envs.parallel import FdiaParallelEnv
-from fdia_env.envs.single_agent import Policy
+from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
+from fdia_env.envs.single_agent import Policy, check_opponent
 from fdia_env.vector.simulation import BatchedSimulation
 
 
@@ -43,6 +51,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         agent: The learning player.
         opponent: Policy of the other player (uniform mix over its actions by default).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` or ``AutoresetMode.SAME_STEP``.
+        max_episode_steps: Truncate each member's episode after this many steps (as
+            Gymnasium's ``TimeLimit``: ``truncated`` is True at that step even if the episode
+            also terminates there), or None.
     """
 
     def __init__(
@@ -52,13 +63,25 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         agent: str = "attacker",
         opponent: Policy | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        max_episode_steps: int | None = None,
     ) -> None:
         self.num_envs = check_int("num_envs", num_envs, minimum=1)
         if agent not in parallel.possible_agents:
             raise ValueError(f"agent must be one of {parallel.possible_agents}, got {agent!r}")
-        mode = AutoresetMode(autoreset_mode)
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError as exc:
+            raise ValueError(
+                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
+                f"got {autoreset_mode!r}"
+            ) from exc
         if mode == AutoresetMode.DISABLED:
             raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP, got DISABLED")
+        self.max_episode_steps = (
+            None
+            if max_episode_steps is None
+            else check_int("max_episode_steps", max_episode_steps, minimum=1)
+        )
         self.metadata = {"autoreset_mode": mode, "render_modes": []}
         self.render_mode = None
         self.parallel = parallel
@@ -67,7 +90,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.other = others[0] if others else None
         if self.other is not None and opponent is None:
             opponent = FixedMix.uniform(int(parallel.action_space(self.other).n))
+        if self.other is not None:
+            check_opponent(opponent, parallel.action_space(self.other))
         self.opponent = opponent
+        self._mix = isinstance(opponent, FixedMix)  # drawn per member (see the module doc)
+        self._opp_rngs: list[np.random.Generator] | None = None
         self.attack, self.defense = parallel.attack, parallel.defense
         self.spec_episode = parallel.spec
         space = parallel.observation_space(agent)
@@ -82,23 +109,46 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self._models = {"attacker": self.attack, "defender": self.defense}
         self.sim: BatchedSimulation | None = None
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
+        self._all = np.ones(self.num_envs, dtype=bool)
+        self._all.setflags(write=False)  # the shared all-True `_key` mask of the infos
+        self._det_defaults = self.defense.info_defaults(parallel.sim.sampled)
+
+    @property
+    def autoreset_mode(self) -> AutoresetMode:
+        """Gymnasium's autoreset mode of this env (also in ``metadata["autoreset_mode"]``)."""
+        return self.metadata["autoreset_mode"]
 
     # --- reset ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        """Reset every member; an int ``seed`` seeds member i with ``seed + i``."""
-        super().reset(seed=seed if isinstance(seed, int) else None)
+        """Reset every member; an int ``seed`` seeds member i with ``seed + i``.
+
+        Raises:
+            ValueError: For a seed that is not a non-negative integer or a list of B of them
+                (None entries allowed); ``options`` as in :func:`check_reset_args`.
+        """
         B = self.num_envs
-        if seed is None:
-            seeds = [None] * B
-        elif isinstance(seed, int):
-            seeds = [seed + i for i in range(B)]
-        else:
+        if seed is None or (isinstance(seed, int | np.integer) and not isinstance(seed, bool)):
+            check_reset_args(seed, options)
+            seeds = [None] * B if seed is None else [int(seed) + i for i in range(B)]
+        elif isinstance(seed, list | tuple):
             if len(seed) != B:
                 raise ValueError(f"seed must be an int or a list of {B} seeds, got {len(seed)}")
-            seeds = list(seed)
+            for s in seed:
+                check_reset_args(s, None)
+            check_reset_args(None, options)
+            seeds = [None if s is None else int(s) for s in seed]
+        else:
+            raise ValueError(f"seed must be an int, a list of {B} ints or None, got {seed!r}")
+        super().reset(seed=None if seed is None or isinstance(seed, list | tuple) else int(seed))
         self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        if isinstance(seed, int) and hasattr(self.opponent, "reset"):
-            self.opponent.reset(seed=seed + 1)
+        if self._mix:  # one opponent generator per member, as each single env has its own
+            if self._opp_rngs is None or seed is not None:
+                self._opp_rngs = [
+                    np.random.default_rng(None if s is None else s + 1) for s in seeds
+                ]
+        elif seed is not None and not isinstance(seed, list | tuple):
+            if hasattr(self.opponent, "reset"):
+                self.opponent.reset(seed=int(seed) + 1)
         if self.sim is None:
             self.sim = BatchedSimulation(self.parallel.sim, B)
         self.sim.rngs = self._rngs
@@ -106,6 +156,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
         self._prev_done = np.zeros(B, dtype=bool)
+        self._det_info = {
+            key: np.full(B, value, dtype=type(value)) for key, value in self._det_defaults.items()
+        }
         return self._observe(self.agent), self._infos()
 
     def _reset_members(self, where: np.ndarray) -> None:
@@ -114,6 +167,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.sim.reset(where, rngs)
         self.attack.batch_reset(self.num_envs, where)
         self.defense.batch_reset(self.num_envs, where)
+        for key, value in self._det_defaults.items():
+            self._det_info[key][where] = value
 
     # --- step ----------------------------------------------------------------------------------
     def step(self, actions: Any):
@@ -122,13 +177,13 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             raise RuntimeError("step() called before reset(): call reset() first")
         B = self.num_envs
         resetting = self._prev_done
+        check_batch_actions(self.single_action_space, actions, B, self.agent)
         actions = {self.agent: actions}
         if self.other is not None:
-            actions[self.other], _ = self.opponent.predict(
-                self._observe(self.other), deterministic=True
+            actions[self.other] = self._opponent_actions(~resetting)
+            check_batch_actions(
+                self.parallel.action_space(self.other), actions[self.other], B, self.other
             )
-            shape = self.parallel.action_space(self.other).shape or ()
-            actions[self.other] = np.asarray(actions[self.other]).reshape(B, *shape)
         attacked, sigma = self.attack.batch_apply(actions["attacker"])
         used, leak, present, steady = self.defense.batch_apply(
             actions.get("defender"), attacked, sigma
@@ -146,7 +201,16 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             detection=self.defense.batch_detection(),
             probability=getattr(self.attack, "b_probability", None),
         )
-        done = self.sim.k >= self.spec_episode.horizon
+        if self._det_defaults:  # the detector's per-member info, for the members that stepped
+            for key, values in self.sim.detection_info.items():
+                self._det_info[key] = np.where(resetting, self._det_info[key], values)
+        k = self.sim.k
+        done = k >= self.spec_episode.horizon
+        truncated = np.zeros(B, dtype=bool)
+        if self.parallel.max_cycles is not None:  # the env's own limit (PettingZoo's)
+            truncated |= ~done & (k >= self.parallel.max_cycles)
+        if self.max_episode_steps is not None:  # Gymnasium's TimeLimit
+            truncated |= k >= self.max_episode_steps
         mode = self.spec_episode.reward_mode
         if mode == "terminal":
             reward = np.where(done, phi, 0.0)
@@ -156,24 +220,52 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             reward = phi.copy()
         if self.agent == "defender":
             reward = -reward
-        truncated = np.zeros(B, dtype=bool)
         infos: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
             if resetting.any():
                 self._reset_members(resetting)
                 reward[resetting] = 0.0
                 done[resetting] = False
-            self._prev_done = done.copy()
+                truncated[resetting] = False
+            self._prev_done = done | truncated
             obs = self._observe(self.agent)
-        else:  # SAME_STEP: finished members restart now; their last observation goes in infos
+        else:  # SAME_STEP: finished members restart now; their last step goes in infos
             obs = self._observe(self.agent)
-            if done.any():
-                infos["final_obs"] = obs.copy()
-                infos["_final_obs"] = done.copy()
-                self._reset_members(done.copy())
+            ended = done | truncated
+            if ended.any():
+                final = np.full(B, None, dtype=object)
+                for i in np.flatnonzero(ended):
+                    final[i] = obs[i].copy()
+                final_info = _masked(self._infos(), ended)
+                infos = {
+                    "final_obs": final,
+                    "_final_obs": ended.copy(),
+                    "final_info": final_info,
+                    "_final_info": ended.copy(),
+                }
+                self._reset_members(ended.copy())
                 obs = self._observe(self.agent)
         infos.update(self._infos())
         return obs, reward, done, truncated, infos
+
+    def _opponent_actions(self, stepping: np.ndarray) -> np.ndarray:
+        """The fixed opponent's (B, ...) actions; a FixedMix draws only for ``stepping``."""
+        B = self.num_envs
+        if self._mix:
+            mix: FixedMix = self.opponent
+            u = np.zeros(B)
+            for i in np.flatnonzero(stepping):  # each member's generator, as its single env's
+                u[i] = self._opp_rngs[i].random()
+            return np.minimum(np.searchsorted(mix._cdf, u, side="right"), mix.n_actions - 1)
+        action, _ = self.opponent.predict(self._observe(self.other), deterministic=True)
+        shape = self.parallel.action_space(self.other).shape or ()
+        try:
+            return np.asarray(action).reshape(B, *shape)
+        except ValueError as exc:
+            raise ValueError(
+                f"opponent.predict must return one {self.other} action per member, shape "
+                f"{(B, *shape)}, got shape {np.shape(action)}"
+            ) from exc
 
     # --- observations ----------------------------------------------------------------------------
     def _observe(self, agent: str) -> np.ndarray:
@@ -184,11 +276,18 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         return rows.T
 
     def _infos(self) -> dict[str, Any]:
+        """Gymnasium vector infos: the single env's keys, each with its all-True ``_key``."""
         # phi is a fresh array every step; k is updated in place, so it is copied
-        infos: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
+        values: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
+        values.update(self.attack.batch_info())
+        for key, array in self._det_info.items():
+            values[key] = array.copy()
         if self._masked:
-            infos["action_mask"] = self._models[self.agent].batch_action_mask()
-            infos["_action_mask"] = np.ones(self.num_envs, dtype=bool)
+            values["action_mask"] = self._models[self.agent].batch_action_mask()
+        infos: dict[str, Any] = {}
+        for key, value in values.items():
+            infos[key] = value
+            infos["_" + key] = self._all
         return infos
 
     def action_masks(self) -> np.ndarray:
@@ -197,6 +296,18 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if mask is None:
             return np.ones((self.num_envs, int(getattr(self.single_action_space, "n", 1))), bool)
         return mask.astype(bool)
+
+
+def _masked(infos: dict[str, Any], where: np.ndarray) -> dict[str, Any]:
+    """``infos`` reported by the members ``where`` only (their ``_key`` masks set to it)."""
+    out: dict[str, Any] = {}
+    for key, value in infos.items():
+        if not key.startswith("_"):
+            out[key] = np.where(where.reshape(-1, *[1] * (value.ndim - 1)), value, 0).astype(
+                value.dtype
+            )
+            out["_" + key] = where.copy()
+    return out
 
 
 def _box(space: spaces.Space) -> spaces.Box:
@@ -209,10 +320,10 @@ def make_vector(
     agent: str = "attacker",
     opponent: Policy | None = None,
     autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+    max_episode_steps: int | None = None,
     **kwargs: Any,
 ) -> FdiaVectorEnv:
     """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B."""
-    kwargs.pop("max_episode_steps", None)
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
@@ -221,5 +332,10 @@ def make_vector(
     if opponent is None and hasattr(mod, "default_opponent") and len(parallel.possible_agents) > 1:
         opponent = mod.default_opponent(parallel, agent)
     return FdiaVectorEnv(
-        parallel, num_envs, agent=agent, opponent=opponent, autoreset_mode=autoreset_mode
+        parallel,
+        num_envs,
+        agent=agent,
+        opponent=opponent,
+        autoreset_mode=autoreset_mode,
+        max_episode_steps=max_episode_steps,
     )

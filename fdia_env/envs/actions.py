@@ -1,0 +1,132 @@
+"""Type and shape checks of actions, shared by the parallel env, the views and the vector env.
+
+The models check what an action *means* (a bitmask within the budget, a threshold); these
+functions check first what it *is*, so that no model ever sees a string, a complex number, a
+bool, or a batch of the wrong length, and no state changes before every action of a step has
+passed. Each failure is a ``ValueError`` that names the player and the space.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+_BOX_SLACK = 1e-6  # float32 round-off allowed outside [low, high]
+
+
+def check_action(space: spaces.Space, action: Any, who: str) -> None:
+    """Raise ``ValueError`` unless ``action`` is an element of ``space`` (up to round-off).
+
+    Args:
+        space: A ``Discrete``, ``Box``, ``MultiBinary`` or ``MultiDiscrete`` space.
+        action: One player's action.
+        who: ``"attacker"`` or ``"defender"``, for the message.
+    """
+    if isinstance(space, spaces.Discrete):
+        index = _integer(action)
+        if index is None or not space.start <= index < space.start + space.n:
+            raise ValueError(
+                f"{who} action must be an integer in [{space.start}, {space.start + space.n}) "
+                f"(the action space {space}), got {action!r}"
+            )
+        return
+    arr = _real_array(action, who, space)
+    if arr.shape != space.shape:
+        raise ValueError(
+            f"{who} action must have shape {space.shape} (the action space {space}), "
+            f"got shape {arr.shape}: {action!r}"
+        )
+    _check_values(space, arr, who)
+
+
+def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str) -> None:
+    """Raise ``ValueError`` unless ``actions`` holds one element of ``space`` per member.
+
+    Args:
+        space: The single env's action space.
+        actions: (B, *space.shape) array (B,) for ``Discrete``.
+        batch: B, the number of members; a shorter or longer batch is an error (never
+            broadcast).
+        who: ``"attacker"`` or ``"defender"``, for the message.
+    """
+    arr = _real_array(actions, who, space, batch=batch)
+    want = (batch, *(space.shape or ()))
+    if arr.shape != want:
+        raise ValueError(
+            f"{who} actions must be an array of shape {want} (one action of {space} for each "
+            f"of the {batch} members), got shape {arr.shape}"
+        )
+    if isinstance(space, spaces.Discrete):
+        if not (np.issubdtype(arr.dtype, np.integer) or _integral_floats(arr)):
+            raise ValueError(f"{who} actions must be integers for {space}, got dtype {arr.dtype}")
+        bad = (arr < space.start) | (arr >= space.start + space.n)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"{who} actions must be integers in [{space.start}, {space.start + space.n}); "
+                f"member {i} has {arr[i]!r}"
+            )
+        return
+    _check_values(space, arr, who)
+
+
+def _integer(action: Any) -> int | None:
+    """An integer action (Python or numpy integer, 0-d or 1-element integer array), else None."""
+    if isinstance(action, bool | np.bool_):
+        return None
+    if isinstance(action, numbers.Integral):
+        return int(action)
+    if isinstance(action, np.ndarray) and action.size == 1:
+        if np.issubdtype(action.dtype, np.integer):
+            return int(action.reshape(()))
+    return None
+
+
+def _real_array(action: Any, who: str, space: spaces.Space, batch: int | None = None) -> np.ndarray:
+    """``action`` as a real numeric array; strings, bools, complex and objects are errors."""
+    kind = "actions" if batch is not None else "action"
+    if action is None or isinstance(action, str | bytes):
+        raise ValueError(f"{who} {kind} must be numeric (the action space {space}), got {action!r}")
+    try:
+        arr = np.asarray(action)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"{who} {kind} must be a numeric array for {space}, got {action!r}"
+        ) from exc
+    if arr.dtype == bool and not isinstance(space, spaces.MultiBinary):
+        raise ValueError(f"{who} {kind} must be numeric, not boolean, for {space}, got {action!r}")
+    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        if arr.dtype != bool:
+            raise ValueError(
+                f"{who} {kind} must be real numbers for {space} (dtype int or float), "
+                f"got dtype {arr.dtype}: {action!r}"
+            )
+    return arr
+
+
+def _integral_floats(arr: np.ndarray) -> bool:
+    return np.issubdtype(arr.dtype, np.floating) and bool(np.all(arr == np.round(arr)))
+
+
+def _check_values(space: spaces.Space, arr: np.ndarray, who: str) -> None:
+    if isinstance(space, spaces.Box):
+        values = arr.astype(np.float64)
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"{who} action must be finite (no NaN or inf), got {arr.tolist()}")
+        low, high = space.low.astype(np.float64), space.high.astype(np.float64)
+        if np.any(values < low - _BOX_SLACK) or np.any(values > high + _BOX_SLACK):
+            raise ValueError(
+                f"{who} action must lie in [{space.low.min()}, {space.high.max()}] "
+                f"(the action space {space}), got {arr.tolist()}"
+            )
+    elif isinstance(space, spaces.MultiBinary):
+        if not np.all((arr == 0) | (arr == 1)):
+            raise ValueError(f"{who} action must hold only 0 and 1 for {space}, got {arr.tolist()}")
+    elif isinstance(space, spaces.MultiDiscrete):
+        if not (np.issubdtype(arr.dtype, np.integer) or _integral_floats(arr)):
+            raise ValueError(f"{who} action must be integers for {space}, got {arr.tolist()}")
+        if np.any(arr < space.start) or np.any(arr >= space.start + space.nvec):
+            raise ValueError(f"{who} action must lie in {space}, got {arr.tolist()}")
