@@ -46,12 +46,16 @@ DEFENSES: dict[str, type[DefenseModel]] = {
 }
 
 
-def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None) -> Any:
+def _check_kwargs(kind: str, kwargs: Any) -> None:
     if kwargs is not None and not isinstance(kwargs, dict):
         raise TypeError(
             f"{kind}_kwargs must be a dict of the {kind} model's parameters or None, "
             f"got {type(kwargs).__name__}: {kwargs!r}"
         )
+
+
+def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None) -> Any:
+    _check_kwargs(kind, kwargs)
     if isinstance(value, str):
         if value not in registry:
             raise ValueError(
@@ -96,6 +100,8 @@ def parallel_env(
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
+    for kind, kwargs in (("attack", attack_kwargs), ("defense", defense_kwargs)):
+        _check_kwargs(kind, kwargs)
     if isinstance(attack, str):  # model parameters the preset defines, unless given
         attack_kwargs = dict(attack_kwargs or {})
         for param in SCENARIO_DEFAULTS.get(attack, ()):

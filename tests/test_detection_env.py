@@ -137,7 +137,7 @@ def test_bad_actions_raise():
     env = detection_game_v0.parallel_env()
     env.reset(seed=0)
     attack = literature_attack(env)
-    with pytest.raises(ValueError, match="defender action must be one finite number"):
+    with pytest.raises(ValueError, match="defender action must be finite"):
         env.step({"attacker": attack, "defender": np.array([np.nan], dtype=np.float32)})
     with pytest.raises(ValueError, match="threshold must not be NaN"):
         env.defense.threshold_to_action(float("nan"))

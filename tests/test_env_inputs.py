@@ -21,7 +21,7 @@ from fdia_env.envs.single_agent import SingleAgentEnv
         ({"objective": "max"}, r"objective must be one of \['trace', 'logdet'\]"),
         ({"reward_mode": "dense"}, r"reward_mode must be one of"),
         ({"dynamics": "random"}, r"dynamics must be one of"),
-        ({"render_mode": "human"}, r"render_mode must be one of \['ansi', 'rgb_array'\]"),
+        ({"render_mode": "window"}, r"render_mode must be one of \['human', 'ansi', 'rgb_array'\]"),
         (
             {"objective": "logdet", "dynamics": "sampled"},
             r"logdet.*only defined for dynamics='expected'",
@@ -112,7 +112,7 @@ def test_fdia_v0_rejects_unknown_models():
         match=r"defense must be one of \[.*'threshold_detector', 'unaware'\]",
     ):
         fdia_v0.parallel_env(defense="moat")
-    with pytest.raises(ValueError, match="attack must be an AttackModel"):
+    with pytest.raises(TypeError, match="attack must be an AttackModel"):
         fdia_v0.parallel_env(attack=object())
 
 

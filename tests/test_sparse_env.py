@@ -92,7 +92,7 @@ def test_over_budget_actions_are_trimmed_to_lowest_sensors_and_never_overspend()
     spent = 0
     for _ in range(6):
         _, _, _, _, info = env.step({"attacker": 0b111})
-        spent += len(info["attacker"]["attacked"])
+        spent += int(info["attacker"]["attacked"].sum())
     assert spent == 4
     assert info["attacker"]["budget_left"] == 0
 

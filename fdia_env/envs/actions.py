@@ -67,7 +67,7 @@ def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str)
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
                 f"{who} actions must be integers in [{space.start}, {space.start + space.n}); "
-                f"member {i} has {arr[i]!r}"
+                f"member {i} has {arr[i].item()!r}"
             )
         return
     _check_values(space, arr, who)
@@ -88,8 +88,12 @@ def _integer(action: Any) -> int | None:
 def _real_array(action: Any, who: str, space: spaces.Space, batch: int | None = None) -> np.ndarray:
     """``action`` as a real numeric array; strings, bools, complex and objects are errors."""
     kind = "actions" if batch is not None else "action"
+    shape = space.shape if batch is None else (batch, *(space.shape or ()))
     if action is None or isinstance(action, str | bytes):
-        raise ValueError(f"{who} {kind} must be numeric (the action space {space}), got {action!r}")
+        raise ValueError(
+            f"{who} {kind} must be a numeric array of shape {shape} (the action space {space}), "
+            f"got {action!r}"
+        )
     try:
         arr = np.asarray(action)
     except (TypeError, ValueError) as exc:
@@ -119,7 +123,7 @@ def _check_values(space: spaces.Space, arr: np.ndarray, who: str) -> None:
         low, high = space.low.astype(np.float64), space.high.astype(np.float64)
         if np.any(values < low - _BOX_SLACK) or np.any(values > high + _BOX_SLACK):
             raise ValueError(
-                f"{who} action must lie in [{space.low.min()}, {space.high.max()}] "
+                f"{who} action must lie in [{space.low.min():g}, {space.high.max():g}] "
                 f"(the action space {space}), got {arr.tolist()}"
             )
     elif isinstance(space, spaces.MultiBinary):
