@@ -197,8 +197,8 @@ def cli(argv: Sequence[str] | None = None) -> int:
         result = main(argv)
     except Aborted as exc:
         print(
-            f"train.py: aborted by a second {exc.args[0]}: the final checkpoint was not "
-            "written (the last periodic one, if any, is kept)",
+            f"train.py: aborted by a second {exc.args[0]}; what was saved before it is kept "
+            "(the last checkpoint, if any)",
             file=sys.stderr,
         )
         return exit_status(exc.signum)
