@@ -203,7 +203,9 @@ def cli(argv: Sequence[str] | None = None) -> int:
         )
         return exit_status(exc.signum)
     except KeyboardInterrupt:
-        print("train.py: interrupted before training started; nothing to resume", file=sys.stderr)
+        print(
+            "train.py: interrupted before training started; nothing new was saved", file=sys.stderr
+        )
         return exit_status(signal.SIGINT)
     except (ValueError, FileExistsError) as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)

@@ -198,6 +198,21 @@ def test_selfplay_policies_are_loaded_safely(tmp_path):
     assert marker.exists()
 
 
+def test_trusted_resume_of_an_sb3_zip_checkpoint_continues_in_the_safe_format(tmp_path, ppo_run):
+    ckpt = ppo_run.run_dir / "checkpoints"
+    ppo_run.model.save(ckpt / "model_64.zip")  # how runs were saved before the safe format
+    for suffix in (".json", ".pt"):
+        (ckpt / f"model_64{suffix}").unlink()
+    point_state_at(ppo_run.run_dir, model="model_64.zip")
+    with pytest.raises(UntrustedCheckpointError):
+        run(tmp_path, "attacker", "--algo", "PPO", "--resume", "--total-timesteps", "128")
+    resumed = run(tmp_path, "attacker", "--algo", "PPO", "--resume", "--total-timesteps", "128",
+                  "--trust-checkpoint")  # fmt: skip
+    assert resumed.model.num_timesteps == 128 and resumed.model._n_updates == 2
+    state = json.loads((ckpt / "state.json").read_text())
+    assert state["model"] == "model_128.json"  # new checkpoints are safe ones
+
+
 @pytest.mark.parametrize("kind", ["absolute", "dotdot", "symlink"])
 def test_model_paths_outside_the_run_folder_are_refused(tmp_path, ppo_run, kind):
     run_dir, ckpt = ppo_run.run_dir, ppo_run.run_dir / "checkpoints"
@@ -502,6 +517,25 @@ def test_sigint_in_process_stops_training_and_writes_the_checkpoint(tmp_path):
     state = json.loads((result.run_dir / "checkpoints" / "state.json").read_text())
     assert state["timesteps"] == result.model.num_timesteps
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_sigint_stops_self_play_after_the_last_finished_iteration(tmp_path):
+    timer = threading.Timer(6.0, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        result = run(tmp_path, "game", "--steps-per-iteration", "64", "--n-steps", "32",
+                     "--batch-size", "16", "--n-epochs", "1", "--no-progress-bar",
+                     "--final-eval-episodes", "2", "--iterations", "100000")  # fmt: skip
+    finally:
+        timer.cancel()
+    assert result.interrupted == signal.SIGINT
+    done = len(result.history)
+    assert 1 <= done < 100_000, "the timer fired before the first iteration finished"
+    state = json.loads((result.run_dir / "state.json").read_text())
+    assert len(state["history"]) == done and len(state["policies"]["attacker"]) == done
+    assert json.loads((result.run_dir / "scores.json").read_text())["iterations"] == done
+    more = run(tmp_path, "game", "--resume", "--iterations", str(done + 1))
+    assert [h["iteration"] for h in more.history] == list(range(1, done + 2))
 
 
 def _train_subprocess(tmp_path, *extra):
