@@ -503,15 +503,34 @@ def test_signal_handlers_are_restored_and_a_second_signal_aborts():
     assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
 
 
+def _wait_for(folder: Path, pattern: str, min_size: int = 0, timeout: float = 120) -> Path:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = [p for p in folder.glob(pattern) if p.stat().st_size > min_size]
+        if found:
+            return found[0]
+        time.sleep(0.1)
+    raise AssertionError(f"no {pattern} in {folder} after {timeout} s")
+
+
+def _sigint_when(folder: Path, pattern: str, min_size: int = 0) -> threading.Thread:
+    """A thread that sends this process SIGINT once ``folder`` holds ``pattern``."""
+
+    def watch():
+        _wait_for(folder, pattern, min_size)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
 def test_sigint_in_process_stops_training_and_writes_the_checkpoint(tmp_path):
     before = signal.getsignal(signal.SIGINT)
-    timer = threading.Timer(3.0, os.kill, (os.getpid(), signal.SIGINT))
-    timer.start()
-    try:
-        result = run(tmp_path, "attacker", *TINY_PPO, "--total-timesteps", "10000000",
-                     "--eval-freq", "0", "--checkpoint-freq", "0", *TINY)  # fmt: skip
-    finally:
-        timer.cancel()
+    watcher = _sigint_when(tmp_path / "runs", "*/tb/events.*", min_size=2000)  # a few rollouts
+    result = run(tmp_path, "attacker", *TINY_PPO, "--total-timesteps", "10000000",
+                 "--eval-freq", "0", "--checkpoint-freq", "0", *TINY)  # fmt: skip
+    watcher.join()
     assert result.interrupted == signal.SIGINT
     assert 0 < result.model.num_timesteps < 10_000_000
     state = json.loads((result.run_dir / "checkpoints" / "state.json").read_text())
@@ -520,17 +539,14 @@ def test_sigint_in_process_stops_training_and_writes_the_checkpoint(tmp_path):
 
 
 def test_sigint_stops_self_play_after_the_last_finished_iteration(tmp_path):
-    timer = threading.Timer(6.0, os.kill, (os.getpid(), signal.SIGINT))
-    timer.start()
-    try:
-        result = run(tmp_path, "game", "--steps-per-iteration", "64", "--n-steps", "32",
-                     "--batch-size", "16", "--n-epochs", "1", "--no-progress-bar",
-                     "--final-eval-episodes", "2", "--iterations", "100000")  # fmt: skip
-    finally:
-        timer.cancel()
+    watcher = _sigint_when(tmp_path / "runs", "*/state.json")  # the first iteration is done
+    result = run(tmp_path, "game", "--steps-per-iteration", "64", "--n-steps", "32",
+                 "--batch-size", "16", "--n-epochs", "1", "--no-progress-bar",
+                 "--final-eval-episodes", "2", "--iterations", "100000")  # fmt: skip
+    watcher.join()
     assert result.interrupted == signal.SIGINT
     done = len(result.history)
-    assert 1 <= done < 100_000, "the timer fired before the first iteration finished"
+    assert 1 <= done < 100_000
     state = json.loads((result.run_dir / "state.json").read_text())
     assert len(state["history"]) == done and len(state["policies"]["attacker"]) == done
     assert json.loads((result.run_dir / "scores.json").read_text())["iterations"] == done
@@ -546,14 +562,12 @@ def _train_subprocess(tmp_path, *extra):
     proc = subprocess.Popen(
         args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:  # progress: TensorBoard has logged a few rollouts
-        events = list((tmp_path / "runs").glob("*/tb/events.*"))
-        if events and events[0].stat().st_size > 2000:
-            return proc
-        time.sleep(0.2)
-    proc.kill()
-    raise AssertionError("train.py showed no progress in 120 s")
+    try:  # progress: TensorBoard has logged a few rollouts
+        _wait_for(tmp_path / "runs", "*/tb/events.*", min_size=2000)
+    except AssertionError:
+        proc.kill()
+        raise
+    return proc
 
 
 def test_ctrl_c_writes_a_final_checkpoint_and_scores_and_exits_130(tmp_path):
@@ -583,12 +597,7 @@ def test_a_second_ctrl_c_aborts_at_once_without_a_traceback(tmp_path):
     # a long final evaluation keeps the run busy after the first Ctrl-C
     proc = _train_subprocess(tmp_path, "--final-eval-episodes", "10000000")
     proc.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and not (tmp_path / "runs").glob("*/scores.json"):
-        if list((tmp_path / "runs").glob("*/model.json")):
-            break
-        time.sleep(0.1)
-    time.sleep(0.5)
+    _wait_for(tmp_path / "runs", "*/model.json")  # the final model is written, evaluation runs
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
