@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-import json
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,6 +35,11 @@ DESCRIPTION = "\n\n".join(
         "python train.py defender --algo DQN; "
         "python train.py game --method psro; "
         "python train.py attacker --resume (continues the latest run of that env, algo, seed).",
+        "Checkpoints hold tensors and JSON only and load without unpickling; --trust-checkpoint "
+        "allows resuming runs saved as stable-baselines3 .zip files (pickle: can run code). "
+        "Ctrl-C (SIGINT) or SIGTERM stops at the next step and saves a checkpoint and the scores "
+        "(exit status 130 or 143); a second Ctrl-C aborts at once. Exit status 2: bad options "
+        "or an unusable checkpoint; 1: another I/O error.",
     ]
 )
 
@@ -86,17 +91,24 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
     its own settings; an option given explicitly must agree with it (checked by the trainer),
     except the training length, which may be extended.
     """
-    from agents.runs import config_from_dict, latest_run
+    from agents.checkpoint import read_json
+    from agents.runs import config_from_dict, resume_dir
 
     if isinstance(cfg, GameConfig):
+        from agents.selfplay import STATE as marker
         from agents.selfplay import game_prefix as prefix_of
     else:
+        from agents.training import CHECKPOINT_STATE as marker
         from agents.training import train_prefix as prefix_of
-    run_dir = cfg.run.run_dir or latest_run(cfg.run.runs_root, prefix_of(cfg))
-    if run_dir is None or not (Path(run_dir) / "config.json").is_file():
-        return cfg  # the trainer reports what is missing
-    saved = json.loads((Path(run_dir) / "config.json").read_text())["config"]
-    default = config_from_dict(type(cfg), saved)
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix_of(cfg), marker)
+    config_path = Path(run_dir) / "config.json"
+    saved = read_json(config_path, "run config").get("config")
+    if not isinstance(saved, dict):
+        raise ValueError(f"run config {config_path} is corrupt: it has no 'config' object")
+    try:
+        default = config_from_dict(type(cfg), saved)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"run config {config_path} is corrupt: {exc}") from None
     default.run.run_dir = Path(run_dir)
     argv = list(argv)
     command = next(a for a in argv if a in COMMANDS)
@@ -122,9 +134,17 @@ def format_table(rows: dict[str, Evaluation]) -> str:
 def main(argv: Sequence[str] | None = None) -> object:
     """Run one command; returns its result (``TrainResult`` or ``SelfPlayResult``).
 
+    A result whose ``interrupted`` is set was stopped by that signal (its checkpoint and scores
+    are written); :func:`cli` turns it into the exit status.
+
     Raises:
-        ValueError: For an unknown env, scenario, algorithm or method (listing the valid names).
+        SystemExit: For an option outside its allowed values (status 2, message naming it).
+        ValueError: For an unknown env, scenario, algorithm or method (listing the valid names),
+            an env option the env does not take, a device not present, nothing to resume, or
+            a checkpoint that is corrupt, outside its run folder or (without
+            ``--trust-checkpoint``) pickle-based.
         FileExistsError: When the run folder exists and ``--resume`` is not given.
+        agents.interrupt.Aborted: On a second SIGINT/SIGTERM.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     cfg = parse(argv)
@@ -134,9 +154,13 @@ def main(argv: Sequence[str] | None = None) -> object:
         from agents.selfplay import run_selfplay
 
         game = run_selfplay(cfg)
+        if not game.history:  # stopped before its first iteration finished
+            return game
         last = game.history[-1]
         print(
-            f"\n{game.method.upper()} on {cfg.env}: {len(game.history)} iterations, "
+            f"\n{game.method.upper()} on {cfg.env}: {len(game.history)} iterations"
+            + (" (interrupted)" if game.interrupted else "")
+            + ", "
             f"{last['timesteps']} steps in {game.train_seconds:.0f} s (seed {cfg.run.seed}); "
             f"NashConv {last['nash_conv']:.4g} = {last['relative_nash_conv']:.2%} of the value "
             f"{game.value:.6g}"
@@ -153,15 +177,67 @@ def main(argv: Sequence[str] | None = None) -> object:
         f"\n{learned.policy} {cfg.agent} on {learned.env_id}, {result.model.num_timesteps} "
         f"steps in {result.train_seconds:.0f} s (seed {cfg.run.seed})"
         + (" (resumed)" if result.resumed else "")
+        + (" (interrupted)" if result.interrupted else "")
     )
     print(f"  run folder: {result.run_dir}")
     print(format_table(result.evaluations))
     return result
 
 
-if __name__ == "__main__":
+def cli(argv: Sequence[str] | None = None) -> int:
+    """Run :func:`main` as a program: one-line messages on stderr, and the exit status.
+
+    Exit status: 0 done; 2 bad options or an unusable checkpoint (``train.py: error: ...``);
+    1 another I/O error; 128 + the signal number when SIGINT (130) or SIGTERM (143) stopped it,
+    after writing the final checkpoint and scores, or when a second one aborted it at once.
+    """
+    from agents.interrupt import Aborted, exit_status
+
     try:
-        main()
+        result = main(argv)
+    except Aborted as exc:
+        print(
+            f"train.py: aborted by a second {exc.args[0]}; what was saved before it is kept "
+            "(the last checkpoint, if any)",
+            file=sys.stderr,
+        )
+        return exit_status(exc.signum)
+    except KeyboardInterrupt:
+        print(
+            "train.py: interrupted before training started; nothing new was saved", file=sys.stderr
+        )
+        return exit_status(signal.SIGINT)
     except (ValueError, FileExistsError) as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
+        return 2
+    except OSError as exc:
+        print(f"train.py: error: {exc}", file=sys.stderr)
+        return 1
+    signum = getattr(result, "interrupted", None)
+    if signum is None:
+        return 0
+    name = signal.Signals(signum).name
+    if hasattr(result, "populations"):  # the game command
+        if not result.history:
+            print(
+                f"train.py: stopped by {name} before the first iteration finished; nothing was "
+                "saved",
+                file=sys.stderr,
+            )
+            return exit_status(signum)
+        done = f"{len(result.history)} iterations"
+        what = "state, policies and scores"
+    else:
+        done = f"{result.model.num_timesteps} steps"
+        what = "checkpoint, model and scores"
+    command = next((a for a in (sys.argv[1:] if argv is None else argv) if a in COMMANDS), "")
+    print(
+        f"train.py: stopped by {name} after {done}; {what} saved in {result.run_dir}; "
+        f"continue with: python train.py {command} --resume --run-dir {result.run_dir}",
+        file=sys.stderr,
+    )
+    return exit_status(signum)
+
+
+if __name__ == "__main__":
+    raise SystemExit(cli())

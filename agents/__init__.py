@@ -4,7 +4,11 @@
 - :mod:`agents.seeding`: :func:`~agents.seeding.seed_everything`;
 - :mod:`agents.registry`: the trainable envs, their scenarios, algorithms and references;
 - :mod:`agents.evaluate`: :func:`~agents.evaluate.evaluate`, the one evaluation loop;
-- :mod:`agents.training`: model building, TensorBoard, atomic checkpoints, resume;
+- :mod:`agents.algos`: the SB3 algorithms and :func:`~agents.algos.build_model`;
+- :mod:`agents.checkpoint`: checkpoints as tensors and JSON (nothing unpickled unless trusted),
+  paths confined to the run folder;
+- :mod:`agents.interrupt`: graceful SIGINT/SIGTERM (stop, save, exit 130/143);
+- :mod:`agents.training`: option checks, TensorBoard, atomic checkpoints, resume;
 - :mod:`agents.selfplay`: iterated best response, fictitious self-play and PSRO;
 - :mod:`agents.runs`, :mod:`agents.plots`: run folders and learning curves;
 - :mod:`agents.demo`: ``make demo``.

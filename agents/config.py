@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -73,6 +75,112 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 
+MAX_SEED = 2**32 - 1
+
+# Per numeric option: integer or real, whether it accepts a value, and the allowed values.
+_Rule = tuple[type, Callable[[float], bool], str]
+_AT_LEAST_1: _Rule = (int, lambda v: v >= 1, ">= 1")
+_AT_LEAST_0: _Rule = (int, lambda v: v >= 0, ">= 0")
+_UNIT: _Rule = (float, lambda v: 0 <= v <= 1, "in [0, 1]")
+_HYPERPARAMETER_RULES: dict[str, _Rule] = {
+    "learning_rate": (float, lambda v: v > 0, "> 0"),
+    "gamma": (float, lambda v: 0 < v <= 1, "in (0, 1]"),
+    "n_steps": _AT_LEAST_1,
+    "batch_size": _AT_LEAST_1,
+    "n_epochs": _AT_LEAST_1,
+    "ent_coef": (float, lambda v: v >= 0, ">= 0"),
+    "gae_lambda": _UNIT,
+    "clip_range": (float, lambda v: v > 0, "> 0"),
+    "buffer_size": _AT_LEAST_1,
+    "learning_starts": _AT_LEAST_0,
+    "train_freq": _AT_LEAST_1,
+    "target_update_interval": _AT_LEAST_1,
+    "exploration_fraction": _UNIT,
+    "exploration_final_eps": _UNIT,
+    "tau": (float, lambda v: 0 < v <= 1, "in (0, 1]"),
+}
+
+
+def flag(name: str) -> str:
+    """``learning_rate`` -> ``learning_rate (--learning-rate)``: the field and its CLI flag."""
+    return f"{name} (--{name.replace('_', '-')})"
+
+
+def check_number(name: str, value: object, kind: type, ok: Callable[[float], bool], allowed: str):
+    """Raise unless ``value`` is a finite number of ``kind`` for which ``ok`` holds.
+
+    Raises:
+        TypeError: For a value that is not an integer (``kind=int``) or a real number.
+        ValueError: For one outside the allowed values (named in the message with the flag).
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{flag(name)} must be a number {allowed}, got {value!r}")
+    if kind is int and not isinstance(value, int):
+        raise TypeError(f"{flag(name)} must be an integer {allowed}, got {value!r}")
+    if not math.isfinite(value) or not ok(value):
+        raise ValueError(f"{flag(name)} must be {allowed}, got {value!r}")
+
+
+def check_choice(name: str, value: object, choices: tuple[str, ...]) -> None:
+    """Raise unless ``value`` is one of ``choices``.
+
+    Raises:
+        ValueError: Listing the choices.
+    """
+    if value not in choices:
+        raise ValueError(f"{flag(name)} must be one of {', '.join(choices)}, got {value!r}")
+
+
+def check_device_name(device: object) -> None:
+    """Raise unless ``device`` names a torch device (``cpu``, ``cuda``, ``cuda:1``, ``auto``).
+
+    Whether the device is present is checked by :func:`check_device_available`.
+
+    Raises:
+        ValueError: For any other string.
+    """
+    import torch
+
+    if device == "auto":
+        return
+    try:
+        torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(
+            f"{flag('device')} must be cpu, cuda, cuda:<index>, mps or auto, got {device!r}"
+        ) from None
+
+
+def check_device_available(device: str) -> None:
+    """Raise unless ``device`` is present on this machine (``auto`` always is).
+
+    Raises:
+        ValueError: For CUDA or MPS without one, or a CUDA index beyond the devices present.
+    """
+    import torch
+
+    check_device_name(device)
+    if device == "auto":
+        return
+    dev = torch.device(device)
+    if dev.type == "cuda":
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if count == 0:
+            raise ValueError(
+                f"{flag('device')}: {device!r} asked for but CUDA is not available here "
+                f"(torch {torch.__version__}); use --device cpu"
+            )
+        if dev.index is not None and dev.index >= count:
+            raise ValueError(
+                f"{flag('device')}: {device!r} asked for but this machine has {count} CUDA "
+                f"device(s), cuda:0 to cuda:{count - 1}"
+            )
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"{flag('device')}: 'mps' asked for but MPS is not available here")
+    elif dev.type not in ("cpu", "cuda", "mps"):
+        raise ValueError(f"{flag('device')} must be cpu, cuda, cuda:<index>, mps or auto")
+
+
 @dataclass
 class Hyperparameters:
     """stable-baselines3 hyperparameters; ``None`` means the algorithm's default."""
@@ -111,6 +219,19 @@ class Hyperparameters:
     """Learning rate over training: constant, or linear decay to 0 (default: PPO/A2C linear)."""
     net_arch: tuple[int, ...] | None = None
     """Hidden layer sizes of the policy and value networks (default: 64 64)."""
+
+    def __post_init__(self) -> None:
+        for name, (kind, ok, allowed) in _HYPERPARAMETER_RULES.items():
+            value = getattr(self, name)
+            if value is not None:
+                check_number(name, value, kind, ok, allowed)
+        if self.lr_schedule is not None:
+            check_choice("lr_schedule", self.lr_schedule, ("constant", "linear"))
+        if self.net_arch is not None:
+            if not isinstance(self.net_arch, tuple | list):
+                raise TypeError(f"{flag('net_arch')} must be a sequence of layer sizes")
+            for size in self.net_arch:
+                check_number("net_arch", size, int, lambda v: v >= 1, ">= 1 (each layer size)")
 
 
 HYPERPARAMETERS = tuple(f.name for f in dataclasses.fields(Hyperparameters))
@@ -153,6 +274,13 @@ def resolved_hyperparameters(algo: str, hp: Hyperparameters) -> dict[str, Any]:
             users = [a for a, d in ALGO_DEFAULTS.items() if name in d]
             raise ValueError(f"{name} does not apply to {algo}; it applies to: {', '.join(users)}")
         values[name] = given
+    if algo in ("PPO", "MaskablePPO"):
+        for name in ("n_steps", "batch_size"):
+            if values[name] < 2:
+                raise ValueError(
+                    f"{flag(name)} must be >= 2 for {algo} (it normalises advantages over a "
+                    f"minibatch), got {values[name]}"
+                )
     if values["lr_schedule"] not in ("constant", "linear"):
         raise ValueError(
             f"lr_schedule must be 'constant' or 'linear', got {values['lr_schedule']!r}"
@@ -189,6 +317,25 @@ def parse_env_kwargs(raw: dict[str, str]) -> dict[str, Any]:
     return out
 
 
+def check_env_kwargs_format(env_kwargs: object) -> None:
+    """Raise unless ``env_kwargs`` maps option names (identifiers) to values.
+
+    Which names an env accepts is checked against the env when it is built.
+
+    Raises:
+        TypeError: For something that is not a dict.
+        ValueError: For a name that is not an identifier.
+    """
+    if not isinstance(env_kwargs, dict):
+        raise TypeError(f"{flag('env_kwargs')} must map option names to values")
+    for key in env_kwargs:
+        if not isinstance(key, str) or not key.isidentifier():
+            raise ValueError(
+                f"{flag('env_kwargs')} takes name value pairs (e.g. --env-kwargs budget 4); "
+                f"{key!r} is not an option name"
+            )
+
+
 @dataclass
 class RunSettings:
     """Where and how a run is written (shared by every command)."""
@@ -209,6 +356,15 @@ class RunSettings:
     """torch device."""
     verbose: int = 0
     """stable-baselines3 verbosity (0: quiet, 1: training statistics)."""
+    trust_checkpoint: bool = False
+    """Allow --resume to load stable-baselines3 .zip / pickled replay buffers (older runs'
+    checkpoints). These are unpickled and can run any code: only for files you trust."""
+
+    def __post_init__(self) -> None:
+        check_number("seed", self.seed, int, lambda v: 0 <= v <= MAX_SEED, f"in [0, {MAX_SEED}]")
+        check_number("torch_threads", self.torch_threads, int, lambda v: v >= 1, ">= 1")
+        check_number("verbose", self.verbose, int, lambda v: v in (0, 1, 2), "0, 1 or 2")
+        check_device_name(self.device)
 
 
 @dataclass
@@ -245,6 +401,19 @@ class TrainConfig:
     agent: tyro.conf.Suppress[str] = "attacker"
     """Learning player, set by the command (attacker or defender)."""
 
+    def __post_init__(self) -> None:
+        check_choice("agent", self.agent, ("attacker", "defender"))
+        check_choice("opponent", self.opponent, ("uniform", "equilibrium"))
+        check_env_kwargs_format(self.env_kwargs)
+        for name, kind in (
+            ("total_timesteps", _AT_LEAST_1),
+            ("eval_freq", (int, lambda v: v >= 0, ">= 0 (0: no evaluations during training)")),
+            ("eval_episodes", _AT_LEAST_1),
+            ("final_eval_episodes", _AT_LEAST_1),
+            ("checkpoint_freq", (int, lambda v: v >= 0, ">= 0 (0: only the final checkpoint)")),
+        ):
+            check_number(name, getattr(self, name), *kind)
+
 
 @dataclass
 class GameConfig:
@@ -273,3 +442,9 @@ class GameConfig:
     """Run folder, seeding and output."""
     hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
     """Hyperparameters of the learner (None: the algorithm's default)."""
+
+    def __post_init__(self) -> None:
+        check_choice("method", self.method, ("psro", "fsp", "ibr"))
+        check_env_kwargs_format(self.env_kwargs)
+        for name in ("iterations", "steps_per_iteration", "final_eval_episodes"):
+            check_number(name, getattr(self, name), *_AT_LEAST_1)

@@ -1,19 +1,25 @@
-"""Run folders: naming, creation, resume lookup, config.json and atomic writes.
+"""Run folders: naming, creation, resume lookup, locking, config.json and atomic writes.
 
 A run folder is ``<runs_root>/<env>-<algo>-s<seed>-<YYYYmmdd-HHMMSS>`` and holds
 ``config.json``, ``checkpoints/``, ``tb/`` (TensorBoard), ``evaluations.jsonl``,
-``scores.json`` and ``learning_curve.png``.
+``scores.json`` and ``learning_curve.png``. A new run's folder is created only once its model
+has been built (so a launch with bad options leaves nothing behind); ``--resume`` picks only a
+folder that holds a checkpoint.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import json
 import os
+import re
+import shutil
 import tempfile
 import time
 import typing
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -30,19 +36,38 @@ RESUMABLE = frozenset(
         "run.verbose",
         "run.device",
         "run.torch_threads",
+        "run.trust_checkpoint",
     }
 )
+# The temporary files of atomic_write: ".<name>.<8 random characters>.tmp".
+TEMP_FILE = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
+def _umask() -> int:
+    """The process umask (read from /proc where it can be, without changing it)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def atomic_write(path: Path, write: Callable[[IO[bytes]], Any]) -> Path:
     """Write ``path`` through a temporary file in the same folder, then ``os.replace`` it.
 
-    A reader (or a resume after a crash) sees either the old file or the complete new one.
+    A reader (or a resume after a crash) sees either the old file or the complete new one. The
+    file gets the mode a plain ``open`` would give it (``0o666`` less the umask); a temporary
+    file left by a kill is removed by :func:`remove_stale_temp_files` on the next start.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
@@ -127,31 +152,50 @@ def run_prefix(env: str, algo: str, seed: int) -> str:
     return f"{safe_env}-{algo}-s{seed}"
 
 
-def latest_run(runs_root: Path, prefix: str) -> Path | None:
-    """The most recent ``<runs_root>/<prefix>-<time>`` folder, or None."""
-    found = sorted(p for p in Path(runs_root).glob(f"{prefix}-*") if p.is_dir())
+def latest_run(runs_root: Path, prefix: str, marker: str | None = None) -> Path | None:
+    """The most recent ``<runs_root>/<prefix>-<time>`` folder (holding ``marker``), or None."""
+    found = sorted(
+        p
+        for p in Path(runs_root).glob(f"{prefix}-*")
+        if p.is_dir() and (marker is None or (p / marker).is_file())
+    )
     return found[-1] if found else None
 
 
-def prepare_run_dir(
-    runs_root: Path, run_dir: Path | None, prefix: str, resume: bool
-) -> tuple[Path, bool]:
-    """The run folder and whether it continues an existing run.
+def resume_dir(runs_root: Path, run_dir: Path | None, prefix: str, marker: str) -> Path:
+    """The run folder ``--resume`` continues: ``run_dir`` or the latest ``<prefix>-*`` one.
 
-    New run: ``run_dir`` or ``<runs_root>/<prefix>-<time>``, which must not exist. Resume:
-    ``run_dir`` or the latest ``<prefix>-*`` folder, which must hold a config.json.
+    Only a folder holding a checkpoint (``marker``, relative to the folder) and a config.json
+    can be resumed; folders without one (a launch that failed or was killed before its first
+    checkpoint) are skipped.
 
     Raises:
-        FileExistsError: A new run's folder exists already.
-        ValueError: Nothing to resume.
+        ValueError: Nothing to resume (naming the folders looked at).
     """
-    if resume:
-        path = Path(run_dir) if run_dir is not None else latest_run(runs_root, prefix)
+    if run_dir is not None:
+        path = Path(run_dir)
+        if not path.is_dir():
+            raise ValueError(f"nothing to resume: run folder {path} (--run-dir) does not exist")
+    else:
+        path = latest_run(runs_root, prefix, marker)
         if path is None:
-            raise ValueError(f"nothing to resume: no run folder {Path(runs_root) / prefix}-*")
-        if not (path / "config.json").is_file():
-            raise ValueError(f"nothing to resume in {path}: it has no config.json")
-        return path, True
+            skipped = latest_run(runs_root, prefix)
+            raise ValueError(
+                f"nothing to resume: no run folder {Path(runs_root) / prefix}-* holds a checkpoint"
+                f" ({marker})" + (f"; {skipped} has none" if skipped is not None else "")
+            )
+    for name in ("config.json", marker):
+        if not (path / name).is_file():
+            raise ValueError(f"nothing to resume in {path}: it has no {name}")
+    return path
+
+
+def new_run_dir(runs_root: Path, run_dir: Path | None, prefix: str) -> Path:
+    """A new run's folder, ``run_dir`` or ``<runs_root>/<prefix>-<time>`` (not created here).
+
+    Raises:
+        FileExistsError: The folder exists already.
+    """
     if run_dir is None:
         run_dir = Path(runs_root) / f"{prefix}-{time.strftime('%Y%m%d-%H%M%S')}"
     path = Path(run_dir)
@@ -159,8 +203,57 @@ def prepare_run_dir(
         raise FileExistsError(
             f"run folder {path} exists; pass --resume to continue it, or choose another --run-dir"
         )
-    path.mkdir(parents=True)
-    return path, False
+    return path
+
+
+@contextmanager
+def run_lock(run_dir: Path) -> Iterator[Path]:
+    """Hold an exclusive lock on ``run_dir/.lock`` (released when the process ends, too).
+
+    Raises:
+        ValueError: When another process holds it (is training in this folder).
+    """
+    lock_path = Path(run_dir) / ".lock"
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            raise ValueError(
+                f"run folder {run_dir} is in use by another process (pid {owner}); wait for it "
+                "to finish or stop it first"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield lock_path
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def removed_unless(run_dir: Path, marker: str) -> Iterator[Path]:
+    """Remove a new run's folder if the block raises before ``run_dir/marker`` exists.
+
+    So a launch that fails (or is aborted) before its first checkpoint leaves nothing behind.
+    """
+    try:
+        yield run_dir
+    except BaseException:
+        if not (Path(run_dir) / marker).is_file():
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
+
+
+def remove_stale_temp_files(run_dir: Path) -> list[Path]:
+    """Remove the temporary files :func:`atomic_write` left in ``run_dir`` when killed.
+
+    Call it only while holding :func:`run_lock` (no other writer is running then).
+    """
+    stale = [p for p in Path(run_dir).rglob("*.tmp") if p.is_file() and TEMP_FILE.match(p.name)]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
 
 
 def read_jsonl(path: Path) -> list[dict[str, Any]]:

@@ -2,63 +2,104 @@
 
 :func:`train` runs one :class:`~agents.config.TrainConfig` end to end:
 
+- every option is checked, and the model built, before the run folder is created: a launch
+  with bad options leaves nothing behind;
 - the env and its analytic reference come from :mod:`agents.registry`; envs are built by
   zero-argument thunks (:func:`env_thunk`);
 - TensorBoard logs go to ``<run>/tb`` (SB3's own statistics plus ``eval/*``);
 - :class:`ScoreCallback` evaluates the policy every ``eval_freq`` steps with
   :func:`agents.evaluate.evaluate` and logs its score against the reference;
-- :class:`CheckpointCallback` saves ``checkpoints/model_<steps>.zip`` (and the replay buffer of
-  off-policy algorithms) every ``checkpoint_freq`` steps through a temporary file and
-  ``os.replace``, then points ``checkpoints/state.json`` at it;
-- the best-scoring model of those evaluations is kept as ``best_model.zip`` (``best.json``) and
-  gets its own row in the final table when it beats the final model;
-- ``resume`` loads the checkpoint ``state.json`` names and continues the same run: same folder,
-  ``num_timesteps``, optimizer state and replay buffer, ``reset_num_timesteps=False``.
+- :class:`CheckpointCallback` saves ``checkpoints/model_<steps>.pt`` / ``.json`` (and the replay
+  buffer of off-policy algorithms as ``replay_buffer_<steps>.npz``) every ``checkpoint_freq``
+  steps in the format of :mod:`agents.checkpoint` (tensors and JSON, nothing unpickled), each
+  file through a temporary file and ``os.replace``, then points ``checkpoints/state.json`` at it;
+- the best-scoring model of those evaluations is kept as ``best_model.pt`` / ``.json``
+  (``best.json``) and gets its own row in the final table when it beats the final model;
+- ``resume`` rebuilds the model from the run's config, loads the checkpoint ``state.json``
+  names into it and continues the same run: same folder, ``num_timesteps``, update counters,
+  optimizer state and replay buffer, ``reset_num_timesteps=False``. Its TensorBoard writer
+  purges the previous sessions' events after the checkpoint, so the step ranges do not overlap;
+- SIGINT/SIGTERM (:mod:`agents.interrupt`) end training at the next step; the final
+  checkpoint, model and scores are written and :attr:`TrainResult.interrupted` names the signal.
 """
 
 from __future__ import annotations
 
-import json
+import importlib
+import inspect
+import sys
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-from sb3_contrib import MaskablePPO
-from stable_baselines3 import A2C, DQN, PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import configure
+from stable_baselines3.common.logger import HumanOutputFormat, Logger, TensorBoardOutputFormat
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from agents.config import TrainConfig, algo_kwargs, parse_env_kwargs, resolved_hyperparameters
+from agents.algos import ALGO_CLASSES, build_model
+from agents.checkpoint import (
+    UntrustedCheckpointError,
+    inside,
+    load_model,
+    load_replay_buffer,
+    read_json,
+    save_model,
+    save_replay_buffer,
+)
+from agents.config import (
+    TrainConfig,
+    algo_kwargs,
+    check_device_available,
+    flag,
+    parse_env_kwargs,
+    resolved_hyperparameters,
+)
 from agents.evaluate import Evaluation, evaluate
+from agents.interrupt import StopTrainingCallback, stop_on_signals
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
 from agents.runs import (
-    atomic_write,
     check_resumable,
     config_dict,
-    prepare_run_dir,
+    new_run_dir,
     read_jsonl,
+    remove_stale_temp_files,
+    removed_unless,
+    resume_dir,
+    run_lock,
     run_prefix,
     write_json,
     write_jsonl,
 )
-from agents.seeding import seed_everything
+from agents.seeding import derived_seed, seed_everything
 
-ALGO_CLASSES: dict[str, type[BaseAlgorithm]] = {
-    "PPO": PPO,
-    "MaskablePPO": MaskablePPO,
-    "A2C": A2C,
-    "DQN": DQN,
-    "SAC": SAC,
-}
+__all__ = [  # ALGO_CLASSES and build_model live in agents.algos; kept here for importers
+    "ALGO_CLASSES",
+    "CheckpointState",
+    "TrainResult",
+    "UntrustedCheckpointError",
+    "build_model",
+    "load_checkpoint",
+    "save_checkpoint",
+    "train",
+]
+
 KEEP_CHECKPOINTS = 2
+CHECKPOINT_STATE = "checkpoints/state.json"  # a run folder that --resume can continue has it
+CHECKPOINT_FILES = (  # pruned to the last KEEP_CHECKPOINTS of each
+    "model_*.json",
+    "model_*.pt",
+    "model_*.zip",
+    "replay_buffer_*.npz",
+    "replay_buffer_*.pkl",
+)
 
 
 def env_thunk(
@@ -100,27 +141,103 @@ def opponent_factory(entry: Trainable, kind: str, env_kwargs: dict[str, Any]) ->
     return make
 
 
-def build_model(
-    algo: str, env: Any, kwargs: dict[str, Any], seed: int, device: str = "cpu", verbose: int = 0
-) -> BaseAlgorithm:
-    """A new SB3 ``algo`` model with an MLP policy on ``env``."""
-    return ALGO_CLASSES[algo]("MlpPolicy", env, seed=seed, device=device, verbose=verbose, **kwargs)
+def env_option_names(gym_id: str) -> tuple[str, ...]:
+    """The options (``--env-kwargs`` names) the env behind ``gym_id`` accepts."""
+    from fdia_env.registration import GYM_IDS
+
+    module, _ = GYM_IDS[gym_id]
+    params = inspect.signature(importlib.import_module(module).parallel_env).parameters
+    return tuple(n for n in params if n != "render_mode")
+
+
+def check_env_kwargs(gym_id: str, env_kwargs: dict[str, Any]) -> None:
+    """Raise unless every key of ``env_kwargs`` is an option of the env.
+
+    Raises:
+        ValueError: Naming the unknown options and listing the valid ones.
+    """
+    valid = env_option_names(gym_id)
+    unknown = [k for k in env_kwargs if k not in valid]
+    if unknown:
+        raise ValueError(
+            f"{flag('env_kwargs')}: unknown option(s) {', '.join(map(repr, unknown))} for "
+            f"{gym_id}; valid options: {', '.join(valid)}"
+        )
+
+
+def make_env(thunk: Callable[[], gym.Env], gym_id: str) -> gym.Env:
+    """``thunk()``, with an env's rejection of an option value reported as a ValueError.
+
+    Raises:
+        ValueError: Naming ``--env-kwargs`` and the env's own message.
+    """
+    try:
+        return thunk()
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{flag('env_kwargs')}: {gym_id} rejected its options: {exc}") from None
+
+
+def make_logger(folder: Path, purge_from: int | None = None, stdout: bool = False) -> Logger:
+    """SB3 logger writing TensorBoard events to ``folder`` (and a table to stdout).
+
+    Args:
+        folder: TensorBoard folder.
+        purge_from: On resume, the first step after the checkpoint: the new event file starts
+            with a ``SessionLog.START`` there, and TensorBoard hides the earlier sessions'
+            events from that step on (the resumed session logs them again), so the step
+            ranges shown do not overlap.
+        stdout: Also print SB3's statistics table.
+    """
+    from torch.utils.tensorboard import SummaryWriter
+
+    class _TensorBoard(TensorBoardOutputFormat):
+        def __init__(self) -> None:  # SB3's __init__ takes no purge_step
+            self.writer = SummaryWriter(log_dir=str(folder), purge_step=purge_from)
+            self._is_closed = False
+
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    formats = [_TensorBoard()] + ([HumanOutputFormat(sys.stdout)] if stdout else [])
+    return Logger(folder=str(folder), output_formats=formats)
 
 
 # ---------------------------------------------------------------------------- checkpoints
 
 
-def save_checkpoint(model: BaseAlgorithm, folder: Path, train_seconds: float) -> Path:
+@dataclass(frozen=True)
+class CheckpointState:
+    """What ``checkpoints/state.json`` names, resolved and checked.
+
+    Attributes:
+        model: The model file (``.json`` of :mod:`agents.checkpoint`, or a trusted ``.zip``).
+        replay_buffer: The replay buffer file (``.npz``, a trusted ``.pkl``), or None.
+        timesteps: The checkpoint's step.
+        train_seconds: Training wall time up to it.
+    """
+
+    model: Path
+    replay_buffer: Path | None
+    timesteps: int
+    train_seconds: float
+
+
+def save_checkpoint(
+    model: BaseAlgorithm,
+    folder: Path,
+    train_seconds: float,
+    algo: str,
+    hyperparameters: dict[str, Any],
+) -> Path:
     """Save ``model`` (and its replay buffer) atomically; point ``state.json`` at it.
 
-    The replay buffer is written first and ``state.json`` last, so the checkpoint it names is
-    always complete. Older checkpoints beyond the last :data:`KEEP_CHECKPOINTS` are removed.
+    The replay buffer and the model are written first and ``state.json`` last, so the
+    checkpoint it names is always complete. Older checkpoints beyond the last
+    :data:`KEEP_CHECKPOINTS` are removed. Returns the model's ``.json``.
     """
     steps = model.num_timesteps
     buffer = None
     if isinstance(model, OffPolicyAlgorithm) and model.replay_buffer is not None:
-        buffer = atomic_write(folder / f"replay_buffer_{steps}.pkl", model.save_replay_buffer)
-    path = atomic_write(folder / f"model_{steps}.zip", model.save)
+        buffer = save_replay_buffer(model.replay_buffer, folder / f"replay_buffer_{steps}.npz")
+    path = save_model(model, folder / f"model_{steps}.json", algo, hyperparameters)
     write_json(
         folder / "state.json",
         {
@@ -130,36 +247,111 @@ def save_checkpoint(model: BaseAlgorithm, folder: Path, train_seconds: float) ->
             "replay_buffer": None if buffer is None else buffer.name,
         },
     )
-    for pattern in ("model_*.zip", "replay_buffer_*.pkl"):
+    for pattern in CHECKPOINT_FILES:
         old = sorted(folder.glob(pattern), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
         for p in old[:-KEEP_CHECKPOINTS]:
             p.unlink(missing_ok=True)
     return path
 
 
-def load_checkpoint(
-    algo: str, folder: Path, env: Any, device: str = "cpu"
-) -> tuple[BaseAlgorithm, float] | None:
-    """The checkpoint ``state.json`` points at, and its training seconds (None: none yet).
+def read_checkpoint_state(folder: Path, root: Path, trusted: bool = False) -> CheckpointState:
+    """Read ``folder/state.json`` and check the files it names, loading none of them.
 
-    Off-policy models get their replay buffer back too.
+    Raises:
+        ValueError: For a corrupt state.json (naming it), a named file outside ``root`` or
+            missing.
+        UntrustedCheckpointError: For an SB3 ``.zip`` / pickled buffer without ``trusted``.
     """
-    state_path = folder / "state.json"
-    if not state_path.is_file():
+    state_path = Path(folder) / "state.json"
+    state = read_json(state_path, "checkpoint state")
+    steps, seconds = state.get("timesteps"), state.get("train_seconds")
+    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
+        raise ValueError(f"checkpoint state {state_path} is corrupt: timesteps {steps!r}")
+    if isinstance(seconds, bool) or not isinstance(seconds, int | float) or seconds < 0:
+        raise ValueError(f"checkpoint state {state_path} is corrupt: train_seconds {seconds!r}")
+    files = {}
+    for key, unsafe in (("model", ".zip"), ("replay_buffer", ".pkl")):
+        name = state.get(key)
+        if name is None and key == "replay_buffer":
+            files[key] = None
+            continue
+        path = inside(folder, name, root, f"{key.replace('_', ' ')} file in {state_path}")
+        if not path.is_file():
+            raise ValueError(f"{path}, named by {state_path}, does not exist")
+        if path.suffix == unsafe and not trusted:
+            raise UntrustedCheckpointError(
+                f"{path} (named by {state_path}) is a pickle-based stable-baselines3 file, which "
+                "can run any code when loaded; it was not loaded: pass --trust-checkpoint to load "
+                "it only if you made it yourself or trust whoever did"
+            )
+        files[key] = path
+    return CheckpointState(files["model"], files["replay_buffer"], steps, float(seconds))
+
+
+def load_checkpoint(
+    checkpoint: CheckpointState,
+    algo: str,
+    env: Any,
+    kwargs: dict[str, Any],
+    root: Path,
+    device: str = "cpu",
+    trusted: bool = False,
+) -> BaseAlgorithm:
+    """The model of ``checkpoint``, rebuilt from ``algo`` and ``kwargs`` on ``env``.
+
+    Off-policy models get their replay buffer back too. Nothing is unpickled unless
+    ``trusted`` (and the checkpoint is an SB3 ``.zip``).
+
+    Raises:
+        ValueError: As :func:`agents.checkpoint.load_model`, or when the model's step count
+            differs from the checkpoint's.
+    """
+    model = load_model(checkpoint.model, env, root, device, kwargs, algo, trusted)
+    if model.num_timesteps != checkpoint.timesteps:
+        raise ValueError(
+            f"{checkpoint.model} holds a model at {model.num_timesteps} steps, its state.json "
+            f"says {checkpoint.timesteps}"
+        )
+    if checkpoint.replay_buffer is not None and isinstance(model, OffPolicyAlgorithm):
+        load_replay_buffer(model, checkpoint.replay_buffer, root, trusted)
+    return model
+
+
+def best_model_file(run_dir: Path, trusted: bool = False) -> Path | None:
+    """The best model that ``best.json`` describes, checked but not loaded (None: none).
+
+    Runs made before the safe format have ``best_model.zip``, which needs ``trusted``.
+
+    Raises:
+        ValueError: For a corrupt best.json, or a model file outside the run folder or missing.
+        UntrustedCheckpointError: For an SB3 ``.zip`` without ``trusted``.
+    """
+    best_path = Path(run_dir) / "best.json"
+    if not best_path.is_file():
         return None
-    state = json.loads(state_path.read_text())
-    model = ALGO_CLASSES[algo].load(folder / state["model"], env=env, device=device)
-    if state.get("replay_buffer") and isinstance(model, OffPolicyAlgorithm):
-        model.load_replay_buffer(folder / state["replay_buffer"])
-    return model, float(state["train_seconds"])
+    record = read_json(best_path, "best-model record")
+    path = inside(run_dir, record.get("model", "best_model.zip"), run_dir, "best model file")
+    if not path.is_file():
+        raise ValueError(f"best model file {path}, named by {best_path}, does not exist")
+    if path.suffix == ".zip" and not trusted:
+        raise UntrustedCheckpointError(
+            f"{path} is a stable-baselines3 .zip, which can run any code when loaded; it was not "
+            "loaded: pass --trust-checkpoint to load it only if you trust it"
+        )
+    return path
 
 
 class CheckpointCallback(BaseCallback):
-    """Every ``every`` steps of ``num_timesteps``, :func:`save_checkpoint`."""
+    """Every ``every`` steps of ``num_timesteps``, ``save(model, seconds)``."""
 
-    def __init__(self, folder: Path, every: int, clock: Callable[[], float]) -> None:
+    def __init__(
+        self,
+        every: int,
+        clock: Callable[[], float],
+        save: Callable[[BaseAlgorithm, float], Path],
+    ) -> None:
         super().__init__()
-        self.folder, self.every, self.clock = folder, every, clock
+        self.every, self.clock, self.save = every, clock, save
         self.next_at = 0
 
     def _on_training_start(self) -> None:
@@ -167,7 +359,7 @@ class CheckpointCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         if self.model.num_timesteps >= self.next_at:
-            save_checkpoint(self.model, self.folder, self.clock())
+            self.save(self.model, self.clock())
             self.next_at = (self.model.num_timesteps // self.every + 1) * self.every
         return True
 
@@ -186,9 +378,9 @@ def improves(score: float | None, score_name: str, best: dict[str, Any] | None) 
 class ScoreCallback(BaseCallback):
     """Every ``every`` steps: evaluate, log ``eval/*`` to TensorBoard, append to the history.
 
-    The best-scoring model so far is kept as ``best_model.zip`` (described by ``best.json``):
-    evaluations of a deterministic policy in expected dynamics are exact, so the best one is a
-    genuine score, not a lucky draw.
+    The best-scoring model so far is kept by ``save_best`` (``best_model.json`` / ``.pt``,
+    described by ``best.json``): evaluations of a deterministic policy in expected dynamics are
+    exact, so the best one is a genuine score, not a lucky draw.
     """
 
     def __init__(
@@ -201,14 +393,16 @@ class ScoreCallback(BaseCallback):
         history: list[dict[str, Any]],
         history_path: Path,
         clock: Callable[[], float],
+        save_best: Callable[[BaseAlgorithm], Path],
     ) -> None:
         super().__init__()
         self.eval_env, self.reference, self.every = eval_env, reference, every
         self.n_episodes, self.seed = n_episodes, seed
         self.history, self.history_path, self.clock = history, history_path, clock
+        self.save_best = save_best
         self.next_at = 0
         best_path = history_path.parent / "best.json"
-        self.best = json.loads(best_path.read_text()) if best_path.is_file() else None
+        self.best = read_json(best_path, "best-model record") if best_path.is_file() else None
 
     def _on_training_start(self) -> None:
         self.next_at = (self.model.num_timesteps // self.every + 1) * self.every
@@ -221,10 +415,9 @@ class ScoreCallback(BaseCallback):
             self.history.append(record)
             write_jsonl(self.history_path, self.history)
             if improves(result.score, result.score_name, self.best):
-                run_dir = self.history_path.parent
-                atomic_write(run_dir / "best_model.zip", self.model.save)
-                self.best = record
-                write_json(run_dir / "best.json", record)
+                saved = self.save_best(self.model)
+                self.best = {**record, "model": saved.name}
+                write_json(saved.parent / "best.json", self.best)
             self.logger.record("eval/mean_return", result.mean)
             if result.reference is not None:
                 self.logger.record("eval/reference", result.reference)
@@ -262,6 +455,7 @@ class TrainResult:
         history: Evaluations during training (evaluations.jsonl).
         train_seconds: Wall time spent in ``learn`` (across resumes).
         resumed: Whether the run continued an existing folder.
+        interrupted: The signal (SIGINT 2, SIGTERM 15) that stopped training early, or None.
     """
 
     run_dir: Path
@@ -270,12 +464,7 @@ class TrainResult:
     history: list[dict[str, Any]] = field(default_factory=list)
     train_seconds: float = 0.0
     resumed: bool = False
-
-
-def _check_positive(**values: int) -> None:
-    for name, v in values.items():
-        if v < 0 or (v == 0 and name in ("total_timesteps", "final_eval_episodes")):
-            raise ValueError(f"{name.replace('_', '-')} must be positive, got {v}")
+    interrupted: int | None = None
 
 
 def train_prefix(cfg: TrainConfig) -> str:
@@ -285,72 +474,127 @@ def train_prefix(cfg: TrainConfig) -> str:
     return run_prefix(name, entry.algorithm(cfg.algo), cfg.run.seed)
 
 
-def train(cfg: TrainConfig) -> TrainResult:
+def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> TrainResult:
     """Train ``cfg.agent`` of ``cfg.env``, evaluate it and write the run folder.
+
+    Every option is checked and the model built before a new run's folder is created; if the
+    run then fails before its first checkpoint, the folder is removed. SIGINT/SIGTERM stop
+    training at the next step (the final checkpoint, model and scores are still written;
+    :attr:`TrainResult.interrupted` names the signal); a second one raises
+    :class:`agents.interrupt.Aborted` at once. The previous signal handlers are restored.
+
+    Args:
+        cfg: The attacker or defender command's settings.
+        report: Called with a line on resuming and on removing stale temporary files (None:
+            silent).
 
     Raises:
         ValueError: For an unknown env, scenario or algorithm (listing the valid names), a
-            hyperparameter that does not apply, or a resume whose options differ.
+            hyperparameter that does not apply or that SB3 rejects, an env option the env does
+            not take, a device not present, nothing to resume, a corrupt checkpoint or one
+            outside its run folder, or a resume whose options differ.
+        UntrustedCheckpointError: For a pickle-based checkpoint without
+            ``cfg.run.trust_checkpoint``.
         FileExistsError: When a new run's folder exists.
     """
-    _check_positive(
-        total_timesteps=cfg.total_timesteps,
-        eval_freq=cfg.eval_freq,
-        eval_episodes=cfg.eval_episodes,
-        final_eval_episodes=cfg.final_eval_episodes,
-        checkpoint_freq=cfg.checkpoint_freq,
-    )
+    say = report or (lambda line: None)
+    check_device_available(cfg.run.device)
     entry = get(cfg.env, cfg.agent)
     algo = entry.algorithm(cfg.algo)
     kwargs = algo_kwargs(algo, cfg.hp)
+    hyperparameters = resolved_hyperparameters(algo, cfg.hp)
     env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(entry.gym_id, env_kwargs)
     opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
-    make_eval_env = env_thunk(entry.gym_id, env_kwargs, opponent)
-    eval_env = make_eval_env()  # bad env kwargs fail here, before a run folder exists
-    reference = entry.reference_of(eval_env)
-
-    try:
-        run_dir, resumed = prepare_run_dir(
-            cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg), cfg.run.resume
-        )
-    except (ValueError, FileExistsError):
-        eval_env.close()
-        raise
+    trusted = cfg.run.trust_checkpoint
     given = config_dict(cfg)
-    if resumed:
-        saved = json.loads((run_dir / "config.json").read_text())
-        check_resumable(saved["config"], given, run_dir)
-    write_json(
-        run_dir / "config.json",
-        {
-            "command": cfg.agent,
-            "config": given,
-            "resolved": {
-                "gym_id": entry.gym_id,
-                "algo": algo,
-                "env_kwargs": env_kwargs,
-                "hyperparameters": resolved_hyperparameters(algo, cfg.hp),
-                "reference": None
-                if reference is None
-                else {"name": reference.name, "value": reference.value},
+
+    with ExitStack() as stack:
+        eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent), entry.gym_id)
+        stack.callback(eval_env.close)
+        reference = entry.reference_of(eval_env)
+        checkpoint: CheckpointState | None = None
+        if cfg.run.resume:
+            run_dir = resume_dir(
+                cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg), CHECKPOINT_STATE
+            )
+            stack.enter_context(run_lock(run_dir))
+            saved = read_json(run_dir / "config.json", "run config")
+            check_resumable(saved.get("config", {}), given, run_dir)
+            checkpoint = read_checkpoint_state(run_dir / "checkpoints", run_dir, trusted)
+            best_model_file(run_dir, trusted)  # refuse an unsafe one now, not after training
+            for stale in remove_stale_temp_files(run_dir):
+                say(f"removed a temporary file left by an interrupted write: {stale}")
+        else:
+            run_dir = new_run_dir(cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg))
+
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        vec_env = DummyVecEnv([env_thunk(entry.gym_id, env_kwargs, opponent, monitor=True)])
+        stack.callback(vec_env.close)
+        if checkpoint is not None:
+            model = load_checkpoint(
+                checkpoint, algo, vec_env, kwargs, run_dir, cfg.run.device, trusted
+            )
+            model.verbose = cfg.run.verbose
+            # fresh draws after resume
+            model.set_random_seed(derived_seed(cfg.run.seed, model.num_timesteps))
+            offset = checkpoint.train_seconds
+            say(f"resuming {run_dir} from its checkpoint at {model.num_timesteps} steps")
+        else:
+            model = build_model(
+                algo, vec_env, kwargs, cfg.run.seed, cfg.run.device, cfg.run.verbose
+            )
+            offset = 0.0
+            run_dir.mkdir(parents=True)  # only now: every option has been checked
+            stack.enter_context(removed_unless(run_dir, CHECKPOINT_STATE))
+            stack.enter_context(run_lock(run_dir))
+        write_json(
+            run_dir / "config.json",
+            {
+                "command": cfg.agent,
+                "config": given,
+                "resolved": {
+                    "gym_id": entry.gym_id,
+                    "algo": algo,
+                    "env_kwargs": env_kwargs,
+                    "hyperparameters": hyperparameters,
+                    "reference": None
+                    if reference is None
+                    else {"name": reference.name, "value": reference.value},
+                },
             },
-        },
-    )
+        )
+        model.set_logger(
+            make_logger(
+                run_dir / "tb",
+                model.num_timesteps + 1 if checkpoint else None,
+                cfg.run.verbose > 0,
+            )
+        )
+        stop = stack.enter_context(stop_on_signals())
+        return _train_and_score(
+            cfg, model, algo, kwargs, hyperparameters, run_dir, eval_env, reference, offset,
+            checkpoint is not None, stop, env_kwargs, entry,
+        )  # fmt: skip
 
-    seed_everything(cfg.run.seed, cfg.run.torch_threads)
-    vec_env = DummyVecEnv([env_thunk(entry.gym_id, env_kwargs, opponent, monitor=True)])
+
+def _train_and_score(
+    cfg: TrainConfig,
+    model: BaseAlgorithm,
+    algo: str,
+    kwargs: dict[str, Any],
+    hyperparameters: dict[str, Any],
+    run_dir: Path,
+    eval_env: gym.Env,
+    reference: Reference | None,
+    offset: float,
+    resumed: bool,
+    stop: Any,
+    env_kwargs: dict[str, Any],
+    entry: Trainable,
+) -> TrainResult:
+    """Learn (until done or stopped), write the final checkpoint, model and scores."""
     ckpt_dir = run_dir / "checkpoints"
-    loaded = load_checkpoint(algo, ckpt_dir, vec_env, cfg.run.device) if resumed else None
-    if loaded is None:
-        model = build_model(algo, vec_env, kwargs, cfg.run.seed, cfg.run.device, cfg.run.verbose)
-        offset = 0.0
-    else:
-        model, offset = loaded
-        model.verbose = cfg.run.verbose
-        model.set_random_seed(cfg.run.seed + model.num_timesteps)  # fresh draws after resume
-    formats = ["tensorboard"] + (["stdout"] if cfg.run.verbose else [])
-    model.set_logger(configure(str(run_dir / "tb"), formats))
-
     history_path = run_dir / "evaluations.jsonl"
     history = [h for h in read_jsonl(history_path) if h["timesteps"] <= model.num_timesteps]
     write_jsonl(history_path, history)
@@ -359,9 +603,15 @@ def train(cfg: TrainConfig) -> TrainResult:
     def clock() -> float:
         return offset + time.perf_counter() - start
 
-    callbacks: list[BaseCallback] = []
+    def checkpoint(m: BaseAlgorithm, seconds: float) -> Path:
+        return save_checkpoint(m, ckpt_dir, seconds, algo, hyperparameters)
+
+    def save_best(m: BaseAlgorithm) -> Path:
+        return save_model(m, run_dir / "best_model.json", algo, hyperparameters)
+
+    callbacks: list[BaseCallback] = [StopTrainingCallback(stop)]
     if cfg.checkpoint_freq:
-        callbacks.append(CheckpointCallback(ckpt_dir, cfg.checkpoint_freq, clock))
+        callbacks.append(CheckpointCallback(cfg.checkpoint_freq, clock, checkpoint))
     if cfg.eval_freq:
         callbacks.append(
             ScoreCallback(
@@ -369,38 +619,46 @@ def train(cfg: TrainConfig) -> TrainResult:
                 reference,
                 cfg.eval_freq,
                 cfg.eval_episodes,
-                cfg.run.seed + 10_000,
+                derived_seed(cfg.run.seed, 10_000),
                 history,
                 history_path,
                 clock,
+                save_best,
             )
         )
     remaining = cfg.total_timesteps - model.num_timesteps
-    if remaining > 0:
+    if remaining > 0 and not stop.requested:
         model.learn(
             remaining,
             callback=callbacks,
-            reset_num_timesteps=loaded is None,
+            reset_num_timesteps=not resumed,
             progress_bar=cfg.run.progress_bar,
         )
     train_seconds = clock()
-    save_checkpoint(model, ckpt_dir, train_seconds)
-    atomic_write(run_dir / "model.zip", model.save)
+    checkpoint(model, train_seconds)
+    save_model(model, run_dir / "model.json", algo, hyperparameters)
 
+    final_seed = derived_seed(cfg.run.seed, 20_000)
     evaluations = final_evaluations(
-        model, algo, eval_env, reference, cfg.final_eval_episodes, cfg.run.seed + 20_000
+        model, algo, eval_env, reference, cfg.final_eval_episodes, final_seed
     )
     learned = evaluations[f"learned ({algo})"]
-    best_path = run_dir / "best.json"
-    if best_path.is_file():
-        best = json.loads(best_path.read_text())
+    best_file = best_model_file(run_dir, cfg.run.trust_checkpoint)
+    if best_file is not None:
+        best = read_json(run_dir / "best.json", "best-model record")
         if best["timesteps"] != model.num_timesteps and improves(
             best["score"], best["score_name"], {"score": learned.score}
         ):
-            best_model = ALGO_CLASSES[algo].load(run_dir / "best_model.zip", device=cfg.run.device)
-            row = evaluate(
-                best_model, eval_env, cfg.final_eval_episodes, cfg.run.seed + 20_000, reference
+            best_model = load_model(
+                best_file,
+                model.get_env(),
+                run_dir,
+                cfg.run.device,
+                kwargs,
+                algo,
+                cfg.run.trust_checkpoint,
             )
+            row = evaluate(best_model, eval_env, cfg.final_eval_episodes, final_seed, reference)
             evaluations = {
                 f"learned ({algo})": learned,
                 f"best eval ({best['timesteps']} steps)": row,
@@ -414,6 +672,7 @@ def train(cfg: TrainConfig) -> TrainResult:
         {
             "num_timesteps": model.num_timesteps,
             "train_seconds": train_seconds,
+            "interrupted": stop.signum,
             "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
         },
     )
@@ -424,9 +683,10 @@ def train(cfg: TrainConfig) -> TrainResult:
         None if reference is None else reference.name,
         f"{algo} {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), seed {cfg.run.seed}",
     )
-    eval_env.close()
-    vec_env.close()
-    return TrainResult(run_dir, model, evaluations, history, train_seconds, resumed)
+    model.logger.close()
+    return TrainResult(
+        run_dir, model, evaluations, history, train_seconds, resumed, interrupted=stop.signum
+    )
 
 
 def final_evaluations(

@@ -28,7 +28,7 @@ def test_attacker_command_writes_a_complete_run_folder(tmp_path, capsys):
     run_dir = result.run_dir
     assert run_dir.parent == tmp_path / "runs"
     assert run_dir.name.startswith("sparse_attack_v0-MaskablePPO-s0-")
-    for name in ("config.json", "scores.json", "learning_curve.png", "model.zip"):
+    for name in ("config.json", "scores.json", "learning_curve.png", "model.json", "model.pt"):
         assert (run_dir / name).is_file(), name
     assert list((run_dir / "tb").glob("events.out.tfevents.*"))
     assert json.loads((run_dir / "checkpoints" / "state.json").read_text())["timesteps"] == 128
@@ -52,7 +52,7 @@ def test_covariance_attacker_trains_with_sac(tmp_path):
     )  # fmt: skip
     assert result.model.num_timesteps == 96
     assert result.evaluations["trace-optimal"].score == pytest.approx(1.0, rel=1e-12)
-    assert (result.run_dir / "checkpoints" / "replay_buffer_96.pkl").is_file()
+    assert (result.run_dir / "checkpoints" / "replay_buffer_96.npz").is_file()
 
 
 def test_defender_command_scores_exploitability(tmp_path):
@@ -83,7 +83,7 @@ def test_game_command_reports_exploitability_every_iteration(tmp_path, capsys):
         assert h["nash_conv"] == pytest.approx(e.nash_conv, abs=1e-9)
     assert np.allclose(result.x, result.history[-1]["x"])
     assert (result.run_dir / "learning_curve.png").is_file()
-    assert len(list((result.run_dir / "policies").glob("*.zip"))) == 4
+    assert len(list((result.run_dir / "policies").glob("*.pt"))) == 4
     out = capsys.readouterr().out
     assert out.count("NashConv") >= 3 and "defender LP equilibrium" in out
 
@@ -157,7 +157,9 @@ def test_help_lists_every_option_with_its_default(capsys):
     for option in ("--total-timesteps", "--resume", "--learning-rate", "--method",
                    "--steps-per-iteration", "--run-dir", "--scenario"):  # fmt: skip
         assert option in out, option
-    assert "(default: 100000)" in out and "(default: psro)" in out
+    flat = " ".join(out.split())  # the help is wrapped to the terminal's width
+    assert "(default: 100000)" in flat and "(default: psro)" in flat
+    assert "--trust-checkpoint" in out
 
 
 def test_game_resume_continues_the_iterations(tmp_path):

@@ -1,0 +1,356 @@
+"""Checkpoints that cannot run code: tensors, JSON and plain arrays, never pickle.
+
+A saved model is a pair of files side by side:
+
+- ``<name>.pt``: ``torch.save`` of ``{"state_dicts": {...}, "variables": {...}}``, the state
+  dicts of the policy and of every optimizer (SB3's ``get_parameters``) and the loose tensors
+  SB3 keeps (SAC's entropy coefficient). It is read with ``torch.load(weights_only=True)``, which
+  rebuilds tensors and plain containers only and refuses any other object;
+- ``<name>.json``: the format tag, the algorithm, its hyperparameters, ``num_timesteps``, the
+  counters training continues from (``_n_updates``, ``_episode_num``, DQN's ``_n_calls`` and
+  ``exploration_rate``), the ``.pt`` file's name and its SHA-256. No random-generator state.
+
+Loading rebuilds the model from its algorithm and hyperparameters on an env (for the spaces) and
+loads the state dicts into it. A replay buffer is an ``.npz`` of its filled rows, read with
+``np.load(allow_pickle=False)``.
+
+stable-baselines3's own ``.zip`` files (and ``save_replay_buffer``'s pickles) are unpickled when
+loaded and can run any code; they load only with ``trusted=True`` (``--trust-checkpoint``). Every
+path a checkpoint names is resolved inside its run folder; one outside it (an absolute path,
+``..``, a symlink pointing out) is refused.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pickle
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.save_util import recursive_getattr
+
+from agents.algos import ALGO_CLASSES, build_model
+from agents.config import Hyperparameters, algo_kwargs
+from agents.runs import atomic_write, write_json
+
+FORMAT = "fdia_env-sb3-state-v1"
+BUFFER_FORMAT = "fdia_env-replay-buffer-v1"
+# Counters SB3 continues from when training resumes (whichever the algorithm has).
+COUNTERS = ("num_timesteps", "_n_updates", "_episode_num", "_n_calls", "exploration_rate")
+BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+TRUST_HINT = (
+    "pass --trust-checkpoint (trusted=True) to load it only if you made it yourself or trust "
+    "whoever did"
+)
+
+
+class UntrustedCheckpointError(ValueError):
+    """A checkpoint that can only be read by unpickling, asked for without ``trusted=True``."""
+
+
+def inside(folder: Path, name: str | Path, root: Path, what: str = "checkpoint file") -> Path:
+    """``folder / name`` resolved, which must lie inside ``root`` (the run folder).
+
+    Raises:
+        ValueError: For an absolute ``name``, one with ``..``, or one that resolves (through
+            symlinks) outside ``root``; the message names the path and the run folder.
+    """
+    if not isinstance(name, str | Path) or not str(name):
+        raise ValueError(f"{what} must be a file name inside the run folder {root}, got {name!r}")
+    raw = Path(name)
+    resolved_root = Path(root).resolve()
+    if raw.is_absolute() or ".." in raw.parts:
+        raise ValueError(
+            f"{what} {str(name)!r} is outside the run folder {resolved_root}: only names inside "
+            "it are loaded"
+        )
+    path = (Path(folder) / raw).resolve()
+    if not path.is_relative_to(resolved_root):
+        raise ValueError(
+            f"{what} {str(name)!r} resolves to {path}, outside the run folder {resolved_root}: "
+            "only files inside it are loaded"
+        )
+    return path
+
+
+def read_json(path: Path, what: str = "file") -> dict[str, Any]:
+    """A JSON object from ``path``.
+
+    Raises:
+        ValueError: For a missing, unreadable or corrupt file (naming it).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{what} {path} does not exist")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{what} {path} is corrupt or unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{what} {path} is corrupt: expected a JSON object")
+    return data
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------------------- models
+
+
+def save_model(
+    model: BaseAlgorithm, path: Path, algo: str, hyperparameters: dict[str, Any]
+) -> Path:
+    """Write ``path.with_suffix(".pt")`` and then ``path.with_suffix(".json")``, atomically.
+
+    Args:
+        model: The model to save.
+        path: Either file of the pair (its suffix is replaced).
+        algo: The algorithm's name (a key of :data:`~agents.algos.ALGO_CLASSES`).
+        hyperparameters: Its resolved hyperparameters
+            (:func:`~agents.config.resolved_hyperparameters`), to rebuild it.
+
+    Returns:
+        The ``.json`` path (what a loader is given).
+    """
+    path = Path(path)
+    _, variable_names = model._get_torch_save_params()
+    payload = {
+        "state_dicts": model.get_parameters(),
+        "variables": {
+            name: recursive_getattr(model, name).detach().cpu().clone() for name in variable_names
+        },
+    }
+    tensors = atomic_write(path.with_suffix(".pt"), lambda fh: torch.save(payload, fh))
+    counters = {k: getattr(model, k) for k in COUNTERS if hasattr(model, k)}
+    meta = {
+        "format": FORMAT,
+        "algo": algo,
+        "hyperparameters": hyperparameters,
+        "num_timesteps": int(model.num_timesteps),
+        "counters": {k: v if isinstance(v, float) else int(v) for k, v in counters.items()},
+        "tensors": tensors.name,
+        "sha256": _sha256(tensors),
+    }
+    return write_json(path.with_suffix(".json"), meta)
+
+
+def load_model(
+    path: Path,
+    env: Any,
+    root: Path,
+    device: str = "cpu",
+    kwargs: dict[str, Any] | None = None,
+    algo: str | None = None,
+    trusted: bool = False,
+) -> BaseAlgorithm:
+    """The model saved at ``path`` (a ``.json`` from :func:`save_model`, or an SB3 ``.zip``).
+
+    Args:
+        path: The file to load, which must lie inside ``root``.
+        env: An env with the model's spaces (a gym env or a vector env); the model is built
+            on it.
+        root: The run folder that must hold ``path`` and the files it names.
+        device: torch device.
+        kwargs: SB3 constructor kwargs (default: from the hyperparameters in the ``.json``).
+        algo: The expected algorithm (checked against the file; required for a ``.zip``).
+        trusted: Allow an SB3 ``.zip``, which is unpickled and can run code.
+
+    Raises:
+        UntrustedCheckpointError: For a ``.zip`` without ``trusted``.
+        ValueError: For a path outside ``root``, a missing or corrupt file, a tensor file that
+            holds anything but tensors and containers, or one that does not fit the model.
+    """
+    path = inside(Path(path).parent, Path(path).name, root, "model file")
+    if path.suffix == ".zip":
+        return _load_sb3_zip(path, env, device, algo, trusted)
+    if path.suffix != ".json":
+        raise ValueError(
+            f"model file {path}: expected a .json checkpoint description (with its .pt tensors) "
+            "or, with --trust-checkpoint, a stable-baselines3 .zip"
+        )
+    meta = read_json(path, "model description")
+    if meta.get("format") != FORMAT:
+        raise ValueError(f"model description {path}: format {meta.get('format')!r}, not {FORMAT}")
+    if algo is not None and meta.get("algo") != algo:
+        raise ValueError(f"model description {path} holds a {meta.get('algo')} model, not {algo}")
+    if meta.get("algo") not in ALGO_CLASSES:
+        raise ValueError(f"model description {path}: unknown algorithm {meta.get('algo')!r}")
+    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
+    if not tensors.is_file():
+        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
+    if _sha256(tensors) != meta.get("sha256"):
+        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    payload = load_tensors(tensors, device)
+    if kwargs is None:
+        kwargs = algo_kwargs(meta["algo"], Hyperparameters(**meta["hyperparameters"]))
+    model = build_model(meta["algo"], env, kwargs, seed=None, device=device)
+    restore(model, payload, meta.get("counters", {}), tensors)
+    return model
+
+
+def load_tensors(path: Path, device: str = "cpu") -> dict[str, Any]:
+    """``torch.load(path, weights_only=True)``: tensors and plain containers, nothing else.
+
+    Raises:
+        ValueError: When the file holds other objects (a pickle that could run code is refused
+            before anything in it runs) or is not a torch file.
+    """
+    try:
+        payload = torch.load(path, map_location=device, weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError, OSError, ValueError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(
+            f"tensor file {path} is not a weights-only torch file and was not loaded ({first})"
+        ) from None
+    if (
+        not isinstance(payload, dict)
+        or not isinstance(payload.get("state_dicts"), dict)
+        or not isinstance(payload.get("variables"), dict)
+    ):
+        raise ValueError(f"tensor file {path} does not hold a {FORMAT} checkpoint")
+    return payload
+
+
+def restore(
+    model: BaseAlgorithm, payload: dict[str, Any], counters: dict[str, Any], source: Path
+) -> None:
+    """Load the state dicts, tensors and counters of a checkpoint into a freshly built model.
+
+    Raises:
+        ValueError: When they do not fit the model (another algorithm or network).
+    """
+    state_names, variable_names = model._get_torch_save_params()
+    if set(payload["state_dicts"]) != set(state_names) or set(payload["variables"]) != set(
+        variable_names
+    ):
+        raise ValueError(
+            f"checkpoint {source} holds {sorted(payload['state_dicts'])} and "
+            f"{sorted(payload['variables'])}; the model needs {sorted(state_names)} and "
+            f"{sorted(variable_names)}"
+        )
+    try:
+        model.set_parameters(payload["state_dicts"], exact_match=True, device=model.device)
+        for name, tensor in payload["variables"].items():
+            target = recursive_getattr(model, name)
+            if not isinstance(tensor, torch.Tensor) or tensor.shape != target.shape:
+                raise ValueError(f"variable {name} has the wrong shape")
+            target.data.copy_(tensor)
+    except (RuntimeError, ValueError, KeyError) as exc:
+        raise ValueError(
+            f"checkpoint {source} does not fit the model built from the run's config: {exc}"
+        ) from None
+    for name, value in counters.items():
+        if name not in COUNTERS or not hasattr(model, name):
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"checkpoint {source}: counter {name} is not a number: {value!r}")
+        setattr(model, name, value)
+
+
+def _load_sb3_zip(
+    path: Path, env: Any, device: str, algo: str | None, trusted: bool
+) -> BaseAlgorithm:
+    if not trusted:
+        raise UntrustedCheckpointError(
+            f"{path} is a stable-baselines3 .zip, which is loaded by unpickling and can run any "
+            f"code; it was not loaded: {TRUST_HINT}"
+        )
+    if algo is None:
+        raise ValueError(f"loading the stable-baselines3 .zip {path} needs its algorithm")
+    if not path.is_file():
+        raise ValueError(f"model file {path} does not exist")
+    return ALGO_CLASSES[algo].load(path, env=env, device=device)
+
+
+# ---------------------------------------------------------------------------- replay buffers
+
+
+def save_replay_buffer(buffer: ReplayBuffer, path: Path) -> Path:
+    """Write the filled rows of ``buffer`` (and its position) as an ``.npz``, atomically."""
+    filled = buffer.buffer_size if buffer.full else buffer.pos
+    arrays: dict[str, np.ndarray] = {
+        "format": np.array(BUFFER_FORMAT),
+        "buffer_size": np.array(buffer.buffer_size),
+        "pos": np.array(buffer.pos),
+        "full": np.array(bool(buffer.full)),
+    }
+    for name in BUFFER_ARRAYS:
+        value = getattr(buffer, name, None)
+        if isinstance(value, dict):
+            arrays.update({f"{name}.{k}": v[:filled] for k, v in value.items()})
+        elif value is not None:
+            arrays[name] = value[:filled]
+    return atomic_write(Path(path), lambda fh: np.savez(fh, **arrays))
+
+
+def load_replay_buffer(model: BaseAlgorithm, path: Path, root: Path, trusted: bool = False) -> None:
+    """Fill ``model.replay_buffer`` from :func:`save_replay_buffer`'s ``.npz``.
+
+    A ``.pkl`` from SB3's ``save_replay_buffer`` is unpickled, so it loads only with
+    ``trusted=True``.
+
+    Raises:
+        UntrustedCheckpointError: For a ``.pkl`` without ``trusted``.
+        ValueError: For a path outside ``root``, a missing or corrupt file, or arrays that do
+            not fit the model's buffer.
+    """
+    path = inside(Path(path).parent, Path(path).name, root, "replay buffer file")
+    if not path.is_file():
+        raise ValueError(f"replay buffer file {path} does not exist")
+    if path.suffix == ".pkl":
+        if not trusted:
+            raise UntrustedCheckpointError(
+                f"{path} is a pickled replay buffer, which can run any code when loaded; it was "
+                f"not loaded: {TRUST_HINT}"
+            )
+        model.load_replay_buffer(path)
+        return
+    buffer = model.replay_buffer
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (ValueError, OSError, EOFError) as exc:  # includes "pickled data" refusals
+        raise ValueError(f"replay buffer file {path} is not a plain .npz ({exc})") from None
+    if str(arrays.get("format", "")) != BUFFER_FORMAT:
+        raise ValueError(f"replay buffer file {path} is not a {BUFFER_FORMAT} file")
+    size, pos, full = (arrays[k].item() for k in ("buffer_size", "pos", "full"))
+    if size != buffer.buffer_size:
+        raise ValueError(
+            f"replay buffer file {path} holds a buffer of {size} rows, the model's has "
+            f"{buffer.buffer_size} (--buffer-size)"
+        )
+    filled = size if full else pos
+    if not 0 <= pos < size:
+        raise ValueError(f"replay buffer file {path}: position {pos} outside [0, {size})")
+    targets: dict[str, np.ndarray] = {}
+    for name in BUFFER_ARRAYS:
+        value = getattr(buffer, name, None)
+        if isinstance(value, dict):
+            targets.update({f"{name}.{k}": v for k, v in value.items()})
+        elif value is not None:
+            targets[name] = value
+    if set(targets) != set(arrays) - {"format", "buffer_size", "pos", "full"}:
+        raise ValueError(
+            f"replay buffer file {path} holds {sorted(arrays)}, the model's buffer needs "
+            f"{sorted(targets)}"
+        )
+    for name, target in targets.items():
+        src = arrays[name]
+        if src.shape != (filled, *target.shape[1:]) or src.dtype != target.dtype:
+            raise ValueError(
+                f"replay buffer file {path}: {name} has shape {src.shape} {src.dtype}, expected "
+                f"{(filled, *target.shape[1:])} {target.dtype}"
+            )
+    for name, target in targets.items():
+        target[:filled] = arrays[name]
+    buffer.pos, buffer.full = int(pos), bool(full)
