@@ -31,15 +31,18 @@ from fdia_env.envs.single_agent import Policy
 class RandomPolicy:
     """Uniformly random legal actions (SB3 ``predict`` signature, reads ``action_masks``).
 
+    Reproducible per episode: :func:`play` and :func:`play_batched` call
+    :meth:`seed_episodes` with each episode's seed, and member ``j`` of a batch draws from the
+    generator of episode ``j``, so batched and sequential evaluation play the same episodes.
+
     Args:
         action_space: The env's action space.
-        seed: Seed of the policy's generator (the space is seeded with it).
+        seed: Seed of the policy's generator until :meth:`seed_episodes` is called.
     """
 
     def __init__(self, action_space: spaces.Space, seed: int | None = None) -> None:
         self.action_space = action_space
-        self.rng = np.random.default_rng(seed)
-        action_space.seed(seed)
+        self.rngs = [np.random.default_rng(seed)]
 
     @property
     def probs(self) -> np.ndarray | None:
@@ -47,6 +50,17 @@ class RandomPolicy:
         if isinstance(self.action_space, spaces.Discrete):
             return np.full(int(self.action_space.n), 1.0 / int(self.action_space.n))
         return None
+
+    def seed_episodes(self, seeds: list[int]) -> None:
+        """One generator per episode of the next (batch of) episode(s), in member order."""
+        self.rngs = [np.random.default_rng([int(s), 0x5EED]) for s in seeds]
+
+    def _draw(self, rng: np.random.Generator, mask: np.ndarray | None) -> Any:
+        space = self.action_space
+        if isinstance(space, spaces.Discrete):
+            legal = np.ones(int(space.n), bool) if mask is None else np.asarray(mask, bool)
+            return np.int64(space.start + np.argmax(rng.random(legal.shape) * legal))
+        return rng.uniform(space.low, space.high, space.shape).astype(space.dtype)
 
     def predict(
         self,
@@ -58,23 +72,16 @@ class RandomPolicy:
     ) -> tuple[Any, Any]:
         """A uniformly random action (among ``action_masks`` when given); batched for (B, d)."""
         obs = np.asarray(observation) if observation is not None else np.zeros(0)
-        batch = obs.shape[0] if obs.ndim >= 2 else None
-        if batch is not None:
-            space = self.action_space
-            if isinstance(space, spaces.Discrete):
-                legal = (
-                    np.ones((batch, int(space.n)), dtype=bool)
-                    if action_masks is None
-                    else np.asarray(action_masks, dtype=bool)
-                )
-                return np.argmax(self.rng.random(legal.shape) * legal, axis=1), state
-            return self.rng.uniform(space.low, space.high, (batch, *space.shape)).astype(
-                space.dtype
-            ), state
-        if action_masks is not None and isinstance(self.action_space, spaces.Discrete):
-            legal = np.flatnonzero(np.asarray(action_masks, dtype=bool))
-            return np.int64(self.rng.choice(legal)), state
-        return self.action_space.sample(), state
+        if obs.ndim < 2:
+            return self._draw(self.rngs[0], action_masks), state
+        batch = obs.shape[0]
+        if len(self.rngs) != batch:
+            raise ValueError(
+                f"RandomPolicy has {len(self.rngs)} episode generators for a batch of {batch}: "
+                "call seed_episodes() with one seed per member first"
+            )
+        masks = [None] * batch if action_masks is None else list(action_masks)
+        return np.stack([self._draw(r, m) for r, m in zip(self.rngs, masks, strict=True)]), state
 
 
 @dataclass(frozen=True)
@@ -198,6 +205,8 @@ def play(
     returns, first_actions = np.zeros(n_episodes), []
     for i in range(n_episodes):
         obs, _ = env.reset(seed=seed + i)
+        if hasattr(policy, "seed_episodes"):
+            policy.seed_episodes([seed + i])
         done, total, first = False, 0.0, True
         while not done:
             kwargs = {"action_masks": masks_fn()} if pass_masks else {}
@@ -239,15 +248,19 @@ def play_batched(
     returns, first_actions = [], []
     for start in range(0, n_episodes, B):
         obs, _ = venv.reset(seed=seed + start)
-        total = np.zeros(B)
-        for t in range(view.parallel.spec.horizon):
+        if hasattr(policy, "seed_episodes"):
+            policy.seed_episodes([seed + start + j for j in range(B)])
+        total, done, t = np.zeros(B), np.zeros(B, dtype=bool), 0
+        while not done.all():  # every member ends at the same step (a fixed window)
             kwargs = {"action_masks": venv.action_masks()} if pass_masks else {}
             action, _ = policy.predict(obs, deterministic=deterministic, **kwargs)
             action = np.asarray(action)
             if t == 0:
                 first_actions.extend(list(action))
-            obs, reward, _, _, _ = venv.step(action)
-            total += reward
+            obs, reward, terminated, truncated, _ = venv.step(action)
+            total += np.where(done, 0.0, reward)
+            done |= terminated | truncated
+            t += 1
         returns.append(total)
     return np.concatenate(returns)[:n_episodes], first_actions[:n_episodes]
 

@@ -6,6 +6,7 @@ import pytest
 import scipy.stats
 import torch
 
+import fdia_env
 from agents import registry
 from agents.config import Hyperparameters, algo_kwargs, parse_env_kwargs
 from agents.evaluate import evaluate, t_interval
@@ -199,3 +200,18 @@ def test_batched_random_policy_respects_masks():
     env = registry.get("sparse_attack_v0").view()
     result = evaluate("random", env, 64, seed=0, num_envs=32)
     assert result.returns.shape == (64,) and np.all(result.returns > 0)
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+@pytest.mark.parametrize("env_id", sorted(fdia_env.registration.GYM_IDS))
+def test_batched_evaluation_equals_sequential_for_every_id_with_default_opponents(env_id, dynamics):
+    # the random policy and the views' default opponents (the sensor game's uniform mix
+    # included) draw per episode, so episode i is the same in both loops
+    kwargs = {"dynamics": dynamics}
+    if "SensorGame" in env_id:
+        kwargs["rounds"] = 3
+    env = gym.make(env_id, **kwargs)
+    one_by_one = evaluate("random", env, 7, seed=5)
+    batched = evaluate("random", env, 7, seed=5, num_envs=3)  # rounds of 3, 3 and 1 episodes
+    np.testing.assert_allclose(batched.returns, one_by_one.returns, rtol=1e-9, atol=1e-12)
+    assert np.ptp(one_by_one.returns) > 0  # the episodes differ: the comparison can fail

@@ -141,6 +141,10 @@ class DefenseModel(ABC):
     def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
         """Batched :meth:`observe_opponent`."""
 
+    def batch_action_mask(self) -> np.ndarray | None:
+        """(B, A) legal actions (int8) or None (every action legal)."""
+        return None
+
     def batch_features(self) -> np.ndarray:
         """(B, f) features of every batch member (none by default)."""
         return np.zeros((self._batch, 0))
