@@ -138,7 +138,7 @@ class _Saddle:
         mean = float(dof @ lam)
         if lower:  # K'(−g) = Σ k λ / (1 + 2 λ g) decreases from the mean to 0
             lo = math.log(mean - x) - math.log(2.0 * self.top) - math.log(mean)
-            hi = math.log(dof.sum() / (2.0 * x))
+            hi = math.log(dof.sum() / x)  # K(−g) < Σ k / (2 g) = x / 2 there
         else:  # K' increases from the mean (δ = 1) to ∞ (δ → 0)
             lo = math.log(0.5 * min(1.0, float(dof[np.argmax(lam)]) * self.top / x))
             hi = 0.0
