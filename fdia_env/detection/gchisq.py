@@ -295,12 +295,17 @@ def _map(x: float | np.ndarray, weights: np.ndarray, which: int) -> np.ndarray:
 
 def quadratic_sf(threshold: float, A: np.ndarray, cov: np.ndarray) -> float:
     """``P(y' A y > threshold)`` for ``y ~ N(0, cov)`` and PSD ``A``."""
-    return float(gchisq_sf(threshold, quadratic_form_weights(A, cov)))
+    return quadratic_tails(threshold, A, cov)[1]
 
 
 def quadratic_tails(threshold: float, A: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
-    """``(P(y' A y <= threshold), P(y' A y > threshold))`` for ``y ~ N(0, cov)``, PSD ``A``."""
-    return gchisq_tails(threshold, quadratic_form_weights(A, cov))
+    """``(P(y' A y <= threshold), P(y' A y > threshold))`` for ``y ~ N(0, cov)``, PSD ``A``.
+
+    ``A`` is PSD by construction (e.g. ``Pzz0⁻¹ − Pzz1⁻¹``), so negative weights are rounding
+    (of a difference of inverses, amplified by ``cov`` ~ a²) and are set to 0.
+    """
+    weights = np.clip(quadratic_form_weights(A, cov), 0.0, None)
+    return gchisq_tails(float(threshold), weights)
 
 
 def gchisq_sf_mc(
