@@ -9,6 +9,11 @@ import numpy as np
 
 _SYM_RTOL = 1e-9
 
+# Largest admissible attack power a² (a covariance trace). Beyond it sums such as Pzz0 + Σ and
+# the symmetrisation (A + A')/2 can overflow; the detection numerics are validated up to it
+# (tests/test_numerics.py). Physically every error limit is reached long before (MATH.md §3).
+MAX_POWER = 1e300
+
 
 def as_matrix(
     name: str, value: Any, shape: tuple[int | None, int | None] | None = None
@@ -124,3 +129,22 @@ def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
 
 def _fmt_shape(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
+
+
+def check_power(name: str, value: Any, *, allow_zero: bool = False) -> float:
+    """Attack power ``a²`` as a float in ``(0, MAX_POWER]`` (``[0, ...]`` if ``allow_zero``).
+
+    Raises:
+        ValueError: Naming ``name`` and the allowed range, for a non-number, NaN, inf, a value
+            out of range or a bool.
+    """
+    low = "0 <=" if allow_zero else "0 <"
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(
+            f"{name} must be a number with {low} {name} <= {MAX_POWER:g}, got {value!r}"
+        )
+    value = float(value)
+    ok = (value >= 0.0 if allow_zero else value > 0.0) and value <= MAX_POWER  # NaN fails
+    if not ok:
+        raise ValueError(f"{name} must satisfy {low} {name} <= {MAX_POWER:g}, got {value}")
+    return value

@@ -8,13 +8,14 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from fdia_env._validation import check_int
+from fdia_env._validation import check_int, check_positive
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
 
 
@@ -187,16 +188,25 @@ def get(name: str, **kwargs: Any) -> Scenario:
             ``ch4-random``.
 
     Raises:
-        ValueError: For an unknown name (the message lists the known ones) or unknown options.
+        ValueError: For an unknown name (the message lists the known ones), an option the
+            preset does not take (the message lists those it takes), or a bad option value
+            (``horizon`` an integer >= 1, ``seed`` an integer >= 0, ``sigma_v`` > 0).
     """
-    if name not in _PRESETS:
+    if not isinstance(name, str) or name not in _PRESETS:
         raise ValueError(f"unknown scenario {name!r}; known scenarios: {', '.join(_PRESETS)}")
-    if "horizon" in kwargs:
-        check_int("horizon", kwargs["horizon"], minimum=1)
-    try:
-        return _PRESETS[name](**kwargs)
-    except TypeError as exc:
-        raise ValueError(f"scenario {name!r} does not take options {sorted(kwargs)}") from exc
+    accepted = inspect.signature(_PRESETS[name]).parameters
+    unknown = sorted(set(kwargs) - set(accepted))
+    if unknown:
+        takes = sorted(accepted) or "none"
+        raise ValueError(f"scenario {name!r} does not take options {unknown}; it takes {takes}")
+    for option, value in kwargs.items():  # validated here: the builders trust their options
+        if option == "horizon":
+            check_int("horizon", value, minimum=1)
+        elif option == "seed":
+            check_int("seed", value, minimum=0)  # numpy seeds are non-negative integers
+        elif option == "sigma_v":
+            check_positive("sigma_v", value)
+    return _PRESETS[name](**kwargs)
 
 
 def resolve(scenario: str | Scenario | LinearSystem) -> Scenario:

@@ -48,11 +48,18 @@ from baselines.detection.evaluate import (
     MonteCarlo,
     MonteCarloStats,
     bayes_cost,
+    decision_probabilities,
     detection_probabilities,
     expected_mse,
     monte_carlo,
 )
-from baselines.detection.gchisq import gchisq_sf, gchisq_sf_mc, quadratic_form_weights
+from baselines.detection.gchisq import (
+    gchisq_cdf,
+    gchisq_sf,
+    gchisq_sf_mc,
+    gchisq_tails,
+    quadratic_form_weights,
+)
 from baselines.detection.mmse import MMSEEstimator, MMSEResult, mmse
 from baselines.detection.policy import as_policy
 from baselines.detection.problem import (
@@ -83,10 +90,13 @@ __all__ = [
     "c2_optimal_pbb",
     "cbd",
     "csd",
+    "decision_probabilities",
     "detection_probabilities",
     "expected_mse",
+    "gchisq_cdf",
     "gchisq_sf",
     "gchisq_sf_mc",
+    "gchisq_tails",
     "mmse",
     "monte_carlo",
     "obdd",

@@ -65,10 +65,24 @@ class Costs:
     c3: float
     c4: float
 
-    def bayes(self, p1: float, p_d: float, p_fa: float) -> float:
-        """``p1[P_d c1 + (1 − P_d) c2] + p0[P_fa c3 + (1 − P_fa) c4]``."""
-        h1 = p_d * self.c1 + (1.0 - p_d) * self.c2
-        h0 = p_fa * self.c3 + (1.0 - p_fa) * self.c4
+    def bayes(
+        self,
+        p1: float,
+        p_d: float,
+        p_fa: float,
+        p_miss: float | None = None,
+        p_cr: float | None = None,
+    ) -> float:
+        """``p1[P_d c1 + P_miss c2] + p0[P_fa c3 + P_cr c4]``.
+
+        ``p_miss`` (``P(D0|H1)``) and ``p_cr`` (``P(D0|H0)``) default to ``1 − P_d`` and
+        ``1 − P_fa``; pass them when known directly: under a strong attack c2 ~ a² and
+        ``1 − P_d`` has lost every digit (:func:`~baselines.detection.evaluate.bayes_cost`).
+        """
+        p_miss = 1.0 - p_d if p_miss is None else p_miss
+        p_cr = 1.0 - p_fa if p_cr is None else p_cr
+        h1 = (p_d * self.c1 if p_d else 0.0) + (p_miss * self.c2 if p_miss else 0.0)
+        h0 = (p_fa * self.c3 if p_fa else 0.0) + (p_cr * self.c4 if p_cr else 0.0)
         return p1 * h1 + (1.0 - p1) * h0
 
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from baselines.detection.detectors import Costs, Detector, detect_gain, strategy_costs
-from baselines.detection.gchisq import quadratic_sf
+from baselines.detection.gchisq import quadratic_tails
 from baselines.detection.mmse import MMSEEstimator
 from baselines.detection.problem import DetectionProblem
 from fdia_env._validation import check_int
@@ -54,12 +54,25 @@ def detection_probabilities(
     """``(P_fa, P_d)`` of ``detector`` when the data follow ``truth`` (default its own model).
 
     ``P(D1|H_h) = P(y' M y > threshold)``, ``y ~ N(0, Pzz_h)`` of ``truth``, M the statistic's
-    matrix (:func:`~baselines.detection.gchisq.quadratic_sf`).
+    matrix (:func:`decision_probabilities`).
+    """
+    _, p_fa, _, p_d = decision_probabilities(detector, truth)
+    return p_fa, p_d
+
+
+def decision_probabilities(
+    detector: Detector, truth: DetectionProblem | None = None
+) -> tuple[float, float, float, float]:
+    """``(P(D0|H0), P(D1|H0), P(D0|H1), P(D1|H1))``, each accurate relative to its size.
+
+    ``P(D0|H1)`` of a strong attack is tiny and multiplies the missed-attack cost c2 ~ a², so it
+    is computed directly (:func:`~fdia_env.detection.gchisq.gchisq_tails`), never as
+    ``1 − P_d``.
     """
     t = _truth(detector, truth)
-    p_fa = quadratic_sf(detector.threshold, detector.matrix, t.Pzz0)
-    p_d = quadratic_sf(detector.threshold, detector.matrix, t.Pzz1)
-    return p_fa, p_d
+    p_cr, p_fa = quadratic_tails(detector.threshold, detector.matrix, t.Pzz0)
+    p_miss, p_d = quadratic_tails(detector.threshold, detector.matrix, t.Pzz1)
+    return p_cr, p_fa, p_miss, p_d
 
 
 @dataclass(frozen=True)
@@ -89,9 +102,9 @@ def bayes_cost(detector: Detector, truth: DetectionProblem | None = None) -> Bay
         (1.0, 1.0, 50.9451)
     """
     t = _truth(detector, truth)
-    p_fa, p_d = detection_probabilities(detector, t)
+    p_cr, p_fa, p_miss, p_d = decision_probabilities(detector, t)
     costs = strategy_costs(detector.problem, detector.on_detect, t)
-    return BayesCost(p_fa, p_d, costs, costs.bayes(t.p1, p_d, p_fa))
+    return BayesCost(p_fa, p_d, costs, costs.bayes(t.p1, p_d, p_fa, p_miss, p_cr))
 
 
 def expected_mse(detector: Detector, truth: DetectionProblem | None = None) -> float:

@@ -29,6 +29,7 @@ import numpy as np
 
 from baselines.detection.attack import c2_optimal_pbb
 from fdia_env._validation import as_matrix, as_vector, check_psd
+from fdia_env._validation import check_power as _check_power
 from fdia_env.kalman import information_update, logdet, predict_cov, spd_inv, steady_state
 from fdia_env.scenarios import Scenario, resolve
 
@@ -44,13 +45,8 @@ def check_probability(name: str, value: Any) -> float:
 
 
 def check_power(value: Any) -> float:
-    """Attack power ``a² >= 0`` as a float, else ``ValueError`` naming ``power``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"power must be a number >= 0, got {value!r}")
-    value = float(value)
-    if not np.isfinite(value) or value < 0.0:
-        raise ValueError(f"power must be a finite number >= 0, got {value}")
-    return value
+    """Attack power ``a²`` in ``[0, MAX_POWER]`` as a float, else a ``ValueError``."""
+    return _check_power("power", value, allow_zero=True)
 
 
 @dataclass(frozen=True, eq=False)

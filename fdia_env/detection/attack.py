@@ -69,4 +69,4 @@ def c2_optimal_pbb(
     u = vectors[:, -1]
     u = u * np.sign(u[np.argmax(np.abs(u))])
     Pbb = float(power) * (inv_half @ np.outer(u, u) @ inv_half)
-    return 0.5 * (Pbb + Pbb.T)
+    return 0.5 * Pbb + 0.5 * Pbb.T  # halves first: no overflow at the largest powers

@@ -19,7 +19,22 @@ eigenvectors V of ``L'AL`` (eigenvalues λ) gives independent ``v_i ~ N(0, 1)`` 
                         = Σ_i g_ii P(λ_i χ²₃ + Σ_{j≠i} λ_j χ²₁ > τ),
 
 (``g = V'L'GLV``; off-diagonal terms vanish by symmetry, and ``E[v² f(v²)] = E[f(χ²₃)]`` for
-``v ~ N(0, 1)``): generalized chi-square tail probabilities, evaluated by Imhof's method.
+``v ~ N(0, 1)``): generalized chi-square tail probabilities (:mod:`fdia_env.detection.gchisq`).
+
+Numerical stability at any attack power. The second moment on D0 is *not* formed as
+``C − E[y y' 1{D1}]``: under a strong attack (power a²) ``C_1 ~ a²`` and ``P(D1 | H1) → 1``, so
+that difference cancels to nothing while it is multiplied by ``|K_1* − K_0|² ~ 1``: at a² = 1e12
+the old form returned 4e11 for an error of 175, and at 1e100 a negative "squared error". Both
+truncated moments are computed directly as sums of non-negative pieces,
+
+    E[y y' 1{D_j}] = Σ_i m_{j,i} t_i t_i',   t_i = (L V)_{:,i},
+    m_{0,i} = P(λ_i χ²₃ + Σ_{l≠i} λ_l χ²₁ <= τ),   m_{1,i} = P(... > τ),
+
+with *each* tail probability accurate relative to its own size (a miss probability of 1e-18
+multiplies a second moment of 1e12), and the error covariance is assembled as
+``Σ_h + W_0 W_0' + W_1 W_1'`` with ``W_j = (K_h* − K_Dj) T diag(√m_j)``: every term is PSD, so the
+result is PSD and finite whenever the true value is (no piece exceeds it). The same holds for the
+Bayes cost, which uses ``P(D0 | h)`` directly instead of ``1 − P(D1 | h)``.
 """
 
 from __future__ import annotations
@@ -29,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fdia_env.detection.gchisq import gchisq_sf
+from fdia_env.detection.gchisq import gchisq_tails
 from fdia_env.kalman import psd_sqrt
 from fdia_env.kalman.linalg import mT
 
@@ -54,33 +69,46 @@ class DetectorOutcome:
         return float(np.trace(self.error_cov))
 
 
+def tails(weights: np.ndarray, tau: float, dof: np.ndarray | None = None) -> tuple[float, float]:
+    """``(P(q <= τ), P(q > τ))`` for ``q = Σ w_i χ²_{k_i}``, weights >= 0; τ may be ±inf."""
+    if np.isnan(tau):
+        raise ValueError("tau must not be NaN")
+    return gchisq_tails(tau, np.clip(weights, 0.0, None), dof)
+
+
 def tail(weights: np.ndarray, tau: float) -> float:
     """``P(Σ w_i χ²₁ > τ)`` for weights >= 0; 1 for τ < 0, 0 for τ = ∞."""
-    if tau < 0.0:
-        return 1.0
-    if not np.isfinite(tau):
-        return 0.0
-    return float(np.clip(gchisq_sf(tau, weights), 0.0, 1.0))
+    return tails(weights, tau)[1]
 
 
-def tail_second_moment(A: np.ndarray, C: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
-    """``(P(y'Ay > τ), E[y y' 1{y'Ay > τ}])`` for ``y ~ N(0, C)`` (see the module docstring).
+def truncated_moments(
+    A: np.ndarray, C: np.ndarray, tau: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces of ``E[y y' 1{y'Ay <= τ}]`` and ``E[y y' 1{y'Ay > τ}]`` for ``y ~ N(0, C)``.
 
-    In the whitened, rotated coordinates ``v`` the cross moments vanish by symmetry and
-    ``E[v_i² 1{Σ λ_j v_j² > τ}] = P(λ_i χ²₃ + Σ_{j≠i} λ_j χ²₁ > τ)``.
+    Returns:
+        ``(p, T, m0, m1)``: ``p = (P(D0), P(D1))``; ``T = L V`` (nz, nz); ``m0``, ``m1`` (nz,)
+        with ``E[y y' 1{D_j}] = T diag(m_j) T'``; every entry of p, m0, m1 in [0, 1] and
+        accurate relative to its size (module docstring).
     """
     L = psd_sqrt(C)
     B = L.T @ A @ L
     lam, V = np.linalg.eigh(0.5 * (B + B.T))
     lam = np.clip(lam, 0.0, None)
-    m = np.array(
-        [
-            tail(np.concatenate([np.full(3, lam[i]), np.delete(lam, i)]), tau)
-            for i in range(lam.size)
-        ]
-    )
-    T = L @ V
-    return tail(lam, tau), (T * m) @ T.T
+    p = np.array(tails(lam, tau))
+    m = np.empty((2, lam.size))
+    dof = np.ones(lam.size)
+    for i in range(lam.size):
+        dof[i] = 3.0  # E[v_i² 1{...}] = P(λ_i χ²₃ + Σ_{j≠i} λ_j χ²₁ ...)
+        m[:, i] = tails(lam, tau, dof)
+        dof[i] = 1.0
+    return p, L @ V, m[0], m[1]
+
+
+def tail_second_moment(A: np.ndarray, C: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
+    """``(P(y'Ay > τ), E[y y' 1{y'Ay > τ}])`` for ``y ~ N(0, C)`` (see the module docstring)."""
+    p, T, _, m1 = truncated_moments(A, C, tau)
+    return float(p[1]), (T * m1) @ T.T
 
 
 def hypotheses(
@@ -120,12 +148,15 @@ def expected_squared_error(
     cov = np.zeros_like(Pxx, dtype=float)
     probs = []
     for prob, Pxz, C in hypotheses(Pxx, H, Pww, sigma, p1):
-        K = Pxz @ np.linalg.inv(C)  # posterior-mean gain under hypothesis h
-        p_d1, Y1 = tail_second_moment(A, C, tau)  # E[y y' 1{D1}]
-        D0, D1 = K - gain_d0, K - gain_d1  # error = (K − K_D) y + posterior noise
-        cov_h = Pxx - K @ Pxz.T + D0 @ (C - Y1) @ D0.T + D1 @ Y1 @ D1.T
-        cov += prob * cov_h
-        probs.append(p_d1)
+        K = np.linalg.solve(C, Pxz.T).T  # posterior-mean gain under hypothesis h (C symmetric)
+        p, T, m0, m1 = truncated_moments(A, C, tau)
+        W0 = ((K - gain_d0) @ T) * np.sqrt(m0)  # error = (K − K_D) y + posterior noise
+        W1 = ((K - gain_d1) @ T) * np.sqrt(m1)
+        posterior = Pxx - K @ Pxz.T
+        cov_h = 0.5 * (posterior + posterior.T) + W0 @ W0.T + W1 @ W1.T
+        if prob > 0.0:
+            cov += prob * cov_h
+        probs.append(float(p[1]))
     cov = 0.5 * (cov + cov.T)
     return DetectorOutcome(error_cov=cov, p_false_alarm=probs[0], p_detection=probs[1])
 
@@ -161,10 +192,11 @@ def bayes_cost_covariance(
     for prob, Pxz, C in hypotheses(Pxx, H, Pww, sigma, p1):
         L = psd_sqrt(C)
         B = L.T @ A @ L
-        p_d1 = tail(np.clip(np.linalg.eigvalsh(0.5 * (B + B.T)), 0.0, None), tau)
-        cov += prob * (
-            p_d1 * case_covariance(Pxx, Pxz, C, gain_d1)
-            + (1.0 - p_d1) * case_covariance(Pxx, Pxz, C, gain_d0)
-        )
+        p_d0, p_d1 = tails(np.linalg.eigvalsh(0.5 * (B + B.T)), tau)  # each accurate, no 1 − p
+        if prob > 0.0:
+            cov += prob * (
+                p_d1 * case_covariance(Pxx, Pxz, C, gain_d1)
+                + p_d0 * case_covariance(Pxx, Pxz, C, gain_d0)
+            )
         probs.append(p_d1)
     return DetectorOutcome(error_cov=cov, p_false_alarm=probs[0], p_detection=probs[1])

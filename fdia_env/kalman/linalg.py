@@ -32,7 +32,11 @@ def inv2(a: np.ndarray) -> np.ndarray:
     determinant finish the adjugate formula. On component views this is many times faster than
     ``np.linalg.inv``'s per-matrix LAPACK call, and exact to rounding.
     """
-    det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    if not np.all(np.isfinite(det)):  # entries beyond ~1e154: invert a / max|a| instead
+        scale = np.abs(a).max(axis=(-2, -1), keepdims=True)
+        return inv2(a / scale) / scale
     return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / det[..., None, None])
 
 

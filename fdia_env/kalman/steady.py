@@ -1,4 +1,12 @@
-"""Steady state of the Kalman filter for a fixed sensor subset (MATH.md §1)."""
+"""Steady state of the Kalman filter for a fixed sensor subset (MATH.md §1).
+
+Checked, never silent: the subset must be detectable with F (PBH test, else ``ValueError``
+naming the subset and the eigenvalue: a single-sensor subset of the sensor game can fail where
+the whole system passes); a marginal mode of F without process noise has no steady state (its
+covariance decays only like 1/k: ``ValueError``); the DARE solution is accepted only when its
+relative residual is below ``1e-8``, and the fixed-point fallback raises ``RuntimeError`` with
+the relative change reached when it does not converge in ``max_iter`` steps.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +17,7 @@ import scipy.linalg
 
 from fdia_env.kalman.filter import information_update, masked_gain, predict_cov
 from fdia_env.kalman.linalg import sym
-from fdia_env.systems import LinearSystem
+from fdia_env.systems import LinearSystem, check_detectable, noise_factor, pbh_defects
 
 
 def _sensor_rows(system: LinearSystem, mask: np.ndarray | None) -> np.ndarray:
@@ -49,11 +57,42 @@ def steady_state(
     key = rows.tobytes()
     cached = _CACHE.setdefault(system, {})
     if key not in cached:
+        _check_steady_state_exists(system, mask, rows)
         result = _solve_dare(system, mask, rows)
         for a in result:
             a.setflags(write=False)
         cached[key] = result
     return cached[key]
+
+
+def _subset_name(system: LinearSystem, mask: np.ndarray | None) -> str:
+    if mask is None:
+        return f"all sensors of system {system.name!r}"
+    used = [s.name or f"#{i}" for i, s in enumerate(system.sensors) if mask[i]]
+    return f"sensor subset {used} (mask {np.asarray(mask, dtype=int).tolist()}) of {system.name!r}"
+
+
+def _check_steady_state_exists(
+    system: LinearSystem, mask: np.ndarray | None, rows: np.ndarray
+) -> None:
+    what = _subset_name(system, None if mask is None else np.asarray(mask, dtype=bool))
+    check_detectable(system.F, system.H[rows], what)
+    bad = pbh_defects(system.F, noise_factor(system.Q), side="cols", unstable_only=False)
+    if bad:
+        raise ValueError(
+            f"no steady state for {what}: the marginal mode of F with eigenvalue {bad[0]:.6g} "
+            "receives no process noise, so its error covariance decays to 0 only like 1/k "
+            "(e.g. a static parameter, F = I, Q = 0); use a finite warmup instead of 'steady'"
+        )
+
+
+def _dare_residual(system: LinearSystem, P_pred: np.ndarray, rows: np.ndarray) -> float:
+    """Relative residual of ``P = F (P − P H' (H P H' + R)⁻¹ H P) F' + Q`` on the used rows."""
+    H, R = system.H[rows], system.R[np.ix_(rows, rows)]
+    S = H @ P_pred @ H.T + R
+    post = P_pred - P_pred @ H.T @ np.linalg.solve(S, H @ P_pred)
+    res = system.F @ post @ system.F.T + system.Q - P_pred
+    return float(np.abs(res).max() / max(np.abs(P_pred).max(), 1e-300))
 
 
 def _solve_dare(
@@ -64,6 +103,8 @@ def _solve_dare(
         P_pred = sym(scipy.linalg.solve_discrete_are(system.F.T, H.T, system.Q, R))
         if not np.all(np.isfinite(P_pred)) or np.linalg.eigvalsh(P_pred).min() <= 0:
             raise np.linalg.LinAlgError("non-positive DARE solution")
+        if _dare_residual(system, P_pred, rows) > 1e-8:
+            raise np.linalg.LinAlgError("inaccurate DARE solution")
     except (np.linalg.LinAlgError, ValueError):
         return steady_state_iterate(system, mask)
     P_post = information_update(P_pred, system.J, mask)
@@ -85,17 +126,32 @@ def steady_state_iterate(
 
     Returns:
         Predicted (..., n, n), filtered (..., n, n) covariances and the gain (..., n, nz).
+
+    Raises:
+        RuntimeError: If some member has not converged after ``max_iter`` iterations (the
+            message gives the relative change reached), or the iterate is no longer finite.
     """
     mask_arr = None if mask is None else np.asarray(mask, dtype=bool)
     batch = () if mask_arr is None else mask_arr.shape[:-1]
     P = np.broadcast_to(system.P0 if P0 is None else P0, (*batch, system.n, system.n)).copy()
+    change = np.inf
     for _ in range(max_iter):
         P_pred = predict_cov(P, system.F, system.Q)
         P_new = information_update(P_pred, system.J, mask_arr)
         scale = np.maximum(np.abs(P_new).max(axis=(-2, -1)), 1e-300)
-        done = np.abs(P_new - P).max(axis=(-2, -1)) <= tol * scale
+        change = np.abs(P_new - P).max(axis=(-2, -1)) / scale
         P = P_new
-        if np.all(done):
+        if not np.all(np.isfinite(P)):
+            raise RuntimeError(
+                f"steady_state_iterate diverged for system {system.name!r}: the covariance is "
+                "no longer finite (is every unstable mode detectable by the used sensors?)"
+            )
+        if np.all(change <= tol):
             break
+    else:
+        raise RuntimeError(
+            f"steady_state_iterate did not converge for system {system.name!r} in {max_iter} "
+            f"iterations: relative change {float(np.max(change)):.3g} > tol {tol:g}"
+        )
     P_pred = predict_cov(P, system.F, system.Q)
     return P_pred, P, masked_gain(P, system, mask_arr)

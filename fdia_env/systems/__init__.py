@@ -1,11 +1,20 @@
 """Systems: linear Gaussian models, sensors and the target-tracking helper."""
 
-from fdia_env.systems.system import LinearSystem, Sensor
+from fdia_env.systems.system import (
+    LinearSystem,
+    Sensor,
+    check_detectable,
+    noise_factor,
+    pbh_defects,
+)
 from fdia_env.systems.tracking import position_sensor, power_weight, pv_sensor, tracking_system
 
 __all__ = [
     "LinearSystem",
     "Sensor",
+    "check_detectable",
+    "noise_factor",
+    "pbh_defects",
     "position_sensor",
     "power_weight",
     "pv_sensor",

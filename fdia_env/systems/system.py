@@ -1,13 +1,91 @@
-"""Linear Gaussian systems and their sensors (MATH.md §1)."""
+"""Linear Gaussian systems and their sensors (MATH.md §1).
+
+Validation when a system is built (every preset passes):
+
+- numeric, finite, correctly shaped matrices; ``F`` non-empty and square; ``T > 0``; ``name`` a
+  string; ``sensors`` a non-empty sequence of :class:`Sensor`;
+- **detectability** of ``(F, H)`` with all sensors: the PBH test ``rank [F − μI; H] = n`` at
+  every eigenvalue with ``|μ| >= 1 − 1e-9`` (unstable or marginal), rank decided by the smallest
+  singular value against ``1e-9 · max(1, |F|, |H|)``: a mode that grows (or persists) unseen
+  makes the filter's covariance diverge (NaN observations, rewards) and the steady state
+  meaningless. The tracking model's double eigenvalue 1 is detectable with a position sensor;
+- **stabilisability** of ``(F, Q^{1/2})`` at every *strictly unstable* eigenvalue
+  (``|μ| > 1 + 1e-9``): such a mode must be driven by process noise for the Riccati equation to
+  have its stabilising solution. Marginal noise-free modes are allowed (a static parameter,
+  ``F = I``, ``Q = 0``: ch3-static); their covariance tends to 0 only like 1/k, so they have no
+  steady state (:func:`~fdia_env.kalman.steady_state` says so).
+
+Subsets of sensors are checked when a steady state is requested for them
+(:func:`~fdia_env.kalman.steady_state`). Arrays are read-only, also after ``pickle`` or
+``copy.deepcopy`` (the steady-state cache relies on it).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.linalg import block_diag
 
-from fdia_env._validation import as_matrix, as_vector, check_psd
+from fdia_env._validation import as_matrix, as_vector, check_positive, check_psd
+
+PBH_TOL = 1e-9  # relative tolerance of the PBH rank tests and of "marginal" (|μ| >= 1 − tol)
+
+
+def _freeze_state(obj: Any, state: dict[str, Any]) -> None:
+    """``__setstate__`` of the frozen system classes: restore, then make every array read-only."""
+    for name, value in state.items():
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+        object.__setattr__(obj, name, value)
+
+
+def pbh_defects(F: np.ndarray, B: np.ndarray, *, side: str, unstable_only: bool) -> list[complex]:
+    """Eigenvalues of F where the PBH rank test fails (empty list: the pair passes).
+
+    Args:
+        F: (n, n) transition.
+        B: (m, n) output matrix (``side="rows"``: ``rank [F − μI; B] = n``, detectability) or
+            (n, m) input matrix (``side="cols"``: ``rank [F − μI, B] = n``, stabilisability).
+        side: ``"rows"`` or ``"cols"``.
+        unstable_only: Test only ``|μ| > 1 + PBH_TOL`` (else also the marginal ``|μ| >= 1 − tol``).
+    """
+    n = F.shape[0]
+    scale = max(1.0, float(np.abs(F).max()), float(np.abs(B).max()) if B.size else 0.0)
+    bad = []
+    for mu in np.linalg.eigvals(F):
+        radius = abs(mu)
+        if (radius <= 1.0 + PBH_TOL) if unstable_only else (radius < 1.0 - PBH_TOL):
+            continue
+        shifted = F - mu * np.eye(n)
+        M = np.vstack([shifted, B]) if side == "rows" else np.hstack([shifted, B])
+        if np.linalg.svd(M, compute_uv=False)[n - 1] <= PBH_TOL * scale:  # rank < n
+            bad.append(complex(mu))
+    return bad
+
+
+def noise_factor(Q: np.ndarray) -> np.ndarray:
+    """``Q^{1/2}`` (symmetric square root of a PSD matrix; rounding negatives clipped)."""
+    w, v = np.linalg.eigh(0.5 * (Q + Q.T))
+    return (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
+
+
+def _fmt_eig(mu: complex) -> str:
+    return f"{mu.real:.6g}" if abs(mu.imag) < 1e-12 else f"{mu.real:.6g}{mu.imag:+.6g}j"
+
+
+def check_detectable(F: np.ndarray, H: np.ndarray, what: str) -> None:
+    """``ValueError`` naming ``what`` and the eigenvalue unless ``(F, H)`` is detectable."""
+    bad = pbh_defects(F, H, side="rows", unstable_only=False)
+    if bad:
+        raise ValueError(
+            f"(F, H) of {what} is not detectable: the mode of F with eigenvalue "
+            f"{_fmt_eig(bad[0])} (|μ| >= 1) is not seen by any sensor (PBH rank test, tolerance "
+            f"{PBH_TOL:g}); its error covariance would grow without bound. Add a sensor that "
+            "observes it or make the mode stable"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,10 +104,18 @@ class Sensor:
 
     def __post_init__(self) -> None:
         H = as_matrix("Sensor.H", self.H)
+        if H.size == 0:
+            raise ValueError(f"Sensor.H must be a non-empty matrix, got shape {H.shape}")
         R = as_matrix("Sensor.R", self.R, shape=(H.shape[0], H.shape[0]))
         check_psd("Sensor.R", R, strict=True)
+        if not isinstance(self.name, str):
+            raise ValueError(f"Sensor.name must be a string, got {self.name!r}")
         object.__setattr__(self, "H", H)
         object.__setattr__(self, "R", R)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickling (and ``copy.deepcopy``) keeps the arrays read-only."""
+        _freeze_state(self, state)
 
     @property
     def dim(self) -> int:
@@ -83,10 +169,21 @@ class LinearSystem:
     def __post_init__(self) -> None:
         F = as_matrix("LinearSystem.F", self.F)
         n = F.shape[0]
+        if F.size == 0:
+            raise ValueError(
+                f"LinearSystem.F must be a non-empty square matrix, got shape {F.shape}"
+            )
         if F.shape != (n, n):
             raise ValueError(f"LinearSystem.F must be square, got shape {F.shape}")
         Q = as_matrix("LinearSystem.Q", self.Q, shape=(n, n))
         check_psd("LinearSystem.Q", Q)
+        if isinstance(self.sensors, Sensor) or not isinstance(self.sensors, Iterable | None):
+            raise ValueError(
+                "LinearSystem.sensors must be a sequence of Sensor, got "
+                f"{type(self.sensors).__name__} (wrap a single sensor as (sensor,))"
+            )
+        if not isinstance(self.name, str):
+            raise ValueError(f"LinearSystem.name must be a string, got {self.name!r}")
         sensors = tuple(self.sensors) if self.sensors is not None else ()
         if not sensors:
             raise ValueError("LinearSystem.sensors must hold at least one Sensor")
@@ -115,14 +212,22 @@ class LinearSystem:
             object.__setattr__(self, "G", G)
             object.__setattr__(self, "u", u)
             Gu = G @ u
-        if not np.isfinite(self.T) or self.T <= 0:
-            raise ValueError(f"LinearSystem.T must be a finite number > 0, got {self.T}")
+        T = check_positive("LinearSystem.T", self.T)
 
         H = np.vstack([s.H for s in sensors])
         R = block_diag(*[s.R for s in sensors])
         Rinv = block_diag(*[np.linalg.inv(s.R) for s in sensors])
         J = np.stack([s.H.T @ np.linalg.solve(s.R, s.H) for s in sensors])
         row_sensor = np.concatenate([np.full(s.dim, i) for i, s in enumerate(sensors)])
+        check_detectable(F, H, f"system {self.name!r}")
+        bad = pbh_defects(F, noise_factor(Q), side="cols", unstable_only=True)
+        if bad:
+            raise ValueError(
+                f"(F, Q^(1/2)) of system {self.name!r} is not stabilisable: the unstable mode "
+                f"of F with eigenvalue {_fmt_eig(bad[0])} (|μ| > 1) receives no process noise "
+                f"(PBH rank test, tolerance {PBH_TOL:g}); the Riccati equation then has no "
+                "stabilising solution. Give Q a component along that mode"
+            )
         for name, value in (
             ("F", F),
             ("Q", Q),
@@ -138,10 +243,15 @@ class LinearSystem:
             ("HtRinv", H.T @ Rinv),
             ("row_sensor", row_sensor),
             ("Gu", Gu),
+            ("T", T),
         ):
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickling (and ``copy.deepcopy``) keeps the arrays read-only."""
+        _freeze_state(self, state)
 
     def row_mask(self, sensor_mask: np.ndarray) -> np.ndarray:
         """Expand a (..., M) per-sensor mask to the (..., nz) stacked measurement rows."""

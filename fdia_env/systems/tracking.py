@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import numbers
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -27,7 +28,10 @@ def pv_sensor(sigma_p: float, sigma_vel: float, rho: float = 0.0, name: str = ""
     """
     sigma_p = check_positive("sigma_p", sigma_p)
     sigma_vel = check_positive("sigma_vel", sigma_vel)
-    if not -1.0 < float(rho) < 1.0:
+    if isinstance(rho, bool) or not isinstance(rho, numbers.Real):
+        raise ValueError(f"rho must be a number strictly between -1 and 1, got {rho!r}")
+    rho = float(rho)
+    if not -1.0 < rho < 1.0:  # also rejects NaN
         raise ValueError(f"rho must lie strictly between -1 and 1, got {rho}")
     c = rho * sigma_p * sigma_vel
     return Sensor(H=np.eye(2), R=np.array([[sigma_p**2, c], [c, sigma_vel**2]]), name=name)
@@ -35,7 +39,7 @@ def pv_sensor(sigma_p: float, sigma_vel: float, rho: float = 0.0, name: str = ""
 
 def tracking_system(
     sigma_v: float,
-    sigma_w: Sequence[float] | None = None,
+    sigma_w: float | Sequence[float] | None = None,
     T: float = 1.0,
     *,
     sensors: Sequence[Sensor] | None = None,
@@ -49,7 +53,9 @@ def tracking_system(
 
     Args:
         sigma_v: Process noise standard deviation σ_v (> 0).
-        sigma_w: Standard deviations of position sensors, one per sensor.
+        sigma_w: Standard deviations of position sensors, one per sensor; a single number is
+            one position sensor (``tracking_system(0.5, 3.0)`` equals
+            ``tracking_system(0.5, [3.0])``).
         T: Sampling period (> 0).
         sensors: Explicit sensors (e.g. from :func:`pv_sensor`); appended after ``sigma_w``'s.
         x0: Prior mean (default zeros).
@@ -67,8 +73,17 @@ def tracking_system(
     sigma_v = check_positive("sigma_v", sigma_v)
     T = check_positive("T", T)
     all_sensors: list[Sensor] = []
+    if isinstance(sigma_w, numbers.Real) and not isinstance(sigma_w, bool):
+        sigma_w = [sigma_w]  # one position sensor
+    elif sigma_w is not None and (isinstance(sigma_w, str) or not isinstance(sigma_w, Iterable)):
+        raise ValueError(
+            "sigma_w must be a number or a sequence of numbers > 0 (position-sensor standard "
+            f"deviations), got {sigma_w!r}"
+        )
     for i, s in enumerate(() if sigma_w is None else sigma_w):
         all_sensors.append(position_sensor(check_positive(f"sigma_w[{i}]", s), name=f"z{i + 1}"))
+    if sensors is not None and (isinstance(sensors, Sensor) or not isinstance(sensors, Iterable)):
+        raise ValueError(f"sensors must be a sequence of Sensor, got {type(sensors).__name__}")
     all_sensors.extend(sensors or ())
     if not all_sensors:
         raise ValueError("tracking_system needs sigma_w or sensors: got no sensor at all")

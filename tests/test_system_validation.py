@@ -1,0 +1,180 @@
+"""System-level validation: detectability, stabilisability, convergence checks, clear errors,
+read-only arrays after pickling."""
+
+import copy
+import pickle
+import time
+
+import numpy as np
+import pytest
+
+from fdia_env import detection_game_v0, scenarios
+from fdia_env.episode import MAX_WARMUP, EpisodeSpec
+from fdia_env.kalman import information_update, predict_cov, steady_state, steady_state_iterate
+from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
+
+POS = Sensor(H=[[1.0, 0.0]], R=[[1.0]], name="pos")
+
+
+def _system(F, Q=None, sensors=(POS,), **kw):
+    n = np.asarray(F).shape[0]
+    return LinearSystem(F=F, Q=np.eye(n) if Q is None else Q, sensors=sensors, **kw)
+
+
+# --- every preset and every single-sensor subset still builds ---------------------------------
+
+
+@pytest.mark.parametrize("name", scenarios.names())
+def test_every_preset_builds_and_its_single_sensor_steady_states_exist(name):
+    system = scenarios.get(name).system
+    if np.allclose(system.Q, 0.0):  # ch3-static: a static parameter has no steady state
+        with pytest.raises(ValueError, match=r"no steady state.*marginal mode.*1/k"):
+            steady_state(system)
+        return
+    for i in range(system.M):
+        mask = np.eye(system.M, dtype=bool)[i]
+        P_pred, _, _ = steady_state(system, mask)
+        # the fixed point of the recursion, independently: one more predict/update cycle
+        again = predict_cov(information_update(P_pred, system.J, mask), system.F, system.Q)
+        np.testing.assert_allclose(again, P_pred, rtol=1e-9, atol=1e-12)
+
+
+def test_tracking_model_with_its_double_eigenvalue_one_is_detectable_with_a_position_sensor():
+    system = tracking_system(0.5, 3.0)  # a scalar sigma_w is one position sensor
+    assert system.M == 1 and np.allclose(np.linalg.eigvals(system.F), 1.0)
+    P_pred, _, _ = steady_state(system)
+    assert np.all(np.isfinite(P_pred)) and np.linalg.eigvalsh(P_pred).min() > 0.0
+
+
+# --- defect 2: silent failures ------------------------------------------------------------------
+
+
+def test_undetectable_unstable_system_is_rejected_naming_pair_and_eigenvalue():
+    """F = 1e6 I with one position sensor: the velocity mode grows unseen (NaN rewards before)."""
+    with pytest.raises(ValueError, match=r"\(F, H\).*not detectable.*eigenvalue 1e\+06"):
+        _system(1e6 * np.eye(2))
+
+
+def test_system_without_measurement_of_a_marginal_mode_is_rejected():
+    """H = 0 gave a 'steady state' of trace 8e13 after 100 000 silent iterations."""
+    blind = Sensor(H=[[0.0, 0.0]], R=[[1.0]])
+    with pytest.raises(ValueError, match=r"\(F, H\).*not detectable.*eigenvalue 1\b"):
+        _system([[1.0, 1.0], [0.0, 1.0]], sensors=(blind,))
+
+
+def test_stable_system_with_h_zero_is_accepted_and_its_steady_state_is_the_lyapunov_solution():
+    F, Q = np.diag([0.5, -0.3]), np.diag([1.0, 2.0])
+    system = _system(F, Q, sensors=(Sensor(H=[[0.0, 0.0]], R=[[1.0]]),))
+    P_pred, _, _ = steady_state(system)
+    np.testing.assert_allclose(P_pred, np.diag([1 / (1 - 0.25), 2 / (1 - 0.09)]), rtol=1e-10)
+
+
+def test_unstable_mode_without_process_noise_is_not_stabilisable():
+    with pytest.raises(ValueError, match=r"\(F, Q\^\(1/2\)\).*not stabilisable.*eigenvalue 2"):
+        _system([[2.0]], Q=[[0.0]], sensors=(Sensor(H=[[1.0]], R=[[1.0]]),))
+
+
+def test_steady_state_of_an_undetectable_subset_names_the_subset():
+    """Both sensors together see both random walks; each alone leaves one unseen."""
+    a = Sensor(H=[[1.0, 0.0]], R=[[1.0]], name="a")
+    b = Sensor(H=[[0.0, 1.0]], R=[[1.0]], name="b")
+    system = _system(np.eye(2), sensors=(a, b), name="two-walks")
+    steady_state(system)  # all sensors: fine
+    with pytest.raises(ValueError, match=r"sensor subset \['a'\].*not detectable.*eigenvalue 1"):
+        steady_state(system, np.array([True, False]))
+
+
+def test_fixed_point_iteration_raises_with_its_residual_instead_of_returning_garbage():
+    system = scenarios.get("ch3-static").system  # P -> 0 like 1/k: no convergence
+    with pytest.raises(RuntimeError, match=r"did not converge.*50 iterations.*relative change"):
+        steady_state_iterate(system, max_iter=50)
+    system = scenarios.get("ch2-position").system
+    P_pred, _, _ = steady_state_iterate(system)  # converges: agrees with the DARE
+    np.testing.assert_allclose(P_pred, steady_state(system)[0], rtol=1e-9)
+
+
+def test_huge_warmup_is_rejected_at_once_with_the_bound():
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=rf"warmup must be <= {MAX_WARMUP}.*use warmup='steady'"):
+        EpisodeSpec(horizon=3, warmup=10**9)
+    with pytest.raises(ValueError, match="warmup must be <= 100000"):
+        detection_game_v0.parallel_env(scenario="ch3-tracking", warmup=10**9)
+    assert time.perf_counter() - start < 30.0  # (it hung before; not a timing test)
+    assert EpisodeSpec(horizon=3, warmup=MAX_WARMUP).warmup == MAX_WARMUP
+    with pytest.raises(ValueError, match="warmup must be 'steady' or an integer"):
+        EpisodeSpec(horizon=3, warmup="stead")
+
+
+# --- defect 3: clear errors ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"T": "x"}, r"LinearSystem\.T must be a positive number, got 'x'"),
+        ({"T": 0.0}, r"LinearSystem\.T must be a finite number > 0"),
+        ({"name": 3}, r"LinearSystem\.name must be a string"),
+        ({"sensors": POS}, r"LinearSystem\.sensors must be a sequence of Sensor"),
+        ({"x0": ["a", "b"]}, r"LinearSystem\.x0 must be a numeric vector"),
+        ({"Q": "high"}, r"LinearSystem\.Q must be a numeric matrix"),
+    ],
+)
+def test_bad_system_parameters_raise_naming_the_parameter(kwargs, message):
+    args = {"F": np.eye(2), "Q": np.eye(2), "sensors": (POS,)} | kwargs
+    with pytest.raises(ValueError, match=message):
+        LinearSystem(**args)
+
+
+def test_empty_transition_matrix_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"LinearSystem\.F must be a non-empty square matrix"):
+        LinearSystem(F=[], Q=[], sensors=(POS,))
+    with pytest.raises(ValueError, match=r"Sensor\.H must be a non-empty matrix"):
+        Sensor(H=[], R=[])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"seed": "x"}, r"seed must be an integer, got 'x'"),
+        ({"seed": -1}, r"seed must be >= 0, got -1"),
+        ({"seed": 1.5}, r"seed must be an integer"),
+        ({"sigma_v": "a"}, r"sigma_v must be a positive number"),
+        ({"bogus": 1}, r"does not take options \['bogus'\]; it takes \['seed', 'sigma_v'\]"),
+    ],
+)
+def test_scenario_options_are_validated_with_their_names(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        scenarios.get("ch4-random", **kwargs)
+
+
+def test_scalar_sigma_w_is_one_position_sensor_and_bad_types_are_named():
+    one, listed = tracking_system(0.5, 3.0), tracking_system(0.5, [3.0])
+    np.testing.assert_array_equal(one.R, listed.R)
+    np.testing.assert_array_equal(one.H, listed.H)
+    with pytest.raises(ValueError, match=r"sigma_w must be a number or a sequence"):
+        tracking_system(0.5, "3.0")
+    with pytest.raises(ValueError, match=r"sensors must be a sequence of Sensor"):
+        tracking_system(0.5, sensors=pv_sensor(1.0, 1.0))
+    with pytest.raises(ValueError, match=r"rho must be a number strictly between -1 and 1"):
+        pv_sensor(1.0, 1.0, rho="0.5")
+    with pytest.raises(ValueError, match=r"rho must lie strictly between -1 and 1, got nan"):
+        pv_sensor(1.0, 1.0, rho=float("nan"))
+
+
+# --- defect 4: read-only after pickling ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("clone", [lambda s: pickle.loads(pickle.dumps(s)), copy.deepcopy])
+def test_cloned_systems_keep_read_only_arrays_and_their_values(clone):
+    original = scenarios.get("ch5-game").system
+    system = clone(original)
+    arrays = {k: v for k, v in vars(system).items() if isinstance(v, np.ndarray)}
+    assert {"F", "Q", "H", "R", "J", "P0", "x0", "Gu", "HtRinv", "row_sensor"} <= set(arrays)
+    for name, value in arrays.items():
+        assert not value.flags.writeable, name
+        np.testing.assert_array_equal(value, getattr(original, name))
+    for sensor in system.sensors:
+        assert not sensor.H.flags.writeable and not sensor.R.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        system.F[0, 0] = 5.0
+    np.testing.assert_allclose(steady_state(system)[0], steady_state(original)[0], rtol=1e-12)
