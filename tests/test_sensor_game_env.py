@@ -151,7 +151,7 @@ def test_seeded_gym_view_episodes_are_reproducible():
     ("kwargs", "match"),
     [
         ({"allocation": "random"}, r"allocation must be one of \['independent', 'dependent'\]"),
-        ({"power": 0.0}, r"power must be a finite number > 0"),
+        ({"power": 0.0}, r"power must satisfy 0 < power <= 1e\+300"),
         ({"rounds": 0}, r"rounds must be >= 1"),
         ({"scenario": "ch4-pv-case1", "power": 1.0}, r"defined for scalar sensors"),
     ],

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env._validation import as_matrix, check_choice, check_positive, check_psd
+from fdia_env._validation import as_matrix, check_choice, check_power, check_psd
 from fdia_env.attacks.base import AttackEffect, AttackModel
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman.linalg import psd_sqrt, sym
@@ -116,7 +116,7 @@ class CovarianceAttack(AttackModel):
         power_mode: str = "per_step",
         weight: np.ndarray | None = None,
     ) -> None:
-        self.power = check_positive("power", power)
+        self.power = check_power("power", power)
         self.structure = check_choice("structure", structure, STRUCTURES)
         self.power_mode = check_choice("power_mode", power_mode, POWER_MODES)
         self._weight = weight

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env._validation import check_choice, check_positive
+from fdia_env._validation import check_choice, check_power
 from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array
 from fdia_env.attacks.subsets import SubsetChoice
 from fdia_env.episode import EpisodeSpec
@@ -112,7 +112,7 @@ def allocation_covariance(
         >>> S.round(2).tolist()  # correlation 1, σ_b ∝ (1/9, 1/16)
         [[75.96, 42.73, 0.0], [42.73, 24.04, 0.0], [0.0, 0.0, 0.0]]
     """
-    power = check_positive("power", power)
+    power = check_power("power", power)
     check_choice("allocation", allocation, ALLOCATIONS)
     sensor_sigmas(system)
     mask = np.zeros((1, system.M), dtype=bool)
@@ -132,7 +132,7 @@ class SubsetAttack(SubsetChoice, AttackModel):
     name = "subset"
 
     def __init__(self, power: float, allocation: str = "independent") -> None:
-        self.power = check_positive("power", power)
+        self.power = check_power("power", power)
         self.allocation = check_choice("allocation", allocation, ALLOCATIONS)
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
