@@ -3,13 +3,13 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test lint demo bench clean
+.PHONY: setup test lint demo bench docs clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -c constraints.txt torch==2.13.0
-	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients]"
+	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients,docs]"
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -23,6 +23,10 @@ lint: $(STAMP)
 test: lint
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
 
+# the documentation site, warnings as errors (python docs/screenshot.py then checks it renders)
+docs: $(STAMP)
+	$(BIN)/sphinx-build -E -W --keep-going -q -b html docs docs/_build/html
+
 demo: $(STAMP)
 	$(BIN)/python -m agents.demo
 
@@ -32,4 +36,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/game.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache docs/_build

@@ -47,11 +47,13 @@ Terminates after ``horizon`` steps (default 1). No truncation.
 
 ``scenario`` (default ``"ch2-position"``), ``power`` (a², default the preset's), ``structure``
 (``"full"`` | ``"diagonal"``), ``power_mode`` (``"per_step"`` | ``"budget"``), ``weight`` (Ω),
-``horizon``, ``objective``, ``reward_mode``, ``dynamics``, ``warmup``, ``render_mode``.
+``horizon``, ``objective``, ``reward_mode``, ``dynamics``, ``warmup``, ``render_mode``
+(``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``.
 
 ## Version History
 
-- v0: initial release.
+- v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
+  ``render_mode="human"``.
 
 ## Example
 

@@ -45,13 +45,15 @@ the prior every round, so any horizon works.
 100), ``statistic``, ``on_detect``, ``criterion`` (``"mse"`` | ``"bayes_cost"``),
 ``assumed_sigma`` (default: the c2-maximising Σ of the power,
 MATH.md §3), ``horizon``, ``warmup``, ``objective``, ``reward_mode``, ``dynamics``,
-``render_mode``. The Gymnasium views ``fdia_env/DetectionDefender-v0`` (the attacker fixed to
-p1 of the preset and the c2-maximising Σ) and ``fdia_env/DetectionAttacker-v0`` (the defender
-fixed to the threshold ``s``, action 0) take ``opponent=`` to change the fixed player.
+``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``. The Gymnasium
+views ``fdia_env/DetectionDefender-v0`` (the attacker fixed to p1 of the preset and the
+c2-maximising Σ) and ``fdia_env/DetectionAttacker-v0`` (the defender fixed to the threshold
+``s``, action 0) take ``opponent=`` to change the fixed player.
 
 ## Version History
 
-- v0: initial release.
+- v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
+  ``render_mode="human"``.
 
 ## Example
 

@@ -1,5 +1,53 @@
 """``fdia_v0``: any attack model against any defense model on any scenario.
 
+## Description
+
+The composition every other module specialises: a scenario (preset name, ``Scenario`` or your
+own ``LinearSystem``) × an attack model × a defense model × an episode spec. Models are given by
+name with their parameters in ``attack_kwargs`` / ``defense_kwargs`` (parameters the preset
+defines, such as ``budget`` or ``power``, are filled in unless given), or as model instances.
+A passive defense (``"perfect_detection"``, ``"unaware"``) leaves the attacker as the only agent.
+
+## Action Space
+
+The attack model's (``"sparse"``: ``Discrete(2**M)`` bitmasks with an action mask;
+``"covariance"``: a ``Box`` mapped to a bias covariance of power a²; ``"subset"``:
+``Discrete(2**M − 1)`` subsets; ``"probabilistic"``: a ``Box`` of the attack probability and the
+covariance) and, for an active defense, the defense model's (``"sensor_selection"``:
+``Discrete(2**M − 1)``; ``"threshold_detector"``: ``Box(-1, 1, (1,))`` mapped to a threshold).
+
+## Observation Space
+
+``Box(float32)`` of the common features (steps left, error variance growth and correlations,
+NIS in sampled dynamics) followed by the player's model features; a ``Dict`` with an
+``action_mask`` for the sparse attacker.
+
+## Rewards
+
+The attacker +Φ and the defender −Φ, Φ = tr or log det of the actual error covariance
+(expected dynamics) or the squared estimation error (sampled), paid as ``reward_mode`` says.
+
+## Episode End
+
+Terminates after ``horizon`` steps (default the preset's, or ``max_cycles`` when only that is
+given); truncated after ``max_cycles`` steps when that is shorter.
+
+## Arguments
+
+``scenario``, ``attack`` (``"sparse"`` | ``"covariance"`` | ``"subset"`` | ``"probabilistic"`` or
+an ``AttackModel``), ``defense`` (``"perfect_detection"`` | ``"unaware"`` |
+``"sensor_selection"`` | ``"threshold_detector"`` or a ``DefenseModel``), ``attack_kwargs``,
+``defense_kwargs`` (dicts of the models' parameters; unknown names are an error), ``horizon``,
+``objective``, ``reward_mode``, ``dynamics``, ``warmup``, ``render_mode``
+(``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``.
+
+## Version History
+
+- v0: initial release. Infos with the same keys at reset and at every step (``attacked`` as an
+  (M,) 0/1 array), ``max_cycles``, ``render_mode="human"``.
+
+## Example
+
 >>> from fdia_env import fdia_v0
 >>> env = fdia_v0.parallel_env(scenario="ch4-position", attack="sparse",
 ...                            defense="perfect_detection",

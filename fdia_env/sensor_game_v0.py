@@ -34,7 +34,8 @@ Terminates after ``rounds`` rounds.
 ## Arguments
 
 ``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``,
-``rounds`` (default 1), ``reward_mode``, ``dynamics``, ``render_mode``.
+``rounds`` (default 1, or ``max_cycles`` when only that is given), ``reward_mode``,
+``dynamics``, ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``.
 
 Gymnasium views: ``fdia_env/SensorGameAttacker-v0`` and ``fdia_env/SensorGameDefender-v0``, the
 other player fixed to ``opponent=`` (any SB3-style policy, e.g.
@@ -42,7 +43,8 @@ other player fixed to ``opponent=`` (any SB3-style policy, e.g.
 
 ## Version History
 
-- v0: initial release.
+- v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
+  ``render_mode="human"``.
 
 ## Example
 

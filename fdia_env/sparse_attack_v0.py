@@ -12,8 +12,10 @@ the env has the single agent ``"attacker"``.
 ## Action Space
 
 ``Discrete(2**M)``: action ``a`` attacks the sensors whose bits are set (bit 0 = sensor 1);
-``0`` attacks nothing. Over-budget rule: a subset larger than the budget left is trimmed to its
-lowest-numbered sensors that fit, so an episode never spends more than ``budget``.
+``0`` attacks nothing. Over-budget rule (``illegal_action``): a subset larger than the budget
+left is trimmed to its lowest-numbered sensors that fit (``"trim"``, default), attacks nothing
+(``"noop"``) or raises a ``ValueError`` (``"error"``), so an episode never spends more than
+``budget``.
 
 ## Observation Space
 
@@ -48,11 +50,13 @@ Terminates after N steps. No truncation.
 
 ``scenario`` (preset name, Scenario or LinearSystem; default ``"ch4-position"``), ``budget``
 (c, default the preset's), ``horizon`` (N, default the preset's), ``objective``,
-``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"ansi"`` | ``"rgb_array"``).
+``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"human"`` | ``"ansi"`` |
+``"rgb_array"``), ``illegal_action`` (``"trim"`` | ``"noop"`` | ``"error"``), ``max_cycles``.
 
 ## Version History
 
-- v0: initial release.
+- v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
+  ``render_mode="human"``.
 
 ## Example
 

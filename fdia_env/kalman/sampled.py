@@ -9,7 +9,7 @@ from fdia_env.systems import LinearSystem
 
 
 def draw(rng: np.random.Generator, factor: np.ndarray, batch: tuple[int, ...]) -> np.ndarray:
-    """Draw (*batch, d) Gaussian vectors with covariance ``factor @ factor'``."""
+    """Draw ``(*batch, d)`` Gaussian vectors with covariance ``factor @ factor'``."""
     noise = rng.standard_normal((*batch, factor.shape[-1]))
     return np.einsum("...ij,...j->...i", factor, noise)  # einsum broadcasts the batch axes
 
