@@ -304,6 +304,7 @@ def branch_and_bound(
         search.offer(problem.evaluate(alloc_pairs), alloc_pairs)
     if problem.budget == 0 or search.best_value >= alloc - PRUNE_RTOL * max(abs(alloc), 1.0):
         bound, proved = search.best_value, True
+        search.nodes = 1  # proved at the root
     else:
         bound = min(alloc, search.run(alloc))
         proved = not search.timed_out
