@@ -270,8 +270,9 @@ def branch_and_bound(
         budget: Sparsity budget c (default: the preset's).
         horizon: Window length N (default: the preset's).
         objective: ``"trace"`` or ``"logdet"``.
-        time_limit: Seconds of search after the incumbent is found (``None``: until proved).
-            When it runs out, the incumbent is returned with the certified upper bound and gap.
+        time_limit: Wall-clock seconds for the whole call, the heuristic incumbent included
+            (``None``: until proved). The search stops between batches once it is spent and
+            returns the incumbent with the certified upper bound and gap.
         chunk: Nodes expanded per batch.
         debug: Check every child bound against the brute-force optimum of its subtree (tiny
             instances only); a violation raises ``RuntimeError``.

@@ -26,8 +26,9 @@ theorem gives ``λ_max(Ô) ≤ max_q Σ_{q'≠q} ‖Ô_qq'‖_F``. Hence
 the smaller is used. For log det, ``log det(P + Z) − log det P ≤ m log(1 + tr(P⁻¹Z)/m)`` for
 ``rank Z ≤ m`` (Jensen on the eigenvalues), with the same per-pair terms weighted by ``P⁻¹``.
 A subtree "base S plus up to r of the free pairs" is bounded by taking the r largest terms.
-No submodularity is used (Φ is in fact *super*-additive in the dropped pairs; the bound covers
-that through the ``1/(1 − ω)`` factor).
+No submodularity is used (it does not hold: dropping the same sensor at consecutive steps is
+worth more than the sum of the single drops, see tests/test_bnb.py); the interaction between
+dropped pairs is what the ``1/(1 − ω)`` factor covers.
 
 **Allocation (Loewner) bound.** Dropping measurements never decreases P in the Loewner order and
 the Riccati map is monotone. Group sensors whose information matrices are proportional,
