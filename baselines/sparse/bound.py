@@ -310,6 +310,9 @@ def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
             D[r] += w[: min(r, len(idx))].sum() * unit[idx[0]]
     J_all = sys.J.sum(axis=0)
     info = J_all[None] - D  # information used with r dropped at a step
+    if len(groups) == 1:  # attained: sum what is left, as the reference recursion does
+        order = groups[0][0]
+        info = np.stack([sys.J[np.sort(order[r:])].sum(axis=0) for r in range(cap + 1)])
     states = problem.P_start[None]
     spent = np.zeros(1, dtype=int)
     history = np.zeros((1, 0), dtype=int)

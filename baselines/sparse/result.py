@@ -37,7 +37,8 @@ class SparseResult:
         nodes: Search-tree nodes bounded or evaluated (branch and bound only).
         seconds: Wall time of the solve (branch and bound only).
         proved_optimal: True when the search completed, so ``value`` is the optimum (up to the
-            pruning tolerance, relative 1e-12); ``None`` for solvers that give no proof.
+            pruning tolerance, relative 1e-12, and 1e-9 for a proof
+            at the root); ``None`` for solvers that give no proof.
     """
 
     value: float
