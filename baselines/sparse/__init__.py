@@ -4,7 +4,9 @@ Every solver is ``f(system_or_scenario, budget, horizon, objective="trace") -> S
 
 - :func:`exhaustive` (EXS): the optimum, by a batched frontier search over all ``C(M·N, c)`` sets;
 - :func:`sfs`, :func:`sbs`, :func:`sfs_ss`: greedy forward / backward selection and SFS with swaps;
-- :func:`dp`: dynamic programming over (budget spent, step); exact for a scalar state.
+- :func:`dp`: dynamic programming over (budget spent, step); exact for a scalar state;
+- :func:`branch_and_bound`: the optimum with a proof (or, under a time limit, a certified gap)
+  beyond enumeration; :func:`upper_bound` is its provable bound.
 
 ``result.policy()`` plays the answer in ``sparse_attack_v0``.
 
@@ -14,6 +16,8 @@ Every solver is ``f(system_or_scenario, budget, horizon, objective="trace") -> S
 0.0328
 """
 
+from baselines.sparse.bnb import branch_and_bound
+from baselines.sparse.bound import upper_bound
 from baselines.sparse.dp import dp
 from baselines.sparse.exhaustive import exhaustive
 from baselines.sparse.greedy import sbs, sfs, sfs_ss
@@ -28,10 +32,12 @@ __all__ = [
     "SparsePolicy",
     "SparseProblem",
     "SparseResult",
+    "branch_and_bound",
     "dp",
     "exhaustive",
     "make_problem",
     "sbs",
     "sfs",
     "sfs_ss",
+    "upper_bound",
 ]

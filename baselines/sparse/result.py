@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -30,6 +31,14 @@ class SparseResult:
             budget ``b``). ``None`` for every other solver.
         evaluations: Number of objective evaluations of candidate sets (for EXS the number of
             sets, ``C(M·N, c)``; for DP the number of one-step candidates ``(s, r)`` tried).
+        upper_bound: Certified upper bound on the optimum (branch and bound only; ``None`` for
+            the other solvers). Equal to ``value`` when the optimum is proved.
+        gap: ``gap_to(upper_bound)``, filled in from ``upper_bound`` (0 when proved optimal).
+        nodes: Search-tree nodes bounded or evaluated (branch and bound only).
+        seconds: Wall time of the solve (branch and bound only).
+        proved_optimal: True when the search completed, so ``value`` is the optimum (up to the
+            pruning tolerance, relative 1e-12, and 1e-9 for a proof
+            at the root); ``None`` for solvers that give no proof.
     """
 
     value: float
@@ -40,12 +49,48 @@ class SparseResult:
     objective: str = "trace"
     order: tuple[Pair, ...] | None = None
     evaluations: int | None = None
+    upper_bound: float | None = None
+    gap: float | None = None
+    nodes: int | None = None
+    seconds: float | None = None
+    proved_optimal: bool | None = None
 
     def __post_init__(self) -> None:
         attacks = tuple(sorted((int(k), int(i)) for k, i in self.attacks))
         object.__setattr__(self, "attacks", attacks)
+        if self.upper_bound is not None:
+            if self.upper_bound < self.value - 1e-9 * max(abs(self.value), 1.0):
+                raise ValueError(
+                    f"upper_bound must be >= value, got {self.upper_bound!r} < {self.value!r}"
+                )
+            if self.gap is None:
+                object.__setattr__(self, "gap", self.gap_to(self.upper_bound))
         if self.order is not None:
             object.__setattr__(self, "order", tuple((int(k), int(i)) for k, i in self.order))
+
+    def gap_to(self, bound: float) -> float:
+        """Relative gap of this result's value to an upper ``bound`` on the optimum.
+
+        In the objective's natural units: ``1 − tr P / bound`` for the trace, and
+        ``1 − det P / exp(bound)`` for log det (``bound`` is then a log-determinant). 0 means
+        the value reaches the bound (optimal); 0.01 means within 1 % of it; an infinite bound
+        gives 1. Clipped at 0 (a bound below the value by rounding).
+
+        Raises:
+            ValueError: If ``bound`` is not a number, is NaN or is −inf.
+        """
+        if isinstance(bound, bool) or not isinstance(bound, (int, float, np.floating)):
+            raise ValueError(f"bound must be a number, got {bound!r}")
+        bound = float(bound)
+        if math.isnan(bound) or bound == -math.inf:
+            raise ValueError(f"bound must be a number above -inf, got {bound!r}")
+        if bound == math.inf:
+            return 1.0
+        if self.objective == "logdet":
+            gap = -math.expm1(self.value - bound)
+        else:
+            gap = (bound - self.value) / abs(bound) if bound != 0 else 0.0
+        return max(0.0, gap)
 
     @property
     def budget(self) -> int:

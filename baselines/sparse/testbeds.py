@@ -1,0 +1,108 @@
+"""Sparse-attack instances beyond the literature's, for branch and bound and its benchmarks.
+
+:func:`mixed_tracking` is the literature's 1-D target-tracking model (MATH.md §1) with many
+sensors of two kinds, alternating: position+velocity sensors (``H = I₂``, random standard
+deviations in [0.2, 1] and correlation in [−0.8, 0.8]) and position sensors (σ in [0.1, 1]).
+Their information matrices are not proportional, so neither DP nor the allocation bound is exact
+and branch and bound has to search.
+
+:func:`dc_grid14` is a DC power-flow model of the IEEE 14-bus network (MATH.md §7) built
+without pandapower: the 20 branch reactances of the standard case (per unit on 100 MVA; lines
+and transformers alike, as in the DC power flow). The state is the 13 voltage angles of buses
+2..14 (bus 1 is the reference), moving as a random walk ``θ[k+1] = θ[k] + v[k]``,
+``v ~ N(0, q I)``. Meters (each one a sensor, one scalar measurement in per unit):
+
+- bus injections ``P_i = Σ_j b_ij (θ_i − θ_j)`` at every bus (14 meters), then
+- branch flows ``P_ij = b_ij (θ_i − θ_j)`` at the from end of every branch (20 meters), then
+- the same flows metered at the to end (20 more),
+
+so ``meters = 14`` gives the injections only and ``meters = 50`` adds 20 + 16 flow meters. When
+the grid presets exist (``grid-ieee14`` in :mod:`fdia_env.scenarios`) use those; this builder
+only keeps the benchmarks independent of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fdia_env._validation import check_int, check_positive
+from fdia_env.systems import LinearSystem, Sensor, position_sensor, pv_sensor, tracking_system
+
+# (from bus, to bus, x in per unit), buses 1-based, IEEE 14-bus case.
+IEEE14_BRANCHES = (
+    (1, 2, 0.05917),
+    (1, 5, 0.22304),
+    (2, 3, 0.19797),
+    (2, 4, 0.17632),
+    (2, 5, 0.17388),
+    (3, 4, 0.17103),
+    (4, 5, 0.04211),
+    (4, 7, 0.20912),
+    (4, 9, 0.55618),
+    (5, 6, 0.25202),
+    (6, 11, 0.19890),
+    (6, 12, 0.25581),
+    (6, 13, 0.13027),
+    (7, 8, 0.17615),
+    (7, 9, 0.11001),
+    (9, 10, 0.08450),
+    (9, 14, 0.27038),
+    (10, 11, 0.19207),
+    (12, 13, 0.19988),
+    (13, 14, 0.34802),
+)
+
+
+def dc_grid14(meters: int = 14, q: float = 1e-4, sigma: float = 0.02) -> LinearSystem:
+    """The IEEE 14-bus DC model with ``meters`` scalar meters (module docstring).
+
+    Args:
+        meters: Number of meters, 1..54 (injections first, then from-end, then to-end flows).
+        q: Random-walk variance of each angle per step (rad²).
+        sigma: Standard deviation of every meter's noise (per unit).
+
+    Raises:
+        ValueError: For ``meters`` outside 1..54 or a non-positive ``q`` or ``sigma``.
+    """
+    meters = check_int("meters", meters, minimum=1, maximum=54)
+    q = check_positive("q", q)
+    sigma = check_positive("sigma", sigma)
+    B = 14
+    A = np.zeros((len(IEEE14_BRANCHES), B))  # branch-bus incidence, scaled by b_ij
+    for row, (i, j, x) in enumerate(IEEE14_BRANCHES):
+        A[row, i - 1] = 1.0 / x
+        A[row, j - 1] = -1.0 / x
+    incidence = np.zeros((len(IEEE14_BRANCHES), B))
+    for row, (i, j, _) in enumerate(IEEE14_BRANCHES):
+        incidence[row, i - 1], incidence[row, j - 1] = 1.0, -1.0
+    injections = incidence.T @ A  # (B, B) the susceptance Laplacian
+    rows = np.vstack([injections, A, -A])[:meters, 1:]  # drop the reference bus column
+    sensors = tuple(
+        Sensor(H=rows[m : m + 1], R=np.array([[sigma**2]]), name=f"m{m + 1}") for m in range(meters)
+    )
+    return LinearSystem(
+        F=np.eye(B - 1), Q=q * np.eye(B - 1), sensors=sensors, name=f"dc-ieee14-{meters}"
+    )
+
+
+def mixed_tracking(sensors: int = 14, seed: int = 0, sigma_v: float = 0.1) -> LinearSystem:
+    """Target tracking with ``sensors`` sensors, alternately position+velocity and position.
+
+    Args:
+        sensors: Number of sensors M >= 1 (even indices position+velocity, odd position).
+        seed: Seed of the random noise levels.
+        sigma_v: Process noise standard deviation of the tracking model.
+
+    Raises:
+        ValueError: For ``sensors < 1`` or a non-positive ``sigma_v``.
+    """
+    sensors = check_int("sensors", sensors, minimum=1)
+    sigma_v = check_positive("sigma_v", sigma_v)
+    rng = np.random.default_rng(seed)
+    out = [
+        pv_sensor(*rng.uniform(0.2, 1.0, 2), rng.uniform(-0.8, 0.8), name=f"z{i + 1}")
+        if i % 2 == 0
+        else position_sensor(rng.uniform(0.1, 1.0), name=f"z{i + 1}")
+        for i in range(sensors)
+    ]
+    return tracking_system(sigma_v, sensors=out, name=f"mixed-tracking-{sensors}")

@@ -1,0 +1,270 @@
+"""Branch and bound (baselines.sparse.bnb) and its provable bound (baselines.sparse.bound)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from baselines.sparse import bnb as bnb_module
+from baselines.sparse import (
+    branch_and_bound,
+    exhaustive,
+    make_problem,
+    sfs,
+    sfs_ss,
+    upper_bound,
+)
+from baselines.sparse.bound import allocation_bound, brute_force_optimum
+from baselines.sparse.testbeds import dc_grid14, mixed_tracking
+from fdia_env import scenarios, sparse_attack_v0
+from fdia_env.systems import LinearSystem, Sensor
+
+CH4_VALUE = 0.03278559152906327  # tests/test_sparse_solvers.py: the literature's optimum
+VALUE_RTOL = 1e-9
+
+
+def close(a: float, b: float, rtol: float = VALUE_RTOL) -> bool:
+    return abs(a - b) <= rtol * max(abs(a), abs(b), 1e-300)
+
+
+def bound_holds(bound: float, optimum: float) -> bool:
+    """The validity check applied to every bound: at least the optimum (rounding allowed)."""
+    return bound >= optimum - 1e-10 * max(abs(optimum), 1.0)
+
+
+def random_system(rng: np.random.Generator) -> tuple[LinearSystem, int, int, str]:
+    """A random instance with M·N <= 30: random F, Q (sometimes singular), vector or scalar
+    sensors, and repeated sensors (exact ties between attack sets)."""
+    n = int(rng.integers(1, 4))
+    M = int(rng.integers(1, 6))
+    F = rng.normal(size=(n, n))
+    F *= rng.uniform(0.5, 1.2) / max(np.abs(np.linalg.eigvals(F)).max(), 1e-9)
+    A = rng.normal(size=(n, n))
+    Q = A @ A.T * rng.uniform(0.01, 1.0) + (0.0 if rng.random() < 0.3 else 1e-3) * np.eye(n)
+    sensors: list[Sensor] = []
+    for _ in range(M):
+        if sensors and rng.random() < 0.25:
+            sensors.append(sensors[-1])  # a tie
+            continue
+        nz = int(rng.integers(1, min(n, 2) + 1))
+        B = rng.normal(size=(nz, nz))
+        sensors.append(Sensor(H=rng.normal(size=(nz, n)), R=B @ B.T + 0.1 * np.eye(nz)))
+    N = int(rng.integers(1, 30 // M + 1))
+    c = int(rng.integers(0, min(4, M * N) + 1))
+    objective = "trace" if rng.random() < 0.5 else "logdet"
+    return LinearSystem(F=F, Q=Q, sensors=tuple(sensors)), c, N, objective
+
+
+def play(result, scenario, budget, horizon, objective) -> float:
+    env = sparse_attack_v0.parallel_env(
+        scenario=scenario,
+        budget=budget,
+        horizon=horizon,
+        objective=objective,
+        reward_mode="terminal",
+    )
+    obs, _ = env.reset(seed=0)
+    policy, total = result.policy(), 0.0
+    while env.agents:
+        action, _ = policy.predict(obs["attacker"])
+        obs, rewards, _, _, _ = env.step({"attacker": action})
+        total += rewards["attacker"]
+    return total
+
+
+# --- equal to EXS -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("horizon", [6, 10])
+def test_bnb_equals_exhaustive_on_ch4_position(horizon):
+    result = branch_and_bound("ch4-position", budget=5, horizon=horizon)
+    best = exhaustive("ch4-position", budget=5, horizon=horizon)
+    assert close(result.value, best.value)
+    assert close(result.value, CH4_VALUE, 1e-12)
+    assert result.proved_optimal and result.gap == 0.0 and result.upper_bound == result.value
+
+
+@pytest.mark.parametrize("case", [1, 2, 3])
+def test_bnb_equals_exhaustive_on_pv_cases_with_det_objective(case):
+    name = f"ch4-pv-case{case}"
+    result = branch_and_bound(name, 5, 6, "logdet")
+    best = exhaustive(name, 5, 6, "logdet")
+    assert close(result.value, best.value)
+    assert result.proved_optimal and result.nodes > 1  # proved by search, not at the root
+    assert bound_holds(upper_bound(name, 5, 6, "logdet"), best.value)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_bnb_equals_exhaustive_on_ch4_random(seed):
+    sc = scenarios.get("ch4-random", seed=seed)
+    result = branch_and_bound(sc, budget=4, horizon=6)
+    best = exhaustive(sc, budget=4, horizon=6)
+    assert close(result.value, best.value)
+    assert bound_holds(upper_bound(sc, 4, 6), best.value)
+
+
+def test_bnb_proves_the_ch4_position_optimum_at_size_60():
+    result = branch_and_bound("ch4-position", budget=5, horizon=20)
+    assert result.proved_optimal and result.gap == 0.0
+    assert close(result.value, CH4_VALUE, 1e-12)
+    assert result.attacks == ((16, 0), (17, 0), (18, 0), (19, 0), (19, 1))
+
+
+def test_bnb_equals_exhaustive_and_bound_holds_on_200_random_instances():
+    rng = np.random.default_rng(2024)
+    objectives = set()
+    for trial in range(200):
+        system, c, N, objective = random_system(rng)
+        objectives.add(objective)
+        best = exhaustive(system, c, N, objective).value
+        # debug mode checks every child bound against its subtree's brute-force optimum
+        result = branch_and_bound(system, c, N, objective, debug=system.M * N <= 8)
+        assert close(result.value, best), (trial, result.value, best)
+        assert result.proved_optimal, trial
+        assert bound_holds(upper_bound(system, c, N, objective), best), trial
+    assert objectives == {"trace", "logdet"}
+
+
+def test_allocation_bound_is_the_optimum_for_position_sensors():
+    sc = scenarios.get("ch4-random", seed=3)
+    problem = make_problem(sc, 4, 5)
+    bound, pairs = allocation_bound(problem)
+    assert pairs is not None and len(pairs) == 4
+    assert close(problem.evaluate(pairs), bound, 1e-12)
+    assert close(bound, exhaustive(sc, 4, 5).value, 1e-12)
+
+
+# --- the check can fail -------------------------------------------------------------------
+
+
+def submodular_bound(problem) -> float:
+    """Φ(∅) + the c largest single-pair gains: valid only if Φ were submodular (it is not)."""
+    base = problem.evaluate([])
+    gains = sorted((problem.evaluate([q]) - base for q in problem.pairs()), reverse=True)
+    return base + sum(gains[: problem.budget])
+
+
+def test_bound_check_catches_invalid_bounds():
+    # ch4-position: dropping the same sensor at consecutive steps interacts (super-additive),
+    # so the submodularity bound falls below the optimum, and so does the exact bound − ε.
+    problem = make_problem("ch4-position", 5, 6)
+    best = exhaustive("ch4-position", 5, 6).value
+    assert not bound_holds(submodular_bound(problem), best)
+    assert submodular_bound(problem) < best * (1 - 1e-3)
+    tight = upper_bound("ch4-position", 5, 6)
+    assert bound_holds(tight, best)
+    assert not bound_holds(tight - 1e-6 * abs(tight), best)
+
+
+def test_debug_mode_raises_on_an_invalid_node_bound(monkeypatch):
+    real = bnb_module.child_bounds
+
+    def too_low(*args, **kwargs):
+        return real(*args, **kwargs) * 0.5  # trace values are positive: halving breaks them
+
+    monkeypatch.setattr(bnb_module, "child_bounds", too_low)
+    system = mixed_tracking(3, seed=1)
+    with pytest.raises(RuntimeError, match="invalid bound"):
+        branch_and_bound(system, 2, 2, debug=True)
+
+
+def test_brute_force_helper_matches_exhaustive():
+    problem = make_problem("ch4-pv-case1", 3, 3, "logdet")
+    value = brute_force_optimum(problem, [], problem.pairs(), 3)
+    assert close(value, exhaustive("ch4-pv-case1", 3, 3, "logdet").value, 1e-12)
+
+
+# --- time limit, certificate ---------------------------------------------------------------
+
+
+def test_time_limit_returns_the_incumbent_with_a_valid_certified_gap():
+    system = dc_grid14(14)
+    best = exhaustive(system, 3, 2).value  # 28 pairs
+    result = branch_and_bound(system, 3, 2, time_limit=0)
+    assert not result.proved_optimal
+    assert bound_holds(result.upper_bound, best)
+    assert result.value <= best * (1 + 1e-12)
+    assert 0.0 <= result.gap <= 1.0
+    assert result.gap == result.gap_to(result.upper_bound)
+    assert result.seconds >= 0 and result.nodes >= 1
+
+
+def test_bnb_certifies_a_300_pair_instance():
+    result = branch_and_bound(mixed_tracking(50), 5, 6, time_limit=120)
+    assert result.proved_optimal
+    assert result.value >= sfs_ss(mixed_tracking(50), 5, 6).value * (1 - 1e-12)
+
+
+def test_gap_to_is_relative_in_natural_units():
+    r = sfs("ch4-position", 5, 6)
+    assert math.isclose(r.gap_to(2 * r.value), 0.5)
+    assert r.gap_to(r.value) == 0.0
+    assert r.gap_to(math.inf) == 1.0
+    d = sfs("ch4-pv-case1", 5, 6, "logdet")
+    assert math.isclose(d.gap_to(d.value + math.log(4.0)), 0.75)  # det is 1/4 of the bound's
+    with pytest.raises(ValueError, match="bound"):
+        r.gap_to("1.0")
+    with pytest.raises(ValueError, match="bound"):
+        r.gap_to(math.nan)
+
+
+def test_other_solvers_carry_no_certificate():
+    r = exhaustive("ch4-position", 5, 6)
+    assert r.upper_bound is None and r.gap is None and r.proved_optimal is None
+    assert r.nodes is None and r.seconds is None
+
+
+# --- the policy -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("scenario", "budget", "horizon", "objective"),
+    [("ch4-position", 5, 10, "trace"), ("ch4-pv-case3", 5, 6, "logdet")],
+)
+def test_policy_replays_the_certified_value_in_the_env(scenario, budget, horizon, objective):
+    result = branch_and_bound(scenario, budget, horizon, objective)
+    ret = play(result, scenario, budget, horizon, objective)
+    assert abs(ret - result.value) <= 1e-12 * abs(result.value)
+
+
+def test_policy_replays_the_value_on_a_custom_system():
+    system = mixed_tracking(4, seed=5)
+    result = branch_and_bound(system, 3, 4)
+    ret = play(result, system, 3, 4, "trace")
+    assert abs(ret - result.value) <= 1e-12 * abs(result.value)
+
+
+# --- bad input ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"budget": 19}, "budget"),
+        ({"budget": -1}, "budget"),
+        ({"budget": 2.5}, "budget"),
+        ({"horizon": 0}, "horizon"),
+        ({"objective": "max"}, "objective"),
+        ({"time_limit": -1.0}, "time_limit"),
+        ({"time_limit": "10"}, "time_limit"),
+        ({"time_limit": math.nan}, "time_limit"),
+        ({"time_limit": True}, "time_limit"),
+        ({"chunk": 0}, "chunk"),
+    ],
+)
+def test_bad_input_names_the_parameter(kwargs, match):
+    args = {"budget": 5, "horizon": 6} | kwargs
+    with pytest.raises(ValueError, match=match):
+        branch_and_bound("ch4-position", **args)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [({"budget": 19}, "budget"), ({"objective": "max"}, "objective"), ({"horizon": 0}, "horizon")],
+)
+def test_upper_bound_bad_input_names_the_parameter(kwargs, match):
+    args = {"budget": 5, "horizon": 6} | kwargs
+    with pytest.raises(ValueError, match=match):
+        upper_bound("ch4-position", **args)
