@@ -134,7 +134,13 @@ class Evaluation:
         if self.score_name == "exploitability":
             rel = self.extras.get("relative_exploitability", math.nan)
             return f"expl {self.score:.4g} ({rel:.2%})"
-        return f"{self.score:.2%}"
+        text = f"{self.score:.2%}"
+        if "ratio_to_bound" in self.extras:  # the optimum is unknown: bracket the true score
+            text += f" (≥ {self.extras['ratio_to_bound']:.2%} of the optimum)"
+        sfs = self.extras.get("ratio_to_SFS")
+        if sfs is not None:
+            text += f", {sfs:.2%} of SFS"
+        return text
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (NaN as None)."""
@@ -391,6 +397,10 @@ def evaluate(
         else:
             score = ref.ratio(mean)
             score_name = "ratio to optimum" if ref.exact else "ratio to best known"
+            if ref.bound is not None:  # a lower bound on the true score
+                extras["ratio_to_bound"] = ref.ratio(mean, ref.bound)
+            if ref.heuristic is not None:
+                extras[f"ratio_to_{ref.heuristic[0]}"] = ref.ratio(mean, ref.heuristic[1])
         env_id = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
         return Evaluation(
             policy=policy_name(policy),

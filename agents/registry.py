@@ -38,6 +38,7 @@ BOX_ALGORITHMS = ("SAC", "PPO", "A2C")
 # EXS is exact but costs C(M·N, c) evaluations (~10⁷/s); above this the reference is the best
 # of the polynomial heuristics ("best known heuristic where the optimum is out of reach").
 EXS_MAX_SETS = 20_000_000
+BNB_TIME_LIMIT = 30.0  # seconds of branch and bound for a sparse reference past EXS
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,11 @@ class Reference:
             played in the env it returns ``value`` (in a game, in expectation).
         cost: The returns are negative costs (a defender's): the score is then
             ``value / return`` (optimal cost over learned cost), at most 1 like the others.
+        bound: When ``exact`` is False: a certified upper bound on the optimum (branch and
+            bound), in the units of ``value``; a return's ratio to it is a lower bound on its
+            true score.
+        heuristic: ``(name, value)`` of a greedy answer (SFS) to compare with where the optimum
+            is unknown.
     """
 
     value: float
@@ -64,19 +70,22 @@ class Reference:
     payoff: np.ndarray | None = field(default=None, repr=False)
     policy: Any = field(default=None, repr=False, compare=False)
     cost: bool = False
+    bound: float | None = None
+    heuristic: tuple[str, float] | None = None
 
     @property
     def is_game(self) -> bool:
         """Whether the score is an exploitability (a game) rather than a ratio."""
         return self.payoff is not None
 
-    def ratio(self, mean_return: float) -> float:
-        """Single-player score: the return as a fraction of the optimum."""
+    def ratio(self, mean_return: float, value: float | None = None) -> float:
+        """Single-player score: the return as a fraction of the optimum (or of ``value``)."""
+        value = self.value if value is None else value
         if self.objective == "logdet":
-            return math.exp(mean_return - self.value)  # det ratio
+            return math.exp(mean_return - value)  # det ratio
         if self.cost:
-            return self.value / mean_return  # both negative: optimal cost / learned cost
-        return mean_return / self.value
+            return value / mean_return  # both negative: optimal cost / learned cost
+        return mean_return / value
 
 
 def parallel_of(env: gym.Env) -> FdiaParallelEnv:
@@ -93,12 +102,15 @@ def parallel_of(env: gym.Env) -> FdiaParallelEnv:
 
 
 def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
-    """EXS for the env's scenario, budget, horizon and objective (or the best heuristic).
+    """EXS for the env's scenario, budget, horizon and objective, or a certified answer.
 
     ``baselines.sparse.exhaustive`` when its ``C(M·N, c)`` sets are within
-    :data:`EXS_MAX_SETS`, else the best of SFS, SFS-SS and DP.
+    :data:`EXS_MAX_SETS`; else ``branch_and_bound`` with :data:`BNB_TIME_LIMIT`: its optimum
+    when proved, otherwise its best set (at least as good as SFS-SS and DP) with the certified
+    upper bound and SFS's value, so a learned policy is scored against the best known answer,
+    the bound (a lower bound on its true score) and the greedy heuristic.
     """
-    from baselines.sparse import dp, exhaustive, sfs, sfs_ss
+    from baselines.sparse import branch_and_bound, exhaustive, sfs
 
     spec = env.spec
     if spec.reward_mode != "terminal" or spec.warmup != "steady":
@@ -107,9 +119,20 @@ def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
     if math.comb(env.system.M * spec.horizon, env.attack.budget) <= EXS_MAX_SETS:
         best = exhaustive(*args)
         return Reference(best.value, "EXS", spec.objective, policy=best.policy())
-    best = max((f(*args) for f in (sfs, sfs_ss, dp)), key=lambda r: r.value)
-    name = f"best heuristic ({best.solver.upper()})"
-    return Reference(best.value, name, spec.objective, False, policy=best.policy())
+    proof = branch_and_bound(*args, time_limit=BNB_TIME_LIMIT)
+    greedy = ("SFS", sfs(*args).value)
+    if proof.proved_optimal:
+        name = "B&B (certified optimum)"
+        return Reference(proof.value, name, spec.objective, policy=proof.policy(), heuristic=greedy)
+    return Reference(
+        proof.value,
+        "best known (B&B incumbent)",
+        spec.objective,
+        False,
+        policy=proof.policy(),
+        bound=proof.upper_bound,
+        heuristic=greedy,
+    )
 
 
 def covariance_reference(env: FdiaParallelEnv) -> Reference | None:

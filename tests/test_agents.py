@@ -215,3 +215,31 @@ def test_batched_evaluation_equals_sequential_for_every_id_with_default_opponent
     batched = evaluate("random", env, 7, seed=5, num_envs=3)  # rounds of 3, 3 and 1 episodes
     np.testing.assert_allclose(batched.returns, one_by_one.returns, rtol=1e-9, atol=1e-12)
     assert np.ptp(one_by_one.returns) > 0  # the episodes differ: the comparison can fail
+
+
+def test_sparse_reference_past_exs_is_certified_by_branch_and_bound():
+    from baselines.sparse.testbeds import mixed_tracking
+
+    # C(84, 5) = 3.2e7 sets: past EXS_MAX_SETS, so branch and bound certifies the optimum
+    env = gym.make("fdia_env/SparseAttack-v0", scenario=mixed_tracking(14), budget=5, horizon=6)
+    ref = registry.sparse_reference(registry.parallel_of(env))
+    assert ref.exact and ref.name == "B&B (certified optimum)" and ref.bound is None
+    assert ref.value == pytest.approx(0.02056760660513471, rel=1e-9)
+    assert ref.heuristic[0] == "SFS" and ref.heuristic[1] <= ref.value
+    result = evaluate(ref.policy, env, 1, seed=0)
+    assert result.score == pytest.approx(1.0, rel=1e-9)
+    assert "of SFS" in result.score_text()
+
+
+def test_sparse_reference_with_an_open_gap_brackets_the_score(monkeypatch):
+    from baselines.sparse.testbeds import dc_grid14
+
+    monkeypatch.setattr(registry, "BNB_TIME_LIMIT", 1.0)  # too short to close the gap
+    env = gym.make("fdia_env/SparseAttack-v0", scenario=dc_grid14(14), budget=5, horizon=6)
+    ref = registry.sparse_reference(registry.parallel_of(env))
+    assert not ref.exact and ref.bound > ref.value
+    result = evaluate("random", env, 20, seed=0)
+    lower = result.extras["ratio_to_bound"]
+    assert lower == pytest.approx(result.mean / ref.bound) and lower < result.score
+    assert result.score_name == "ratio to best known"
+    assert "of the optimum" in result.score_text() and "of SFS" in result.score_text()
