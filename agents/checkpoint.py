@@ -257,14 +257,19 @@ def restore(
         setattr(model, name, value)
 
 
+def require_trusted(path: Path, trusted: bool, what: str = "a stable-baselines3 .zip") -> None:
+    """Raise :class:`UntrustedCheckpointError` for a pickle-based file unless ``trusted``."""
+    if not trusted:
+        raise UntrustedCheckpointError(
+            f"{path} is {what}, which is loaded by unpickling and can run any code; it was not "
+            f"loaded: {TRUST_HINT}"
+        )
+
+
 def _load_sb3_zip(
     path: Path, env: Any, device: str, algo: str | None, trusted: bool
 ) -> BaseAlgorithm:
-    if not trusted:
-        raise UntrustedCheckpointError(
-            f"{path} is a stable-baselines3 .zip, which is loaded by unpickling and can run any "
-            f"code; it was not loaded: {TRUST_HINT}"
-        )
+    require_trusted(path, trusted)
     if algo is None:
         raise ValueError(f"loading the stable-baselines3 .zip {path} needs its algorithm")
     if not path.is_file():
@@ -308,11 +313,7 @@ def load_replay_buffer(model: BaseAlgorithm, path: Path, root: Path, trusted: bo
     if not path.is_file():
         raise ValueError(f"replay buffer file {path} does not exist")
     if path.suffix == ".pkl":
-        if not trusted:
-            raise UntrustedCheckpointError(
-                f"{path} is a pickled replay buffer, which can run any code when loaded; it was "
-                f"not loaded: {TRUST_HINT}"
-            )
+        require_trusted(path, trusted, "a pickled replay buffer")
         model.load_replay_buffer(path)
         return
     buffer = model.replay_buffer

@@ -40,7 +40,13 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.algos import build_model
-from agents.checkpoint import UntrustedCheckpointError, inside, load_model, read_json, save_model
+from agents.checkpoint import (
+    inside,
+    load_model,
+    read_json,
+    require_trusted,
+    save_model,
+)
 from agents.config import (
     GameConfig,
     algo_kwargs,
@@ -228,12 +234,8 @@ def load_policies(
     for path in (p for side in SIDES for p in paths[side]):
         if not path.is_file():
             raise ValueError(f"policy file {path}, listed in {run_dir / STATE}, does not exist")
-        if path.suffix == ".zip" and not trusted:
-            raise UntrustedCheckpointError(
-                f"{path} is a stable-baselines3 .zip, which can run any code when loaded; it was "
-                "not loaded: pass --trust-checkpoint to load it only if you made it yourself or "
-                "trust whoever did"
-            )
+        if path.suffix == ".zip":
+            require_trusted(path, trusted)
     models: dict[str, list[BaseAlgorithm]] = {}
     for side in SIDES:
         with entries[side].make(**env_kwargs) as env:

@@ -50,6 +50,7 @@ from agents.checkpoint import (
     load_model,
     load_replay_buffer,
     read_json,
+    require_trusted,
     save_model,
     save_replay_buffer,
 )
@@ -333,11 +334,8 @@ def best_model_file(run_dir: Path, trusted: bool = False) -> Path | None:
     path = inside(run_dir, record.get("model", "best_model.zip"), run_dir, "best model file")
     if not path.is_file():
         raise ValueError(f"best model file {path}, named by {best_path}, does not exist")
-    if path.suffix == ".zip" and not trusted:
-        raise UntrustedCheckpointError(
-            f"{path} is a stable-baselines3 .zip, which can run any code when loaded; it was not "
-            "loaded: pass --trust-checkpoint to load it only if you trust it"
-        )
+    if path.suffix == ".zip":
+        require_trusted(path, trusted)
     return path
 
 
