@@ -110,7 +110,7 @@ def test_make_vec_builds_sane_or_names_a_parameter(env_id, data, seed):
         if not built:
             return
         with bounded():
-            obs, infos = env.reset(seed=seed)
+            obs, _ = env.reset(seed=seed)
             assert_in_space(env.observation_space, obs)
             obs, reward, *_ = env.step(env.action_space.sample())
             assert_in_space(env.observation_space, obs)

@@ -123,7 +123,7 @@ def _valid_action(space: spaces.Space, rng: np.random.Generator):
 
 
 def _check_step(env, out, signature) -> None:
-    obs, rewards, terms, truncs, infos = out
+    obs, rewards, _, _, infos = out
     for agent in obs:
         assert_in_space(env.observation_space(agent), obs[agent], f"{agent} observation")
         assert_finite(rewards[agent], f"{agent} reward")
