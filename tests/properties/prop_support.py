@@ -125,10 +125,20 @@ def mixed(valid: st.SearchStrategy[Any]) -> st.SearchStrategy[Any]:
 
 
 @st.composite
-def kwargs_of(draw: Any, params: dict[str, st.SearchStrategy[Any]]) -> dict[str, Any]:
-    """A random subset of ``params``, each value drawn from :func:`mixed` of its strategy."""
-    chosen = draw(st.lists(st.sampled_from(sorted(params)), unique=True, max_size=len(params)))
-    return {name: draw(mixed(params[name])) for name in sorted(chosen)}
+def kwargs_of(
+    draw: Any,
+    params: dict[str, st.SearchStrategy[Any]],
+    required: tuple[str, ...] = (),
+    wrong: bool = True,
+) -> dict[str, Any]:
+    """A random subset of ``params`` (always the ``required`` ones), values from :func:`mixed`.
+
+    With ``wrong=False`` the values are drawn from the valid strategies only.
+    """
+    chosen = set(draw(st.lists(st.sampled_from(sorted(params)), unique=True)))
+    chosen |= set(required)
+    pick = mixed if wrong else (lambda strategy: strategy)
+    return {name: draw(pick(params[name])) for name in sorted(chosen)}
 
 
 @st.composite
