@@ -7,10 +7,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.covariance.problem import check_weight
+from baselines.covariance.problem import check_weight, resolve_system
 from fdia_env._validation import as_matrix, check_choice, check_psd
 from fdia_env.kalman import steady_state
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, power_weight
 
 if TYPE_CHECKING:
@@ -142,7 +142,7 @@ def evaluate(
         1.455
     """
     check_choice("objective", objective, OBJECTIVES)
-    system = resolve(system_or_scenario).system
+    system = resolve_system(system_or_scenario).system
     sigma = as_matrix("sigma", sigma, shape=(system.nz, system.nz))
     check_psd("sigma", sigma)
     omega = power_weight(system) if weight is None else check_weight(weight, system.nz)
