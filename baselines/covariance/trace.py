@@ -129,8 +129,8 @@ def _position_noise(system: LinearSystem, rule: str) -> np.ndarray:
     for i, s in enumerate(system.sensors):
         if s.dim != 1 or not np.array_equal(s.H, H0):
             raise ValueError(
-                f"system_or_scenario must have scalar sensors with one common H (e.g. position "
-                f"sensors) for {rule}; "
+                f"system_or_scenario: {rule} needs scalar sensors with one common H (e.g. "
+                "position sensors); "
                 f"sensor {i} has H = {s.H.tolist()}, sensor 0 has H = {H0.tolist()}"
             )
     return np.array([s.R[0, 0] for s in system.sensors])
@@ -213,8 +213,8 @@ def pv_single_sensor_rule(
     system = sc.system
     if system.M != 1 or not np.array_equal(system.sensors[0].H, np.eye(2)):
         raise ValueError(
-            "system_or_scenario must have exactly one position+velocity sensor (H = I₂) for "
-            "pv_single_sensor_rule, got "
+            "system_or_scenario: pv_single_sensor_rule needs exactly one position+velocity sensor "
+            "(H = I₂), got "
             f"{system.M} sensor(s) with H = {[s.H.tolist() for s in system.sensors]}"
         )
     problem = make_problem(sc, power)
