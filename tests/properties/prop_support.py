@@ -193,16 +193,21 @@ def assert_in_space(space: spaces.Space, value: Any, where: str = "observation")
     assert space.contains(value), f"{where} {value!r} not in {space}"
 
 
-def assert_psd(P: Any, what: str = "P", rtol: float = 1e-8) -> None:
-    """``P`` (..., n, n) is finite, symmetric and PSD to a tolerance relative to its scale."""
+def assert_psd(P: Any, what: str = "P", rtol: float = 1e-8, atol: float = 1e-10) -> None:
+    """``P`` (..., n, n) is finite, symmetric and PSD to ``max(rtol · scale, atol)``.
+
+    The absolute floor ``atol`` is the one of ``fdia_env._validation.check_psd`` (tolerance
+    ``1e-10 · max(1, scale)``): a matrix the project accepts as PSD input passes here too.
+    """
     P = np.asarray(P, dtype=np.float64)
     assert np.all(np.isfinite(P)), f"{what} not finite: {P}"
     scale = max(float(np.abs(P).max()), 1e-300) if P.size else 1.0
     asym = float(np.abs(P - np.swapaxes(P, -1, -2)).max()) if P.size else 0.0
-    assert asym <= rtol * scale, f"{what} not symmetric (|P - P'| = {asym:.3g}): {P}"
+    tol = max(rtol * scale, atol)
+    assert asym <= tol, f"{what} not symmetric (|P - P'| = {asym:.3g}): {P}"
     if P.size:
         lowest = float(np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2))).min())
-        assert lowest >= -rtol * scale, f"{what} not PSD (λ_min = {lowest:.3g}): {P}"
+        assert lowest >= -tol, f"{what} not PSD (λ_min = {lowest:.3g}): {P}"
 
 
 def assert_finite(value: Any, what: str) -> None:

@@ -354,6 +354,12 @@ KNOWN_DEFECTS: dict[str, tuple[str, dict]] = {
         "AttributeError: 'bytes' object has no attribute 'sensors'",
         {"system": b"x", "subset": [0], "power": 1.0},
     ),
+    "game.solve_bayesian": (
+        "baselines/game (game worker): solve_bayesian(matrices=[payoff_matrix('ch5-game')], "
+        "priors=[1.0], attacker=np.zeros(0)) -> 'truth value of an empty array is ambiguous', "
+        "naming no parameter",
+        {"matrices": [game.payoff_matrix("ch5-game")], "priors": [1.0], "attacker": np.zeros(0)},
+    ),
     "game.strategy_bounds": (
         "baselines/game (game worker): strategy_bounds(L=[[1.0]], player=np.zeros(0)) -> "
         "'truth value of an empty array is ambiguous', naming no parameter",

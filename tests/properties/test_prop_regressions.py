@@ -90,6 +90,12 @@ def test_fdia_v0_missing_model_parameter_names_the_kwargs(kwargs, missing):
         fdia_v0.parallel_env(**kwargs)
 
 
+def test_expected_tracking_horizon_from_max_cycles_names_max_cycles():
+    with pytest.raises(ValueError, match="horizon must be 1 with dynamics='expected'") as info:
+        detection_game_v0.parallel_env(scenario="ch2-position", max_cycles=2)
+    assert "max_cycles" in str(info.value)
+
+
 def test_sensor_game_on_vector_sensors_fails_at_construction_naming_scenario():
     with pytest.raises(ValueError, match="scenario 'ch2-pv-2' cannot host the subset attack"):
         sensor_game_v0.parallel_env(scenario="ch2-pv-2")
