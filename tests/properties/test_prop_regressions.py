@@ -204,3 +204,21 @@ def test_detection_game_error_covariance_psd_at_power_1e18():
     obs, *_ = env.step({"attacker": attack, "defender": np.array([-1.0], np.float32)})
     assert_psd(env.sim.M, "M")
     assert np.all(np.isfinite(obs["attacker"]))
+
+
+@pytest.mark.parametrize("power", [1e15, 1e18, 2.0**63, 1e30])
+def test_det_optimal_logdet_stays_exact_at_huge_power(power):
+    """log det(P + W Σ W') at a huge power: finite, and log(1 + a² g) of the rank-one optimum.
+
+    ch2-position's optimum is rank one (two scalar sensors, one direction), so the value is
+    ``log det P + log(1 + a² g)`` with g the top gain at unit power; the difference to the
+    power 3000 value is therefore known in closed form. Forming P + W Σ W' first gave −inf
+    from a² = 1e18 on (the small eigenvalue lost to round-off) and 31.5347 instead of 31.5010
+    at 1e15.
+    """
+    ref = cov.det_optimal("ch2-position", 3000.0)
+    result = cov.det_optimal("ch2-position", power)
+    logdet_P = float(np.linalg.slogdet(ref.P)[1])
+    g = np.expm1(ref.value - logdet_P) / 3000.0  # from the well-conditioned reference
+    assert np.isfinite(result.value)
+    assert result.value == pytest.approx(logdet_P + np.log1p(power * g), rel=1e-9)
