@@ -116,8 +116,10 @@ def parallel_env(
     static = _is_static(sc.system)
     if dynamics == "expected" and not static and spec.horizon > 1:
         raise ValueError(
-            "horizon must be 1 with dynamics='expected' in the tracking setting (after one "
-            "detection the estimation error is no longer Gaussian); use dynamics='sampled'"
+            f"horizon must be 1 with dynamics='expected' in the tracking setting (after one "
+            f"detection the estimation error is no longer Gaussian), got {spec.horizon} (from "
+            f"horizon, or max_cycles when horizon is not given, on the non-static scenario "
+            f"{sc.name!r}); use dynamics='sampled'"
         )
     attack = ProbabilisticAttack(power)
     sigma = c2_optimal_pbb(_prior(sc.system, spec), sc.system.H, sc.system.R, attack.power)

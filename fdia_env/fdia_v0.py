@@ -73,6 +73,7 @@ from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 NAME = "fdia_v0"
+_NAMED = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
 ATTACKS: dict[str, type[AttackModel]] = {
     "sparse": SparseAttack,
     "covariance": CovarianceAttack,
@@ -110,10 +111,18 @@ def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None
                 f"{kind} must be one of {sorted(registry)} or a model instance, got {value!r}"
             )
         cls = registry[value]
-        allowed = [p for p in inspect.signature(cls).parameters if p != "self"]
+        params = {p: v for p, v in inspect.signature(cls).parameters.items() if p != "self"}
+        allowed = list(params)
         unknown = sorted(set(kwargs or {}) - set(allowed))
         if unknown:
             raise ValueError(f"{kind}_kwargs: {value!r} takes {allowed}, got unknown {unknown}")
+        required = [p for p, v in params.items() if v.default is v.empty and v.kind in _NAMED]
+        missing = [p for p in required if p not in (kwargs or {})]
+        if missing:
+            raise ValueError(
+                f"{kind}_kwargs must give {missing} for {kind}={value!r} (the scenario defines "
+                f"no default for them), got {kwargs!r}"
+            )
         return cls(**(kwargs or {}))
     if kwargs:
         raise ValueError(f"{kind}_kwargs only apply when {kind} is given by name")

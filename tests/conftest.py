@@ -6,11 +6,31 @@ Imported by the test modules as ``from conftest import ...`` (pytest puts ``test
 from __future__ import annotations
 
 import itertools
+import os
 
 import numpy as np
+from hypothesis import HealthCheck, Phase, settings
 from hypothesis import strategies as st
 
 from fdia_env.systems import LinearSystem, Sensor
+
+# Hypothesis profiles, picked by HYPOTHESIS_PROFILE (default "ci"). "ci": the same examples on
+# every run (derandomize), no example database; "dev": 10x the examples of the property suite
+# (tests/properties scales its per-test budgets by max_examples / 100), random, with a database.
+settings.register_profile(
+    "ci",
+    derandomize=True,
+    database=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile(
+    "dev", max_examples=1000, suppress_health_check=[HealthCheck.too_slow], print_blob=True
+)
+settings.register_profile(  # find failures fast: no shrinking, every distinct bug reported
+    "triage", parent=settings.get_profile("dev"), phases=[Phase.explicit, Phase.generate]
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def all_masks(M: int) -> np.ndarray:

@@ -58,7 +58,10 @@ def water_filling(xi: np.ndarray, power: float) -> tuple[np.ndarray, float]:
         [4.5, 1.5]
     """
     power = check_positive("power", power)
-    xi = np.asarray(xi, dtype=np.float64)
+    try:
+        xi = np.asarray(xi, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"xi must be a non-empty finite 1-D array of numbers, got {xi!r}") from exc
     if xi.ndim != 1 or xi.size == 0 or not np.all(np.isfinite(xi)):
         raise ValueError(f"xi must be a non-empty finite 1-D array, got {xi!r}")
     top = float(xi.max(initial=0.0))

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fdia_env.scenarios import Scenario, resolve
+from baselines.covariance.problem import resolve_system
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, Sensor
 
 
@@ -82,7 +83,7 @@ def equivalent_sensor(system_or_scenario: str | Scenario | LinearSystem) -> Equi
         >>> eq.identical, round(float(eq.R[0, 0]), 6)  # (1/3 + 1/4)⁻¹ = 12/7
         (True, 1.714286)
     """
-    system = resolve(system_or_scenario).system
+    system = resolve_system(system_or_scenario).system
     H0 = system.sensors[0].H
     if all(np.array_equal(s.H, H0) for s in system.sensors):
         Rinv = [np.linalg.inv(s.R) for s in system.sensors]

@@ -27,11 +27,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.covariance.problem import make_problem
+from baselines.covariance.problem import make_problem, resolve_system
 from baselines.covariance.trace import top_eigenvector
-from fdia_env._validation import as_vector, check_choice, check_int
+from fdia_env._validation import as_vector, check_choice, check_finite, check_int, check_psd
 from fdia_env.kalman import actual_covariance_step, steady_state
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 if TYPE_CHECKING:
@@ -76,6 +76,10 @@ class MultiShotResult:
         from baselines.covariance.policy import CovariancePolicy
 
         return CovariancePolicy(source, self.sigmas, horizon=self.horizon)
+
+
+# attacked steps of one plan: (N, nz, nz) coefficient matrices are built and stored
+MAX_HORIZON = 10_000
 
 
 def check_weights(weights: np.ndarray | None, horizon: int) -> np.ndarray:
@@ -127,7 +131,7 @@ def multi_shot(
         system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
         power: a² > 0 (default: the scenario's): the total over the window in ``"budget"``
             mode, every step's in ``"per_step"`` mode.
-        horizon: Number of attacked steps N ≥ 1 (steps K..K+N−1).
+        horizon: Number of attacked steps N, 1..``MAX_HORIZON`` (steps K..K+N−1).
         weights: (N,) time weights α_m ≥ 0 summing to 1 (default equal); ``α = e_{N−1}``
             scores only the last step, like the env's terminal reward.
         weight: (nz, nz) power weighting Ω (default :func:`~fdia_env.systems.power_weight`).
@@ -142,7 +146,7 @@ def multi_shot(
         (0, 174.16)
     """
     check_choice("power_mode", power_mode, POWER_MODES)
-    horizon = check_int("horizon", horizon, minimum=1)
+    horizon = check_int("horizon", horizon, minimum=1, maximum=MAX_HORIZON)
     alpha = check_weights(weights, horizon)
     problem = make_problem(system_or_scenario, power, weight)
     C = coefficient_matrices(problem.system, alpha, problem.W)
@@ -184,12 +188,20 @@ def recursion_objective(
         sigmas: (N, nz, nz) ``Σ[K..K+N−1]``.
         weights: (N,) time weights α (default equal).
     """
-    system = resolve(system_or_scenario).system
-    sigmas = np.asarray(sigmas, dtype=np.float64)
+    system = resolve_system(system_or_scenario).system
+    try:
+        sigmas = np.asarray(sigmas, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"sigmas must be an (N, {system.nz}, {system.nz}) array of numbers, got {sigmas!r}"
+        ) from exc
     if sigmas.ndim != 3 or sigmas.shape[1:] != (system.nz, system.nz):
         raise ValueError(
             f"sigmas must have shape (N, {system.nz}, {system.nz}), got {sigmas.shape}"
         )
+    check_finite("sigmas", sigmas)
+    for j, sigma in enumerate(sigmas):
+        check_psd(f"sigmas[{j}]", sigma)
     alpha = check_weights(weights, sigmas.shape[0])
     _, P, W = steady_state(system)
     M, total = P, 0.0

@@ -43,6 +43,14 @@ def check_weight(weight: Any, nz: int) -> np.ndarray:
     return arr
 
 
+def resolve_system(system_or_scenario: Any) -> Scenario:
+    """:func:`fdia_env.scenarios.resolve`, its ``ValueError`` naming ``system_or_scenario``."""
+    try:
+        return resolve(system_or_scenario)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"system_or_scenario: {exc}") from exc
+
+
 def resolve_power(scenario: Scenario, power: Any) -> float:
     """``power`` (a² > 0) if given, else the scenario's; ``ValueError`` naming ``power``."""
     if power is None:
@@ -118,7 +126,7 @@ def make_problem(
             where the scenario has none); a weight of the wrong shape, not symmetric or not
             positive definite; an unknown scenario.
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     a2 = resolve_power(sc, power)
     omega = power_weight(sc.system) if weight is None else weight
     return CovarianceProblem(sc.system, a2, omega)

@@ -7,10 +7,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.covariance.problem import check_weight
+from baselines.covariance.problem import check_weight, resolve_system
 from fdia_env._validation import as_matrix, check_choice, check_psd
-from fdia_env.kalman import steady_state
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.kalman import psd_sqrt, steady_state
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, power_weight
 
 if TYPE_CHECKING:
@@ -61,7 +61,7 @@ class CovarianceResult:
         cov = 0.5 * (cov + cov.T)
         sigma.setflags(write=False)
         cov.setflags(write=False)
-        value = np.trace(cov) if self.objective == "trace" else np.linalg.slogdet(cov)[1]
+        value = np.trace(cov) if self.objective == "trace" else _logdet(self.P, self.W, sigma)
         object.__setattr__(self, "sigma", sigma)
         object.__setattr__(self, "covariance", cov)
         object.__setattr__(self, "value", float(value))
@@ -142,10 +142,27 @@ def evaluate(
         1.455
     """
     check_choice("objective", objective, OBJECTIVES)
-    system = resolve(system_or_scenario).system
+    system = resolve_system(system_or_scenario).system
     sigma = as_matrix("sigma", sigma, shape=(system.nz, system.nz))
     check_psd("sigma", sigma)
     omega = power_weight(system) if weight is None else check_weight(weight, system.nz)
     _, P, W = steady_state(system)
     budget = float(np.trace(omega @ sigma))
     return CovarianceResult(sigma, objective, "given", P, W, omega, budget)
+
+
+def _logdet(P: np.ndarray, W: np.ndarray, sigma: np.ndarray) -> float:
+    """``log det(P + W Σ W')`` by the determinant lemma, finite for any power.
+
+    ``log det P + Σ_i log(1 + λ_i)``, λ the eigenvalues of the PSD ``S' W' P⁻¹ W S`` (Σ = S S').
+    Forming ``P + W Σ W'`` first loses P's small eigenvalues to round-off once Σ is ~1e17
+    times larger (log det = −inf at a² = 1e18 on ch2-position); this form keeps them.
+    """
+    try:
+        L = np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:  # a singular P: the direct form (its log det is −inf anyway)
+        return float(np.linalg.slogdet(P + W @ sigma @ W.T)[1])
+    S = psd_sqrt(sigma)
+    X = np.linalg.solve(L, W @ S)  # L⁻¹ W S: X'X = S' W' P⁻¹ W S
+    lam = np.linalg.eigvalsh(X.T @ X)
+    return float(2.0 * np.log(np.diag(L)).sum() + np.log1p(np.maximum(lam, 0.0)).sum())

@@ -22,10 +22,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from baselines.covariance.problem import CovarianceProblem, make_problem, weight_roots
+from baselines.covariance.problem import (
+    CovarianceProblem,
+    make_problem,
+    resolve_system,
+    weight_roots,
+)
 from baselines.covariance.result import CovarianceResult
 from fdia_env._validation import check_choice
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 STRUCTURES = ("full", "diagonal")
@@ -124,7 +129,8 @@ def _position_noise(system: LinearSystem, rule: str) -> np.ndarray:
     for i, s in enumerate(system.sensors):
         if s.dim != 1 or not np.array_equal(s.H, H0):
             raise ValueError(
-                f"{rule} needs scalar sensors with one common H (e.g. position sensors); "
+                f"system_or_scenario: {rule} needs scalar sensors with one common H (e.g. "
+                "position sensors); "
                 f"sensor {i} has H = {s.H.tolist()}, sensor 0 has H = {H0.tolist()}"
             )
     return np.array([s.R[0, 0] for s in system.sensors])
@@ -146,7 +152,7 @@ def independent_position_rule(
         >>> result.variances.tolist(), round(result.value, 1)
         ([3000.0, 0.0], 390.8)
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     r = _position_noise(sc.system, "independent_position_rule")
     problem = make_problem(sc, power)
     best = int(np.argmin(r))
@@ -171,7 +177,7 @@ def dependent_position_rule(
         >>> result.variances.round(6).tolist(), round(result.value, 1)
         ([1920.0, 1080.0], 609.9)
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     r = _position_noise(sc.system, "dependent_position_rule")
     problem = make_problem(sc, power)
     c = (1.0 / r) / np.sum(1.0 / r)
@@ -203,11 +209,12 @@ def pv_single_sensor_rule(
         >>> round(result.info["rho"]), round(result.value, 2)
         (1, 805.55)
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     system = sc.system
     if system.M != 1 or not np.array_equal(system.sensors[0].H, np.eye(2)):
         raise ValueError(
-            "pv_single_sensor_rule needs exactly one position+velocity sensor (H = I₂), got "
+            "system_or_scenario: pv_single_sensor_rule needs exactly one position+velocity sensor "
+            "(H = I₂), got "
             f"{system.M} sensor(s) with H = {[s.H.tolist() for s in system.sensors]}"
         )
     problem = make_problem(sc, power)

@@ -64,8 +64,9 @@ class SparseAttack(AttackModel):
             )
         if self.budget > system.M * spec.horizon:
             raise ValueError(
-                f"budget must be <= M * horizon = {system.M * spec.horizon} "
-                f"(every sensor-time pair of the window), got {self.budget}"
+                f"budget must be <= M * horizon = {system.M * spec.horizon} (every sensor-time "
+                f"pair of the window: M = {system.M} sensors, horizon = {spec.horizon} steps, "
+                f"which is max_cycles when only that is given), got {self.budget}"
             )
         self.M = system.M
         self.n_actions = 2**system.M

@@ -141,6 +141,12 @@ class SubsetAttack(SubsetChoice, AttackModel):
             raise ValueError(
                 f"the subset action supports at most {MAX_GAME_SENSORS} sensors, got {system.M}"
             )
+        try:  # checked here, not at the first step that attacks a vector sensor
+            sensor_sigmas(system)
+        except ValueError as exc:
+            raise ValueError(
+                f"scenario {system.name!r} cannot host the subset attack: {exc}"
+            ) from exc
         self.bind_subsets(system.M)
         self._sigmas: dict[int, np.ndarray] = {}
         self._system = system

@@ -44,8 +44,7 @@ class SingleAgentEnv(gym.Env):
     def __init__(
         self, parallel: FdiaParallelEnv, agent: str = "attacker", opponent: Policy | None = None
     ) -> None:
-        if agent not in parallel.possible_agents:
-            raise ValueError(f"agent must be one of {parallel.possible_agents}, got {agent!r}")
+        check_agent(agent, parallel.possible_agents)
         others = [a for a in parallel.possible_agents if a != agent]
         if others and opponent is None:
             raise ValueError(f"opponent is required: the env also has {others[0]!r}")
@@ -114,6 +113,12 @@ class SingleAgentEnv(gym.Env):
         return self.parallel.render()
 
 
+def check_agent(agent: Any, possible_agents: list[str]) -> None:
+    """Raise ``ValueError`` unless ``agent`` is one of the env's players (any type accepted)."""
+    if not (isinstance(agent, str) and agent in possible_agents):
+        raise ValueError(f"agent must be one of {possible_agents}, got {agent!r}")
+
+
 def check_opponent(opponent: Any, space: spaces.Space) -> None:
     """Raise ``TypeError``/``ValueError`` unless ``opponent`` can play actions of ``space``.
 
@@ -145,6 +150,7 @@ def make_single_agent(
     """
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
+    check_agent(agent, parallel.possible_agents)
     others = [a for a in parallel.possible_agents if a != agent]
     if others and opponent is None and hasattr(mod, "default_opponent"):
         opponent = mod.default_opponent(parallel, agent)

@@ -38,8 +38,12 @@ from fdia_env._validation import check_int
 from fdia_env.envs.actions import check_batch_actions
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
-from fdia_env.envs.single_agent import Policy, check_opponent
+from fdia_env.envs.single_agent import Policy, check_agent, check_opponent
 from fdia_env.vector.simulation import BatchedSimulation
+
+# members of one vector env: every member holds (n, n) covariances, its features and, for the
+# sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
+MAX_NUM_ENVS = 2**20
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
@@ -47,7 +51,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
 
     Args:
         parallel: A two-player env instance; its scenario, models and episode spec are used.
-        num_envs: B (>= 1).
+        num_envs: B (1..``MAX_NUM_ENVS``).
         agent: The learning player.
         opponent: Policy of the other player (uniform mix over its actions by default).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` or ``AutoresetMode.SAME_STEP``.
@@ -65,9 +69,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         max_episode_steps: int | None = None,
     ) -> None:
-        self.num_envs = check_int("num_envs", num_envs, minimum=1)
-        if agent not in parallel.possible_agents:
-            raise ValueError(f"agent must be one of {parallel.possible_agents}, got {agent!r}")
+        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
+        check_agent(agent, parallel.possible_agents)
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError as exc:
@@ -327,8 +330,10 @@ def make_vector(
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
+    check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
+    check_agent(agent, parallel.possible_agents)
     if opponent is None and hasattr(mod, "default_opponent") and len(parallel.possible_agents) > 1:
         opponent = mod.default_opponent(parallel, agent)
     return FdiaVectorEnv(

@@ -1,0 +1,140 @@
+"""Valid-value strategies for every env constructor's keyword arguments (property suite)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from hypothesis import strategies as st
+from prop_support import matrix_values
+
+from fdia_env import scenarios
+from fdia_env.attacks import CovarianceAttack, SparseAttack
+from fdia_env.defenses import PerfectDetection, UnawareFilter
+
+MODULES = (
+    "sparse_attack_v0",
+    "covariance_attack_v0",
+    "sensor_game_v0",
+    "detection_game_v0",
+    "fdia_v0",
+)
+SMALL_SCENARIOS = [n for n in scenarios.names() if n != "ch4-random"]  # ch4-random: 10 sensors
+
+scenario_values = st.one_of(
+    st.sampled_from(SMALL_SCENARIOS),
+    st.builds(lambda name: scenarios.get(name), st.sampled_from(SMALL_SCENARIOS)),
+    st.builds(lambda name: scenarios.get(name).system, st.sampled_from(SMALL_SCENARIOS)),
+)
+power_values = st.one_of(
+    st.none(),
+    st.floats(1e-12, 1e12),
+    st.sampled_from([1.0, 100.0, 3000.0, 1e12]),
+    st.integers(1, 10**6),
+)
+warmup_values = st.one_of(st.none(), st.just("steady"), st.integers(0, 150))
+COMMON = {
+    "scenario": scenario_values,
+    "horizon": st.one_of(st.none(), st.integers(1, 12)),
+    "objective": st.sampled_from(["trace", "logdet"]),
+    "reward_mode": st.sampled_from(["terminal", "shaped", "per_step"]),
+    "dynamics": st.sampled_from(["expected", "sampled"]),
+    "warmup": warmup_values,
+    "render_mode": st.sampled_from([None, "ansi", "rgb_array"]),
+    "max_cycles": st.one_of(st.none(), st.integers(1, 12)),
+}
+
+
+def _pick(*names: str) -> dict[str, st.SearchStrategy[Any]]:
+    return {name: COMMON[name] for name in names}
+
+
+PARAMS: dict[str, dict[str, st.SearchStrategy[Any]]] = {
+    "sparse_attack_v0": {
+        **_pick(*COMMON),
+        "budget": st.one_of(st.none(), st.integers(0, 12)),
+        "illegal_action": st.sampled_from(["trim", "error", "noop"]),
+    },
+    "covariance_attack_v0": {
+        **_pick(*COMMON),
+        "power": power_values,
+        "structure": st.sampled_from(["full", "diagonal"]),
+        "power_mode": st.sampled_from(["per_step", "budget"]),
+        "weight": st.one_of(st.none(), matrix_values()),
+    },
+    "sensor_game_v0": {
+        **_pick("scenario", "reward_mode", "dynamics", "render_mode", "max_cycles"),
+        "power": power_values,
+        "allocation": st.sampled_from(["independent", "dependent"]),
+        "rounds": st.one_of(st.none(), st.integers(1, 6)),
+    },
+    "detection_game_v0": {
+        **_pick(*COMMON),
+        "power": st.one_of(st.floats(1e-12, 1e12), st.sampled_from([1.0, 100.0, 1e12])),
+        "statistic": st.sampled_from(["quadratic", "chi2"]),
+        "on_detect": st.sampled_from(["discard", "incorporate"]),
+        "criterion": st.sampled_from(["mse", "bayes_cost"]),
+        "assumed_sigma": st.one_of(st.none(), matrix_values()),
+    },
+    "fdia_v0": {
+        **_pick(*COMMON),
+        "attack": st.one_of(
+            st.sampled_from(["sparse", "covariance", "subset", "probabilistic"]),
+            st.builds(SparseAttack, st.integers(0, 3)),
+            st.builds(CovarianceAttack, st.sampled_from([1.0, 100.0])),
+        ),
+        "defense": st.one_of(
+            st.sampled_from(["perfect_detection", "unaware", "sensor_selection"]),
+            st.builds(PerfectDetection),
+            st.builds(UnawareFilter),
+        ),
+        "attack_kwargs": st.one_of(
+            st.none(),
+            st.fixed_dictionaries({}, optional={"budget": st.integers(0, 4)}),
+            st.fixed_dictionaries({}, optional={"power": st.floats(1e-6, 1e6)}),
+            st.dictionaries(
+                st.sampled_from(["budget", "power", "structure", "bogus"]),
+                st.integers(-2, 5),
+                max_size=2,
+            ),
+        ),
+        "defense_kwargs": st.one_of(st.none(), st.just({}), st.just({"bogus": 1})),
+    },
+}
+
+# the Gymnasium entry points' own arguments (on top of the module's)
+VIEW_PARAMS = {
+    "agent": st.sampled_from(["attacker", "defender"]),
+}
+VECTOR_PARAMS = {
+    "agent": st.sampled_from(["attacker", "defender"]),
+    "autoreset_mode": st.sampled_from(["NextStep", "SameStep", "next_step"]),
+    "max_episode_steps": st.one_of(st.none(), st.integers(1, 10)),
+}
+
+
+def random_seed() -> st.SearchStrategy[int]:
+    """Seeds for reset."""
+    return st.integers(0, 2**32 - 1)
+
+
+def unit_actions(shape: tuple[int, ...]) -> st.SearchStrategy[np.ndarray]:
+    """Arrays in [-1, 1] of ``shape`` (float32)."""
+    return st.lists(
+        st.floats(-1.0, 1.0, width=32), min_size=int(np.prod(shape)), max_size=int(np.prod(shape))
+    ).map(lambda v: np.array(v, dtype=np.float32).reshape(shape))
+
+
+def known_detection_defect(module: str, kwargs: dict[str, Any]) -> bool:
+    """detection_game_v0 with power > 1e15: fdia_env/detection's error covariance is indefinite.
+
+    Owned by the detection worker; pinned by
+    ``test_prop_regressions.py::test_detection_game_error_covariance_psd_at_power_1e18``
+    (xfail, strict). Powers up to 1e12 are covered by the properties.
+    """
+    power = kwargs.get("power")
+    uses_detection = module == "detection_game_v0" or kwargs.get("attack") == "probabilistic"
+    try:
+        return uses_detection and float(power) > 1e15
+    except (TypeError, ValueError):
+        return False
