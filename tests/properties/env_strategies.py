@@ -123,18 +123,3 @@ def unit_actions(shape: tuple[int, ...]) -> st.SearchStrategy[np.ndarray]:
     return st.lists(
         st.floats(-1.0, 1.0, width=32), min_size=int(np.prod(shape)), max_size=int(np.prod(shape))
     ).map(lambda v: np.array(v, dtype=np.float32).reshape(shape))
-
-
-def known_detection_defect(module: str, kwargs: dict[str, Any]) -> bool:
-    """detection_game_v0 with power > 1e15: fdia_env/detection's error covariance is indefinite.
-
-    Owned by the detection worker; pinned by
-    ``test_prop_regressions.py::test_detection_game_error_covariance_psd_at_power_1e18``
-    (xfail, strict). Powers up to 1e12 are covered by the properties.
-    """
-    power = kwargs.get("power")
-    uses_detection = module == "detection_game_v0" or kwargs.get("attack") == "probabilistic"
-    try:
-        return uses_detection and float(power) > 1e15
-    except (TypeError, ValueError):
-        return False

@@ -19,10 +19,9 @@ from env_strategies import (
     PARAMS,
     VECTOR_PARAMS,
     VIEW_PARAMS,
-    known_detection_defect,
     random_seed,
 )
-from hypothesis import assume, given
+from hypothesis import given
 from hypothesis import strategies as st
 from prop_support import (
     assert_finite,
@@ -64,7 +63,6 @@ def _check_parallel(env, seed: int) -> None:
 def test_parallel_env_builds_sane_or_names_a_parameter(module, data, seed):
     mod = importlib.import_module(f"fdia_env.{module}")
     kwargs = data.draw(kwargs_of(PARAMS[module]), label="kwargs")
-    assume(not known_detection_defect(module, kwargs))
     built, env = outcome(lambda: mod.parallel_env(**kwargs), kwargs)
     if built:
         with bounded():
@@ -77,7 +75,6 @@ def test_parallel_env_builds_sane_or_names_a_parameter(module, data, seed):
 def test_gymnasium_make_builds_sane_or_names_a_parameter(env_id, data, seed):
     module = GYM_IDS[env_id][0].rsplit(".", 1)[1]
     kwargs = data.draw(kwargs_of({**PARAMS[module], **VIEW_PARAMS}), label="kwargs")
-    assume(not known_detection_defect(module, kwargs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         built, env = outcome(lambda: gym.make(env_id, **kwargs), kwargs)
@@ -100,7 +97,6 @@ def test_make_vec_builds_sane_or_names_a_parameter(env_id, data, seed):
     params = {k: v for k, v in PARAMS[module].items() if k != "render_mode"}
     kwargs = data.draw(kwargs_of({**params, **VECTOR_PARAMS}), label="kwargs")
     kwargs["num_envs"] = data.draw(mixed(st.integers(1, 4)), label="num_envs")
-    assume(not known_detection_defect(module, kwargs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         built, env = outcome(

@@ -189,14 +189,6 @@ def test_recursion_objective_of_zero_bias_is_the_steady_trace():
 
 
 # --- a known defect in code another worker owns -----------------------------------------------
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "fdia_env/detection (detection worker): detection_game_v0.parallel_env(power=1e18) "
-        "(ch3-static), attacker = default opponent, defender action -1: the expected error "
-        "covariance env.sim.M has eigenvalue -2.55 (cancellation), so the observation holds NaN"
-    ),
-)
 def test_detection_game_error_covariance_psd_at_power_1e18():
     env = detection_game_v0.parallel_env(power=1e18)
     env.reset(seed=0)

@@ -112,14 +112,6 @@ def test_linear_system_from_matrices_builds_or_names_a_parameter(kwargs):
     _check_system(kwargs)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "fdia_env/systems (systems worker): wrong types give Python's own TypeError, naming no "
-        "parameter: LinearSystem(F=[[1.0]], Q=[[1.0]], sensors=1.5) -> \"'float' object is not "
-        "iterable\"; LinearSystem(..., T='x') -> \"ufunc 'isfinite' not supported\""
-    ),
-)
 @prop_settings(30)
 @given(kwargs=system_kwargs())
 @example(kwargs={"F": [[1.0]], "Q": [[1.0]], "sensors": 1.5})
@@ -204,14 +196,6 @@ def test_pv_sensor_with_a_real_rho_builds_or_names_a_parameter(kwargs, rho):
     _check_pv(kwargs)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        'fdia_env/systems (systems worker): pv_sensor(1.0, 1.0, rho=None) -> "float() argument '
-        'must be a string or a real number", rho=\'x\' -> "could not convert string to float": '
-        "neither names rho"
-    ),
-)
 @prop_settings(30)
 @given(kwargs=kwargs_of(PV, required=("sigma_p", "sigma_vel")))
 @example(kwargs={"sigma_p": 1.0, "sigma_vel": 1.0, "rho": None})
@@ -226,7 +210,7 @@ def test_pv_sensor_builds_or_names_a_parameter(kwargs):
 )
 def test_scenarios_get_known_name_builds_or_names_an_option(name, options):
     built, sc = outcome(lambda: scenarios.get(name, **options), options or ["scenario"])
-    if built:
+    if built and sc.steady_state:  # a static preset (F = I, Q = 0) has none, by design
         _check_steady(sc.system)
 
 
@@ -253,15 +237,6 @@ def test_scenarios_get_builds_or_names_a_parameter(name, options):
         _check_steady(sc.system)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "fdia_env/kalman + fdia_env/systems (detection worker): a system that is not detectable "
-        "builds and its steady state is not finite, e.g. LinearSystem(F=[[2.0]], Q=[[1.0]], "
-        "sensors=(Sensor(H=[[0.0]], R=[[1.0]]),)): steady_state returns P = inf/NaN (or runs "
-        "steady_state_iterate's 100,000 iterations) instead of a ValueError naming F/sensors"
-    ),
-)
 @prop_settings(30)
 @given(kwargs=system_kwargs())
 @example(kwargs={"F": [[2.0]], "Q": [[1.0]], "sensors": (Sensor(H=[[0.0]], R=[[1.0]]),)})
