@@ -98,7 +98,6 @@ class _Search:
         tail: bool = True,
     ):
         self.p = problem
-        self.tail = tail
         self.chunk = chunk
         self.deadline = deadline
         self.debug = debug
@@ -113,7 +112,9 @@ class _Search:
         self.groups = information_groups(problem.system.J)
         self.table = None
         N, n = problem.horizon, problem.system.n
-        if tail and N >= 3 and enumeration_size(problem.M, problem.budget) <= TAIL_LIMIT:
+        # the mixed bound only where its enumerations stay small (e.g. 14 sensors, c = 5)
+        self.tail = tail and enumeration_size(problem.M, problem.budget - 1) <= TAIL_LIMIT
+        if self.tail and N >= 3:
             posts = np.empty((1, N, n, n))
             forward(problem, posts, np.zeros((1, N, problem.M), dtype=bool), 0)
             self.table = TailTable(problem, self.factors, posts[0, N - 3])

@@ -55,8 +55,8 @@ SAFETY = 1e-9
 # Largest number of (row, subset) small problems materialised at once.
 CHUNK = 1 << 15
 # Grid of the table: σ_j = SIGMA_0 · SIGMA_RATIO^j, j = 0..; σ beyond the last point: no bound.
-SIGMA_0 = 1e-4
-SIGMA_RATIO = 1.5
+SIGMA_0 = 1e-3
+SIGMA_RATIO = 2.0
 SIGMA_MAX = 1e3
 
 
@@ -71,6 +71,17 @@ def enumeration_size(M: int, r: int) -> int:
     """Small problems of one exact two-step tail from one posterior with budget r."""
     ones = [comb(M, s) for s in range(r + 1)]
     return sum(ones[a] * sum(ones[: r - a + 1]) for a in range(r + 1))
+
+
+def _valid(free: np.ndarray, sets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row, set) index pairs with every sensor of the set free in the row (row blocks)."""
+    block = max(1, (1 << 22) // max(sets.size, 1))
+    rows, cols = [], []
+    for lo in range(0, len(free), block):
+        r, c = np.nonzero(free[lo : lo + block][:, sets].all(axis=2))
+        rows.append(r + lo)
+        cols.append(c)
+    return np.concatenate(rows), np.concatenate(cols)
 
 
 def _raise(problem: SparseProblem, values: np.ndarray) -> np.ndarray:
@@ -115,8 +126,7 @@ def last_step(
     out[:, 0] = base
     for s in range(1, min(r, M) + 1):
         sets = combos(M, s)
-        ok = free[:, sets].all(axis=2)  # (R, C)
-        rows, cols = np.nonzero(ok)
+        rows, cols = _valid(free, sets)
         if len(rows) == 0:
             continue
         idx = (sets[:, :, None] * nz + np.arange(nz)).reshape(len(sets), s * nz)
@@ -161,8 +171,7 @@ def two_steps(
     out = np.full((R_, r + 1), -np.inf)
     for a in range(0, min(r, M) + 1):
         sets = combos(M, a)
-        ok = free[:, sets].all(axis=2) if a else np.ones((R_, 1), dtype=bool)
-        rows, cols = np.nonzero(ok)
+        rows, cols = _valid(free, sets)
         step = max(1, CHUNK // max(len(combos(M, min(r - a, M))), 1))
         for lo in range(0, len(rows), step):
             rr, cc = rows[lo : lo + step], cols[lo : lo + step]
@@ -192,7 +201,9 @@ class TailTable:
         self.W_inv_chol = np.linalg.inv(np.linalg.cholesky(self.W))
         count = int(np.ceil(np.log(SIGMA_MAX / SIGMA_0) / np.log(SIGMA_RATIO))) + 1
         self.sigmas = np.concatenate([[0.0], SIGMA_0 * SIGMA_RATIO ** np.arange(count)])
-        self.values = np.full((len(self.sigmas), problem.budget + 1), np.nan)
+        # children have at most budget − 1 pairs left; the tail gets at most that many
+        self.budget = max(problem.budget - 1, 0)
+        self.values = np.full((len(self.sigmas), self.budget + 1), np.nan)
         self.computed = 0
 
     def sigma(self, P: np.ndarray) -> np.ndarray:
@@ -217,7 +228,12 @@ class TailTable:
         p, n, M = self.p, self.p.system.n, self.p.M
         prev = self.P_hat[None] + self.sigmas[js][:, None, None] * self.W[None]
         vals = two_steps(
-            p, self.factors, prev, np.zeros((len(js), n, n)), np.ones((len(js), M), bool), p.budget
+            p,
+            self.factors,
+            prev,
+            np.zeros((len(js), n, n)),
+            np.ones((len(js), M), bool),
+            self.budget,
         )
         self.values[js] = _raise(p, at_most(vals))
         self.computed += len(js)
@@ -336,5 +352,5 @@ def tail_child_bounds(
 def enumeration_size_partial(free: int, M: int, r: int, two: bool) -> int:
     """Small problems of one child's exact tail: ``free`` free sensors at its step."""
     if not two:
-        return comb(free, r)
+        return sum(comb(free, s) for s in range(r + 1))
     return sum(comb(free, a) * sum(comb(M, s) for s in range(r - a + 1)) for a in range(r + 1))
