@@ -191,6 +191,10 @@ class _Search:
         """Debug: every child bound must be at least the child's exact subtree optimum."""
         p = self.p
         pairs = p.pairs()
+
+        def scale(v: float) -> float:  # relative for trace (values may be ~1e-4), log det: ≥ 1
+            return abs(v) if p.objective == "trace" else max(abs(v), 1.0)
+
         for r_ in range(len(last)):
             base = [pairs[f] for f in np.flatnonzero(attacked[r_].ravel())]
             for col in range(bounds.shape[1]):
@@ -199,7 +203,7 @@ class _Search:
                     continue
                 exact = brute_force_optimum(p, [*base, pairs[f]], pairs[f + 1 :], remaining)
                 self.checked += 1
-                if bounds[r_, col] < exact - 1e-9 * max(abs(exact), 1.0):
+                if bounds[r_, col] < exact - 1e-9 * scale(exact):
                     raise RuntimeError(
                         f"invalid bound at node {[*base, pairs[f]]}: bound {bounds[r_, col]!r} "
                         f"< subtree optimum {exact!r}"
