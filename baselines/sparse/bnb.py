@@ -10,8 +10,12 @@ sharing), and all children of a batch of nodes are bounded in one batched pass.
 - Root: the allocation bound (:func:`baselines.sparse.bound.allocation_bound`); when it equals
   the incumbent (relative :data:`ROOT_RTOL`) the optimum is proved at the root (scalar
   position sensors sharing H).
-- Nodes: the smoother (downdate) bound of :mod:`baselines.sparse.bound`, computed for every
-  child of a node from the node's RTS smoother; children are kept sorted by bound and explored
+- Nodes: the smaller of the smoother (downdate) bound of :mod:`baselines.sparse.bound`,
+  computed for every child of a node from the node's RTS smoother, and the mixed bound of
+  :mod:`baselines.sparse.tail` (exact enumeration of the last two steps, Loewner relaxation of
+  the steps before, validity argument in that module's docstring; used when its enumeration
+  stays below :data:`TAIL_LIMIT` small problems, e.g. 14 sensors at c = 5 but not 50 sensors);
+  children are kept sorted by bound and explored
   depth first, best bound first; a child is pruned when its bound does not exceed the incumbent
   (relative tolerance :data:`PRUNE_RTOL`, absorbing rounding between two exact evaluations).
 
