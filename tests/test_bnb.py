@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -16,6 +17,7 @@ from baselines.sparse import (
     sfs_ss,
     upper_bound,
 )
+from baselines.sparse.bnb import _Search
 from baselines.sparse.bound import allocation_bound, brute_force_optimum
 from baselines.sparse.testbeds import dc_grid14, mixed_tracking
 from fdia_env import scenarios, sparse_attack_v0
@@ -170,6 +172,100 @@ def test_debug_mode_raises_on_an_invalid_node_bound(monkeypatch):
         branch_and_bound(system, 2, 2, debug=True)
 
 
+# --- the mixed (tail-enumeration) bound ----------------------------------------------------
+
+
+def only_mixed_bound(monkeypatch) -> None:
+    """Switch the smoother bound off (+inf), so that debug mode checks the mixed bound alone."""
+    monkeypatch.setattr(bnb_module, "child_bounds", lambda *a, **k: np.full_like(a[1].a, np.inf))
+
+
+@pytest.mark.parametrize(
+    ("system", "budget", "horizon", "objective"),
+    [
+        (dc_grid14(14), 2, 4, "trace"),
+        (dc_grid14(14), 2, 4, "logdet"),
+        (mixed_tracking(3, seed=2), 3, 4, "trace"),  # 2-row sensors: block Woodbury
+        (mixed_tracking(3, seed=2), 3, 5, "logdet"),
+    ],
+)
+def test_mixed_bound_alone_holds_at_every_node(monkeypatch, system, budget, horizon, objective):
+    # every child bound of the search, at head steps (table) and at the last two steps
+    # (enumeration), against its subtree's brute-force optimum
+    only_mixed_bound(monkeypatch)
+    result = branch_and_bound(system, budget, horizon, objective, debug=True)
+    assert result.proved_optimal
+    assert close(result.value, exhaustive(system, budget, horizon, objective).value)
+
+
+def test_mixed_bound_alone_holds_on_random_instances(monkeypatch):
+    only_mixed_bound(monkeypatch)
+    rng = np.random.default_rng(7)
+    checked = 0
+    while checked < 25:
+        system, c, N, objective = random_system(rng)
+        if N < 3 or system.M * N > 10 or c == 0:
+            continue
+        result = branch_and_bound(system, c, N, objective, debug=True)
+        assert close(result.value, exhaustive(system, c, N, objective).value), checked
+        checked += 1
+
+
+def test_mixed_bound_is_exact_at_the_last_step_so_the_check_catches_any_undercut(monkeypatch):
+    # At the last two steps the mixed bound is the subtree optimum (+ 1e-9 relative); lowering
+    # it by 1e-6 relative makes it invalid somewhere and debug mode must say so.
+    only_mixed_bound(monkeypatch)
+    real = bnb_module.tail_child_bounds
+
+    def undercut(*args, **kwargs):
+        b = real(*args, **kwargs)
+        return np.where(np.isfinite(b), b - 1e-6 * np.abs(b), b)
+
+    monkeypatch.setattr(bnb_module, "tail_child_bounds", undercut)
+    with pytest.raises(RuntimeError, match="invalid bound"):
+        branch_and_bound(dc_grid14(14), 2, 3, debug=True)
+
+
+def test_tail_table_is_monotone_and_exact_at_the_nominal_posterior():
+    problem = make_problem(mixed_tracking(6, seed=3), 4, 3)
+    search = _Search(problem, 64, None, False)
+    table = search.table
+    sigma = np.array([0.0, 1e-3, 0.1, 1.0, 10.0])
+    values = np.stack([table.lookup(sigma, np.full(5, b)) for b in range(4)])
+    assert np.all(np.diff(values, axis=0) >= 0)  # more drops never lower Φ
+    assert np.all(np.diff(values, axis=1) >= 0)  # a larger prior never lowers Φ
+    # σ = 0, b drops over the last two steps: the exact optimum with every pair before free of
+    # attack, by enumeration over the reference recursion (N = 3: steps 1 and 2)
+    pairs = [(k, i) for k in (1, 2) for i in range(6)]
+    for b in range(4):
+        best = max(problem.evaluate(list(s)) for s in itertools.combinations(pairs, b))
+        assert close(values[b, 0], best, 2e-9)
+    # σ above the grid: no bound
+    assert table.lookup(np.array([1e9]), np.array([1]))[0] == np.inf
+
+
+@pytest.mark.parametrize("objective", ["trace", "logdet"])
+def test_mixed_bound_proves_a_42_pair_grid_instance_equal_to_exhaustive(objective):
+    system = dc_grid14(14)
+    result = branch_and_bound(system, 3, 3, objective)
+    assert result.proved_optimal
+    assert close(result.value, exhaustive(system, 3, 3, objective).value)
+    old = branch_and_bound(system, 3, 3, objective, mixed_bound=False)
+    assert close(old.value, result.value) and result.nodes < old.nodes
+
+
+def test_mixed_bound_certifies_the_84_pair_grid_instance():
+    # dc-ieee14-14, N = 6, c = 5: 3·10⁷ sets; the optimum blanks meters 10..14 at the last
+    # step. Independent check: the best 5-subset of the last step by the reference recursion.
+    system = dc_grid14(14)
+    result = branch_and_bound(system, 5, 6)
+    assert result.proved_optimal and result.gap == 0.0
+    problem = make_problem(system, 5, 6)
+    masks = problem.masks([[(5, i) for i in s] for s in itertools.combinations(range(14), 5)])
+    assert close(result.value, float(problem.evaluate_masks(masks).max()), 1e-12)
+    assert result.value > sfs_ss(system, 5, 6).value * (1 + 1e-3)  # beats the heuristics
+
+
 def test_brute_force_helper_matches_exhaustive():
     problem = make_problem("ch4-pv-case1", 3, 3, "logdet")
     value = brute_force_optimum(problem, [], problem.pairs(), 3)
@@ -252,6 +348,7 @@ def test_policy_replays_the_value_on_a_custom_system():
         ({"time_limit": math.nan}, "time_limit"),
         ({"time_limit": True}, "time_limit"),
         ({"chunk": 0}, "chunk"),
+        ({"mixed_bound": 1}, "mixed_bound"),
     ],
 )
 def test_bad_input_names_the_parameter(kwargs, match):

@@ -10,8 +10,12 @@ sharing), and all children of a batch of nodes are bounded in one batched pass.
 - Root: the allocation bound (:func:`baselines.sparse.bound.allocation_bound`); when it equals
   the incumbent (relative :data:`ROOT_RTOL`) the optimum is proved at the root (scalar
   position sensors sharing H).
-- Nodes: the smoother (downdate) bound of :mod:`baselines.sparse.bound`, computed for every
-  child of a node from the node's RTS smoother; children are kept sorted by bound and explored
+- Nodes: the smaller of the smoother (downdate) bound of :mod:`baselines.sparse.bound`,
+  computed for every child of a node from the node's RTS smoother, and the mixed bound of
+  :mod:`baselines.sparse.tail` (exact enumeration of the last two steps, Loewner relaxation of
+  the steps before, validity argument in that module's docstring; used when its enumeration
+  stays below :data:`TAIL_LIMIT` small problems, e.g. 14 sensors at c = 5 but not 50 sensors);
+  children are kept sorted by bound and explored
   depth first, best bound first; a child is pruned when its bound does not exceed the incumbent
   (relative tolerance :data:`PRUNE_RTOL`, absorbing rounding between two exact evaluations).
 
@@ -35,6 +39,7 @@ from baselines.sparse.bound import (
     child_bounds,
     final_value,
     forward,
+    information_groups,
     measurement_factors,
     pair_terms,
 )
@@ -42,6 +47,7 @@ from baselines.sparse.dp import dp
 from baselines.sparse.greedy import sfs_ss
 from baselines.sparse.problem import Pair, SparseProblem, make_problem
 from baselines.sparse.result import SparseResult
+from baselines.sparse.tail import TailTable, enumeration_size, tail_child_bounds
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -50,6 +56,8 @@ PRUNE_RTOL = 1e-12
 # evaluation), which differ by up to ~1e-11 relative on ill-conditioned instances.
 ROOT_RTOL = 1e-9
 DEFAULT_CHUNK = 512
+# Largest exact tail enumeration (small problems) per child, and per table point.
+TAIL_LIMIT = 200_000
 
 
 @dataclass
@@ -85,7 +93,14 @@ def _check_time_limit(time_limit: object) -> float | None:
 
 
 class _Search:
-    def __init__(self, problem: SparseProblem, chunk: int, deadline: float | None, debug: bool):
+    def __init__(
+        self,
+        problem: SparseProblem,
+        chunk: int,
+        deadline: float | None,
+        debug: bool,
+        tail: bool = True,
+    ):
         self.p = problem
         self.chunk = chunk
         self.deadline = deadline
@@ -98,6 +113,15 @@ class _Search:
         self.nodes = 0
         self.checked = 0
         self.timed_out = False
+        self.groups = information_groups(problem.system.J)
+        self.table = None
+        N, n = problem.horizon, problem.system.n
+        # the mixed bound only where its enumerations stay small (e.g. 14 sensors, c = 5)
+        self.tail = tail and enumeration_size(problem.M, problem.budget - 1) <= TAIL_LIMIT
+        if self.tail and N >= 3:
+            posts = np.empty((1, N, n, n))
+            forward(problem, posts, np.zeros((1, N, problem.M), dtype=bool), 0)
+            self.table = TailTable(problem, self.factors, posts[0, N - 3])
 
     # -- incumbent --------------------------------------------------------------------------
 
@@ -128,6 +152,20 @@ class _Search:
             cross = self._with_cross(len(last[sl]), p.horizon - start)
             terms = pair_terms(p, self.factors, posts[sl], start, cross)
             b = child_bounds(p, terms, last[sl] + 1, remaining, self.nz)
+            if self.tail:
+                tail = tail_child_bounds(
+                    p,
+                    self.factors,
+                    self.table,
+                    self.groups,
+                    attacked[sl],
+                    last[sl],
+                    posts[sl],
+                    start,
+                    remaining,
+                    TAIL_LIMIT,
+                )
+                b = np.minimum(b, tail)
             b = np.minimum(b, bound[sl, None])  # a child's bound never exceeds its parent's
             pieces.append(b)
         b = np.concatenate(pieces)
@@ -157,6 +195,10 @@ class _Search:
         """Debug: every child bound must be at least the child's exact subtree optimum."""
         p = self.p
         pairs = p.pairs()
+
+        def scale(v: float) -> float:  # relative for trace (values may be ~1e-4), log det: ≥ 1
+            return abs(v) if p.objective == "trace" else max(abs(v), 1.0)
+
         for r_ in range(len(last)):
             base = [pairs[f] for f in np.flatnonzero(attacked[r_].ravel())]
             for col in range(bounds.shape[1]):
@@ -165,7 +207,7 @@ class _Search:
                     continue
                 exact = brute_force_optimum(p, [*base, pairs[f]], pairs[f + 1 :], remaining)
                 self.checked += 1
-                if bounds[r_, col] < exact - 1e-9 * max(abs(exact), 1.0):
+                if bounds[r_, col] < exact - 1e-9 * scale(exact):
                     raise RuntimeError(
                         f"invalid bound at node {[*base, pairs[f]]}: bound {bounds[r_, col]!r} "
                         f"< subtree optimum {exact!r}"
@@ -266,6 +308,7 @@ def branch_and_bound(
     *,
     chunk: int = DEFAULT_CHUNK,
     debug: bool = False,
+    mixed_bound: bool = True,
 ) -> SparseResult:
     """The optimal attack set of exactly ``budget`` pairs, with a proof (or a certified gap).
 
@@ -280,6 +323,9 @@ def branch_and_bound(
         chunk: Nodes expanded per batch.
         debug: Check every child bound against the brute-force optimum of its subtree (tiny
             instances only); a violation raises ``RuntimeError``.
+        mixed_bound: Also use the mixed (tail-enumeration) bound of
+            :mod:`baselines.sparse.tail` (the minimum of the valid bounds is used); ``False``
+            gives the smoother and allocation bounds only, as before it existed.
 
     Returns:
         A :class:`SparseResult` (``solver="bnb"``) with ``upper_bound``, ``gap`` (0 when
@@ -299,8 +345,10 @@ def branch_and_bound(
     limit = _check_time_limit(time_limit)
     if isinstance(chunk, bool) or not isinstance(chunk, numbers.Integral) or chunk < 1:
         raise ValueError(f"chunk must be an integer >= 1, got {chunk!r}")
+    if not isinstance(mixed_bound, bool):
+        raise ValueError(f"mixed_bound must be True or False, got {mixed_bound!r}")
     deadline = None if limit is None else t0 + limit
-    search = _Search(problem, int(chunk), deadline, debug)
+    search = _Search(problem, int(chunk), deadline, debug, mixed_bound)
     for heuristic in (sfs_ss, dp):
         result = heuristic(problem.system, problem.budget, problem.horizon, objective)
         search.offer(result.value, list(result.attacks))
