@@ -1,11 +1,13 @@
 """Systems: linear Gaussian models, sensors and the target-tracking helper."""
 
+from fdia_env.systems.grid import grid_system
 from fdia_env.systems.system import LinearSystem, Sensor
 from fdia_env.systems.tracking import position_sensor, power_weight, pv_sensor, tracking_system
 
 __all__ = [
     "LinearSystem",
     "Sensor",
+    "grid_system",
     "position_sensor",
     "power_weight",
     "pv_sensor",
