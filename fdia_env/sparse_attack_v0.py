@@ -15,6 +15,13 @@ the env has the single agent ``"attacker"``.
 ``0`` attacks nothing. Over-budget rule: a subset larger than the budget left is trimmed to its
 lowest-numbered sensors that fit, so an episode never spends more than ``budget``.
 
+That is ``action="bitmask"``, the default (``"auto"``) up to M = 16 sensors. Above 16 (the
+power-grid presets have 34 to 304 meters) ``"auto"`` gives ``MultiBinary(M)`` (entry i = 1
+attacks sensor i; ``action_mask`` of shape (2M,) in sb3-contrib's MultiBinary convention,
+``[may be 0, may be 1]`` per sensor, closing every "1" once the budget is spent);
+``action="single"`` gives ``Discrete(M + 1)`` (0 = no attack, j = sensor j alone). The same
+over-budget rule applies to every format (see :class:`fdia_env.attacks.SparseAttack`).
+
 ## Observation Space
 
 ``Dict(observation=Box(float32), action_mask=Box(0, 1, (2**M,), int8))``, where
@@ -48,7 +55,8 @@ Terminates after N steps. No truncation.
 
 ``scenario`` (preset name, Scenario or LinearSystem; default ``"ch4-position"``), ``budget``
 (c, default the preset's), ``horizon`` (N, default the preset's), ``objective``,
-``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"ansi"`` | ``"rgb_array"``).
+``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"ansi"`` | ``"rgb_array"``),
+``action`` (``"auto"`` | ``"bitmask"`` | ``"multibinary"`` | ``"single"``).
 
 ## Version History
 
@@ -87,6 +95,7 @@ def parallel_env(
     dynamics: str = "expected",
     warmup: int | str | None = None,
     render_mode: str | None = None,
+    action: str = "auto",
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     sc, spec = episode_spec(
@@ -97,7 +106,7 @@ def parallel_env(
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
-    attack = SparseAttack(scenario_default(sc, "budget", budget))
+    attack = SparseAttack(scenario_default(sc, "budget", budget), action=action)
     return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, render_mode=render_mode, name=NAME)
 
 

@@ -7,12 +7,21 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env._validation import check_int
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index, as_index_array
+from fdia_env._validation import check_choice, check_int
+from fdia_env.attacks.base import (
+    AttackEffect,
+    AttackModel,
+    as_index,
+    as_index_array,
+    mask_array_to_bits,
+    mask_to_bits,
+)
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
 MAX_SENSORS = 16
+"""Largest M of the ``Discrete(2**M)`` bitmask action (``action="auto"`` switches above it)."""
+ACTION_FORMATS = ("auto", "bitmask", "multibinary", "single")
 
 
 def trim_to_budget(bits: int, remaining: int) -> int:
@@ -29,29 +38,43 @@ def trim_to_budget(bits: int, remaining: int) -> int:
 class SparseAttack(AttackModel):
     """Attack up to ``budget`` sensor-time pairs over the window.
 
-    Action: ``Discrete(2**M)``; action ``a`` attacks the sensors whose bits are set in ``a``
-    (bit 0 = sensor 1), so 0 is "no attack". The observation's ``action_mask`` marks the
-    subsets no larger than the remaining budget.
+    Action formats (``action``):
 
-    Over-budget rule: an action that selects more sensors than the budget left is trimmed to
-    the lowest-numbered selected sensors that fit; no episode ever spends more than ``budget``.
+    - ``"bitmask"``: ``Discrete(2**M)``; action ``a`` attacks the sensors whose bits are set in
+      ``a`` (bit 0 = sensor 1), so 0 is "no attack". ``action_mask`` (2**M,) marks the subsets
+      no larger than the remaining budget. At most :data:`MAX_SENSORS` sensors.
+    - ``"multibinary"``: ``MultiBinary(M)``, entry i = 1 attacks sensor i. ``action_mask``
+      (2M,) is sb3-contrib's MultiBinary convention, ``[may be 0, may be 1]`` per sensor: every
+      choice is legal while budget is left, only 0s once it is spent (MaskablePPO samples the
+      entries independently, so a mask cannot say "at most r ones"; the trimming rule does).
+    - ``"single"``: ``Discrete(M + 1)``, action 0 attacks nothing and action j attacks sensor
+      j (1-based) alone; ``action_mask`` (M+1,) allows only 0 once the budget is spent.
+    - ``"auto"`` (default): ``"bitmask"`` for M <= 16, ``"multibinary"`` above.
+
+    Over-budget rule (every format): an action that selects more sensors than the budget left
+    is trimmed to the lowest-numbered selected sensors that fit; no episode ever spends more
+    than ``budget``.
 
     Features: the remaining budget as a fraction of ``budget`` (0 when ``budget`` is 0).
     """
 
     name = "sparse"
 
-    def __init__(self, budget: int) -> None:
+    def __init__(self, budget: int, action: str = "auto") -> None:
         self.budget = check_int("budget", budget, minimum=0)
+        self.action_format = check_choice("action", action, ACTION_FORMATS)
         self.remaining = self.budget
         self.last_attacked = 0
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Build the action space for ``system`` and check the budget fits the window."""
-        if system.M > MAX_SENSORS:
+        fmt = self.action_format
+        if fmt == "auto":
+            fmt = "bitmask" if system.M <= MAX_SENSORS else "multibinary"
+        if fmt == "bitmask" and system.M > MAX_SENSORS:
             raise ValueError(
                 f"the sparse attack's subset action supports at most {MAX_SENSORS} sensors, "
-                f"the system has {system.M}"
+                f"the system has {system.M}; use action='multibinary' or action='single'"
             )
         if self.budget > system.M * spec.horizon:
             raise ValueError(
@@ -59,6 +82,12 @@ class SparseAttack(AttackModel):
                 f"(every sensor-time pair of the window), got {self.budget}"
             )
         self.M = system.M
+        self.format = fmt
+        self.feature_low = np.zeros(1, dtype=np.float32)
+        self.feature_high = np.ones(1, dtype=np.float32)
+        if fmt != "bitmask":
+            self._bind_large(fmt)
+            return
         self.n_actions = 2**system.M
         self.action_space = spaces.Discrete(self.n_actions)
         sizes = np.array([a.bit_count() for a in range(self.n_actions)])
@@ -67,8 +96,20 @@ class SparseAttack(AttackModel):
         self._masks = [
             (sizes <= r).astype(np.int8) for r in range(self.budget + 1)
         ]  # per budget left
-        self.feature_low = np.zeros(1, dtype=np.float32)
-        self.feature_high = np.ones(1, dtype=np.float32)
+
+    def _bind_large(self, fmt: str) -> None:
+        """Spaces and masks of the ``"multibinary"`` and ``"single"`` formats."""
+        M = self.M
+        if fmt == "multibinary":
+            self.action_space = spaces.MultiBinary(M)
+            self._open = np.ones(2 * M, dtype=np.int8)
+            self._closed = np.tile(np.array([1, 0], dtype=np.int8), M)  # only "0" per sensor
+        else:
+            self.n_actions = M + 1
+            self.action_space = spaces.Discrete(M + 1)
+            self._open = np.ones(M + 1, dtype=np.int8)
+            self._closed = np.zeros(M + 1, dtype=np.int8)
+            self._closed[0] = 1
 
     def reset(self) -> None:
         """Restore the full budget."""
@@ -80,11 +121,43 @@ class SparseAttack(AttackModel):
         return [self.remaining / self.budget if self.budget else 0.0]
 
     def action_mask(self) -> np.ndarray:
-        """Subsets whose size fits the remaining budget (int8, 1 = legal); a new array per call."""
+        """Legal actions for the remaining budget (int8, 1 = legal); a new array per call."""
+        if self.format != "bitmask":
+            return (self._open if self.remaining > 0 else self._closed).copy()
         return self._masks[self.remaining].copy()
+
+    def _bits_of(self, action: Any) -> int:
+        """The attacked-sensor bitmask of a ``"multibinary"`` or ``"single"`` action."""
+        if self.format == "single":
+            j = as_index(action)
+            if j is None or not 0 <= j <= self.M:
+                raise ValueError(
+                    f"attacker action must be an integer in [0, {self.M + 1}) (0 = no attack, "
+                    f"j = sensor j), got {action!r}"
+                )
+            return 0 if j == 0 else 1 << (j - 1)
+        a = np.asarray(action) if isinstance(action, (np.ndarray, list, tuple)) else None
+        if (
+            a is None
+            or a.shape != (self.M,)
+            or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
+            or not np.isin(a, (0, 1)).all()
+        ):
+            raise ValueError(
+                f"attacker action must be a 0/1 integer array of shape ({self.M},) "
+                f"(MultiBinary: 1 = attack that sensor), got {action!r}"
+            )
+        return mask_to_bits(a.astype(bool))
 
     def apply(self, action: Any) -> AttackEffect:
         """Attack the chosen subset, trimmed to the remaining budget."""
+        if self.format != "bitmask":
+            a = self._bits_of(action)
+            if a.bit_count() > self.remaining:
+                a = trim_to_budget(a, self.remaining)
+            self.remaining -= a.bit_count()
+            self.last_attacked = a
+            return AttackEffect(attacked=a)
         a = as_index(action)
         if a is None or not 0 <= a < self.n_actions:
             raise ValueError(
@@ -129,13 +202,42 @@ class SparseAttack(AttackModel):
         self._mask_table = (self._sizes[None, :] <= left.T).astype(np.int8)
 
     def batch_action_mask(self) -> np.ndarray:
-        """(B, 2**M) subsets within each member's budget left."""
+        """(B, A) legal actions of each member for its budget left (see :meth:`action_mask`)."""
+        if self.format != "bitmask":
+            return np.where((self.b_remaining > 0)[:, None], self._open, self._closed)
         if self._trim_table is None:
             self._batch_tables()
         return np.take(self._mask_table, np.minimum(self.b_remaining, self.M), axis=0)
 
+    def _batch_apply_large(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
+        """Batched ``"multibinary"`` / ``"single"`` actions: the same trimming rule."""
+        B = self.b_remaining.shape[0]
+        if self.format == "single":
+            j = as_index_array(actions, self.M + 1, "attacker", "0 = none, j = sensor j")
+            chosen = np.zeros((B, self.M), dtype=bool)
+            hit = np.flatnonzero(j > 0)
+            chosen[hit, j[hit] - 1] = True
+        else:
+            a = np.asarray(actions)
+            if (
+                a.shape != (B, self.M)
+                or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
+                or not np.isin(a, (0, 1)).all()
+            ):
+                raise ValueError(
+                    f"attacker actions must be a 0/1 integer array of shape ({B}, {self.M}) "
+                    f"(MultiBinary), got {actions!r}"
+                )
+            chosen = a.astype(bool)
+        # keep the lowest-numbered chosen sensors that fit each member's budget left
+        kept = chosen & (np.cumsum(chosen, axis=1) <= self.b_remaining[:, None])
+        self.b_remaining = self.b_remaining - kept.sum(axis=1)
+        return mask_array_to_bits(kept), None
+
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
         """Attack each member's subset, trimmed to its budget (same rule as :meth:`apply`)."""
+        if self.format != "bitmask":
+            return self._batch_apply_large(actions)
         a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
         if self._trim_table is None:
             self._batch_tables()
