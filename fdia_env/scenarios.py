@@ -13,7 +13,7 @@ filter in steady state at the window start; the prior mean is the case's DC powe
 
 | name | model | values |
 |---|---|---|
-| grid-ieee14 | IEEE 14-bus, n = 13 angles, M = 34 meters | c = 6, N = 6, a² = 0.01, game k = 2 (595 strategies each) |
+| grid-ieee14 | IEEE 14-bus, n = 13 angles, M = 34 meters | c = 6, N = 6, a² = 0.01, game k = 2 |
 | grid-ieee30 | IEEE 30-bus, n = 29, M = 71 | c = 6, N = 4, a² = 0.01, game k = 1 |
 | grid-ieee57 | IEEE 57-bus, n = 56, M = 137 | c = 6, N = 3, a² = 0.01, game k = 1 |
 | grid-ieee118 | IEEE 118-bus, n = 117, M = 304 | c = 6, N = 3, a² = 0.01, game k = 1 |
@@ -30,11 +30,10 @@ keeps the network observable).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
-
-import functools
 
 import numpy as np
 
