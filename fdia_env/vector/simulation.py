@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fdia_env.attacks.base import bits_to_mask
 from fdia_env.defenses.base import BatchDetection
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
@@ -194,7 +195,7 @@ class BatchedSimulation:
         M_ = self.system.M
         P = np.empty((self.B, self.system.n, self.system.n))
         for u in np.unique(used):  # one cached DARE per distinct subset, not per member
-            P[used == u] = steady_state(self.system, (int(u) >> np.arange(M_)) & 1 == 1)[1]
+            P[used == u] = steady_state(self.system, bits_to_mask(u, M_))[1]
         self._set_P(P)
         self._M = P.copy()
         self.consistent[:] = True
