@@ -17,9 +17,10 @@ lowest-numbered sensors that fit, so an episode never spends more than ``budget`
 
 That is ``action="bitmask"``, the default (``"auto"``) up to M = 16 sensors. Above 16 (the
 power-grid presets have 34 to 304 meters) ``"auto"`` gives ``MultiBinary(M)`` (entry i = 1
-attacks sensor i; ``action_mask`` of shape (2M,) in sb3-contrib's MultiBinary convention,
-``[may be 0, may be 1]`` per sensor, closing every "1" once the budget is spent);
-``action="single"`` gives ``Discrete(M + 1)`` (0 = no attack, j = sensor j alone). The same
+attacks sensor i; no action mask, so the observation is the plain ``Box``: MaskablePPO's
+per-entry MultiBinary mask cannot express a budget, and Gymnasium's MultiBinary mask has another
+shape; train it with PPO/A2C); ``action="single"`` gives ``Discrete(M + 1)`` (0 = no attack, j =
+sensor j alone, masked to 0 once the budget is spent: the MaskablePPO choice). The same
 over-budget rule applies to every format (see :class:`fdia_env.attacks.SparseAttack`).
 
 ## Observation Space

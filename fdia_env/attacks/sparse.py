@@ -43,10 +43,12 @@ class SparseAttack(AttackModel):
     - ``"bitmask"``: ``Discrete(2**M)``; action ``a`` attacks the sensors whose bits are set in
       ``a`` (bit 0 = sensor 1), so 0 is "no attack". ``action_mask`` (2**M,) marks the subsets
       no larger than the remaining budget. At most :data:`MAX_SENSORS` sensors.
-    - ``"multibinary"``: ``MultiBinary(M)``, entry i = 1 attacks sensor i. ``action_mask``
-      (2M,) is sb3-contrib's MultiBinary convention, ``[may be 0, may be 1]`` per sensor: every
-      choice is legal while budget is left, only 0s once it is spent (MaskablePPO samples the
-      entries independently, so a mask cannot say "at most r ones"; the trimming rule does).
+    - ``"multibinary"``: ``MultiBinary(M)``, entry i = 1 attacks sensor i; no action mask (the
+      observation is a plain ``Box``): sb3-contrib's MaskablePPO masks a MultiBinary action
+      per entry (a (2M,) mask of independent Bernoullis), so a mask could not say "at most r
+      ones" anyway, and Gymnasium's own MultiBinary mask has another shape, (M,) with values
+      0/1/2, so one mask could not serve both; the trimming rule below keeps the budget. Train
+      it with PPO/A2C (SB3 supports MultiBinary), or use ``"single"`` with MaskablePPO.
     - ``"single"``: ``Discrete(M + 1)``, action 0 attacks nothing and action j attacks sensor
       j (1-based) alone; ``action_mask`` (M+1,) allows only 0 once the budget is spent.
     - ``"auto"`` (default): ``"bitmask"`` for M <= 16, ``"multibinary"`` above.
@@ -102,8 +104,6 @@ class SparseAttack(AttackModel):
         M = self.M
         if fmt == "multibinary":
             self.action_space = spaces.MultiBinary(M)
-            self._open = np.ones(2 * M, dtype=np.int8)
-            self._closed = np.tile(np.array([1, 0], dtype=np.int8), M)  # only "0" per sensor
         else:
             self.n_actions = M + 1
             self.action_space = spaces.Discrete(M + 1)
@@ -120,9 +120,11 @@ class SparseAttack(AttackModel):
         """Remaining budget fraction."""
         return [self.remaining / self.budget if self.budget else 0.0]
 
-    def action_mask(self) -> np.ndarray:
-        """Legal actions for the remaining budget (int8, 1 = legal); a new array per call."""
-        if self.format != "bitmask":
+    def action_mask(self) -> np.ndarray | None:
+        """Legal actions for the remaining budget (int8, 1 = legal; None for multibinary)."""
+        if self.format == "multibinary":
+            return None
+        if self.format == "single":
             return (self._open if self.remaining > 0 else self._closed).copy()
         return self._masks[self.remaining].copy()
 
@@ -201,9 +203,11 @@ class SparseAttack(AttackModel):
         self._trim_table = kept.reshape(-1)  # flat: index action * (M + 1) + left
         self._mask_table = (self._sizes[None, :] <= left.T).astype(np.int8)
 
-    def batch_action_mask(self) -> np.ndarray:
+    def batch_action_mask(self) -> np.ndarray | None:
         """(B, A) legal actions of each member for its budget left (see :meth:`action_mask`)."""
-        if self.format != "bitmask":
+        if self.format == "multibinary":
+            return None
+        if self.format == "single":
             return np.where((self.b_remaining > 0)[:, None], self._open, self._closed)
         if self._trim_table is None:
             self._batch_tables()

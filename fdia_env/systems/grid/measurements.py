@@ -22,8 +22,9 @@ drift of 0.057° per step); see :data:`DEFAULT_SIGMA_FLOW` and the grid presets 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+import functools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -72,7 +73,11 @@ class GridModel:
         H_full: (nz, Nb) measurement matrix over every bus angle (slack column included).
         offset: (nz,) constant phase-shift terms of the measurements.
         state_buses: (n,) pandapower indices of the buses whose angles are the state.
-        system: The :class:`LinearSystem` (``system.H`` is ``H_full`` without the slack column).
+        build: Zero-argument function that builds the system (called once, by ``system``).
+
+    ``system`` (built on first access, then cached) is the :class:`LinearSystem`; ``system.H``
+    is ``H_full`` without the slack column. Building it costs O(M n²) memory (one information
+    matrix per sensor), so the measurement model alone (``measure``) does not build it.
     """
 
     network: DCNetwork
@@ -80,7 +85,12 @@ class GridModel:
     H_full: np.ndarray
     offset: np.ndarray
     state_buses: np.ndarray
-    system: LinearSystem
+    build: Callable[[], LinearSystem] = field(repr=False)
+
+    @functools.cached_property
+    def system(self) -> LinearSystem:
+        """The :class:`LinearSystem` (built once)."""
+        return self.build()
 
     def measure(self, theta: np.ndarray) -> np.ndarray:
         """Noise-free measurements ``H_full θ + offset`` for (..., Nb) bus angles, per unit."""
@@ -208,30 +218,33 @@ def grid_model(
             "angles); meter more buses or branches"
         )
     var = np.array([sigma_injection**2 if m.kind == "injection" else sigma_flow**2 for m in meters])
-    owner_arr = np.array(owner)
-    group = []
-    for s in range(owner_arr.max() + 1):
-        rows = np.flatnonzero(owner_arr == s)
-        label = (
-            _label(network, meters[rows[0]])
-            if grouping == "meter"
-            else f"rtu{int(network.buses[meters[rows[0]].bus])}"
-        )
-        group.append(Sensor(H=H[rows], R=np.diag(var[rows]), name=label))
     if Q is None:
         q = check_positive("q", q)
         Q = q * np.eye(n)
     else:
         Q = as_matrix("Q", Q, shape=(n, n))
     F = np.eye(n) if F is None else as_matrix("F", F, shape=(n, n))
-    system = LinearSystem(
-        F=F,
-        Q=Q,
-        sensors=tuple(group),
-        x0=network.theta[keep],
-        P0=DEFAULT_P0 * np.eye(n) if P0 is None else P0,
-        name=name or f"grid-{network.name}",
-    )
+
+    def build() -> LinearSystem:
+        owner_arr = np.array(owner)
+        group = []
+        for s in range(owner_arr.max() + 1):
+            rows = np.flatnonzero(owner_arr == s)
+            label = (
+                _label(network, meters[rows[0]])
+                if grouping == "meter"
+                else f"rtu{int(network.buses[meters[rows[0]].bus])}"
+            )
+            group.append(Sensor(H=H[rows], R=np.diag(var[rows]), name=label))
+        return LinearSystem(
+            F=F,
+            Q=Q,
+            sensors=tuple(group),
+            x0=network.theta[keep],
+            P0=DEFAULT_P0 * np.eye(n) if P0 is None else P0,
+            name=name or f"grid-{network.name}",
+        )
+
     for arr in (H_full, offset):
         arr.setflags(write=False)
     return GridModel(
@@ -240,7 +253,7 @@ def grid_model(
         H_full=H_full,
         offset=offset,
         state_buses=network.buses[keep],
-        system=system,
+        build=build,
     )
 
 
