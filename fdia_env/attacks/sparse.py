@@ -14,7 +14,6 @@ from fdia_env.attacks.base import (
     as_index,
     as_index_array,
     mask_array_to_bits,
-    mask_to_bits,
 )
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -142,14 +141,14 @@ class SparseAttack(AttackModel):
         if (
             a is None
             or a.shape != (self.M,)
-            or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
-            or not np.isin(a, (0, 1)).all()
+            or a.dtype.kind not in "biu"
+            or (a.dtype != bool and (a.min() < 0 or a.max() > 1))
         ):
             raise ValueError(
                 f"attacker action must be a 0/1 integer array of shape ({self.M},) "
                 f"(MultiBinary: 1 = attack that sensor), got {action!r}"
             )
-        return mask_to_bits(a.astype(bool))
+        return int.from_bytes(np.packbits(a != 0, bitorder="little").tobytes(), "little")
 
     def apply(self, action: Any) -> AttackEffect:
         """Attack the chosen subset, trimmed to the remaining budget."""
