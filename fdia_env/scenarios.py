@@ -1,13 +1,36 @@
-"""Named parameter sets from the literature (MATH.md §6).
+"""Named parameter sets from the literature (MATH.md §6) and power-grid presets (MATH.md §7).
 
 >>> from fdia_env import scenarios
 >>> sc = scenarios.get("ch4-position")
 >>> sc.system.M, sc.budget, sc.horizon
 (3, 5, 6)
+
+Power-grid presets (need the ``[grid]`` extra; built with
+:func:`fdia_env.systems.grid_system` on first :func:`get`, then cached). One sensor per meter: an
+injection meter at every bus and a flow meter at the from end of every branch; σ_flow = 0.01,
+σ_injection = 0.02 (per unit on 100 MVA), random walk ``Q = q I`` with q = 1e-6 rad², the
+filter in steady state at the window start; the prior mean is the case's DC power-flow angles.
+
+| name | model | values |
+|---|---|---|
+| grid-ieee14 | IEEE 14-bus, n = 13 angles, M = 34 meters | c = 6, N = 6, a² = 0.01, game k = 2 |
+| grid-ieee30 | IEEE 30-bus, n = 29, M = 71 | c = 6, N = 4, a² = 0.01, game k = 1 |
+| grid-ieee57 | IEEE 57-bus, n = 56, M = 137 | c = 6, N = 3, a² = 0.01, game k = 1 |
+| grid-ieee118 | IEEE 118-bus, n = 117, M = 304 | c = 6, N = 3, a² = 0.01, game k = 1 |
+
+Why these values: with σ and q as above the steady-state ``tr P`` is 0.27 (ieee14) to 0.34
+(ieee118) of the static estimator's ``tr (H' R⁻¹ H)⁻¹``, so prediction and measurements both
+matter (MATH.md §7); a² = 0.01 pu² (a 10 MW bias standard deviation) makes the single-meter
+attack term ``a² |W e_i|²`` 1 to 3 times ``tr P``; c and N leave the sparse problems far beyond
+exhaustive search (C(204, 6) ≈ 1e11 sets for ieee14) while SFS, SBS, SFS-SS and DP run in
+seconds. ``k`` is the sensor game's ``max_subset_size``: the attacker picks at most k meters,
+the defender leaves out at most k (no single meter is critical, so every such defender subset
+keeps the network observable).
 """
 
 from __future__ import annotations
 
+import functools
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -159,6 +182,36 @@ def _ch5_game() -> Scenario:
     )
 
 
+# name -> (case, budget c, horizon N, sensor-game max_subset_size k)
+GRID_PRESETS: dict[str, tuple[str, int, int, int]] = {
+    "grid-ieee14": ("ieee14", 6, 6, 2),
+    "grid-ieee30": ("ieee30", 6, 4, 1),
+    "grid-ieee57": ("ieee57", 6, 3, 1),
+    "grid-ieee118": ("ieee118", 6, 3, 1),
+}
+GRID_POWER = 0.01
+
+
+def _grid(name: str) -> Callable[[], Scenario]:
+    @functools.cache
+    def build() -> Scenario:
+        from fdia_env.systems.grid import grid_system
+
+        case, budget, horizon, k = GRID_PRESETS[name]
+        sys = grid_system(case, name=name)
+        return Scenario(
+            name,
+            sys,
+            f"{case}: DC dynamic state estimation, {sys.M} meters, {sys.n} angles (MATH.md §7)",
+            budget=budget,
+            horizon=horizon,
+            power=GRID_POWER,
+            extra={"case": case, "max_subset_size": k},
+        )
+
+    return build
+
+
 _PRESETS: dict[str, Callable[..., Scenario]] = {
     "ch2-position": _ch2_position,
     "ch2-pv-1": _ch2_pv(two=False),
@@ -171,6 +224,7 @@ _PRESETS: dict[str, Callable[..., Scenario]] = {
     "ch4-pv-case3": _ch4_pv(3),
     "ch4-random": _ch4_random,
     "ch5-game": _ch5_game,
+    **{name: _grid(name) for name in GRID_PRESETS},
 }
 
 

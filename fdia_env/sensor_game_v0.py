@@ -16,6 +16,13 @@ equilibrium of ``baselines.game``.
 ``Discrete(2**M − 1)`` for each player: index j is the j-th subset by size then lexicographic
 (for M = 3: z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3; see ``fdia_env.attacks.subsets``).
 
+With ``max_subset_size=k`` (for large M, where 2**M − 1 is astronomically large) the attacker's
+strategies are the subsets of at most k sensors and the defender's those that leave out at most
+k sensors (sizes M − k..M), each in the same size-then-lexicographic order: e.g. k = 1 gives the
+attacker ``Discrete(M)`` (one sensor) and the defender ``Discrete(M + 1)`` (drop one sensor,
+then the full set last). The power-grid presets set k (``scenario.extra["max_subset_size"]``);
+``max_subset_size=None`` takes the preset's k, or every subset when the preset has none.
+
 ## Observation Space
 
 ``Box(float32)``: steps left / rounds, log variance growth and correlations of the actual error
@@ -35,7 +42,8 @@ Terminates after ``rounds`` rounds.
 
 ``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``,
 ``rounds`` (default 1, or ``max_cycles`` when only that is given), ``reward_mode``,
-``dynamics``, ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``.
+``dynamics``, ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``,
+``max_subset_size``.
 
 Gymnasium views: ``fdia_env/SensorGameAttacker-v0`` and ``fdia_env/SensorGameDefender-v0``, the
 other player fixed to ``opponent=`` (any SB3-style policy, e.g.
@@ -78,6 +86,7 @@ def parallel_env(
     dynamics: str = "expected",
     render_mode: str | None = None,
     max_cycles: int | None = None,
+    max_subset_size: int | None = None,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     if rounds is not None:
@@ -92,15 +101,14 @@ def parallel_env(
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
-    attack = SubsetAttack(scenario_default(sc, "power", power), allocation=allocation)
+    if max_subset_size is None:
+        max_subset_size = sc.extra.get("max_subset_size")
+    attack = SubsetAttack(
+        scenario_default(sc, "power", power), allocation=allocation, max_subset_size=max_subset_size
+    )
+    defense = SensorSelection(max_subset_size)
     return FdiaParallelEnv(
-        sc,
-        attack,
-        SensorSelection(),
-        spec,
-        render_mode=render_mode,
-        name=NAME,
-        max_cycles=max_cycles,
+        sc, attack, defense, spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles
     )
 
 

@@ -17,6 +17,14 @@ left is trimmed to its lowest-numbered sensors that fit (``"trim"``, default), a
 (``"noop"``) or raises a ``ValueError`` (``"error"``), so an episode never spends more than
 ``budget``.
 
+That is ``action="bitmask"``, the default (``"auto"``) up to M = 16 sensors. Above 16 (the
+power-grid presets have 34 to 304 meters) ``"auto"`` gives ``MultiBinary(M)`` (entry i = 1
+attacks sensor i; no action mask, so the observation is the plain ``Box``: MaskablePPO's
+per-entry MultiBinary mask cannot express a budget, and Gymnasium's MultiBinary mask has another
+shape; train it with PPO/A2C); ``action="single"`` gives ``Discrete(M + 1)`` (0 = no attack, j =
+sensor j alone, masked to 0 once the budget is spent: the MaskablePPO choice). The same
+over-budget rule applies to every format (see :class:`fdia_env.attacks.SparseAttack`).
+
 ## Observation Space
 
 ``Dict(observation=Box(float32), action_mask=Box(0, 1, (2**M,), int8))``, where
@@ -51,7 +59,8 @@ Terminates after N steps. No truncation.
 ``scenario`` (preset name, Scenario or LinearSystem; default ``"ch4-position"``), ``budget``
 (c, default the preset's), ``horizon`` (N, default the preset's), ``objective``,
 ``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"human"`` | ``"ansi"`` |
-``"rgb_array"``), ``illegal_action`` (``"trim"`` | ``"noop"`` | ``"error"``), ``max_cycles``.
+``"rgb_array"``), ``action`` (``"auto"`` | ``"bitmask"`` | ``"multibinary"`` | ``"single"``),
+``illegal_action`` (``"trim"`` | ``"noop"`` | ``"error"``), ``max_cycles``.
 
 ## Version History
 
@@ -93,6 +102,7 @@ def parallel_env(
     render_mode: str | None = None,
     max_cycles: int | None = None,
     illegal_action: str = "trim",
+    action: str = "auto",
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     sc, spec = episode_spec(
@@ -104,7 +114,9 @@ def parallel_env(
         reward_mode=reward_mode,
         dynamics=dynamics,
     )
-    attack = SparseAttack(scenario_default(sc, "budget", budget), illegal_action=illegal_action)
+    attack = SparseAttack(
+        scenario_default(sc, "budget", budget), action=action, illegal_action=illegal_action
+    )
     return FdiaParallelEnv(
         sc,
         attack,

@@ -51,7 +51,7 @@ def test_custom_system_without_budget_or_horizon_needs_them():
 def test_too_many_sensors_for_subset_actions():
     system = tracking_system(sigma_v=0.5, sigma_w=[1.0] * 17)
     with pytest.raises(ValueError, match="at most 16 sensors"):
-        sparse_attack_v0.parallel_env(scenario=system, budget=1, horizon=2)
+        sparse_attack_v0.parallel_env(scenario=system, budget=1, horizon=2, action="bitmask")
 
 
 @pytest.mark.parametrize("action", [8, -1, 1.5, "1", None, np.array([1, 2])])

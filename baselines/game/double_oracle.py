@@ -30,7 +30,7 @@ import numpy as np
 from baselines.game.lp import solve_zero_sum
 from baselines.game.payoff import SensorGame, make_game
 from fdia_env._validation import check_int, check_positive
-from fdia_env.attacks.subsets import subsets
+from fdia_env.attacks.subsets import game_subsets
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -51,6 +51,7 @@ class DoubleOracleResult:
         iterations: Restricted games solved.
         restricted_size: Strategies in the restricted game at the end (defender, attacker).
         M: Number of sensors.
+        max_subset_size: k of the strategy sets (None: every non-empty subset).
     """
 
     value: float
@@ -62,13 +63,19 @@ class DoubleOracleResult:
     iterations: int
     restricted_size: tuple[int, int]
     M: int
+    max_subset_size: int | None = None
 
     def strategy(self, player: str) -> np.ndarray:
-        """(2^M − 1,) mixed strategy of ``"defender"`` or ``"attacker"`` in subsets order."""
+        """Mixed strategy of ``"defender"`` or ``"attacker"`` over its subsets, in their order.
+
+        (2^M − 1,) entries for the full game; with ``max_subset_size`` the player's subsets of
+        :func:`~fdia_env.attacks.subsets.game_subsets`.
+        """
         support = {"defender": self.defender, "attacker": self.attacker}.get(player)
         if support is None:
             raise ValueError(f"player must be 'defender' or 'attacker', got {player!r}")
-        index = {s: j for j, s in enumerate(subsets(self.M))}
+        family = game_subsets(self.M, self.max_subset_size, player)
+        index = {s: j for j, s in enumerate(family)}
         p = np.zeros(len(index))
         for s, prob in support.items():
             p[index[s]] = prob
@@ -81,15 +88,20 @@ def solve_double_oracle(
     allocation: str = "independent",
     tol: float = 1e-9,
     max_iter: int = 10_000,
+    max_subset_size: int | None = None,
 ) -> DoubleOracleResult:
     """Equilibrium of the (2^M − 1)-strategy game without building its payoff matrix.
 
     Args:
-        system_or_scenario: Preset name, scenario or system of scalar sensors (M ≤ 20).
+        system_or_scenario: Preset name, scenario or system of scalar sensors (M ≤ 20, or any
+            M with ``max_subset_size``).
         power: Attack power a² (> 0); defaults to the scenario's.
         allocation: ``"independent"`` or ``"dependent"``.
         tol: Stop when ``gap <= tol · max(|lower|, |upper|)`` (relative certificate, > 0).
         max_iter: Most restricted games to solve (≥ 1).
+        max_subset_size: k of the restricted strategy sets (default the scenario's, e.g. the
+            power-grid presets'; else every subset): the attacker's subsets of at most k
+            sensors, the defender's leaving out at most k.
 
     Returns:
         A :class:`DoubleOracleResult`. If the gap cannot be closed to ``tol`` (rounding in the
@@ -102,7 +114,7 @@ def solve_double_oracle(
     """
     tol = check_positive("tol", tol)
     max_iter = check_int("max_iter", max_iter, minimum=1)
-    game = make_game(system_or_scenario, power, allocation)
+    game = make_game(system_or_scenario, power, allocation, max_subset_size)
     return _double_oracle(game, tol, max_iter)
 
 
@@ -140,15 +152,17 @@ def _double_oracle(game: SensorGame, tol: float, max_iter: int) -> DoubleOracleR
             RuntimeWarning,
             stacklevel=3,
         )
-    names = subsets(game.M)
+    rows_names = game_subsets(game.M, game.max_subset_size, "defender")
+    cols_names = game_subsets(game.M, game.max_subset_size, "attacker")
     return DoubleOracleResult(
         value=float(value),
         lower=lower,
         upper=upper,
         gap=upper - lower,
-        defender={names[r]: float(p) for r, p in zip(rows, x, strict=True) if p > 0},
-        attacker={names[c]: float(p) for c, p in zip(cols, y, strict=True) if p > 0},
+        defender={rows_names[r]: float(p) for r, p in zip(rows, x, strict=True) if p > 0},
+        attacker={cols_names[c]: float(p) for c, p in zip(cols, y, strict=True) if p > 0},
         iterations=iteration,
         restricted_size=(len(rows), len(cols)),
         M=game.M,
+        max_subset_size=game.max_subset_size,
     )

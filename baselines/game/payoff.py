@@ -41,7 +41,7 @@ from fdia_env.attacks.subset import (
     attack_directions,
     sensor_sigmas,
 )
-from fdia_env.attacks.subsets import subsets
+from fdia_env.attacks.subsets import game_sizes, subset_count, subsets
 from fdia_env.kalman import steady_state, steady_state_iterate
 from fdia_env.scenarios import Scenario, resolve
 from fdia_env.systems import LinearSystem
@@ -58,11 +58,25 @@ MAX_MATRIX_SENSORS = 13
 _DARE_MAX_SUBSETS = 63
 
 
-def subset_masks(M: int) -> np.ndarray:
-    """(2^M − 1, M) boolean masks of :func:`~fdia_env.attacks.subsets.subsets` (M ≤ 20)."""
-    if M > 20:
-        raise ValueError(f"M must be <= 20 for an explicit list of subsets, got {M}")
-    subs = subsets(M)
+def subset_masks(
+    M: int, max_subset_size: int | None = None, player: str = "attacker"
+) -> np.ndarray:
+    """Boolean masks of a player's subsets (:func:`~fdia_env.attacks.subsets.game_subsets`).
+
+    ``max_subset_size=None``: all 2^M − 1 subsets (M ≤ 20); else the subsets of the game with
+    that k (at most 2^20 of them).
+    """
+    if max_subset_size is None and M > 20:
+        raise ValueError(
+            f"M must be <= 20 for an explicit list of subsets, got {M}; pass max_subset_size"
+        )
+    lo, hi = game_sizes(M, max_subset_size, player)
+    if subset_count(M, hi, lo) > 2**20:
+        raise ValueError(
+            f"max_subset_size={max_subset_size} gives the {player} "
+            f"{subset_count(M, hi, lo):,} subsets of {M} sensors; at most 2**20 are supported"
+        )
+    subs = subsets(M, max_size=hi, min_size=lo)
     masks = np.zeros((len(subs), M), dtype=bool)
     for row, s in enumerate(subs):
         masks[row, list(s)] = True
@@ -70,9 +84,13 @@ def subset_masks(M: int) -> np.ndarray:
 
 
 def subset_steady_states(system: LinearSystem, masks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Steady-state ``tr P[k|k]`` (k,) and gain ``W`` (k, n, nz) of each defender subset."""
+    """Steady-state ``tr P[k|k]`` (k,) and gain ``W`` (k, n, nz) of each defender subset.
+
+    Per-subset DAREs (cached) for few subsets or a large state (n ≥ 32, where one batched
+    fixed-point iteration over hundreds of subsets costs more); otherwise the batched iteration.
+    """
     masks = np.asarray(masks, dtype=bool)
-    if len(masks) <= _DARE_MAX_SUBSETS:
+    if len(masks) <= _DARE_MAX_SUBSETS or system.n >= 32:
         states = [steady_state(system, m) for m in masks]
         P = np.stack([s[1] for s in states])
         W = np.stack([s[2] for s in states])
@@ -89,21 +107,30 @@ class SensorGame:
         system: The system (scalar sensors).
         power: Attack power a².
         allocation: ``"independent"`` or ``"dependent"``.
+        max_subset_size: None (every non-empty subset for both players) or k: the attacker's
+            subsets of at most k sensors and the defender's that leave out at most k
+            (:func:`~fdia_env.attacks.subsets.game_sizes`), as in ``sensor_game_v0``.
 
     Derived (computed in ``__post_init__``):
-        M: Number of sensors; ``size = 2^M − 1`` strategies per player.
-        masks: (size, M) subsets in :func:`~fdia_env.attacks.subsets.subsets` order.
+        M: Number of sensors; ``size = 2^M − 1`` strategies per player (the defender's count
+            with ``max_subset_size``; ``attacker_size`` the attacker's).
+        masks: (size, M) the defender's subsets in size-then-lexicographic order.
+        attacker_masks: (attacker_size, M) the attacker's subsets (``masks`` itself when both
+            players have every subset).
         trace_P: (size,) ``tr P_D``, steady-state filtered covariance of each defender subset.
         W: (size, n, M) steady-state gain of each defender subset (zero columns outside D).
-        U: (size, M) attack direction of each attacker subset, ``Σ_A = a² u_A u_A'``.
+        U: (attacker_size, M) attack direction of each attacker subset, ``Σ_A = a² u_A u_A'``.
     """
 
     system: LinearSystem
     power: float
     allocation: str = "independent"
+    max_subset_size: int | None = None
     M: int = field(init=False)
     size: int = field(init=False)
+    attacker_size: int = field(init=False)
     masks: np.ndarray = field(init=False, repr=False)
+    attacker_masks: np.ndarray = field(init=False, repr=False)
     trace_P: np.ndarray = field(init=False, repr=False)
     W: np.ndarray = field(init=False, repr=False)
     U: np.ndarray = field(init=False, repr=False)
@@ -114,14 +141,18 @@ class SensorGame:
         power = check_positive("power", self.power)
         check_choice("allocation", self.allocation, ALLOCATIONS)
         sensor_sigmas(self.system)
-        masks = subset_masks(self.system.M)
+        k = self.max_subset_size
+        masks = subset_masks(self.system.M, k, "defender")
+        attacker_masks = masks if k is None else subset_masks(self.system.M, k, "attacker")
         trace_P, W = subset_steady_states(self.system, masks)
-        U = attack_directions(self.system, masks, self.allocation)
+        U = attack_directions(self.system, attacker_masks, self.allocation)
         for name, value in (
             ("power", power),
             ("M", self.system.M),
             ("size", len(masks)),
+            ("attacker_size", len(attacker_masks)),
             ("masks", masks),
+            ("attacker_masks", attacker_masks),
             ("trace_P", trace_P),
             ("W", W),
             ("U", U),
@@ -137,7 +168,7 @@ class SensorGame:
         one (r, M²) × (M², c) matrix product.
         """
         rows = np.arange(self.size) if rows is None else np.asarray(rows, dtype=np.intp)
-        cols = np.arange(self.size) if cols is None else np.asarray(cols, dtype=np.intp)
+        cols = np.arange(self.attacker_size) if cols is None else np.asarray(cols, dtype=np.intp)
         W = self.W[rows]
         G = np.einsum("dki,dkj->dij", W, W).reshape(len(rows), -1)  # vec(W_D' W_D)
         u = self.U[cols]
@@ -155,7 +186,7 @@ class SensorGame:
         return self.trace_P + np.einsum("dkj,dkj->d", WS, self.W)  # tr(W Σ̄ W')
 
     def attacker_values(self, rows: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """(size,) expected payoff of every attacker subset against the defender mix ``x``.
+        """(attacker_size,) expected payoff of every attacker subset against the defender mix ``x``.
 
         Linear in the mix: ``Σ_D x_D tr P_D + a² u_A' Ḡ u_A`` with ``Ḡ = Σ_D x_D W_D' W_D``.
         """
@@ -172,20 +203,28 @@ def make_game(
     system_or_scenario: str | Scenario | LinearSystem,
     power: float | None = None,
     allocation: str = "independent",
+    max_subset_size: int | None = None,
 ) -> SensorGame:
-    """Build a :class:`SensorGame`; ``power`` defaults to the scenario's (100 for ch5-game)."""
+    """Build a :class:`SensorGame`; ``power`` defaults to the scenario's (100 for ch5-game).
+
+    ``max_subset_size`` defaults to the scenario's (``extra["max_subset_size"]``: the power-grid
+    presets), else every subset.
+    """
     sc = resolve(system_or_scenario)
     if power is None:
         if sc.power is None:
             raise ValueError(f"power is required: scenario {sc.name!r} does not define one")
         power = sc.power
-    return SensorGame(sc.system, power, allocation)
+    if max_subset_size is None:
+        max_subset_size = sc.extra.get("max_subset_size")
+    return SensorGame(sc.system, power, allocation, max_subset_size)
 
 
 def payoff_matrix(
     system_or_scenario: str | Scenario | LinearSystem,
     power: float | None = None,
     allocation: str = "independent",
+    max_subset_size: int | None = None,
 ) -> np.ndarray:
     """The full (2^M − 1) × (2^M − 1) payoff ``L[D, A] = tr(P_D + W_D Σ_{A∩D} W_D')``.
 
@@ -198,9 +237,13 @@ def payoff_matrix(
             scalar sensors.
         power: Attack power a² (> 0); defaults to the scenario's.
         allocation: ``"independent"`` (Prop. 2) or ``"dependent"`` (Prop. 3).
+        max_subset_size: k of the restricted strategy sets (default the scenario's, else
+            every subset): rows the defender's subsets leaving out at most k sensors, columns
+            the attacker's subsets of at most k sensors.
 
     Returns:
-        (m, m) payoff to the attacker (the defender minimises it), m = 2^M − 1.
+        (m, m) payoff to the attacker (the defender minimises it), m = 2^M − 1 (with k: the
+        two players' subset counts).
 
     Raises:
         ValueError: Naming the parameter: power ≤ 0 or missing, an unknown allocation or
@@ -208,11 +251,20 @@ def payoff_matrix(
             :func:`~baselines.game.double_oracle.solve_double_oracle`).
     """
     sc = resolve(system_or_scenario)
-    if sc.system.M > MAX_MATRIX_SENSORS:
+    k = max_subset_size if max_subset_size is not None else sc.extra.get("max_subset_size")
+    if k is None and sc.system.M > MAX_MATRIX_SENSORS:
         size = 2**sc.system.M - 1
         raise ValueError(
             f"payoff_matrix builds the full {size:,} × {size:,} matrix for M = {sc.system.M} "
             f"sensors ({size**2 * 8 / 2**30:.0f} GiB); M must be <= {MAX_MATRIX_SENSORS}. "
-            "Use solve_double_oracle, which never builds it"
+            "Use solve_double_oracle, which never builds it, or pass max_subset_size"
         )
-    return make_game(sc, power, allocation).payoff()
+    if k is not None:
+        rows = subset_count(sc.system.M, *game_sizes(sc.system.M, k, "defender")[::-1])
+        cols = subset_count(sc.system.M, *game_sizes(sc.system.M, k, "attacker")[::-1])
+        if rows * cols > 2**28:
+            raise ValueError(
+                f"payoff_matrix with max_subset_size={k} is {rows:,} × {cols:,} "
+                f"({rows * cols * 8 / 2**30:.0f} GiB); use solve_double_oracle"
+            )
+    return make_game(sc, power, allocation, k).payoff()

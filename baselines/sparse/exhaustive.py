@@ -37,6 +37,23 @@ from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 DEFAULT_CHUNK_ROWS = 1 << 18
+DEFAULT_MAX_SETS = 10**9
+"""EXS refuses instances with more sets than this unless ``max_sets`` is raised or None."""
+FAST_SETS_PER_S = 1e7  # measured order of magnitude, 2×2 component path, one core
+GENERIC_FLOPS_PER_S = 2e9  # generic path: about one n×n inverse (≈ 2n³ flops) per set
+
+
+def estimated_seconds(count: int, n: int, fast: bool) -> float:
+    """Rough EXS run time for ``count`` sets on a state of size ``n`` (order of magnitude)."""
+    rate = FAST_SETS_PER_S if fast and n == 2 else GENERIC_FLOPS_PER_S / max(2.0 * n**3, 200.0)
+    return count / rate
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("hours", 3600), ("min", 60)):
+        if seconds >= size:
+            return f"{seconds / size:,.3g} {unit}"
+    return f"{seconds:.3g} s"
 
 
 @dataclass
@@ -208,6 +225,7 @@ def exhaustive(
     *,
     fast: bool = True,
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
+    max_sets: int | None = DEFAULT_MAX_SETS,
 ) -> SparseResult:
     """EXS: the best attack set of exactly ``budget`` pairs, by exhaustive search.
 
@@ -219,6 +237,8 @@ def exhaustive(
         fast: Use the 2×2 component algebra when the state has two components; ``False`` forces
             the generic ``np.linalg`` path (for cross-checks).
         chunk_rows: Most states held per level (bounds memory; larger is slightly faster).
+        max_sets: Refuse instances with more than this many sets ``C(M·N, c)`` (default 10⁹,
+            minutes on the 2×2 path); ``None`` runs any size.
 
     Returns:
         The optimal :class:`SparseResult` (``evaluations = C(M·N, c)``). Among sets with equal
@@ -226,7 +246,9 @@ def exhaustive(
         on one core with the 2×2 path (M·N = 60, c = 5 in about half a second).
 
     Raises:
-        ValueError: For a bad budget, horizon, objective or scenario (naming the parameter).
+        ValueError: For a bad budget, horizon, objective or scenario (naming the parameter), or
+            an instance above ``max_sets`` (the message gives the number of sets and an
+            estimated run time).
 
     Example:
         >>> result = exhaustive("ch4-position", budget=5, horizon=6)
@@ -237,6 +259,17 @@ def exhaustive(
     if chunk_rows < 1:
         raise ValueError(f"chunk_rows must be >= 1, got {chunk_rows}")
     sys = problem.system
+    count = math.comb(problem.size, problem.budget)
+    if max_sets is not None:
+        if isinstance(max_sets, bool) or not isinstance(max_sets, int) or max_sets < 1:
+            raise ValueError(f"max_sets must be an integer >= 1 or None, got {max_sets!r}")
+        if count > max_sets:
+            eta = _duration(estimated_seconds(count, sys.n, fast))
+            raise ValueError(
+                f"EXS would evaluate C(M·N = {problem.size}, c = {problem.budget}) = {count:,} "
+                f"sets (estimated {eta} on one core), above max_sets = {max_sets:,}; pass "
+                "max_sets=None to run it anyway, or use sfs / sfs_ss / dp"
+            )
     search = _FrontierSearch(problem, algebra_for(sys.F, sys.Q, objective, fast), chunk_rows)
     _, pairs = search.run()
     return SparseResult(

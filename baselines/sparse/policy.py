@@ -9,6 +9,7 @@ import numpy as np
 
 from baselines.sparse.result import SparseResult
 from fdia_env._validation import check_int
+from fdia_env.attacks.sparse import MAX_SENSORS
 
 
 class SparsePolicy:
@@ -19,7 +20,9 @@ class SparsePolicy:
     (the terminal observation) get action 0.
 
     Args:
-        actions: (N,) bitmask per step (bit 0 = sensor 1), e.g. :meth:`SparseResult.actions`.
+        actions: (N,) bitmask per step (bit 0 = sensor 1), e.g. :meth:`SparseResult.actions`,
+            for the ``Discrete(2**M)`` action; or an (N, M) 0/1 plan (:meth:`SparseResult.plan`)
+            for the ``MultiBinary(M)`` action of envs with more than 16 sensors.
 
     Example:
         >>> policy = SparsePolicy([0, 0, 1, 1, 1, 3])
@@ -29,18 +32,24 @@ class SparsePolicy:
 
     def __init__(self, actions: Sequence[int] | np.ndarray) -> None:
         arr = np.asarray(actions)
-        if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.integer):
-            raise ValueError(f"actions must be a non-empty 1-D sequence of ints, got {actions!r}")
+        ints = np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool
+        if arr.ndim not in (1, 2) or arr.size == 0 or not ints:
+            raise ValueError(
+                "actions must be a non-empty 1-D sequence of bitmasks or an (N, M) 0/1 plan, "
+                f"got {actions!r}"
+            )
+        if arr.ndim == 2 and not np.isin(arr, (0, 1)).all():
+            raise ValueError(f"an (N, M) plan must hold only 0 and 1, got {arr.tolist()}")
         if (arr < 0).any():
             raise ValueError(f"actions must be non-negative bitmasks, got {arr.tolist()}")
         self.actions = arr.astype(np.int64)
         self.actions.setflags(write=False)
-        self.horizon = check_int("horizon", arr.size, minimum=1)
+        self.horizon = check_int("horizon", arr.shape[0], minimum=1)
 
     @classmethod
     def from_result(cls, result: SparseResult) -> SparsePolicy:
-        """The policy that plays ``result.attacks``."""
-        return cls(result.actions())
+        """The policy that plays ``result.attacks`` (a 0/1 plan above 16 sensors)."""
+        return cls(result.plan() if result.num_sensors > MAX_SENSORS else result.actions())
 
     def step_of(self, observation: Any) -> np.ndarray:
         """Window step(s) encoded in a (d,) or (B, d) observation (dict or plain Box)."""
@@ -66,10 +75,14 @@ class SparsePolicy:
             deterministic: Ignored (the policy is deterministic).
 
         Returns:
-            An ``np.int64`` action for one observation, a (B,) array for a batch.
+            An ``np.int64`` action for one observation, a (B,) array for a batch; with an
+            (N, M) plan an (M,) int8 MultiBinary action, (B, M) for a batch.
         """
         step = self.step_of(observation)
         inside = (step >= 0) & (step < self.horizon)
+        if self.actions.ndim == 2:  # MultiBinary rows; zeros outside the window
+            rows = self.actions[np.clip(step, 0, self.horizon - 1)]
+            return np.where(np.asarray(inside)[..., None], rows, 0).astype(np.int8), state
         action = np.where(inside, self.actions[np.clip(step, 0, self.horizon - 1)], 0)
         if action.ndim == 0:
             return np.int64(action), state

@@ -104,6 +104,13 @@ class SparseResult:
             out[k] |= 1 << i
         return out
 
+    def plan(self) -> np.ndarray:
+        """(N, M) int8: 1 where the pair (step, sensor) is attacked (the MultiBinary actions)."""
+        out = np.zeros((self.horizon, self.num_sensors), dtype=np.int8)
+        for k, i in self.attacks:
+            out[k, i] = 1
+        return out
+
     def grid(self) -> np.ndarray:
         """(M, N) ints: pick number (1-based) where SFS's ``order`` has a pair, else 0.
 

@@ -33,8 +33,34 @@ class AttackEffect:
 
 
 def bits_to_mask(bits: int, M: int) -> np.ndarray:
-    """Bit ``i`` of ``bits`` set means sensor ``i``: returns an (M,) bool array."""
-    return (int(bits) >> np.arange(M)) & 1 == 1
+    """Bit ``i`` of ``bits`` set means sensor ``i``: returns an (M,) bool array (any M)."""
+    if M <= 62:
+        return (int(bits) >> np.arange(M)) & 1 == 1
+    raw = np.frombuffer(int(bits).to_bytes((M + 7) // 8, "little"), dtype=np.uint8)
+    return np.unpackbits(raw, bitorder="little")[:M].astype(bool)
+
+
+def bit_array(values: Any, M: int) -> np.ndarray:
+    """(B,) sensor bitmasks as int64 for M <= 62, else as Python ints in an object array.
+
+    The batched models keep one bitmask per member; beyond 62 sensors a bitmask no longer fits
+    an int64, and numpy's object arrays keep the same ``&``, ``|``, ``~``, ``>>`` semantics.
+    """
+    if M <= 62:
+        return np.asarray(values, dtype=np.int64)
+    out = np.empty(len(values), dtype=object)
+    out[:] = [int(v) for v in values]
+    return out
+
+
+def mask_array_to_bits(masks: np.ndarray) -> np.ndarray:
+    """(B, M) booleans -> (B,) bitmasks (:func:`bit_array` dtype)."""
+    masks = np.asarray(masks, dtype=bool)
+    M = masks.shape[1]
+    if M <= 62:
+        return masks.astype(np.int64) @ (np.int64(1) << np.arange(M, dtype=np.int64))
+    packed = np.packbits(masks, axis=1, bitorder="little")
+    return bit_array([int.from_bytes(row.tobytes(), "little") for row in packed], M)
 
 
 def mask_to_bits(mask: np.ndarray) -> int:

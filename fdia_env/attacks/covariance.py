@@ -21,7 +21,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_power, check_psd
-from fdia_env.attacks.base import AttackEffect, AttackModel
+from fdia_env.attacks.base import AttackEffect, AttackModel, mask_array_to_bits
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman.linalg import psd_sqrt, sym
 from fdia_env.systems import LinearSystem, power_weight
@@ -145,6 +145,7 @@ class CovarianceAttack(AttackModel):
         dim = self.map.size + int(self._budget)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(dim,), dtype=np.float32)
         self._row_sensor = system.row_sensor
+        self._M = system.M
         n_feat = int(self._budget)
         self.feature_low = np.zeros(n_feat, dtype=np.float32)
         self.feature_high = np.ones(n_feat, dtype=np.float32)
@@ -242,13 +243,10 @@ class CovarianceAttack(AttackModel):
         self.b_power = np.asarray(spend, dtype=np.float64).copy()
         sigma = self.map.to_sigma_batch(entries, spend)
         rows = np.diagonal(sigma, axis1=-2, axis2=-1) > 0.0  # (B, nz)
-        weights = np.zeros(self._row_sensor.size, dtype=np.int64)
-        weights[:] = 1 << self._row_sensor
-        # a sensor is attacked when any of its rows carries bias: OR of its row bits
-        attacked = np.zeros(a.shape[0], dtype=np.int64)
-        for r in range(weights.size):
-            attacked |= np.where(rows[:, r], weights[r], 0)
-        return attacked, sigma
+        # a sensor is attacked when any of its rows carries bias
+        owner = np.zeros((self._row_sensor.size, self._M))
+        owner[np.arange(self._row_sensor.size), self._row_sensor] = 1.0
+        return mask_array_to_bits(rows.astype(float) @ owner > 0.0), sigma
 
     def batch_info(self) -> dict[str, np.ndarray]:
         """Batched :meth:`info`."""

@@ -8,11 +8,19 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index, as_index_array
+from fdia_env.attacks.base import (
+    AttackEffect,
+    AttackModel,
+    as_index,
+    as_index_array,
+    mask_array_to_bits,
+)
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
 MAX_SENSORS = 16
+"""Largest M of the ``Discrete(2**M)`` bitmask action (``action="auto"`` switches above it)."""
+ACTION_FORMATS = ("auto", "bitmask", "multibinary", "single")
 ILLEGAL_ACTIONS = ("trim", "error", "noop")
 
 
@@ -30,37 +38,53 @@ def trim_to_budget(bits: int, remaining: int) -> int:
 class SparseAttack(AttackModel):
     """Attack up to ``budget`` sensor-time pairs over the window.
 
-    Action: ``Discrete(2**M)``; action ``a`` attacks the sensors whose bits are set in ``a``
-    (bit 0 = sensor 1), so 0 is "no attack". The observation's ``action_mask`` marks the
-    subsets no larger than the remaining budget.
+    Action formats (``action``):
 
-    Over-budget rule (``illegal_action``): an action that selects more sensors than the budget
-    left is an illegal action (its ``action_mask`` entry is 0). ``"trim"`` (default) keeps the
-    lowest-numbered selected sensors that fit, ``"noop"`` attacks nothing, ``"error"`` raises a
-    ``ValueError`` naming the action and the budget left. No episode ever spends more than
-    ``budget``.
+    - ``"bitmask"``: ``Discrete(2**M)``; action ``a`` attacks the sensors whose bits are set in
+      ``a`` (bit 0 = sensor 1), so 0 is "no attack". ``action_mask`` (2**M,) marks the subsets
+      no larger than the remaining budget. At most :data:`MAX_SENSORS` sensors.
+    - ``"multibinary"``: ``MultiBinary(M)``, entry i = 1 attacks sensor i; no action mask (the
+      observation is a plain ``Box``): sb3-contrib's MaskablePPO masks a MultiBinary action
+      per entry (a (2M,) mask of independent Bernoullis), so a mask could not say "at most r
+      ones" anyway, and Gymnasium's own MultiBinary mask has another shape, (M,) with values
+      0/1/2, so one mask could not serve both; the trimming rule below keeps the budget. Train
+      it with PPO/A2C (SB3 supports MultiBinary), or use ``"single"`` with MaskablePPO.
+    - ``"single"``: ``Discrete(M + 1)``, action 0 attacks nothing and action j attacks sensor
+      j (1-based) alone; ``action_mask`` (M+1,) allows only 0 once the budget is spent.
+    - ``"auto"`` (default): ``"bitmask"`` for M <= 16, ``"multibinary"`` above.
+
+    Over-budget rule (every format, ``illegal_action``): an action that selects more sensors
+    than the budget left is illegal (its ``action_mask`` entry is 0 where there is a mask).
+    ``"trim"`` (default) keeps the lowest-numbered selected sensors that fit, ``"noop"``
+    attacks nothing, ``"error"`` raises a ``ValueError`` naming the action and the budget left.
+    No episode ever spends more than ``budget``.
 
     Features: the remaining budget as a fraction of ``budget`` (0 when ``budget`` is 0).
 
     Args:
         budget: c, the sensor-time pairs the attacker may corrupt over the window (>= 0).
+        action: ``"auto"``, ``"bitmask"``, ``"multibinary"`` or ``"single"`` (see above).
         illegal_action: ``"trim"``, ``"noop"`` or ``"error"`` (see above).
     """
 
     name = "sparse"
 
-    def __init__(self, budget: int, illegal_action: str = "trim") -> None:
+    def __init__(self, budget: int, action: str = "auto", illegal_action: str = "trim") -> None:
         self.budget = check_int("budget", budget, minimum=0)
+        self.action_format = check_choice("action", action, ACTION_FORMATS)
         self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
         self.remaining = self.budget
         self.last_attacked = 0
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Build the action space for ``system`` and check the budget fits the window."""
-        if system.M > MAX_SENSORS:
+        fmt = self.action_format
+        if fmt == "auto":
+            fmt = "bitmask" if system.M <= MAX_SENSORS else "multibinary"
+        if fmt == "bitmask" and system.M > MAX_SENSORS:
             raise ValueError(
                 f"the sparse attack's subset action supports at most {MAX_SENSORS} sensors, "
-                f"the system has {system.M}"
+                f"the system has {system.M}; use action='multibinary' or action='single'"
             )
         if self.budget > system.M * spec.horizon:
             raise ValueError(
@@ -69,6 +93,12 @@ class SparseAttack(AttackModel):
                 f"which is max_cycles when only that is given), got {self.budget}"
             )
         self.M = system.M
+        self.format = fmt
+        self.feature_low = np.zeros(1, dtype=np.float32)
+        self.feature_high = np.ones(1, dtype=np.float32)
+        if fmt != "bitmask":
+            self._bind_large(fmt)
+            return
         self.n_actions = 2**system.M
         self.action_space = spaces.Discrete(self.n_actions)
         sizes = np.array([a.bit_count() for a in range(self.n_actions)])
@@ -77,8 +107,18 @@ class SparseAttack(AttackModel):
         self._masks = [
             (sizes <= r).astype(np.int8) for r in range(self.budget + 1)
         ]  # per budget left
-        self.feature_low = np.zeros(1, dtype=np.float32)
-        self.feature_high = np.ones(1, dtype=np.float32)
+
+    def _bind_large(self, fmt: str) -> None:
+        """Spaces and masks of the ``"multibinary"`` and ``"single"`` formats."""
+        M = self.M
+        if fmt == "multibinary":
+            self.action_space = spaces.MultiBinary(M)
+        else:
+            self.n_actions = M + 1
+            self.action_space = spaces.Discrete(M + 1)
+            self._open = np.ones(M + 1, dtype=np.int8)
+            self._closed = np.zeros(M + 1, dtype=np.int8)
+            self._closed[0] = 1
 
     def reset(self) -> None:
         """Restore the full budget."""
@@ -89,45 +129,80 @@ class SparseAttack(AttackModel):
         """Remaining budget fraction."""
         return [self.remaining / self.budget if self.budget else 0.0]
 
-    def action_mask(self) -> np.ndarray:
-        """Subsets whose size fits the remaining budget (int8, 1 = legal); a new array per call."""
+    def action_mask(self) -> np.ndarray | None:
+        """Legal actions for the remaining budget (int8, 1 = legal; None for multibinary)."""
+        if self.format == "multibinary":
+            return None
+        if self.format == "single":
+            return (self._open if self.remaining > 0 else self._closed).copy()
         return self._masks[self.remaining].copy()
 
-    def apply(self, action: Any) -> AttackEffect:
-        """Attack the chosen subset, trimmed to the remaining budget."""
-        a = as_index(action)
-        if a is None or not 0 <= a < self.n_actions:
+    def _bits_of(self, action: Any) -> int:
+        """The attacked-sensor bitmask of a ``"multibinary"`` or ``"single"`` action."""
+        if self.format == "single":
+            j = as_index(action)
+            if j is None or not 0 <= j <= self.M:
+                raise ValueError(
+                    f"attacker action must be an integer in [0, {self.M + 1}) (0 = no attack, "
+                    f"j = sensor j), got {action!r}"
+                )
+            return 0 if j == 0 else 1 << (j - 1)
+        a = np.asarray(action) if isinstance(action, (np.ndarray, list, tuple)) else None
+        if (
+            a is None
+            or a.shape != (self.M,)
+            or a.dtype.kind not in "biu"
+            or (a.dtype != bool and (a.min() < 0 or a.max() > 1))
+        ):
             raise ValueError(
-                f"attacker action must be an integer in [0, {self.n_actions}) (a sensor bitmask), "
-                f"got {action!r}"
+                f"attacker action must be a 0/1 integer array of shape ({self.M},) "
+                f"(MultiBinary: 1 = attack that sensor), got {action!r}"
             )
+        return int.from_bytes(np.packbits(a != 0, bitorder="little").tobytes(), "little")
+
+    def apply(self, action: Any) -> AttackEffect:
+        """Attack the chosen subset; an over-budget one by the ``illegal_action`` rule."""
+        if self.format != "bitmask":
+            a = self._bits_of(action)
+        else:
+            a = as_index(action)
+            if a is None or not 0 <= a < self.n_actions:
+                raise ValueError(
+                    f"attacker action must be an integer in [0, {self.n_actions}) (a sensor "
+                    f"bitmask), got {action!r}"
+                )
         if a.bit_count() > self.remaining:
-            a = self._illegal(a, self.remaining)
+            a = self._illegal(a, self.remaining, action)
         self.remaining -= a.bit_count()
         self.last_attacked = a
         return AttackEffect(attacked=a)
 
-    def _illegal(self, action: int, remaining: int) -> int:
-        """What an over-budget ``action`` does, by the ``illegal_action`` rule."""
+    def _illegal(self, bits: int, remaining: int, action: Any) -> int:
+        """What an over-budget action (sensor bitmask ``bits``) does, by ``illegal_action``."""
         if self.illegal_action == "error":
+            shown = action if self.format != "multibinary" else np.asarray(action).tolist()
             raise ValueError(
-                f"attacker action {action} (sensors {_sensors(action)}) is illegal: it attacks "
-                f"{action.bit_count()} sensors with {remaining} of the budget left; legal actions "
-                f"are those with action_mask[a] = 1 (at most {remaining} bits set)"
+                f"attacker action {shown} (sensors {_sensors(bits)}) is illegal: it attacks "
+                f"{bits.bit_count()} sensors with {remaining} of the budget left; legal actions "
+                f"are those with action_mask[a] = 1 (at most {remaining} sensors)"
             )
-        return 0 if self.illegal_action == "noop" else trim_to_budget(action, remaining)
+        return 0 if self.illegal_action == "noop" else trim_to_budget(bits, remaining)
 
     def info(self) -> dict[str, Any]:
         """``attacked``: (M,) int8, 1 for each sensor attacked this step; ``budget_left``."""
-        attacked = (self.last_attacked >> np.arange(self.M)) & 1
-        return {"attacked": attacked.astype(np.int8), "budget_left": int(self.remaining)}
+        a = self.last_attacked
+        if self.M <= 62:
+            attacked = ((a >> np.arange(self.M)) & 1).astype(np.int8)
+        else:
+            attacked = np.array([a >> i & 1 for i in range(self.M)], dtype=np.int8)
+        return {"attacked": attacked, "budget_left": int(self.remaining)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Restore the full budget of the members ``where``."""
         if where is None:
             self.b_remaining = np.full(batch, self.budget, dtype=np.int64)
-            self.b_attacked = np.zeros(batch, dtype=np.int64)
+            self.b_attacked = np.zeros((batch, self.M), dtype=np.int8)
         else:
             self.b_remaining[where] = self.budget
             self.b_attacked[where] = 0
@@ -150,14 +225,52 @@ class SparseAttack(AttackModel):
         self._trim_table = kept.reshape(-1)  # flat: index action * (M + 1) + left
         self._mask_table = (self._sizes[None, :] <= left.T).astype(np.int8)
 
-    def batch_action_mask(self) -> np.ndarray:
-        """(B, 2**M) subsets within each member's budget left."""
+    def batch_action_mask(self) -> np.ndarray | None:
+        """(B, A) legal actions of each member for its budget left (see :meth:`action_mask`)."""
+        if self.format == "multibinary":
+            return None
+        if self.format == "single":
+            return np.where((self.b_remaining > 0)[:, None], self._open, self._closed)
         if self._trim_table is None:
             self._batch_tables()
         return np.take(self._mask_table, np.minimum(self.b_remaining, self.M), axis=0)
 
+    def _batch_apply_large(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
+        """Batched ``"multibinary"`` / ``"single"`` actions: the same trimming rule."""
+        B = self.b_remaining.shape[0]
+        if self.format == "single":
+            j = as_index_array(actions, self.M + 1, "attacker", "0 = none, j = sensor j")
+            chosen = np.zeros((B, self.M), dtype=bool)
+            hit = np.flatnonzero(j > 0)
+            chosen[hit, j[hit] - 1] = True
+        else:
+            a = np.asarray(actions)
+            if (
+                a.shape != (B, self.M)
+                or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
+                or not np.isin(a, (0, 1)).all()
+            ):
+                raise ValueError(
+                    f"attacker actions must be a 0/1 integer array of shape ({B}, {self.M}) "
+                    f"(MultiBinary), got {actions!r}"
+                )
+            chosen = a.astype(bool)
+        over = chosen.sum(axis=1) > self.b_remaining
+        if over.any() and self.illegal_action != "trim":
+            i = int(np.flatnonzero(over)[0])
+            bits = int(mask_array_to_bits(chosen[i : i + 1])[0])
+            self._illegal(bits, int(self.b_remaining[i]), actions[i])  # raises for "error"
+            chosen = chosen & ~over[:, None]  # "noop"
+        # keep the lowest-numbered chosen sensors that fit each member's budget left
+        kept = chosen & (np.cumsum(chosen, axis=1) <= self.b_remaining[:, None])
+        self.b_remaining = self.b_remaining - kept.sum(axis=1)
+        self.b_attacked = kept.astype(np.int8)
+        return mask_array_to_bits(kept), None
+
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
         """Attack each member's subset, trimmed to its budget (same rule as :meth:`apply`)."""
+        if self.format != "bitmask":
+            return self._batch_apply_large(actions)
         a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
         if self._trim_table is None:
             self._batch_tables()
@@ -165,17 +278,16 @@ class SparseAttack(AttackModel):
             over = np.take(self._sizes, a) > self.b_remaining
             if over.any():
                 i = int(np.flatnonzero(over)[0])
-                self._illegal(int(a[i]), int(self.b_remaining[i]))  # raises for "error"
+                self._illegal(int(a[i]), int(self.b_remaining[i]), int(a[i]))  # raises: "error"
                 a = np.where(over, 0, a)
         a = np.take(self._trim_table, a * (self.M + 1) + np.minimum(self.b_remaining, self.M))
         self.b_remaining = self.b_remaining - np.take(self._sizes, a)
-        self.b_attacked = a
+        self.b_attacked = ((a[:, None] >> np.arange(self.M)) & 1).astype(np.int8)
         return a, None
 
     def batch_info(self) -> dict[str, np.ndarray]:
         """Batched :meth:`info`."""
-        attacked = (self.b_attacked[:, None] >> np.arange(self.M)) & 1
-        return {"attacked": attacked.astype(np.int8), "budget_left": self.b_remaining.copy()}
+        return {"attacked": self.b_attacked.copy(), "budget_left": self.b_remaining.copy()}
 
 
 def _sensors(bits: int) -> list[int]:

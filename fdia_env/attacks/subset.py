@@ -17,14 +17,14 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env._validation import check_choice, check_power
+from fdia_env._validation import check_choice, check_int, check_power
 from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array
 from fdia_env.attacks.subsets import SubsetChoice
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
 ALLOCATIONS = ("independent", "dependent")
-MAX_GAME_SENSORS = 16
+MAX_GAME_SENSORS = 16  # the full game (every non-empty subset) up to this M
 
 
 def sensor_sigmas(system: LinearSystem) -> np.ndarray:
@@ -125,29 +125,31 @@ class SubsetAttack(SubsetChoice, AttackModel):
     """Attack a non-empty sensor subset with power a² split by ``allocation``.
 
     Action: ``Discrete(2**M − 1)``, index ``j`` = the j-th subset by size then lexicographic
-    (:func:`fdia_env.attacks.subsets.subsets`). Features: the defender's last subset as a 0/1
+    (:func:`fdia_env.attacks.subsets.subsets`); with ``max_subset_size=k`` only the subsets of
+    at most k sensors, in the same order. Features: the defender's last subset as a 0/1
     indicator per sensor (all zeros before the first round).
     """
 
     name = "subset"
 
-    def __init__(self, power: float, allocation: str = "independent") -> None:
+    def __init__(
+        self, power: float, allocation: str = "independent", max_subset_size: int | None = None
+    ) -> None:
         self.power = check_power("power", power)
         self.allocation = check_choice("allocation", allocation, ALLOCATIONS)
+        if max_subset_size is not None:
+            check_int("max_subset_size", max_subset_size, minimum=1)
+        self._k = max_subset_size
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
-        """Precompute every subset's bias covariance."""
-        if system.M > MAX_GAME_SENSORS:
-            raise ValueError(
-                f"the subset action supports at most {MAX_GAME_SENSORS} sensors, got {system.M}"
-            )
+        """Build the action over the attacker's subsets (at most ``max_subset_size`` sensors)."""
         try:  # checked here, not at the first step that attacks a vector sensor
             sensor_sigmas(system)
         except ValueError as exc:
             raise ValueError(
                 f"scenario {system.name!r} cannot host the subset attack: {exc}"
             ) from exc
-        self.bind_subsets(system.M)
+        self.bind_subsets(system.M, self._k, "attacker")
         self._sigmas: dict[int, np.ndarray] = {}
         self._system = system
 

@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_positive, check_psd
-from fdia_env.attacks.base import AttackEffect
+from fdia_env.attacks.base import AttackEffect, bit_array
 from fdia_env.defenses.base import BatchDetection, DefenseModel, Detection, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -70,6 +70,7 @@ class ThresholdDetector(DefenseModel):
         self.assumed_sigma = assumed
         self.scale = self._scale or (float(system.nz) if self.statistic == "chi2" else 1.0)
         self._all = (1 << system.M) - 1
+        self._M = system.M
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
     def action_to_threshold(self, action: Any) -> float:
@@ -149,7 +150,7 @@ class ThresholdDetector(DefenseModel):
             self.criterion,
         )
         present = None if sigma is None else np.ones(attacked.shape, dtype=bool)
-        return np.full(attacked.shape, self._all, dtype=np.int64), sigma, present, False
+        return bit_array([self._all] * len(attacked), self._M), sigma, present, False
 
     def batch_detection(self) -> BatchDetection:
         """The per-member thresholds of the last batched step."""

@@ -19,16 +19,20 @@ class SensorSelection(SubsetChoice, DefenseModel):
     Each round is the one-shot game of MATH.md §5: the filter has been running on D and is in its
     steady state when the attack comes, so the payoff is ``tr(P_D + W_D Σ_{A∩D} W_D')``.
 
-    Action: ``Discrete(2**M − 1)`` (subsets by size then lexicographic). Features: the
-    attacker's last subset as a 0/1 indicator per sensor.
+    Action: ``Discrete(2**M − 1)`` (subsets by size then lexicographic); with
+    ``max_subset_size=k`` only the subsets that leave out at most k sensors (sizes M − k..M), in
+    the same order. Features: the attacker's last subset as a 0/1 indicator per sensor.
     """
 
     name = "sensor_selection"
     passive = False
 
+    def __init__(self, max_subset_size: int | None = None) -> None:
+        self._k = max_subset_size
+
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
-        """Build the action space."""
-        self.bind_subsets(system.M)
+        """Build the action space (subsets leaving out at most ``max_subset_size`` sensors)."""
+        self.bind_subsets(system.M, self._k, "defender")
         self._row_sensor = system.row_sensor
 
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
@@ -46,9 +50,7 @@ class SensorSelection(SubsetChoice, DefenseModel):
         """Forget the last round of the members ``where``; build the row masks once."""
         super().batch_reset(batch, where)
         if where is None:
-            self._row_masks = np.array(
-                [[(b >> int(i)) & 1 for i in self._row_sensor] for b in self.bits], dtype=float
-            )
+            self._row_masks = self._masks[:, self._row_sensor].astype(float)
 
     def batch_apply(self, actions, attacked, sigma):
         """Each member's subset; Σ restricted to A ∩ D leaks; every round restarts steady."""

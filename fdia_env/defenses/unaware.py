@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.attacks.base import AttackEffect
+from fdia_env.attacks.base import AttackEffect, bit_array
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -25,6 +25,7 @@ class UnawareFilter(DefenseModel):
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Nothing to build: the model has no action."""
         self._all = (1 << system.M) - 1
+        self._M = system.M
 
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Every sensor is used; the bias leaks through."""
@@ -33,4 +34,4 @@ class UnawareFilter(DefenseModel):
     def batch_apply(self, actions, attacked, sigma):
         """Every sensor; the whole bias leaks."""
         present = None if sigma is None else np.ones(attacked.shape, dtype=bool)
-        return np.full(attacked.shape, self._all, dtype=np.int64), sigma, present, False
+        return bit_array([self._all] * len(attacked), self._M), sigma, present, False

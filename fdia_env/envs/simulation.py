@@ -189,7 +189,9 @@ class Simulation:
         P_prev, M_prev = self.P, self.M
         P_pred = predict_cov(P_prev, sys.F, sys.Q)
         P_new = information_update(P_pred, sys.J, mask)  # P[k|k]⁻¹ = P[k|k−1]⁻¹ + Σ_used J_i
-        W = masked_gain(P_new, sys, mask)  # nominal gain: zero columns for dropped sensors
+        needs_gain = leak is not None or not self.consistent or self.sampled
+        # nominal gain (zero columns for dropped sensors), only where it is read
+        W = masked_gain(P_new, sys, mask) if needs_gain else None
         if leak is not None or not self.consistent:
             # the nominal gain is not optimal for R + Σ: Joseph form for the actual error
             noise = sys.R if leak is None else sys.R + leak

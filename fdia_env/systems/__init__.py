@@ -1,5 +1,6 @@
 """Systems: linear Gaussian models, sensors and the target-tracking helper."""
 
+from fdia_env.systems.grid import grid_system
 from fdia_env.systems.system import (
     LinearSystem,
     Sensor,
@@ -13,6 +14,7 @@ __all__ = [
     "LinearSystem",
     "Sensor",
     "check_detectable",
+    "grid_system",
     "noise_factor",
     "pbh_defects",
     "position_sensor",

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from fdia_env.attacks.base import bits_to_mask
 from fdia_env.defenses.base import BatchDetection
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
-    information_update,
     joseph_update,
     masked_gain,
     objective,
@@ -24,6 +24,7 @@ from fdia_env.kalman import (
     small,
     steady_state,
 )
+from fdia_env.kalman.linalg import spd_inv
 from fdia_env.vector.detection import batched_detection_step
 
 
@@ -194,7 +195,7 @@ class BatchedSimulation:
         M_ = self.system.M
         P = np.empty((self.B, self.system.n, self.system.n))
         for u in np.unique(used):  # one cached DARE per distinct subset, not per member
-            P[used == u] = steady_state(self.system, (int(u) >> np.arange(M_)) & 1 == 1)[1]
+            P[used == u] = steady_state(self.system, bits_to_mask(u, M_))[1]
         self._set_P(P)
         self._M = P.copy()
         self.consistent[:] = True
@@ -208,9 +209,12 @@ class BatchedSimulation:
         mask = ((used[:, None] >> np.arange(sys.M)) & 1).astype(bool)
         P_prev, M_prev = self.P, self.M
         P_pred = predict_cov(P_prev, sys.F, sys.Q)
-        P_new = information_update(P_pred, sys.J, mask)
-        W = masked_gain(P_new, sys, mask)
+        # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product
+        used_info = (mask.astype(float) @ self._J_flat).reshape(-1, sys.n, sys.n)
+        P_new = spd_inv(spd_inv(P_pred) + used_info)
         leaking = ~self.consistent if present is None else ~self.consistent | present
+        # the (B, n, nz) gain only where it is read (large for the power-grid systems)
+        W = masked_gain(P_new, sys, mask) if leaking.any() or self.sampled else None
         if leaking.any():  # Joseph form for the members whose filter is not optimal
             noise = sys.R if leak is None else sys.R + leak
             M_new = joseph_update(predict_cov(M_prev, sys.F, sys.Q), W, sys.H, noise)

@@ -1,0 +1,25 @@
+"""Power-grid DC dynamic state estimation (MATH.md §7); needs the ``[grid]`` extra (pandapower)."""
+
+from fdia_env.systems.grid.measurements import (
+    DEFAULT_Q,
+    DEFAULT_SIGMA_FLOW,
+    DEFAULT_SIGMA_INJECTION,
+    GridModel,
+    Meter,
+    grid_model,
+    grid_system,
+)
+from fdia_env.systems.grid.network import CASES, DCNetwork, dc_network
+
+__all__ = [
+    "CASES",
+    "DEFAULT_Q",
+    "DEFAULT_SIGMA_FLOW",
+    "DEFAULT_SIGMA_INJECTION",
+    "DCNetwork",
+    "GridModel",
+    "Meter",
+    "dc_network",
+    "grid_model",
+    "grid_system",
+]
