@@ -60,6 +60,10 @@ class RandomPolicy:
         if isinstance(space, spaces.Discrete):
             legal = np.ones(int(space.n), bool) if mask is None else np.asarray(mask, bool)
             return np.int64(space.start + np.argmax(rng.random(legal.shape) * legal))
+        if isinstance(space, spaces.MultiBinary):
+            return rng.integers(0, 2, size=space.shape).astype(space.dtype)
+        if isinstance(space, spaces.MultiDiscrete):
+            return (space.start + rng.integers(0, space.nvec)).astype(space.dtype)
         return rng.uniform(space.low, space.high, space.shape).astype(space.dtype)
 
     def predict(
