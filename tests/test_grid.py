@@ -290,18 +290,19 @@ def test_sparse_action_formats_and_trimming_rule():
     action = np.zeros(34, dtype=np.int64)
     action[[5, 1, 30, 7]] = 1
     _, _, _, _, infos = env.step({"attacker": action})
-    assert infos["attacker"]["attacked"] == [1, 5, 7]  # trimmed to the lowest-numbered three
+    attacked = np.flatnonzero(infos["attacker"]["attacked"]).tolist()
+    assert attacked == [1, 5, 7]  # trimmed to the lowest-numbered three
     _, _, _, _, infos = env.step({"attacker": action})
-    assert infos["attacker"]["attacked"] == [] and infos["attacker"]["budget_left"] == 0
+    assert not infos["attacker"]["attacked"].any() and infos["attacker"]["budget_left"] == 0
     single = sparse_attack_v0.parallel_env(scenario="grid-ieee14", budget=1, action="single")
     assert single.action_space("attacker") == gym.spaces.Discrete(35)
     obs, _ = single.reset(seed=0)
     assert obs["attacker"]["action_mask"].tolist() == [1] * 35
     obs, _, _, _, infos = single.step({"attacker": 8})
-    assert infos["attacker"]["attacked"] == [7]
+    assert np.flatnonzero(infos["attacker"]["attacked"]).tolist() == [7]
     assert obs["attacker"]["action_mask"].tolist() == [1] + [0] * 34  # budget spent
     _, _, _, _, infos = single.step({"attacker": 3})
-    assert infos["attacker"]["attacked"] == []
+    assert np.flatnonzero(infos["attacker"]["attacked"]).tolist() == []
     with pytest.raises(ValueError, match=r"0/1 integer array of shape \(34,\)"):
         env.reset(seed=0)
         env.step({"attacker": np.full(34, 2)})

@@ -13,6 +13,7 @@ from fdia_env.attacks.base import (
     AttackModel,
     as_index,
     as_index_array,
+    bits_to_mask,
     mask_array_to_bits,
 )
 from fdia_env.episode import EpisodeSpec
@@ -190,11 +191,7 @@ class SparseAttack(AttackModel):
 
     def info(self) -> dict[str, Any]:
         """``attacked``: (M,) int8, 1 for each sensor attacked this step; ``budget_left``."""
-        a = self.last_attacked
-        if self.M <= 62:
-            attacked = ((a >> np.arange(self.M)) & 1).astype(np.int8)
-        else:
-            attacked = np.array([a >> i & 1 for i in range(self.M)], dtype=np.int8)
+        attacked = bits_to_mask(self.last_attacked, self.M).astype(np.int8)
         return {"attacked": attacked, "budget_left": int(self.remaining)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------

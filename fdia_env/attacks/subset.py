@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from fdia_env._validation import check_choice, check_int, check_power
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array
+from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array, bits_to_mask
 from fdia_env.attacks.subsets import SubsetChoice
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -175,7 +175,7 @@ class SubsetAttack(SubsetChoice, AttackModel):
     def info(self) -> dict[str, Any]:
         """``attacked``: (M,) int8, 1 for each sensor of the subset attacked this step."""
         bits = getattr(self, "attacked_bits", 0)
-        return {"attacked": ((bits >> np.arange(self.M)) & 1).astype(np.int8)}
+        return {"attacked": bits_to_mask(bits, self.M).astype(np.int8)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -128,7 +128,10 @@ def _check_values(space: spaces.Space, arr: np.ndarray, who: str) -> None:
             )
     elif isinstance(space, spaces.MultiBinary):
         if not np.all((arr == 0) | (arr == 1)):
-            raise ValueError(f"{who} action must hold only 0 and 1 for {space}, got {arr.tolist()}")
+            raise ValueError(
+                f"{who} action must be a 0/1 integer array of shape {space.shape} ({space}), "
+                f"got {arr.tolist()}"
+            )
     elif isinstance(space, spaces.MultiDiscrete):
         if not (np.issubdtype(arr.dtype, np.integer) or _integral_floats(arr)):
             raise ValueError(f"{who} action must be integers for {space}, got {arr.tolist()}")
