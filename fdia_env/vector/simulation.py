@@ -23,6 +23,7 @@ from fdia_env.kalman import (
     psd_sqrt,
     small,
     steady_state,
+    sym,
 )
 from fdia_env.kalman.linalg import spd_inv
 from fdia_env.vector.detection import batched_detection_step
@@ -45,6 +46,8 @@ class BatchedSimulation:
         self.B = batch
         self.sampled = single.sampled
         self.fast = system.n == 2
+        self._F_identity = bool(np.array_equal(system.F, np.eye(system.n)))
+        self._eye = np.eye(system.n)
         self._J_flat = system.J.reshape(system.M, -1)
         self._start = single.P_start
         self._start_diag = np.diag(self._start)
@@ -208,10 +211,16 @@ class BatchedSimulation:
         sys = self.system
         mask = ((used[:, None] >> np.arange(sys.M)) & 1).astype(bool)
         P_prev, M_prev = self.P, self.M
-        P_pred = predict_cov(P_prev, sys.F, sys.Q)
-        # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product
+        # P[k|k−1] = F P F' + Q; a random walk (F = I, the grid presets) skips the products
+        P_pred = P_prev + sys.Q if self._F_identity else predict_cov(P_prev, sys.F, sys.Q)
+        # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product,
+        # computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]: one LU solve instead of two inverses
+        # (I + P J is invertible: its eigenvalues are those of I + P^½ J P^½, all >= 1)
         used_info = (mask.astype(float) @ self._J_flat).reshape(-1, sys.n, sys.n)
-        P_new = spd_inv(spd_inv(P_pred) + used_info)
+        if sys.n > 2:
+            P_new = sym(np.linalg.solve(self._eye + P_pred @ used_info, P_pred))
+        else:
+            P_new = spd_inv(spd_inv(P_pred) + used_info)
         leaking = ~self.consistent if present is None else ~self.consistent | present
         # the (B, n, nz) gain only where it is read (large for the power-grid systems)
         W = masked_gain(P_new, sys, mask) if leaking.any() or self.sampled else None
