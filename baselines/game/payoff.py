@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from baselines._inputs import resolve_system
 from fdia_env._validation import check_choice, check_positive
 from fdia_env.attacks.subset import (
     ALLOCATIONS,
@@ -43,7 +44,7 @@ from fdia_env.attacks.subset import (
 )
 from fdia_env.attacks.subsets import subsets
 from fdia_env.kalman import steady_state, steady_state_iterate
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 # The allocation rules live with the env's attack model (one implementation for both):
@@ -174,7 +175,7 @@ def make_game(
     allocation: str = "independent",
 ) -> SensorGame:
     """Build a :class:`SensorGame`; ``power`` defaults to the scenario's (100 for ch5-game)."""
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     if power is None:
         if sc.power is None:
             raise ValueError(f"power is required: scenario {sc.name!r} does not define one")
@@ -207,7 +208,7 @@ def payoff_matrix(
             scenario, a sensor with more than one measurement component, M > 13 (use
             :func:`~baselines.game.double_oracle.solve_double_oracle`).
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     if sc.system.M > MAX_MATRIX_SENSORS:
         size = 2**sc.system.M - 1
         raise ValueError(

@@ -17,9 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from baselines._inputs import resolve_system
 from fdia_env._validation import check_choice, check_int
 from fdia_env.kalman import information_update, objective, predict_cov, steady_state
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 OBJECTIVES = ("trace", "logdet")
@@ -127,7 +128,7 @@ def make_problem(
         ValueError: Naming the parameter: a budget that is negative, not an integer or larger
             than ``M·N``; a horizon below 1; an unknown objective or scenario.
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     if budget is None:
         if sc.budget is None:
             raise ValueError(f"budget is required: scenario {sc.name!r} does not define one")
