@@ -214,16 +214,9 @@ def test_scenarios_get_known_name_builds_or_names_an_option(name, options):
         _check_steady(sc.system)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "fdia_env/scenarios.py (systems worker): scenarios.get('x') -> \"unknown scenario 'x'\" "
-        'names the parameter `name` only indirectly; scenarios.get([1]) -> "unhashable type: '
-        "'list'\""
-    ),
-)
 @prop_settings(30)
 @example(name="x", options={})
+@example(name=[1], options={})
 @given(
     name=mixed(st.sampled_from(scenarios.names())),
     options=kwargs_of(
