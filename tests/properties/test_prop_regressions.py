@@ -385,3 +385,13 @@ def test_pbh_noise_test_still_flags_a_noise_free_marginal_mode():
 def test_inv2_of_nan_entries_returns_nan_instead_of_recursing():
     out = inv2(np.full((2, 2), np.nan))
     assert out.shape == (2, 2) and np.all(np.isnan(out))
+
+
+def test_double_oracle_stopped_by_max_iter_reports_the_strategies_it_solved():
+    """max_iter = 1 grew the restricted game after its last solve, so the strategies no longer
+    matched the rows (``zip() argument 2 is shorter than argument 1``)."""
+    with pytest.warns(RuntimeWarning, match="double oracle stopped after 1 iteration"):
+        result = game.solve_double_oracle("ch5-game", max_iter=1)
+    assert result.restricted_size == (1, 1)
+    assert sum(result.defender.values()) == pytest.approx(1.0, abs=1e-12)
+    assert result.lower <= result.value + 1e-9 <= result.upper + 2e-9
