@@ -23,6 +23,8 @@ from fdia_env.kalman import information_update, objective, predict_cov, steady_s
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
+MAX_HORIZON = 10_000  # longest attack window N a sparse problem accepts
+
 OBJECTIVES = ("trace", "logdet")
 
 Pair = tuple[int, int]
@@ -53,7 +55,9 @@ class SparseProblem:
     def __post_init__(self) -> None:
         if not isinstance(self.system, LinearSystem):
             raise ValueError(f"system must be a LinearSystem, got {type(self.system).__name__}")
-        horizon = check_int("horizon", self.horizon, minimum=1)
+        # an attack window beyond MAX_HORIZON steps is no search problem (numpy would fail to
+        # allocate its masks, naming nothing); the covariance multi-shot uses the same bound
+        horizon = check_int("horizon", self.horizon, minimum=1, maximum=MAX_HORIZON)
         budget = check_int("budget", self.budget, minimum=0)
         size = self.system.M * horizon
         if budget > size:

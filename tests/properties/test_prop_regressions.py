@@ -395,3 +395,11 @@ def test_double_oracle_stopped_by_max_iter_reports_the_strategies_it_solved():
     assert result.restricted_size == (1, 1)
     assert sum(result.defender.values()) == pytest.approx(1.0, abs=1e-12)
     assert result.lower <= result.value + 1e-9 <= result.upper + 2e-9
+
+
+@pytest.mark.parametrize("horizon", [10_001, 2**63])
+def test_sparse_problem_huge_horizon_names_horizon(horizon):
+    """sbs(ch4-position, budget=horizon=2**63) raised numpy's 'Maximum allowed dimension
+    exceeded', naming no parameter."""
+    with bounded(5.0), pytest.raises(ValueError, match="horizon must be <= 10000"):
+        sparse.sbs("ch4-position", budget=1, horizon=horizon)
