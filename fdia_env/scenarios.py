@@ -246,8 +246,11 @@ def get(name: str, **kwargs: Any) -> Scenario:
             preset does not take (the message lists those it takes), or a bad option value
             (``horizon`` an integer >= 1, ``seed`` an integer >= 0, ``sigma_v`` > 0).
     """
-    if not isinstance(name, str) or name not in _PRESETS:
-        raise ValueError(f"unknown scenario {name!r}; known scenarios: {', '.join(_PRESETS)}")
+    if not isinstance(name, str) or name not in _PRESETS:  # str first: a list is unhashable
+        raise ValueError(
+            f"unknown scenario {name!r}; known scenarios: {', '.join(_PRESETS)} "
+            "(name must be one of them)"
+        )
     accepted = inspect.signature(_PRESETS[name]).parameters
     unknown = sorted(set(kwargs) - set(accepted))
     if unknown:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baselines.covariance.problem import resolve_system
+from baselines._inputs import resolve_system
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, Sensor
 

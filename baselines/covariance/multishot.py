@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.covariance.problem import make_problem, resolve_system
+from baselines._inputs import resolve_system
+from baselines.covariance.problem import make_problem
 from baselines.covariance.trace import top_eigenvector
 from fdia_env._validation import as_vector, check_choice, check_finite, check_int, check_psd
 from fdia_env.kalman import actual_covariance_step, steady_state

@@ -17,9 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from baselines._inputs import resolve_system
 from fdia_env._validation import as_matrix, check_positive, check_psd
 from fdia_env.kalman import steady_state
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, power_weight
 
 
@@ -41,14 +42,6 @@ def check_weight(weight: Any, nz: int) -> np.ndarray:
         )
     check_psd("weight", arr, strict=True)
     return arr
-
-
-def resolve_system(system_or_scenario: Any) -> Scenario:
-    """:func:`fdia_env.scenarios.resolve`, its ``ValueError`` naming ``system_or_scenario``."""
-    try:
-        return resolve(system_or_scenario)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"system_or_scenario: {exc}") from exc
 
 
 def resolve_power(scenario: Scenario, power: Any) -> float:

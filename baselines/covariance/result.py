@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.covariance.problem import check_weight, resolve_system
+from baselines._inputs import resolve_system
+from baselines.covariance.problem import check_weight
 from fdia_env._validation import as_matrix, check_choice, check_psd
 from fdia_env.kalman import psd_sqrt, steady_state
 from fdia_env.scenarios import Scenario

@@ -22,12 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from baselines.covariance.problem import (
-    CovarianceProblem,
-    make_problem,
-    resolve_system,
-    weight_roots,
-)
+from baselines._inputs import resolve_system
+from baselines.covariance.problem import CovarianceProblem, make_problem, weight_roots
 from baselines.covariance.result import CovarianceResult
 from fdia_env._validation import check_choice
 from fdia_env.scenarios import Scenario

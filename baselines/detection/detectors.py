@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.stats
 
-from baselines.detection.problem import DetectionProblem, check_probability
+from baselines.detection.problem import DetectionProblem, check_probability, check_problem
 from fdia_env._validation import check_choice
 
 STATISTICS = ("quadratic", "chi2")
@@ -175,8 +175,7 @@ class Detector:
     matrix: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.problem, DetectionProblem):
-            raise ValueError(f"problem must be a DetectionProblem, got {type(self.problem)}")
+        check_problem("problem", self.problem)
         check_choice("statistic", self.statistic, STATISTICS)
         check_choice("on_detect", self.on_detect, ON_DETECT)
         try:
@@ -215,7 +214,17 @@ class Detector:
         return DetectionResult(stat, decision, prior + gain_y, self.costs, self.threshold)
 
 
+def check_detector(name: str, value: object) -> Detector:
+    """``value`` if it is a :class:`Detector`, else ``TypeError`` naming ``name``."""
+    if not isinstance(value, Detector):
+        raise TypeError(
+            f"{name} must be a Detector (from obdd, obdi, cbd or csd), got {type(value).__name__}"
+        )
+    return value
+
+
 def _bayes_detector(name: str, problem: DetectionProblem, on_detect: str) -> Detector:
+    check_problem("problem", problem)
     costs = strategy_costs(problem, on_detect, problem)
     return Detector(name, problem, "quadratic", bayes_threshold(problem, costs), on_detect)
 
@@ -248,7 +257,7 @@ def cbd(problem: DetectionProblem) -> Detector:
     D1 iff ``N(z; z̄, Pzz1) / N(z; z̄, Pzz0) > p0 / p1``, i.e. ``q > 2 ln(p0/p1) + ln|Pzz1| −
     ln|Pzz0|`` (the Bayes test with costs ``a = −p1``, ``b = p0``).
     """
-    p = problem
+    p = check_problem("problem", problem)
     if p.p1 == 0.0:
         alpha = math.inf
     elif p.p0 == 0.0:
@@ -263,6 +272,7 @@ def csd(problem: DetectionProblem, level: float = 0.95) -> Detector:
 
     Its false-alarm rate is ``1 − level`` whatever Pbb (the statistic is χ²_{nz} under H0).
     """
+    check_problem("problem", problem)
     level = check_probability("level", level)
     threshold = float(scipy.stats.chi2.ppf(level, problem.nz))
     return Detector("CSD", problem, "chi2", threshold, "discard")

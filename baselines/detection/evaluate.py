@@ -25,20 +25,26 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from baselines.detection.detectors import Costs, Detector, detect_gain, strategy_costs
+from baselines.detection.detectors import (
+    Costs,
+    Detector,
+    check_detector,
+    detect_gain,
+    strategy_costs,
+)
 from baselines.detection.gchisq import quadratic_tails
 from baselines.detection.mmse import MMSEEstimator
-from baselines.detection.problem import DetectionProblem
+from baselines.detection.problem import DetectionProblem, check_problem
 from fdia_env._validation import check_int
 from fdia_env.detection.expected import expected_squared_error
 from fdia_env.kalman import psd_sqrt
 
 
 def _truth(detector: Detector, truth: DetectionProblem | None) -> DetectionProblem:
+    check_detector("detector", detector)
     if truth is None:
         return detector.problem
-    if not isinstance(truth, DetectionProblem):
-        raise ValueError(f"truth must be a DetectionProblem, got {type(truth).__name__}")
+    check_problem("truth", truth)
     d = detector.problem
     if truth.Pxx.shape != d.Pxx.shape or truth.H.shape != d.H.shape:
         raise ValueError(
@@ -212,6 +218,7 @@ def monte_carlo(
     Returns:
         A :class:`MonteCarlo`.
     """
+    check_problem("truth", truth)
     draws = check_int("draws", draws, minimum=2)
     rng = np.random.default_rng(seed)
     if states is None:

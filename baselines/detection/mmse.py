@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from baselines.detection.problem import DetectionProblem
+from baselines.detection.problem import DetectionProblem, check_problem
 
 
 @dataclass(frozen=True)
@@ -45,8 +45,7 @@ class MMSEEstimator:
     name: str = "MMSE"
 
     def __post_init__(self) -> None:
-        if not isinstance(self.problem, DetectionProblem):
-            raise ValueError(f"problem must be a DetectionProblem, got {type(self.problem)}")
+        check_problem("problem", self.problem)
 
     def __call__(self, z: np.ndarray, x_bar: np.ndarray | None = None) -> MMSEResult:
         """Posterior means for (..., nz) measurements (``x_bar`` (..., n) as in the detectors)."""

@@ -44,6 +44,16 @@ def check_probability(name: str, value: Any) -> float:
     return value
 
 
+def check_problem(name: str, value: Any) -> DetectionProblem:
+    """``value`` if it is a :class:`DetectionProblem`, else ``TypeError`` naming ``name``."""
+    if not isinstance(value, DetectionProblem):
+        raise TypeError(
+            f"{name} must be a DetectionProblem (from static_problem or tracking_problem), "
+            f"got {type(value).__name__}"
+        )
+    return value
+
+
 def check_power(value: Any) -> float:
     """Attack power ``a²`` in ``[0, MAX_POWER]`` as a float, else a ``ValueError``."""
     return _check_power("power", value, allow_zero=True)

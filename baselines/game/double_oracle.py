@@ -134,6 +134,8 @@ def _double_oracle(game: SensorGame, tol: float, max_iter: int) -> DoubleOracleR
         if upper - lower <= tol * max(abs(lower), abs(upper)):
             converged = True
             break
+        if iteration == max_iter:  # no budget to solve a grown game: x, y must match rows, cols
+            break
         grew = False
         if d_best not in in_rows:
             rows.append(d_best)

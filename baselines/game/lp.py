@@ -213,7 +213,7 @@ def strategy_bounds(
         ([0.0, 0.5], [0.5, 1.0])
     """
     L = as_payoff(L)
-    if player not in ("defender", "attacker"):
+    if not isinstance(player, str) or player not in ("defender", "attacker"):  # arrays too
         raise ValueError(f"player must be 'defender' or 'attacker', got {player!r}")
     value = solve_zero_sum(L)[2]
     slack = rtol * max(float(L.max() - L.min()), 1.0)
@@ -357,7 +357,7 @@ def solve_bayesian(
         >>> round(solve_bayesian([L1, L2], [0.5, 0.5], attacker="informed").value, 6)
         1.5
     """
-    if attacker not in ATTACKER_MODELS:
+    if not isinstance(attacker, str) or attacker not in ATTACKER_MODELS:  # arrays too
         raise ValueError(f"attacker must be one of {list(ATTACKER_MODELS)}, got {attacker!r}")
     if isinstance(matrices, np.ndarray) and matrices.ndim == 3:
         matrices = list(matrices)

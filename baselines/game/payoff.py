@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from baselines._inputs import resolve_system
 from fdia_env._validation import check_choice, check_positive
 from fdia_env.attacks.subset import (
     ALLOCATIONS,
@@ -43,7 +44,7 @@ from fdia_env.attacks.subset import (
 )
 from fdia_env.attacks.subsets import game_sizes, subset_count, subsets
 from fdia_env.kalman import steady_state, steady_state_iterate
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 # The allocation rules live with the env's attack model (one implementation for both):
@@ -210,7 +211,7 @@ def make_game(
     ``max_subset_size`` defaults to the scenario's (``extra["max_subset_size"]``: the power-grid
     presets), else every subset.
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     if power is None:
         if sc.power is None:
             raise ValueError(f"power is required: scenario {sc.name!r} does not define one")
@@ -250,7 +251,7 @@ def payoff_matrix(
             scenario, a sensor with more than one measurement component, M > 13 (use
             :func:`~baselines.game.double_oracle.solve_double_oracle`).
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     k = max_subset_size if max_subset_size is not None else sc.extra.get("max_subset_size")
     if k is None and sc.system.M > MAX_MATRIX_SENSORS:
         size = 2**sc.system.M - 1

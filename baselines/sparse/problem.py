@@ -17,10 +17,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from baselines._inputs import resolve_system
 from fdia_env._validation import check_choice, check_int
 from fdia_env.kalman import information_update, objective, predict_cov, steady_state
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
+
+MAX_HORIZON = 10_000  # longest attack window N a sparse problem accepts
 
 OBJECTIVES = ("trace", "logdet")
 
@@ -52,7 +55,9 @@ class SparseProblem:
     def __post_init__(self) -> None:
         if not isinstance(self.system, LinearSystem):
             raise ValueError(f"system must be a LinearSystem, got {type(self.system).__name__}")
-        horizon = check_int("horizon", self.horizon, minimum=1)
+        # an attack window beyond MAX_HORIZON steps is no search problem (numpy would fail to
+        # allocate its masks, naming nothing); the covariance multi-shot uses the same bound
+        horizon = check_int("horizon", self.horizon, minimum=1, maximum=MAX_HORIZON)
         budget = check_int("budget", self.budget, minimum=0)
         size = self.system.M * horizon
         if budget > size:
@@ -127,7 +132,7 @@ def make_problem(
         ValueError: Naming the parameter: a budget that is negative, not an integer or larger
             than ``M·N``; a horizon below 1; an unknown objective or scenario.
     """
-    sc = resolve(system_or_scenario)
+    sc = resolve_system(system_or_scenario)
     if budget is None:
         if sc.budget is None:
             raise ValueError(f"budget is required: scenario {sc.name!r} does not define one")

@@ -100,6 +100,7 @@ def allocation_covariance(
         (nz, nz) rank-one ``a² u_A u_A'``, zero outside A.
 
     Raises:
+        TypeError: If ``system`` is not a :class:`~fdia_env.systems.LinearSystem`.
         ValueError: Naming the parameter: an empty or out-of-range subset, power ≤ 0, an
             unknown allocation, a sensor that is not scalar.
 
@@ -112,6 +113,8 @@ def allocation_covariance(
         >>> S.round(2).tolist()  # correlation 1, σ_b ∝ (1/9, 1/16)
         [[75.96, 42.73, 0.0], [42.73, 24.04, 0.0], [0.0, 0.0, 0.0]]
     """
+    if not isinstance(system, LinearSystem):
+        raise TypeError(f"system must be a LinearSystem, got {type(system).__name__}")
     power = check_power("power", power)
     check_choice("allocation", allocation, ALLOCATIONS)
     sensor_sigmas(system)

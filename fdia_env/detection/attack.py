@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fdia_env._validation import as_matrix, check_psd
+from fdia_env._validation import as_matrix, check_power, check_psd
 
 
 def c2_gain_matrix(Pxx: np.ndarray, H: np.ndarray, Pww: np.ndarray) -> np.ndarray:
@@ -50,13 +50,27 @@ def c2_optimal_pbb(
         (nz, nz) rank-one (zero when a² = 0) PSD matrix with ``tr(Ω Pbb) = a²``. The eigenvector's
         sign is fixed (largest-magnitude entry positive); the matrix does not depend on it.
 
+    Raises:
+        ValueError: Naming the parameter: a matrix that is not numeric and finite or has the
+            wrong shape, ``Pxx`` not symmetric PSD, ``Pww`` not symmetric positive definite,
+            ``power`` not a number in ``[0, MAX_POWER]``, a weight not positive definite.
+
     Example:
         >>> import numpy as np
         >>> c2_optimal_pbb(100 * np.eye(2), np.eye(2), np.diag([3.0, 4.0]), 50.0).round(9).tolist()
         [[50.0, 0.0], [0.0, 0.0]]
     """
-    G = c2_gain_matrix(np.asarray(Pxx, float), np.asarray(H, float), np.asarray(Pww, float))
-    nz = G.shape[0]
+    Pxx = as_matrix("Pxx", Pxx)
+    n = Pxx.shape[0]
+    if Pxx.shape != (n, n):
+        raise ValueError(f"Pxx must be a square (n, n) matrix, got shape {Pxx.shape}")
+    check_psd("Pxx", Pxx)
+    H = as_matrix("H", H, shape=(None, n))
+    nz = H.shape[0]
+    Pww = as_matrix("Pww", Pww, shape=(nz, nz))
+    check_psd("Pww", Pww, strict=True)
+    power = check_power("power", power, allow_zero=True)
+    G = c2_gain_matrix(Pxx, H, Pww)
     if weight is None:
         inv_half = np.eye(nz)
     else:

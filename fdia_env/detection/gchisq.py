@@ -50,6 +50,7 @@ import scipy.integrate
 import scipy.optimize
 import scipy.stats
 
+from fdia_env._validation import as_matrix, check_psd, check_square
 from fdia_env.kalman import psd_sqrt
 
 _DROP = 1e-12  # Imhof only: weights below this fraction of the largest are treated as zero
@@ -62,9 +63,18 @@ class NumericalAccuracyWarning(RuntimeWarning):
 
 
 def quadratic_form_weights(A: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """Eigenvalues of ``L' A L`` (``L L' = cov``): ``y' A y = Σ λ_i χ²_1`` for ``y ~ N(0, cov)``."""
-    L = psd_sqrt(np.asarray(cov, dtype=np.float64))
-    M = L.T @ np.asarray(A, dtype=np.float64) @ L
+    """Eigenvalues of ``L' A L`` (``L L' = cov``): ``y' A y = Σ λ_i χ²_1`` for ``y ~ N(0, cov)``.
+
+    Raises:
+        ValueError: Naming ``A`` or ``cov``: not a finite numeric matrix, ``A`` not square,
+            ``cov`` not of ``A``'s shape or not symmetric PSD.
+    """
+    A = as_matrix("A", A)
+    check_square("A", A)
+    cov = as_matrix("cov", cov, shape=A.shape)
+    check_psd("cov", cov)
+    L = psd_sqrt(cov)
+    M = L.T @ A @ L
     return np.linalg.eigvalsh(0.5 * (M + M.T))
 
 
@@ -220,8 +230,8 @@ def gchisq_tails(
         >>> f"{lo:.6e}", round(up, 12)
         ('1.565570e-06', 0.99999843443)
     """
-    lam = np.asarray(weights, dtype=np.float64).reshape(-1)
-    k = np.ones_like(lam) if dof is None else np.asarray(dof, dtype=np.float64).reshape(-1)
+    lam = _as_floats("weights", weights)
+    k = np.ones_like(lam) if dof is None else _as_floats("dof", dof)
     if k.shape != lam.shape or not np.all(np.isfinite(k)) or np.any(k <= 0):
         raise ValueError(f"dof must be {lam.size} finite numbers > 0, got {k.tolist()}")
     if not np.all(np.isfinite(lam)):
@@ -229,7 +239,7 @@ def gchisq_tails(
     top = float(lam.max()) if lam.size else 0.0
     if lam.size and lam.min() < -1e-9 * max(top, 1.0):
         raise ValueError(f"weights must be >= 0, got {lam.tolist()}")
-    x = float(x)
+    x = float(_as_floats("x", x, scalar=True)[0])
     if math.isnan(x):
         raise ValueError("x must not be NaN")
     keep = lam > 0.0
@@ -283,7 +293,20 @@ def gchisq_cdf(x: float | np.ndarray, weights: np.ndarray) -> np.ndarray:
     return _map(x, weights, 0)
 
 
+def _as_floats(name: str, value: object, scalar: bool = False) -> np.ndarray:
+    """``value`` as a flat float64 array (one entry if ``scalar``), else ``ValueError``."""
+    kind = "a real number" if scalar else "a real number or an array of real numbers"
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be {kind}, got {value!r}") from exc
+    if scalar and arr.size != 1:
+        raise ValueError(f"{name} must be a single real number, got {value!r}")
+    return arr
+
+
 def _map(x: float | np.ndarray, weights: np.ndarray, which: int) -> np.ndarray:
+    _as_floats("x", x)
     xs = np.asarray(x, dtype=np.float64)
     if np.any(np.isnan(xs)):
         raise ValueError(f"x must not be NaN, got {xs.tolist()}")

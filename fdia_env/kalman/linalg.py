@@ -36,6 +36,10 @@ def inv2(a: np.ndarray) -> np.ndarray:
         det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
     if not np.all(np.isfinite(det)):  # entries beyond ~1e154: invert a / max|a| instead
         scale = np.abs(a).max(axis=(-2, -1), keepdims=True)
+        if not np.all(np.isfinite(scale)) or np.any(scale == 0.0):
+            # NaN/inf entries (a diverged iterate): no rescaling helps; LAPACK gives NaN/inf
+            # instead of recursing without end
+            return np.linalg.inv(a)
         return inv2(a / scale) / scale
     return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / det[..., None, None])
 

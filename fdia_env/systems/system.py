@@ -53,15 +53,19 @@ def pbh_defects(F: np.ndarray, B: np.ndarray, *, side: str, unstable_only: bool)
         unstable_only: Test only ``|μ| > 1 + PBH_TOL`` (else also the marginal ``|μ| >= 1 − tol``).
     """
     n = F.shape[0]
-    scale = max(1.0, float(np.abs(F).max()), float(np.abs(B).max()) if B.size else 0.0)
+    # Each block is scaled to max |entry| 1 (the rank is unchanged): a noise factor 1e10 times
+    # F's entries (σ_v = 1e10) must not make F's own unit-size directions look like round-off.
+    f_scale = max(1.0, float(np.abs(F).max()))
+    b_max = float(np.abs(B).max()) if B.size else 0.0
+    B = B / b_max if b_max > 0.0 else B
     bad = []
     for mu in np.linalg.eigvals(F):
         radius = abs(mu)
         if (radius <= 1.0 + PBH_TOL) if unstable_only else (radius < 1.0 - PBH_TOL):
             continue
-        shifted = F - mu * np.eye(n)
+        shifted = (F - mu * np.eye(n)) / f_scale
         M = np.vstack([shifted, B]) if side == "rows" else np.hstack([shifted, B])
-        if np.linalg.svd(M, compute_uv=False)[n - 1] <= PBH_TOL * scale:  # rank < n
+        if np.linalg.svd(M, compute_uv=False)[n - 1] <= PBH_TOL:  # rank < n
             bad.append(complex(mu))
     return bad
 

@@ -82,9 +82,16 @@ def tracking_system(
         )
     for i, s in enumerate(() if sigma_w is None else sigma_w):
         all_sensors.append(position_sensor(check_positive(f"sigma_w[{i}]", s), name=f"z{i + 1}"))
-    if sensors is not None and (isinstance(sensors, Sensor) or not isinstance(sensors, Iterable)):
-        raise ValueError(f"sensors must be a sequence of Sensor, got {type(sensors).__name__}")
-    all_sensors.extend(sensors or ())
+    if sensors is not None:
+        if isinstance(sensors, Sensor | str) or not isinstance(sensors, Iterable):
+            raise ValueError(f"sensors must be a sequence of Sensor, got {type(sensors).__name__}")
+        sensors = tuple(sensors)  # not ``sensors or ()``: an array has no truth value
+        for i, s in enumerate(sensors):
+            if not isinstance(s, Sensor):
+                raise ValueError(
+                    f"sensors must be a sequence of Sensor; sensors[{i}] is a {type(s).__name__}"
+                )
+        all_sensors.extend(sensors)
     if not all_sensors:
         raise ValueError("tracking_system needs sigma_w or sensors: got no sensor at all")
     gamma = np.array([[T**2 / 2.0], [T]])

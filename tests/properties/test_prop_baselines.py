@@ -328,75 +328,6 @@ FUNCTIONS: dict[str, tuple[Callable, dict, tuple[str, ...]]] = {
     ),
 }
 
-# defects in code other workers own: function -> (reason with the minimal example, example)
-_SCENARIO_MSG = (
-    "fdia_env.scenarios.resolve/get (systems worker): a bad system_or_scenario gives 'scenario "
-    "must be a preset name, ...' or \"unknown scenario 'x'\", naming the parameter "
-    "system_or_scenario only indirectly"
-)
-_WRONG_OBJECT = "(detection worker): a wrong type gives AttributeError, naming no parameter"
-KNOWN_DEFECTS: dict[str, tuple[str, dict]] = {
-    **{
-        f"sparse.{f}": (f"baselines/sparse + {_SCENARIO_MSG}", {"system_or_scenario": []})
-        for f in ("exhaustive", "sfs", "sbs", "sfs_ss", "dp")
-    },
-    "sparse.make_problem": (
-        f"baselines/sparse + {_SCENARIO_MSG}",
-        {"system_or_scenario": [], "budget": 1, "horizon": 1},
-    ),
-    "game.payoff_matrix": (f"baselines/game + {_SCENARIO_MSG}", {"system_or_scenario": "x"}),
-    "game.solve_double_oracle": (
-        f"baselines/game + {_SCENARIO_MSG}",
-        {"system_or_scenario": "x"},
-    ),
-    "game.attack_covariance": (
-        "baselines/game (game worker): attack_covariance(system=b'x', subset=[0], power=1.0) -> "
-        "AttributeError: 'bytes' object has no attribute 'sensors'",
-        {"system": b"x", "subset": [0], "power": 1.0},
-    ),
-    "game.solve_bayesian": (
-        "baselines/game (game worker): solve_bayesian(matrices=[payoff_matrix('ch5-game')], "
-        "priors=[1.0], attacker=np.zeros(0)) -> 'truth value of an empty array is ambiguous', "
-        "naming no parameter",
-        {"matrices": [game.payoff_matrix("ch5-game")], "priors": [1.0], "attacker": np.zeros(0)},
-    ),
-    "game.strategy_bounds": (
-        "baselines/game (game worker): strategy_bounds(L=[[1.0]], player=np.zeros(0)) -> "
-        "'truth value of an empty array is ambiguous', naming no parameter",
-        {"L": [[1.0]], "player": np.zeros(0)},
-    ),
-    **{
-        f"detection.{f}": (
-            f"baselines/detection {_WRONG_OBJECT}: {f}(problem=None) -> AttributeError",
-            {"problem": None},
-        )
-        for f in ("obdd", "obdi", "cbd", "csd")
-    },
-    **{
-        f"detection.{f}": (
-            f"baselines/detection {_WRONG_OBJECT}: {f}(detector=None) -> AttributeError",
-            {"detector": None},
-        )
-        for f in ("bayes_cost", "expected_mse", "detection_probabilities")
-    },
-    "detection.c2_optimal_pbb": (
-        "baselines/detection (detection worker): c2_optimal_pbb(Pxx=object(), H=I, Pww=I, "
-        "power=1.0) -> TypeError 'float() argument must be ...', naming no parameter",
-        {"Pxx": object(), "H": np.eye(2), "Pww": np.eye(2), "power": 1.0},
-    ),
-    "detection.gchisq_sf": (
-        "baselines/detection (detection worker): gchisq_sf(x=object(), weights=[1.0]) -> "
-        "TypeError 'float() argument must be ...', naming no parameter",
-        {"x": object(), "weights": np.array([1.0])},
-    ),
-    "detection.quadratic_form_weights": (
-        "baselines/detection (detection worker): quadratic_form_weights(A=None, cov=1.0) -> "
-        "numpy AxisError, naming no parameter",
-        {"A": None, "cov": 1.0},
-    ),
-}
-
-
 # parameters a message may name although not passed: required when the scenario has no default
 IMPLIED = {"sparse": ("budget", "horizon"), "covariance": ("power",), "game": ("power",)}
 
@@ -413,7 +344,7 @@ def _params(name: str):
     return kwargs_of(FUNCTIONS[name][1], required=FUNCTIONS[name][2])
 
 
-@pytest.mark.parametrize("name", sorted(n for n in FUNCTIONS if n not in KNOWN_DEFECTS))
+@pytest.mark.parametrize("name", sorted(FUNCTIONS))
 @prop_settings(12)
 @given(data=st.data())
 def test_baseline_returns_sane_numbers_or_names_a_parameter(name, data):
@@ -425,34 +356,3 @@ def test_baseline_returns_sane_numbers_or_names_a_parameter(name, data):
 @given(problem=problems)
 def test_detection_problem_covariances_are_psd(problem):
     assert_sane(problem, "problem")
-
-
-@pytest.mark.parametrize(
-    "name",
-    [
-        pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_DEFECTS[n][0]))
-        for n in sorted(KNOWN_DEFECTS)
-    ],
-)
-def test_known_baseline_defect_minimal_example(name):
-    """The minimal failing example of each known defect (in code other workers own)."""
-    _check_call(name, KNOWN_DEFECTS[name][1])
-
-
-@pytest.mark.parametrize(
-    "name",
-    [
-        pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_DEFECTS[n][0]))
-        for n in sorted(KNOWN_DEFECTS)
-    ],
-)
-@prop_settings(12)
-@given(data=st.data())
-def test_baseline_with_a_known_defect_returns_sane_numbers_or_names_a_parameter(name, data):
-    """The property of the functions above; remove the xfail once their owners fix them.
-
-    Every example starts with the minimal failing one, so the xfail is deterministic under
-    every profile while the defect exists.
-    """
-    _check_call(name, KNOWN_DEFECTS[name][1])
-    _check_call(name, data.draw(_params(name), label="kwargs"))

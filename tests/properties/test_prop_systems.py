@@ -155,11 +155,12 @@ def test_tracking_system_builds_with_a_psd_steady_state(kwargs):
 @pytest.mark.xfail(
     strict=True,
     reason=(
-        "fdia_env/systems + fdia_env/kalman (systems worker): tracking_system(sigma_v=1e9, "
-        "sigma_w=[1.0]) builds but steady_state gives a NaN P (also sigma_v ~ 1e6 with T = 100 "
-        "and pv sensors); "
-        "tracking_system(sigma_v=1.0, sigma_w=1.0) -> \"'float' object is not iterable\"; "
-        "tracking_system(1.0, sensors=np.zeros(0)) -> 'truth value of an empty array'"
+        "fdia_env/kalman/steady.py: steady_state is not robust at extreme tracking indices "
+        "λ = σ_v T²/σ_w: tracking_system(sigma_v=1e9, sigma_w=[1.0]) builds but steady_state "
+        "raises RuntimeError 'steady_state_iterate diverged' (the DARE solver rejects it and the "
+        "information-form iteration from P0 = I loses P[k+1|k] to cancellation); λ <= 1e-20 "
+        "does not converge in 100 000 iterations; random draws with λ in [1e-8, 1e6] and "
+        "T in [1e-3, 1e3] still fail in 4 of 300 (tiny absolute scales, σ_w ~ 1e-17)"
     ),
 )
 @prop_settings(30)
@@ -214,16 +215,9 @@ def test_scenarios_get_known_name_builds_or_names_an_option(name, options):
         _check_steady(sc.system)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "fdia_env/scenarios.py (systems worker): scenarios.get('x') -> \"unknown scenario 'x'\" "
-        'names the parameter `name` only indirectly; scenarios.get([1]) -> "unhashable type: '
-        "'list'\""
-    ),
-)
 @prop_settings(30)
 @example(name="x", options={})
+@example(name=[1], options={})
 @given(
     name=mixed(st.sampled_from(scenarios.names())),
     options=kwargs_of(
