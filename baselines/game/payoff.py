@@ -111,8 +111,9 @@ class SensorGame:
         max_subset_size: None (every non-empty subset for both players) or k: the attacker's
             subsets of at most k sensors and the defender's that leave out at most k
             (:func:`~fdia_env.attacks.subsets.game_sizes`), as in ``sensor_game_v0``.
-        M: (derived here and below, in ``__post_init__``) Number of sensors; ``size = 2^M − 1`` strategies per player (the defender's count
-            with ``max_subset_size``; ``attacker_size`` the attacker's).
+        M: Number of sensors (this and the fields below are derived in ``__post_init__``);
+            ``size = 2^M − 1`` strategies per player (the defender's count with
+            ``max_subset_size``; ``attacker_size`` the attacker's).
         masks: (size, M) the defender's subsets in size-then-lexicographic order.
         attacker_masks: (attacker_size, M) the attacker's subsets (``masks`` itself when both
             players have every subset).
