@@ -35,7 +35,7 @@ logger = logging.getLogger(__name__)
 # The project's PPO defaults under RLlib; n_steps is the train batch of one iteration (all env
 # runners together), batch_size the SGD minibatch.
 RLLIB_DEFAULTS: dict[str, Any] = {
-    "learning_rate": 3e-4,
+    "learning_rate": 1e-3,
     "gamma": 1.0,
     "n_steps": 1_000,
     "batch_size": 128,
