@@ -162,8 +162,9 @@ def ppo_config(
         total_timesteps: Needed for ``lr_schedule="linear"`` (decay to 0 at this step).
         train_agents: Multi-agent: the players that learn (default: all).
         sample_timeout_s: Seconds an iteration waits for the remote env runners.
-        fast: False keeps RLlib's sampler and training defaults (the reference of
-            ``benchmarks/rllib.py``); masking, spaces and metrics are set either way.
+        fast: False keeps RLlib's sampler, network and training-batch defaults (the reference
+            of ``benchmarks/rllib.py``); masking, spaces, metrics and ``lr``, ``gamma``,
+            ``lambda_``, ``clip_param``, ``entropy_coeff`` are set either way.
 
     Raises:
         ValueError: For an unknown env, a bad count or hyperparameter, or a linear schedule
@@ -186,7 +187,7 @@ def ppo_config(
         check_number("sample_timeout_s", sample_timeout_s, float, lambda v: v > 0, "> 0")
     values = rllib_hyperparameters(hp)
     env_config = dict(env_config or {})
-    model = DefaultModelConfig(fcnet_hiddens=values["net_arch"])
+    model = DefaultModelConfig(fcnet_hiddens=values["net_arch"]) if fast else DefaultModelConfig()
 
     def spec(obs_space: Any) -> RLModuleSpec:
         if is_masked(obs_space):

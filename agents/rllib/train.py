@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -478,7 +479,9 @@ def learn_best_response_rllib(
         ),
         cfg.run,
     )
-    algo = config.build_algo()
+    with warnings.catch_warnings():  # each learner re-registers RLlib's internal env id
+        warnings.filterwarnings("ignore", message="Overriding environment rllib-")
+        algo = config.build_algo()
     try:
         from agents.rllib.config import agent_returns, steps_sampled
 
