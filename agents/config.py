@@ -530,6 +530,8 @@ class SweepConfig:
     def __post_init__(self) -> None:
         check_choice("agent", self.agent, ("attacker", "defender", "both"))
         check_choice("opponent", self.opponent, ("uniform", "equilibrium"))
+        if self.run.backend != "rllib":
+            raise ValueError(f"{flag('backend')}: train.py sweep runs on rllib only")
         check_env_kwargs_format(self.env_kwargs)
         if not isinstance(self.scenarios, tuple | list) or not all(
             isinstance(s, str) for s in self.scenarios

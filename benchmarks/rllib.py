@@ -13,7 +13,8 @@ one-step episodes) it prints
   numpy at every step, one env per runner, 256×256 networks), and the steps each iteration
   trains on.
 
-Every figure is the median over ``--iterations`` iterations after one warm-up iteration. The
+Every figure is the median over ``--iterations`` iterations after one warm-up iteration (RLlib's
+defaults: ``--defaults-iterations``, default 1, without warm-up: one takes minutes here). The
 machine's load average is printed too: on a shared machine the absolute times scale with it,
 the ratios much less.
 """
@@ -52,12 +53,13 @@ def bare_rate(steps: int = 20_000) -> float:
     return steps / (time.perf_counter() - t0)
 
 
-def measure(config, iterations: int) -> dict[str, float]:
+def measure(config, iterations: int, warm_up: bool = True) -> dict[str, float]:
     from agents.rllib.config import steps_sampled
 
     algo = config.build_algo()
     try:
-        algo.train()  # warm-up
+        if warm_up:
+            algo.train()
         walls, rates, steps = [], [], []
         for _ in range(iterations):
             t0 = time.perf_counter()
@@ -67,6 +69,12 @@ def measure(config, iterations: int) -> dict[str, float]:
             sampling = result["timers"]["env_runner_sampling_timer"]
             rates.append(n / sampling)
             steps.append(n)
+            learning = result["timers"].get("learner_update_timer", float("nan"))
+            print(
+                f"    iteration {walls[-1]:.2f} s: sampling {sampling:.2f} s, learning "
+                f"{learning:.2f} s",
+                flush=True,
+            )
         return {
             "iteration_s": statistics.median(walls),
             "sample_rate": statistics.median(rates),
@@ -81,6 +89,12 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=3)
     parser.add_argument("--runners", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--num-cpus", type=int, default=2)
+    parser.add_argument(
+        "--defaults-iterations",
+        type=int,
+        default=1,
+        help="iterations of RLlib's defaults (no warm-up: each takes minutes here)",
+    )
     args = parser.parse_args()
 
     import ray
@@ -104,7 +118,11 @@ def main() -> None:
             f"({m['steps']:.0f} steps)",
             flush=True,
         )
-    m = measure(ppo_config(ENV, ENV_CONFIG, num_env_runners=0, fast=False), args.iterations)
+    m = measure(
+        ppo_config(ENV, ENV_CONFIG, num_env_runners=0, fast=False),
+        args.defaults_iterations,
+        warm_up=False,
+    )
     shipped = rows[0][1]
     print(
         f"  RLlib defaults, 0 env runners: {m['sample_rate']:8,.0f} env steps/s sampled "

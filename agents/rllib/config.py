@@ -9,8 +9,11 @@ Gymnasium view). What it sets beyond RLlib's defaults:
 - one torch thread in every env runner and in the driver (these networks are tiny);
 - ``num_envs_per_env_runner=8``: one batched forward pass serves 8 envs;
 - a train batch of 1,000 steps, minibatches of 128, 10 epochs, 64×64 networks, ``gamma=1``
-  (the windows are a few steps long), entropy 0.01: RLlib's 4,000 × 30 epochs on 256×256
-  networks spends ~30× the time for these bandit-like games;
+  (the windows are a few steps long): RLlib's 4,000 × 30 epochs on 256×256 networks spends
+  far more time per step for these bandit-like games;
+- entropy coefficient 0.1 and a learning rate decaying linearly to 0 over the run (when its
+  length is known): with SB3's 0.01 and a constant rate the sparse attacker of seed 1 settled
+  on a plan worth 89.6 % of EXS; with these, 100 % on seeds 0-3;
 - RLlib's ``ActionMaskingTorchRLModule`` for every player with illegal actions (their
   observations are ``{"observations", "action_mask"}``, :mod:`agents.rllib.envs`), so no
   illegal action is ever sampled;
@@ -40,10 +43,10 @@ RLLIB_DEFAULTS: dict[str, Any] = {
     "n_steps": 1_000,
     "batch_size": 128,
     "n_epochs": 10,
-    "ent_coef": 0.01,
+    "ent_coef": 0.1,
     "gae_lambda": 0.95,
     "clip_range": 0.2,
-    "lr_schedule": "constant",
+    "lr_schedule": "linear",
     "net_arch": (64, 64),
 }
 ENVS_PER_ENV_RUNNER = 8
@@ -159,7 +162,9 @@ def ppo_config(
         num_env_runners: Remote env runners (0: sample in the driver process).
         envs_per_env_runner: Envs stepped together by each env runner.
         seed: RLlib's seed (networks, env runners' env seeds).
-        total_timesteps: Needed for ``lr_schedule="linear"`` (decay to 0 at this step).
+        total_timesteps: Where the default linear learning-rate schedule reaches 0; without
+            it the default schedule is constant (an explicit ``lr_schedule="linear"`` then
+            raises).
         train_agents: Multi-agent: the players that learn (default: all).
         sample_timeout_s: Seconds an iteration waits for the remote env runners.
         fast: False keeps RLlib's sampler, network and training-batch defaults (the reference
@@ -218,10 +223,10 @@ def ppo_config(
         raise ValueError("train_agents applies to multi-agent envs (a module name) only")
 
     lr: Any = values["learning_rate"]
-    if values["lr_schedule"] == "linear":
-        if total_timesteps is None:
-            raise ValueError("lr_schedule linear needs total_timesteps (the step where lr is 0)")
+    if values["lr_schedule"] == "linear" and total_timesteps is not None:
         lr = [[0, lr], [int(total_timesteps), 0.0]]
+    elif values["lr_schedule"] == "linear" and hp is not None and hp.lr_schedule == "linear":
+        raise ValueError("lr_schedule linear needs total_timesteps (the step where lr is 0)")
     training = {
         "lr": lr,
         "gamma": values["gamma"],
