@@ -237,14 +237,23 @@ def run_sweep(cfg: SweepConfig, report: Any = print) -> dict[str, Any]:
 def format_results(rows: list[dict[str, Any]]) -> str:
     """The results table: swept values, per-agent returns, reference and score."""
     returns = sorted({k for r in rows for k in r if k.startswith("return_")})
-    head = [*COLUMNS, *returns, "reference", "score"]
+    evals = ["eval_mean"] if any("eval_mean" in r for r in rows) else []
+    head = [*COLUMNS, *returns, *evals, "reference", "score"]
     lines = ["  " + "  ".join(f"{h:>14s}" for h in head)]
     for r in rows:
         cells = []
         for h in head:
             v = r.get(h)
-            if isinstance(v, float):
-                v = "nan" if math.isnan(v) else f"{v:.6g}"
+            if isinstance(v, float) and math.isnan(v):
+                v = "nan"
+            elif (
+                h == "score"
+                and isinstance(v, float)
+                and r.get("score_name", "").startswith("ratio")
+            ):
+                v = f"{v:.2%}"
+            elif isinstance(v, float):
+                v = f"{v:.6g}"
             cells.append(f"{'-' if v is None else v!s:>14s}")
         line = "  " + "  ".join(cells)
         if r.get("score_name"):
