@@ -180,6 +180,15 @@ def main(argv: Sequence[str] | None = None) -> object:
         if not game.history:  # stopped before its first iteration finished
             return game
         last = game.history[-1]
+        if "nash_conv" not in last:  # a continuous game (RLlib self-play): no exact matrix game
+            returns = ", ".join(f"{k} {v:.6g}" for k, v in last["agent_returns"].items())
+            print(
+                f"\nSELFPLAY (RLlib PPO) on {cfg.env}: {last['timesteps']} steps in "
+                f"{game.train_seconds:.0f} s (seed {cfg.run.seed}); last mean returns: {returns}"
+            )
+            print(f"  run folder: {game.run_dir}")
+            print(format_table(game.evaluations))
+            return game
         print(
             f"\n{game.method.upper()}{' (RLlib PPO)' if rllib else ''} on {cfg.env}: "
             f"{len(game.history)} iterations"

@@ -181,3 +181,21 @@ def test_tune_sweep_of_two_seeds_writes_one_results_table(local_ray, tmp_path):
     table = (out["run_dir"] / "results.csv").read_text().splitlines()
     assert len(table) == 3 and "return_attacker" in table[0] and "score" in table[0]
     assert not any(math.isnan(r["score"]) for r in rows)
+
+
+def test_selfplay_on_detection_game_learns_both_and_scores_the_defender(local_ray, tmp_path):
+    import train
+
+    game = train.main(
+        ["game", "--backend", "rllib", "--method", "selfplay", "--env", "detection_game_v0",
+         "--iterations", "1", "--steps-per-iteration", "500", "--n-steps", "500",
+         "--batch-size", "100", "--n-epochs", "2", "--final-eval-episodes", "5",
+         "--no-progress-bar", "--runs-root", str(tmp_path)]
+    )  # fmt: skip
+    returns = game.history[-1]["agent_returns"]
+    assert returns["attacker"] == pytest.approx(-returns["defender"], abs=1e-9)
+    assert returns["attacker"] > 0  # the attacker is paid a positive trace error
+    learned = game.evaluations["defender (learned, vs the view's opponent)"]
+    # a defender's score is the optimal Bayes cost over its own: in (0, 1]
+    assert learned.score == pytest.approx(learned.reference / learned.mean, rel=1e-12)
+    assert 0 < learned.score <= 1 + 1e-9

@@ -35,6 +35,9 @@ from agents.seeding import derived_seed, seed_everything
 
 ALGO = "PPO"
 SCORES = "scores.json"
+# two-player zero-sum games with continuous actions: self-play without an exact matrix game; each
+# side that has an analytic reference (agents.registry) is scored in its view at the end
+CONTINUOUS_GAMES = ("detection_game_v0",)
 
 
 def check_algo(algo: str | None) -> None:
@@ -319,7 +322,10 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
     if cfg.run.resume:
         raise ValueError("--resume is not supported with --backend rllib; start a new run")
     if cfg.env not in game_names():
-        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(game_names())}")
+        if cfg.env in CONTINUOUS_GAMES:
+            return _selfplay_continuous(cfg, report)
+        valid = [*game_names(), *CONTINUOUS_GAMES]
+        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
     check_algo(cfg.algo)
     say = report or (lambda line: None)
     entries = {side: get(cfg.env, side) for side in SIDES}
@@ -531,7 +537,10 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
     if cfg.run.resume:
         raise ValueError("--resume is not supported with --backend rllib; start a new run")
     if cfg.env not in game_names():
-        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(game_names())}")
+        if cfg.env in CONTINUOUS_GAMES:
+            return _selfplay_continuous(cfg, report)
+        valid = [*game_names(), *CONTINUOUS_GAMES]
+        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
     check_algo(cfg.algo)
     say = report or (lambda line: None)
     entries = {side: get(cfg.env, side) for side in SIDES}
@@ -636,4 +645,96 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         return SelfPlayResult(
             run_dir, cfg.method, x, y, value, history, evaluations, pops, seconds,
             interrupted=stop.signum,
+        )  # fmt: skip
+
+
+def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
+    """Self-play on a continuous-action game: both players learn; per-agent returns reported.
+
+    There is no exact payoff matrix, so no exploitability: after training, each side with a
+    registered view (for ``detection_game_v0`` the defender, scored against OBDD's α) plays its
+    view against the view's fixed opponent, scored by :func:`agents.evaluate.evaluate`.
+    """
+    from agents.evaluate import evaluate
+    from agents.interrupt import stop_on_signals
+    from agents.registry import REGISTRY
+    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.policy import policy_of
+    from agents.selfplay import SIDES, SelfPlayResult
+    from agents.training import check_env_kwargs
+
+    check_algo(cfg.algo)
+    say = report or (lambda line: None)
+    entries = {side: REGISTRY[cfg.env, side] for side in SIDES if (cfg.env, side) in REGISTRY}
+    first = next(iter(entries.values()))
+    hyperparameters = rllib_hyperparameters(cfg.hp)
+    env_kwargs = first.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(first.gym_id, env_kwargs)
+    run_dir = new_run_dir(
+        cfg.run.runs_root,
+        cfg.run.run_dir,
+        run_prefix(f"{cfg.env}-selfplay", f"rllib-{ALGO}", cfg.run.seed),
+    )
+    with ExitStack() as stack:
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        init_ray(cfg.run)
+        n_steps = hyperparameters["n_steps"]
+        per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        config = ppo_config(
+            cfg.env,
+            env_kwargs,
+            hp=cfg.hp,
+            num_env_runners=cfg.run.num_env_runners,
+            envs_per_env_runner=cfg.run.envs_per_env_runner,
+            seed=cfg.run.seed,
+            total_timesteps=cfg.iterations * per_iteration,
+            sample_timeout_s=cfg.run.sample_timeout_s,
+        )
+        algo = _with_run(config, cfg.run).build_algo()
+        stack.callback(algo.stop)
+        run_dir.mkdir(parents=True)
+        stack.enter_context(removed_unless(run_dir, SCORES))
+        stack.enter_context(run_lock(run_dir))
+        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, None)
+        stop = stack.enter_context(stop_on_signals())
+
+        def on_iteration(rec: dict[str, Any]) -> None:
+            if rec["timesteps"] % per_iteration == 0:
+                returns = "  ".join(f"{k} {v:+.4g}" for k, v in rec["agent_returns"].items())
+                say(f"iter {rec['iteration']:3d}  steps {rec['timesteps']:8d}  returns {returns}")
+
+        history, steps, seconds = _iterate(
+            algo, cfg.iterations * per_iteration, run_dir, stop, on_iteration,
+            progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
+        )  # fmt: skip
+        evaluations = {}
+        seed = derived_seed(cfg.run.seed, 20_000)
+        for side, entry in entries.items():
+            with entry.make(**env_kwargs) as env:
+                policy = policy_of(algo, side, env.action_space, False)
+                reference = entry.reference_of(env)
+                evaluations[f"{side} (learned, vs the view's opponent)"] = evaluate(
+                    policy, env, cfg.final_eval_episodes, seed, reference
+                )
+                if reference is not None and reference.policy is not None:
+                    evaluations[f"{side}: {reference.name}"] = evaluate(
+                        reference.policy, env, cfg.final_eval_episodes, seed, reference
+                    )
+        algo.save_to_path(str((run_dir / "checkpoint").resolve()))
+        write_json(
+            run_dir / SCORES,
+            {
+                "method": "selfplay",
+                "backend": "rllib",
+                "agent_returns": history[-1]["agent_returns"] if history else {},
+                "iterations": len(history),
+                "timesteps": steps,
+                "train_seconds": seconds,
+                "interrupted": stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
+            },
+        )
+        return SelfPlayResult(
+            run_dir, "selfplay", np.zeros(0), np.zeros(0), math.nan, history, evaluations, {},
+            seconds, interrupted=stop.signum,
         )  # fmt: skip
