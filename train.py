@@ -35,6 +35,10 @@ DESCRIPTION = "\n\n".join(
         "python train.py defender --algo DQN; "
         "python train.py game --method psro; "
         "python train.py attacker --resume (continues the latest run of that env, algo, seed).",
+        "--backend rllib runs the attacker, defender and game commands on Ray RLlib (PPO; "
+        "--num-env-runners K, --ray-address ADDR for a running cluster; game adds --method "
+        "selfplay, both players learning at once); sweep runs a Ray Tune grid over seeds, "
+        "scenarios and hyperparameters. Both need the fdia-env[rllib] extra.",
         "Checkpoints hold tensors and JSON only and load without unpickling; --trust-checkpoint "
         "allows resuming runs saved as stable-baselines3 .zip files (pickle: can run code). "
         "Ctrl-C (SIGINT) or SIGTERM stops at the next step and saves a checkpoint and the scores "
@@ -253,7 +257,7 @@ def cli(argv: Sequence[str] | None = None) -> int:
     after writing the final checkpoint and scores, or when a second one aborted it at once.
     """
     from agents.interrupt import Aborted, exit_status
-    from agents.rllib import MissingExtraError
+    from agents.rllib import MissingExtraError, ZeroStepsSampled
 
     try:
         result = main(argv)
@@ -272,7 +276,7 @@ def cli(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileExistsError, MissingExtraError) as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)
         return 2
-    except OSError as exc:
+    except (OSError, ZeroStepsSampled) as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)
         return 1
     signum = getattr(result, "interrupted", None)

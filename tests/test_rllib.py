@@ -199,3 +199,16 @@ def test_selfplay_on_detection_game_learns_both_and_scores_the_defender(local_ra
     # a defender's score is the optimal Bayes cost over its own: in (0, 1]
     assert learned.score == pytest.approx(learned.reference / learned.mean, rel=1e-12)
     assert 0 < learned.score <= 1 + 1e-9
+
+
+def test_an_iteration_that_samples_nothing_raises_naming_the_timeout():
+    from agents.rllib import ZeroStepsSampled
+    from agents.rllib.config import _Report
+
+    report = _Report(single_agent="attacker", timeout=60.0)
+    result = {"training_iteration": 1, "env_runners": {"num_env_steps_sampled": 0}}
+    with pytest.raises(ZeroStepsSampled, match=r"sampled 0 env steps.*sample_timeout_s=60.0"):
+        report(result=result)
+    ok = {"env_runners": {"num_env_steps_sampled": 1000, "episode_return_mean": 0.03}}
+    report(result=ok)
+    assert ok["agent_returns"] == {"attacker": 0.03}  # the view's player, not "default_agent"

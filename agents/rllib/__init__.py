@@ -24,6 +24,10 @@ class MissingExtraError(ImportError):
     """Ray RLlib is not installed (``pip install -e ".[rllib]"``)."""
 
 
+class ZeroStepsSampled(RuntimeError):
+    """An RLlib iteration sampled no env step (sample timeout, or env runners that failed)."""
+
+
 def require_ray() -> None:
     """Raise unless ``ray[rllib]`` can be imported.
 

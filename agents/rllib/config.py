@@ -31,6 +31,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from agents.config import HYPERPARAMETERS, Hyperparameters, check_number, flag
+from agents.rllib import ZeroStepsSampled
 from agents.rllib.envs import MODULES, is_masked, make_multi_agent, make_view, register_envs
 
 logger = logging.getLogger(__name__)
@@ -51,10 +52,6 @@ RLLIB_DEFAULTS: dict[str, Any] = {
 }
 ENVS_PER_ENV_RUNNER = 8
 SAMPLE_TIMEOUT_S = 600.0
-
-
-class ZeroStepsSampled(RuntimeError):
-    """An iteration sampled no env step (sample timeout, or env runners that failed)."""
 
 
 def rllib_hyperparameters(hp: Hyperparameters | None = None) -> dict[str, Any]:

@@ -160,7 +160,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
             hyperparameter that does not apply, an env option the env does not take, or
             ``--resume``.
         FileExistsError: When the run folder exists.
-        agents.rllib.config.ZeroStepsSampled: When an iteration sampled nothing.
+        agents.rllib.ZeroStepsSampled: When an iteration sampled nothing.
     """
     from agents.interrupt import stop_on_signals
     from agents.rllib.config import ppo_config, rllib_hyperparameters
