@@ -14,10 +14,10 @@ from typing import Annotated
 
 import tyro
 
-from agents.config import GameConfig, TrainConfig
+from agents.config import GameConfig, SweepConfig, TrainConfig
 from agents.evaluate import Evaluation
 
-COMMANDS = ("attacker", "defender", "game")
+COMMANDS = ("attacker", "defender", "game", "sweep")
 
 DESCRIPTION = "\n\n".join(
     [
@@ -35,6 +35,10 @@ DESCRIPTION = "\n\n".join(
         "python train.py defender --algo DQN; "
         "python train.py game --method psro; "
         "python train.py attacker --resume (continues the latest run of that env, algo, seed).",
+        "--backend rllib runs the attacker, defender and game commands on Ray RLlib (PPO; "
+        "--num-env-runners K, --ray-address ADDR for a running cluster; game adds --method "
+        "selfplay, both players learning at once); sweep runs a Ray Tune grid over seeds, "
+        "scenarios and hyperparameters. Both need the fdia-env[rllib] extra.",
         "Checkpoints hold tensors and JSON only and load without unpickling; --trust-checkpoint "
         "allows resuming runs saved as stable-baselines3 .zip files (pickle: can run code). "
         "Ctrl-C (SIGINT) or SIGTERM stops at the next step and saves a checkpoint and the scores "
@@ -66,6 +70,15 @@ Command = (
             "game",
             default=GameConfig(),
             description="Self-play on a two-player game with learned best responses.",
+        ),
+    ]
+    | Annotated[
+        SweepConfig,
+        tyro.conf.subcommand(
+            "sweep",
+            default=SweepConfig(),
+            description="A Ray Tune sweep of RLlib PPO runs over seeds, scenarios and "
+            "hyperparameters: one results table (needs the fdia-env[rllib] extra).",
         ),
     ]
 )
@@ -148,17 +161,41 @@ def main(argv: Sequence[str] | None = None) -> object:
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     cfg = parse(argv)
-    if cfg.run.resume:
+    if isinstance(cfg, SweepConfig):
+        from agents.rllib.sweep import run_sweep
+
+        return run_sweep(cfg)
+    rllib = cfg.run.backend == "rllib"
+    if rllib:
+        from agents.rllib import require_ray
+
+        require_ray()
+    elif isinstance(cfg, GameConfig) and cfg.method == "selfplay":
+        raise ValueError("--method selfplay (both players learning at once) needs --backend rllib")
+    if cfg.run.resume and not rllib:
         cfg = with_saved_options(cfg, argv)
     if isinstance(cfg, GameConfig):
-        from agents.selfplay import run_selfplay
+        if rllib:
+            from agents.rllib.train import selfplay_rllib as run_selfplay
+        else:
+            from agents.selfplay import run_selfplay
 
         game = run_selfplay(cfg)
         if not game.history:  # stopped before its first iteration finished
             return game
         last = game.history[-1]
+        if "nash_conv" not in last:  # a continuous game (RLlib self-play): no exact matrix game
+            returns = ", ".join(f"{k} {v:.6g}" for k, v in last["agent_returns"].items())
+            print(
+                f"\nSELFPLAY (RLlib PPO) on {cfg.env}: {last['timesteps']} steps in "
+                f"{game.train_seconds:.0f} s (seed {cfg.run.seed}); last mean returns: {returns}"
+            )
+            print(f"  run folder: {game.run_dir}")
+            print(format_table(game.evaluations))
+            return game
         print(
-            f"\n{game.method.upper()} on {cfg.env}: {len(game.history)} iterations"
+            f"\n{game.method.upper()}{' (RLlib PPO)' if rllib else ''} on {cfg.env}: "
+            f"{len(game.history)} iterations"
             + (" (interrupted)" if game.interrupted else "")
             + ", "
             f"{last['timesteps']} steps in {game.train_seconds:.0f} s (seed {cfg.run.seed}); "
@@ -168,6 +205,23 @@ def main(argv: Sequence[str] | None = None) -> object:
         print(f"  run folder: {game.run_dir}")
         print(format_table(game.evaluations))
         return game
+
+    if rllib:
+        from agents.rllib.train import train_rllib
+
+        result = train_rllib(cfg)
+        learned = next(iter(result.evaluations.values()))
+        last = result.history[-1]["agent_returns"] if result.history else {}
+        returns = ", ".join(f"{k} {v:.6g}" for k, v in last.items())
+        print(
+            f"\nRLlib PPO {cfg.agent} on {learned.env_id}, {result.timesteps} steps in "
+            f"{len(result.history)} iterations, {result.train_seconds:.0f} s (seed {cfg.run.seed})"
+            + (" (interrupted)" if result.interrupted else "")
+            + (f"; last iteration's mean return: {returns}" if returns else "")
+        )
+        print(f"  run folder: {result.run_dir}")
+        print(format_table(result.evaluations))
+        return result
 
     from agents.training import train
 
@@ -184,6 +238,17 @@ def main(argv: Sequence[str] | None = None) -> object:
     return result
 
 
+def _backend_of(run_dir: Path) -> str:
+    """The backend a run folder was written by (``sb3`` for runs that do not say)."""
+    import json
+
+    try:
+        saved = json.loads((Path(run_dir) / "config.json").read_text())
+    except (OSError, ValueError):
+        return "sb3"
+    return (saved.get("resolved") or {}).get("backend", "sb3")
+
+
 def cli(argv: Sequence[str] | None = None) -> int:
     """Run :func:`main` as a program: one-line messages on stderr, and the exit status.
 
@@ -192,6 +257,7 @@ def cli(argv: Sequence[str] | None = None) -> int:
     after writing the final checkpoint and scores, or when a second one aborted it at once.
     """
     from agents.interrupt import Aborted, exit_status
+    from agents.rllib import MissingExtraError, ZeroStepsSampled
 
     try:
         result = main(argv)
@@ -207,16 +273,23 @@ def cli(argv: Sequence[str] | None = None) -> int:
             "train.py: interrupted before training started; nothing new was saved", file=sys.stderr
         )
         return exit_status(signal.SIGINT)
-    except (ValueError, FileExistsError) as exc:
+    except (ValueError, FileExistsError, MissingExtraError) as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)
         return 2
-    except OSError as exc:
+    except (OSError, ZeroStepsSampled) as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)
         return 1
     signum = getattr(result, "interrupted", None)
     if signum is None:
         return 0
     name = signal.Signals(signum).name
+    if _backend_of(result.run_dir) == "rllib":
+        print(
+            f"train.py: stopped by {name}; the scores so far are saved in {result.run_dir} "
+            "(--backend rllib runs cannot be resumed)",
+            file=sys.stderr,
+        )
+        return exit_status(signum)
     if hasattr(result, "populations"):  # the game command
         if not result.history:
             print(

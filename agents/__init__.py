@@ -11,7 +11,9 @@
 - :mod:`agents.training`: option checks, TensorBoard, atomic checkpoints, resume;
 - :mod:`agents.selfplay`: iterated best response, fictitious self-play and PSRO;
 - :mod:`agents.runs`, :mod:`agents.plots`: run folders and learning curves;
-- :mod:`agents.demo`: ``make demo``.
+- :mod:`agents.demo`: ``make demo``;
+- :mod:`agents.rllib`: Ray RLlib training, self-play and Ray Tune sweeps (``--backend rllib``,
+  ``train.py sweep``; ray is imported only there, from the ``fdia-env[rllib]`` extra).
 
 ``train.py`` at the repository root is the command line over these.
 """

@@ -76,6 +76,7 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
 
 
 MAX_SEED = 2**32 - 1
+BACKENDS = ("sb3", "rllib")
 
 # Per numeric option: integer or real, whether it accepts a value, and the allowed values.
 _Rule = tuple[type, Callable[[float], bool], str]
@@ -359,12 +360,39 @@ class RunSettings:
     trust_checkpoint: bool = False
     """Allow --resume to load stable-baselines3 .zip / pickled replay buffers (older runs'
     checkpoints). These are unpickled and can run any code: only for files you trust."""
+    backend: Literal["sb3", "rllib"] = "sb3"
+    """sb3: stable-baselines3 in this process; rllib: Ray RLlib PPO, locally or on a Ray
+    cluster (needs the fdia-env[rllib] extra)."""
+    num_env_runners: int = 0
+    """rllib: remote env runners sampling in parallel (0: sample in this process)."""
+    envs_per_env_runner: int = 8
+    """rllib: envs each env runner steps together (one batched forward pass)."""
+    ray_address: str | None = None
+    """rllib: address of a running Ray cluster (as `ray start --head` prints it, e.g.
+    10.0.0.1:6379, or auto); default: start a local Ray."""
+    num_cpus: int | None = None
+    """rllib: CPUs of the local Ray (default: all); ignored with --ray-address."""
+    sample_timeout_s: float = 600.0
+    """rllib: seconds an iteration waits for its samples; one that gets none is an error."""
 
     def __post_init__(self) -> None:
         check_number("seed", self.seed, int, lambda v: 0 <= v <= MAX_SEED, f"in [0, {MAX_SEED}]")
         check_number("torch_threads", self.torch_threads, int, lambda v: v >= 1, ">= 1")
         check_number("verbose", self.verbose, int, lambda v: v in (0, 1, 2), "0, 1 or 2")
         check_device_name(self.device)
+        check_choice("backend", self.backend, BACKENDS)
+        check_number("num_env_runners", self.num_env_runners, *_AT_LEAST_0)
+        check_number("envs_per_env_runner", self.envs_per_env_runner, *_AT_LEAST_1)
+        if self.num_cpus is not None:
+            check_number("num_cpus", self.num_cpus, *_AT_LEAST_1)
+        if self.ray_address is not None and (
+            not isinstance(self.ray_address, str) or not self.ray_address.strip()
+        ):
+            raise ValueError(
+                f"{flag('ray_address')} must be a Ray address (host:port, ray://host:port or "
+                f"auto), got {self.ray_address!r}"
+            )
+        check_number("sample_timeout_s", self.sample_timeout_s, float, lambda v: v > 0, "> 0")
 
 
 @dataclass
@@ -422,8 +450,9 @@ class GameConfig:
     The exploitability of the current strategies is reported after every iteration.
     """
 
-    method: Literal["psro", "fsp", "ibr"] = "psro"
-    """psro (LP meta-solver), fsp (average of all best responses), ibr (latest best response)."""
+    method: Literal["psro", "fsp", "ibr", "selfplay"] = "psro"
+    """psro (LP meta-solver), fsp (average of all best responses), ibr (latest best response),
+    selfplay (--backend rllib: both players learning at once, scored by their average mix)."""
     env: str = "sensor_game_v0"
     """Registered two-player env."""
     scenario: str | None = None
@@ -444,7 +473,76 @@ class GameConfig:
     """Hyperparameters of the learner (None: the algorithm's default)."""
 
     def __post_init__(self) -> None:
-        check_choice("method", self.method, ("psro", "fsp", "ibr"))
+        check_choice("method", self.method, ("psro", "fsp", "ibr", "selfplay"))
         check_env_kwargs_format(self.env_kwargs)
         for name in ("iterations", "steps_per_iteration", "final_eval_episodes"):
             check_number(name, getattr(self, name), *_AT_LEAST_1)
+
+
+def _check_tuple(name: str, values: object, kind: type, ok: Callable[[float], bool], allowed: str):
+    if not isinstance(values, tuple | list):
+        raise TypeError(f"{flag(name)} must be a list of values, got {values!r}")
+    for v in values:
+        check_number(name, v, kind, ok, allowed)
+
+
+@dataclass
+class SweepConfig:
+    """A Ray Tune sweep of RLlib PPO runs over seeds, scenarios and hyperparameters.
+
+    Every combination of --seeds, --scenarios, --learning-rates and --ent-coefs is one trial:
+    ``--agent attacker|defender`` trains that player of the view (the other fixed, as
+    ``--opponent``), ``--agent both`` both players of a game at once (self-play). Each trial is
+    scored by agents.evaluate against the analytic reference; the sweep writes one results table
+    (results.csv, results.json) in its run folder.
+    """
+
+    env: str = "sparse_attack_v0"
+    """Registered env (a bad name lists the valid ones)."""
+    agent: Literal["attacker", "defender", "both"] = "attacker"
+    """The learning player(s); both: self-play of a two-player game."""
+    scenarios: tuple[str, ...] = ()
+    """Scenario presets to sweep (default: the env's first)."""
+    seeds: tuple[int, ...] = (0, 1)
+    """Seeds to sweep."""
+    learning_rates: tuple[float, ...] = ()
+    """Learning rates to sweep (default: --learning-rate or the RLlib default)."""
+    ent_coefs: tuple[float, ...] = ()
+    """Entropy coefficients to sweep (default: --ent-coef or the RLlib default)."""
+    env_kwargs: dict[str, str] = field(default_factory=dict)
+    """Extra env options as name value pairs (JSON values), for every trial."""
+    opponent: Literal["uniform", "equilibrium"] = "uniform"
+    """Two-player envs with one learning player: the fixed other player."""
+    total_timesteps: int = 20_000
+    """Environment steps per trial."""
+    final_eval_episodes: int = 100
+    """Episodes of each trial's final evaluation."""
+    max_concurrent_trials: int | None = None
+    """Trials running at once (default: as many as the CPUs allow)."""
+    run: tyro.conf.OmitArgPrefixes[RunSettings] = field(
+        default_factory=lambda: RunSettings(backend="rllib")
+    )
+    """Run folder, seeding and Ray settings (each trial samples in its own process unless
+    --num-env-runners is given)."""
+    hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
+    """Hyperparameters of every trial (None: the RLlib default)."""
+
+    def __post_init__(self) -> None:
+        check_choice("agent", self.agent, ("attacker", "defender", "both"))
+        check_choice("opponent", self.opponent, ("uniform", "equilibrium"))
+        if self.run.backend != "rllib":
+            raise ValueError(f"{flag('backend')}: train.py sweep runs on rllib only")
+        check_env_kwargs_format(self.env_kwargs)
+        if not isinstance(self.scenarios, tuple | list) or not all(
+            isinstance(s, str) for s in self.scenarios
+        ):
+            raise TypeError(f"{flag('scenarios')} must be a list of scenario names")
+        _check_tuple("seeds", self.seeds, int, lambda v: 0 <= v <= MAX_SEED, f"in [0, {MAX_SEED}]")
+        if not self.seeds:
+            raise ValueError(f"{flag('seeds')} needs at least one seed")
+        _check_tuple("learning_rates", self.learning_rates, float, lambda v: v > 0, "> 0")
+        _check_tuple("ent_coefs", self.ent_coefs, float, lambda v: v >= 0, ">= 0")
+        for name in ("total_timesteps", "final_eval_episodes"):
+            check_number(name, getattr(self, name), *_AT_LEAST_1)
+        if self.max_concurrent_trials is not None:
+            check_number("max_concurrent_trials", self.max_concurrent_trials, *_AT_LEAST_1)

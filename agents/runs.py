@@ -33,6 +33,13 @@ RESUMABLE = frozenset(
         "run.run_dir",
         "run.runs_root",
         "run.progress_bar",
+        # how a run is executed, not what it is (absent from runs made before they existed)
+        "run.backend",
+        "run.num_env_runners",
+        "run.envs_per_env_runner",
+        "run.ray_address",
+        "run.num_cpus",
+        "run.sample_timeout_s",
         "run.verbose",
         "run.device",
         "run.torch_threads",

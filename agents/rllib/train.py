@@ -1,0 +1,740 @@
+"""``train.py attacker|defender|game --backend rllib``: RLlib PPO runs scored like the SB3 runs.
+
+- :func:`train_rllib`: one player of a Gymnasium view (the other fixed, as ``--opponent``);
+- :func:`selfplay_rllib`: both players of a two-player game learning at once (multi-agent PPO,
+  one RL module each), scored after every iteration by the exploitability of their mixes on the
+  exact payoff matrix; the reported strategies are the average of the mixes over the second
+  half of the run (simultaneous gradient play orbits the equilibrium; its average converges).
+
+A run folder ``runs/<env>[-<agent>]-rllib-PPO-s<seed>-<time>/`` holds ``config.json``,
+``progress.jsonl`` (one line per iteration: steps, per-agent returns, seconds), ``scores.json``
+and ``checkpoint/`` (RLlib's ``Algorithm.save_to_path``; restore with
+``Algorithm.from_checkpoint``). SIGINT/SIGTERM stop after the current iteration; the scores are
+still written. ``--resume`` is not supported with this backend.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
+from agents.evaluate import Evaluation
+from agents.registry import Trainable, game_names, get
+from agents.rllib import require_ray
+from agents.runs import config_dict, new_run_dir, removed_unless, run_lock, run_prefix, write_json
+from agents.seeding import derived_seed, seed_everything
+
+ALGO = "PPO"
+SCORES = "scores.json"
+# two-player zero-sum games with continuous actions: self-play without an exact matrix game; each
+# side that has an analytic reference (agents.registry) is scored in its view at the end
+CONTINUOUS_GAMES = ("detection_game_v0",)
+
+
+def check_algo(algo: str | None) -> None:
+    """Raise unless ``algo`` is None or PPO (the algorithm this backend trains).
+
+    Raises:
+        ValueError: Naming the option.
+    """
+    if algo is not None and algo.replace("-", "").replace("_", "").lower() != "ppo":
+        raise ValueError(
+            f"--algo {algo!r}: --backend rllib trains PPO (with RLlib's action-masking module "
+            "for masked players); leave --algo out or use the sb3 backend"
+        )
+
+
+def init_ray(run: RunSettings) -> None:
+    """Start a local Ray (``run.num_cpus``) or connect to ``run.ray_address``, once.
+
+    Raises:
+        ImportError: Without ray (naming the ``fdia-env[rllib]`` extra).
+    """
+    require_ray()
+    import ray
+
+    if ray.is_initialized():
+        return
+    if run.ray_address is not None:
+        ray.init(address=run.ray_address, include_dashboard=False)
+    else:
+        ray.init(num_cpus=run.num_cpus, include_dashboard=False)
+
+
+def env_config_of(
+    entry: Trainable, env_kwargs: dict[str, Any], opponent: str = "uniform"
+) -> tuple[dict[str, Any], Any]:
+    """The view's RLlib ``env_config`` (with the fixed opponent's mix) and an eval env."""
+    from agents.training import opponent_factory
+
+    config = dict(env_kwargs)
+    make = opponent_factory(entry, opponent, env_kwargs)
+    if make is not None:
+        mix = make()
+        config["opponent"] = [float(p) for p in mix.probs]
+        return config, entry.make(opponent=mix, **env_kwargs)
+    return config, entry.make(**env_kwargs)
+
+
+@dataclass
+class RLlibTrainResult:
+    """What :func:`train_rllib` returns.
+
+    Attributes:
+        run_dir: The run folder.
+        policy: The learned policy (:class:`~agents.rllib.policy.RLlibPolicy`).
+        evaluations: Final evaluations by row name (learned, analytic answer, random).
+        history: One record per RLlib iteration (steps, per-agent returns, seconds).
+        timesteps: Env steps sampled.
+        train_seconds: Wall time of the iterations.
+        interrupted: The signal that stopped training early, or None.
+    """
+
+    run_dir: Path
+    policy: Any
+    evaluations: dict[str, Evaluation]
+    history: list[dict[str, Any]] = field(default_factory=list)
+    timesteps: int = 0
+    train_seconds: float = 0.0
+    interrupted: int | None = None
+
+
+def _iterate(
+    algo: Any,
+    total_steps: int,
+    run_dir: Path,
+    stop: Any,
+    on_iteration: Callable[[dict[str, Any]], None] | None = None,
+    progress: bool = False,
+    desc: str = "",
+) -> tuple[list[dict[str, Any]], int, float]:
+    """Train until ``total_steps`` env steps (or a stop request); write progress.jsonl."""
+    from agents.rllib.config import agent_returns, steps_sampled
+    from agents.runs import write_jsonl
+
+    history: list[dict[str, Any]] = []
+    steps, seconds = 0, 0.0
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total_steps, desc=desc, unit="step")
+    while steps < total_steps and not stop.requested:
+        start = time.perf_counter()
+        result = algo.train()
+        seconds += time.perf_counter() - start
+        n = steps_sampled(result)
+        steps += n
+        rec = {
+            "iteration": int(result.get("training_iteration", len(history) + 1)),
+            "timesteps": steps,
+            "train_seconds": round(seconds, 3),
+            "agent_returns": agent_returns(result),
+        }
+        if on_iteration is not None:
+            on_iteration(rec)
+        history.append(rec)
+        write_jsonl(run_dir / "progress.jsonl", history)
+        if bar is not None:
+            bar.update(n)
+    if bar is not None:
+        bar.close()
+    return history, steps, seconds
+
+
+def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Any:
+    """Train ``cfg.agent`` of ``cfg.env`` with RLlib PPO, evaluate it, write the run folder.
+
+    Raises:
+        ImportError: Without ray (naming the ``fdia-env[rllib]`` extra).
+        ValueError: For an unknown env or scenario, an algorithm other than PPO, a
+            hyperparameter that does not apply, an env option the env does not take, or
+            ``--resume``.
+        FileExistsError: When the run folder exists.
+        agents.rllib.ZeroStepsSampled: When an iteration sampled nothing.
+    """
+    from agents.interrupt import stop_on_signals
+    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.envs import is_masked
+    from agents.rllib.policy import policy_of
+    from agents.training import check_env_kwargs, final_evaluations
+
+    if cfg.run.resume:
+        raise ValueError("--resume is not supported with --backend rllib; start a new run")
+    check_algo(cfg.algo)
+    entry = get(cfg.env, cfg.agent)
+    hyperparameters = rllib_hyperparameters(cfg.hp)
+    env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(entry.gym_id, env_kwargs)
+    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
+    run_dir = new_run_dir(
+        cfg.run.runs_root, cfg.run.run_dir, run_prefix(name, f"rllib-{ALGO}", cfg.run.seed)
+    )
+    env_config, eval_env = env_config_of(entry, env_kwargs, cfg.opponent)
+    with ExitStack() as stack:
+        stack.callback(eval_env.close)
+        reference = entry.reference_of(eval_env)
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        init_ray(cfg.run)
+        config = _with_run(
+            ppo_config(
+                entry.gym_id,
+                env_config,
+                hp=cfg.hp,
+                num_env_runners=cfg.run.num_env_runners,
+                envs_per_env_runner=cfg.run.envs_per_env_runner,
+                seed=cfg.run.seed,
+                total_timesteps=cfg.total_timesteps,
+                sample_timeout_s=cfg.run.sample_timeout_s,
+            ),
+            cfg.run,
+        )
+        algo = config.build_algo()
+        stack.callback(algo.stop)
+        run_dir.mkdir(parents=True)
+        stack.enter_context(removed_unless(run_dir, SCORES))
+        stack.enter_context(run_lock(run_dir))
+        _write_config(run_dir, cfg.agent, cfg, entry.gym_id, env_kwargs, hyperparameters, reference)
+        stop = stack.enter_context(stop_on_signals())
+        history, steps, seconds = _iterate(
+            algo,
+            cfg.total_timesteps,
+            run_dir,
+            stop,
+            progress=cfg.run.progress_bar,
+            desc=f"RLlib PPO {cfg.agent} on {entry.env}",
+        )
+        masked = is_masked(_view_space(entry.gym_id, env_config))
+        policy = policy_of(algo, None, eval_env.action_space, masked)
+        seed = derived_seed(cfg.run.seed, 10_000)
+        rows = final_evaluations(policy, ALGO, eval_env, reference, cfg.final_eval_episodes, seed)
+        evaluations = {f"learned (RLlib {ALGO})": rows.pop(f"learned ({ALGO})"), **rows}
+        algo.save_to_path(str((run_dir / "checkpoint").resolve()))
+        write_json(
+            run_dir / SCORES,
+            {
+                "timesteps": steps,
+                "train_seconds": seconds,
+                "iterations": len(history),
+                "agent_returns": history[-1]["agent_returns"] if history else {},
+                "interrupted": stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
+            },
+        )
+        return RLlibTrainResult(
+            run_dir, policy, evaluations, history, steps, seconds, interrupted=stop.signum
+        )
+
+
+def _view_space(gym_id: str, env_config: dict[str, Any]) -> Any:
+    from agents.rllib.envs import make_view
+
+    with make_view(gym_id, env_config) as env:
+        return env.observation_space
+
+
+def _with_run(config: Any, run: RunSettings) -> Any:
+    """Apply the run's torch device to the learner (``cuda`` uses one GPU)."""
+    if run.device.startswith("cuda"):
+        config = config.learners(num_gpus_per_learner=1)
+    return config
+
+
+def _write_config(
+    run_dir: Path,
+    command: str,
+    cfg: TrainConfig | GameConfig,
+    env: str,
+    env_kwargs: dict[str, Any],
+    hyperparameters: dict[str, Any],
+    reference: Any,
+) -> None:
+    write_json(
+        run_dir / "config.json",
+        {
+            "command": command,
+            "config": config_dict(cfg),
+            "resolved": {
+                "backend": "rllib",
+                "env": env,
+                "algo": ALGO,
+                "env_kwargs": env_kwargs,
+                "hyperparameters": hyperparameters,
+                "reference": None
+                if reference is None
+                else {"name": reference.name, "value": reference.value},
+            },
+        },
+    )
+
+
+# ------------------------------------------------------------------------------------ self-play
+
+
+def initial_mixes(policies: dict[str, Any], parallel: Any) -> dict[str, np.ndarray]:
+    """Each player's mixed strategy: its action distribution at the (seeded) initial state."""
+    obs, _ = parallel.reset(seed=0)
+    out = {}
+    for side, policy in policies.items():
+        own = obs[side]
+        if isinstance(own, dict):
+            out[side] = policy.action_probs(own["observation"], own["action_mask"])
+        else:
+            out[side] = policy.action_probs(own)
+    return out
+
+
+def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
+    """Both players of ``cfg.env`` learning at once (``--method selfplay``), scored exactly.
+
+    Other methods (psro, fsp, ibr) run :func:`psro_rllib`.
+
+    ``cfg.iterations`` iterations of ``cfg.steps_per_iteration`` env steps each; after each the
+    exploitability of the players' current mixes and of their average over the second half of
+    the iterations so far is computed on the exact payoff matrix. The result's ``x``/``y`` are
+    the average mixes (the last-iterate figures are in the history).
+
+    Raises:
+        ImportError: Without ray.
+        ValueError: For a method other than selfplay, an env that is not a one-shot matrix game,
+            an unknown scenario, a hyperparameter that does not apply, or ``--resume``.
+        FileExistsError: When the run folder exists.
+    """
+    from agents.interrupt import stop_on_signals
+    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.envs import make_multi_agent
+    from agents.rllib.policy import policy_of
+    from agents.selfplay import SIDES, SelfPlayResult, _final_evaluations
+    from agents.training import check_env_kwargs
+    from baselines.game import exploitability
+
+    if cfg.method != "selfplay":
+        return psro_rllib(cfg, report)
+    if cfg.run.resume:
+        raise ValueError("--resume is not supported with --backend rllib; start a new run")
+    if cfg.env not in game_names():
+        if cfg.env in CONTINUOUS_GAMES:
+            return _selfplay_continuous(cfg, report)
+        valid = [*game_names(), *CONTINUOUS_GAMES]
+        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
+    check_algo(cfg.algo)
+    say = report or (lambda line: None)
+    entries = {side: get(cfg.env, side) for side in SIDES}
+    hyperparameters = rllib_hyperparameters(cfg.hp)
+    env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
+    with entries["attacker"].make(**env_kwargs) as env:
+        reference = entries["attacker"].reference_of(env)
+    if reference is None or not reference.is_game:
+        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
+    L, value = reference.payoff, reference.value
+    run_dir = new_run_dir(
+        cfg.run.runs_root,
+        cfg.run.run_dir,
+        run_prefix(f"{cfg.env}-selfplay", f"rllib-{ALGO}", cfg.run.seed),
+    )
+    parallel = make_multi_agent(cfg.env, env_kwargs).parallel
+    with ExitStack() as stack:
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        init_ray(cfg.run)
+        n_steps = hyperparameters["n_steps"]
+        per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        config = _with_run(
+            ppo_config(
+                cfg.env,
+                env_kwargs,
+                hp=cfg.hp,
+                num_env_runners=cfg.run.num_env_runners,
+                envs_per_env_runner=cfg.run.envs_per_env_runner,
+                seed=cfg.run.seed,
+                total_timesteps=cfg.iterations * per_iteration,
+                sample_timeout_s=cfg.run.sample_timeout_s,
+            ),
+            cfg.run,
+        )
+        algo = config.build_algo()
+        stack.callback(algo.stop)
+        run_dir.mkdir(parents=True)
+        stack.enter_context(removed_unless(run_dir, SCORES))
+        stack.enter_context(run_lock(run_dir))
+        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
+        stop = stack.enter_context(stop_on_signals())
+        policies = {
+            side: policy_of(algo, side, parallel.action_space(side), False) for side in SIDES
+        }
+        mixes: dict[str, list[np.ndarray]] = {side: [] for side in SIDES}
+
+        def on_iteration(rec: dict[str, Any]) -> None:
+            now = initial_mixes(policies, parallel)
+            for side in SIDES:
+                mixes[side].append(now[side])
+            half = len(mixes["attacker"]) // 2
+            avg = {side: np.mean(mixes[side][half:], axis=0) for side in SIDES}
+            last = exploitability(L, now["defender"], now["attacker"], value)
+            mean = exploitability(L, avg["defender"], avg["attacker"], value)
+            rec.update(
+                last_nash_conv=last.nash_conv,
+                last_relative_nash_conv=last.nash_conv / abs(value),
+                defender=mean.defender,
+                attacker=mean.attacker,
+                nash_conv=mean.nash_conv,
+                relative_nash_conv=mean.nash_conv / abs(value),
+                x=avg["defender"].tolist(),
+                y=avg["attacker"].tolist(),
+            )
+            if len(mixes["attacker"]) % (per_iteration // n_steps) == 0:
+                say(_selfplay_line(rec, value))
+
+        history, steps, seconds = _iterate(
+            algo,
+            cfg.iterations * per_iteration,
+            run_dir,
+            stop,
+            on_iteration,
+            progress=cfg.run.progress_bar,
+            desc=f"RLlib self-play on {cfg.env}",
+        )
+        if not history:
+            return SelfPlayResult(
+                run_dir, "selfplay", np.zeros(0), np.zeros(0), value, [], interrupted=stop.signum
+            )
+        x, y = np.array(history[-1]["x"]), np.array(history[-1]["y"])
+        evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
+        algo.save_to_path(str((run_dir / "checkpoint").resolve()))
+        write_json(
+            run_dir / SCORES,
+            {
+                "method": "selfplay",
+                "backend": "rllib",
+                "value": value,
+                "x": x.tolist(),
+                "y": y.tolist(),
+                "final": {k: history[-1][k] for k in ("defender", "attacker", "nash_conv")},
+                "relative_nash_conv": history[-1]["relative_nash_conv"],
+                "last_iterate_relative_nash_conv": history[-1]["last_relative_nash_conv"],
+                "agent_returns": history[-1]["agent_returns"],
+                "iterations": len(history),
+                "timesteps": steps,
+                "train_seconds": seconds,
+                "interrupted": stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
+            },
+        )
+        return SelfPlayResult(
+            run_dir,
+            "selfplay",
+            x,
+            y,
+            value,
+            history,
+            evaluations,
+            {},
+            seconds,
+            interrupted=stop.signum,
+        )
+
+
+def _selfplay_line(rec: dict[str, Any], value: float) -> str:
+    returns = "  ".join(f"{k} {v:+.4g}" for k, v in rec["agent_returns"].items())
+    return (
+        f"iter {rec['iteration']:3d}  steps {rec['timesteps']:8d}  returns {returns}  "
+        f"NashConv last {rec['last_nash_conv']:.4f} ({rec['last_relative_nash_conv']:.2%})  "
+        f"average {rec['nash_conv']:.4f} ({rec['relative_nash_conv']:.2%} of value {value:.4g})"
+    )
+
+
+# ----------------------------------------------------------------------- PSRO, FSP, IBR
+
+
+def learn_best_response_rllib(
+    entry: Trainable,
+    env_kwargs: dict[str, Any],
+    opponent: np.ndarray,
+    cfg: GameConfig,
+    seed: int,
+) -> tuple[Any, int, dict[str, float]]:
+    """A fresh RLlib PPO learner trained against the fixed mix ``opponent``.
+
+    Returns the learned policy, its pure strategy (the deterministic action at the initial
+    state) and its last per-agent returns.
+    """
+    from agents.rllib.config import ppo_config
+    from agents.rllib.policy import policy_of
+    from agents.selfplay import initial_action
+
+    env_config = {**env_kwargs, "opponent": [float(p) for p in opponent], "opponent_seed": seed}
+    config = _with_run(
+        ppo_config(
+            entry.gym_id,
+            env_config,
+            hp=cfg.hp,
+            num_env_runners=cfg.run.num_env_runners,
+            envs_per_env_runner=cfg.run.envs_per_env_runner,
+            seed=seed,
+            total_timesteps=cfg.steps_per_iteration,
+            sample_timeout_s=cfg.run.sample_timeout_s,
+        ),
+        cfg.run,
+    )
+    with warnings.catch_warnings():  # each learner re-registers RLlib's internal env id
+        warnings.filterwarnings("ignore", message="Overriding environment rllib-")
+        algo = config.build_algo()
+    try:
+        from agents.rllib.config import agent_returns, steps_sampled
+
+        steps, returns = 0, {}
+        while steps < cfg.steps_per_iteration:
+            result = algo.train()
+            steps += steps_sampled(result)
+            returns = agent_returns(result)
+        with entry.make(**env_kwargs) as env:
+            policy = policy_of(algo, None, env.action_space, False)
+        return policy, initial_action(policy, entry, env_kwargs), returns
+    finally:
+        algo.stop()
+
+
+def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
+    """PSRO, FSP or IBR (``cfg.method``) with RLlib PPO best responses, scored exactly.
+
+    The loop of :mod:`agents.selfplay` (same meta-solver, same exploitability records) with a
+    fresh RLlib PPO learner per best response (single-agent view, the other side's current mix
+    as its fixed opponent). The learned policies stay in memory; the run folder holds
+    config.json, progress.jsonl (one record per iteration) and scores.json.
+
+    Raises:
+        ImportError: Without ray.
+        ValueError: As :func:`selfplay_rllib`.
+        FileExistsError: When the run folder exists.
+    """
+    from agents.interrupt import stop_on_signals
+    from agents.rllib.config import rllib_hyperparameters
+    from agents.runs import write_jsonl
+    from agents.selfplay import (
+        METHODS,
+        SIDES,
+        SelfPlayResult,
+        _final_evaluations,
+        _grow_meta,
+        _report_line,
+        mix_of,
+        one_hot,
+    )
+    from agents.training import check_env_kwargs
+    from baselines.game import exploitability, solve_zero_sum
+
+    if cfg.method not in METHODS:
+        raise ValueError(f"unknown method {cfg.method!r}; valid methods: {', '.join(METHODS)}")
+    if cfg.run.resume:
+        raise ValueError("--resume is not supported with --backend rllib; start a new run")
+    if cfg.env not in game_names():
+        if cfg.env in CONTINUOUS_GAMES:
+            return _selfplay_continuous(cfg, report)
+        valid = [*game_names(), *CONTINUOUS_GAMES]
+        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
+    check_algo(cfg.algo)
+    say = report or (lambda line: None)
+    entries = {side: get(cfg.env, side) for side in SIDES}
+    hyperparameters = rllib_hyperparameters(cfg.hp)
+    env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
+    with entries["attacker"].make(**env_kwargs) as env:
+        reference = entries["attacker"].reference_of(env)
+        n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
+    if reference is None or not reference.is_game:
+        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
+    L, value = reference.payoff, reference.value
+    run_dir = new_run_dir(
+        cfg.run.runs_root,
+        cfg.run.run_dir,
+        run_prefix(f"{cfg.env}-{cfg.method}", f"rllib-{ALGO}", cfg.run.seed),
+    )
+    with ExitStack() as stack:
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        init_ray(cfg.run)
+        run_dir.mkdir(parents=True)
+        stack.enter_context(removed_unless(run_dir, SCORES))
+        stack.enter_context(run_lock(run_dir))
+        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
+        stop = stack.enter_context(stop_on_signals())
+        pops: dict[str, list[int]] = {side: [] for side in SIDES}
+        models: dict[str, list[Any]] = {side: [] for side in SIDES}
+        meta = np.zeros((0, 0))
+        x, y = np.full(n["defender"], 1 / n["defender"]), np.full(n["attacker"], 1 / n["attacker"])
+        history: list[dict[str, Any]] = []
+        start = time.perf_counter()
+        for it in range(1, cfg.iterations + 1):
+            if stop.requested:
+                break
+            opponents = {"attacker": x, "defender": y}
+            returns = {}
+            for s, side in enumerate(SIDES):
+                policy, action, returns[side] = learn_best_response_rllib(
+                    entries[side], env_kwargs, opponents[side], cfg,
+                    derived_seed(cfg.run.seed, 1000 * it + s),
+                )  # fmt: skip
+                models[side].append(policy)
+                pops[side].append(action)
+            gap_att = float((x @ L).max() - (x @ L)[pops["attacker"][-1]])
+            gap_def = float((L @ y)[pops["defender"][-1]] - (L @ y).min())
+            if cfg.method == "ibr":
+                x = one_hot(pops["defender"][-1], n["defender"])
+                y = one_hot(pops["attacker"][-1], n["attacker"])
+            elif cfg.method == "fsp":
+                x = mix_of(pops["defender"], np.ones(len(pops["defender"])), n["defender"])
+                y = mix_of(pops["attacker"], np.ones(len(pops["attacker"])), n["attacker"])
+            else:
+                meta = _grow_meta(meta, models, entries["attacker"], env_kwargs, cfg.run.seed)
+                sx, sy, _ = solve_zero_sum(meta)
+                x = mix_of(pops["defender"], sx, n["defender"])
+                y = mix_of(pops["attacker"], sy, n["attacker"])
+            e = exploitability(L, x, y, value)
+            rec = {
+                "iteration": it,
+                "timesteps": 2 * it * cfg.steps_per_iteration,
+                "train_seconds": round(time.perf_counter() - start, 3),
+                "defender": e.defender,
+                "attacker": e.attacker,
+                "nash_conv": e.nash_conv,
+                "relative_nash_conv": e.nash_conv / abs(value),
+                "br_attacker": pops["attacker"][-1],
+                "br_defender": pops["defender"][-1],
+                "br_gap_attacker": gap_att,
+                "br_gap_defender": gap_def,
+                "agent_returns": {side: returns[side].get(side, math.nan) for side in SIDES},
+                "x": x.tolist(),
+                "y": y.tolist(),
+            }
+            history.append(rec)
+            write_jsonl(run_dir / "progress.jsonl", history)
+            say(_report_line(rec))
+        if not history:
+            return SelfPlayResult(
+                run_dir, cfg.method, np.zeros(0), np.zeros(0), value, [], interrupted=stop.signum
+            )
+        seconds = history[-1]["train_seconds"]
+        evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
+        write_json(
+            run_dir / SCORES,
+            {
+                "method": cfg.method,
+                "backend": "rllib",
+                "value": value,
+                "x": x.tolist(),
+                "y": y.tolist(),
+                "populations": pops,
+                "meta_payoff": meta.tolist(),
+                "final": {k: history[-1][k] for k in ("defender", "attacker", "nash_conv")},
+                "relative_nash_conv": history[-1]["relative_nash_conv"],
+                "iterations": len(history),
+                "timesteps": history[-1]["timesteps"],
+                "train_seconds": seconds,
+                "interrupted": stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
+            },
+        )
+        return SelfPlayResult(
+            run_dir, cfg.method, x, y, value, history, evaluations, pops, seconds,
+            interrupted=stop.signum,
+        )  # fmt: skip
+
+
+def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
+    """Self-play on a continuous-action game: both players learn; per-agent returns reported.
+
+    There is no exact payoff matrix, so no exploitability: after training, each side with a
+    registered view (for ``detection_game_v0`` the defender, scored against OBDD's α) plays its
+    view against the view's fixed opponent, scored by :func:`agents.evaluate.evaluate`.
+    """
+    from agents.evaluate import evaluate
+    from agents.interrupt import stop_on_signals
+    from agents.registry import REGISTRY
+    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.policy import policy_of
+    from agents.selfplay import SIDES, SelfPlayResult
+    from agents.training import check_env_kwargs
+
+    check_algo(cfg.algo)
+    say = report or (lambda line: None)
+    entries = {side: REGISTRY[cfg.env, side] for side in SIDES if (cfg.env, side) in REGISTRY}
+    first = next(iter(entries.values()))
+    hyperparameters = rllib_hyperparameters(cfg.hp)
+    env_kwargs = first.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(first.gym_id, env_kwargs)
+    run_dir = new_run_dir(
+        cfg.run.runs_root,
+        cfg.run.run_dir,
+        run_prefix(f"{cfg.env}-selfplay", f"rllib-{ALGO}", cfg.run.seed),
+    )
+    with ExitStack() as stack:
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        init_ray(cfg.run)
+        n_steps = hyperparameters["n_steps"]
+        per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        config = ppo_config(
+            cfg.env,
+            env_kwargs,
+            hp=cfg.hp,
+            num_env_runners=cfg.run.num_env_runners,
+            envs_per_env_runner=cfg.run.envs_per_env_runner,
+            seed=cfg.run.seed,
+            total_timesteps=cfg.iterations * per_iteration,
+            sample_timeout_s=cfg.run.sample_timeout_s,
+        )
+        algo = _with_run(config, cfg.run).build_algo()
+        stack.callback(algo.stop)
+        run_dir.mkdir(parents=True)
+        stack.enter_context(removed_unless(run_dir, SCORES))
+        stack.enter_context(run_lock(run_dir))
+        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, None)
+        stop = stack.enter_context(stop_on_signals())
+
+        def on_iteration(rec: dict[str, Any]) -> None:
+            if rec["timesteps"] % per_iteration == 0:
+                returns = "  ".join(f"{k} {v:+.4g}" for k, v in rec["agent_returns"].items())
+                say(f"iter {rec['iteration']:3d}  steps {rec['timesteps']:8d}  returns {returns}")
+
+        history, steps, seconds = _iterate(
+            algo, cfg.iterations * per_iteration, run_dir, stop, on_iteration,
+            progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
+        )  # fmt: skip
+        evaluations = {}
+        seed = derived_seed(cfg.run.seed, 20_000)
+        for side, entry in entries.items():
+            with entry.make(**env_kwargs) as env:
+                policy = policy_of(algo, side, env.action_space, False)
+                reference = entry.reference_of(env)
+                evaluations[f"{side} (learned, vs the view's opponent)"] = evaluate(
+                    policy, env, cfg.final_eval_episodes, seed, reference
+                )
+                if reference is not None and reference.policy is not None:
+                    evaluations[f"{side}: {reference.name}"] = evaluate(
+                        reference.policy, env, cfg.final_eval_episodes, seed, reference
+                    )
+        algo.save_to_path(str((run_dir / "checkpoint").resolve()))
+        write_json(
+            run_dir / SCORES,
+            {
+                "method": "selfplay",
+                "backend": "rllib",
+                "agent_returns": history[-1]["agent_returns"] if history else {},
+                "iterations": len(history),
+                "timesteps": steps,
+                "train_seconds": seconds,
+                "interrupted": stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
+            },
+        )
+        return SelfPlayResult(
+            run_dir, "selfplay", np.zeros(0), np.zeros(0), math.nan, history, evaluations, {},
+            seconds, interrupted=stop.signum,
+        )  # fmt: skip
