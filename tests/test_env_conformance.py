@@ -257,3 +257,29 @@ def test_fdia_v0_model_kwargs_are_checked():
         fdia_v0.parallel_env(attack_kwargs={"budgt": 3})
     env = fdia_v0.parallel_env(attack_kwargs={"budget": 2, "illegal_action": "noop"})
     assert env.attack.illegal_action == "noop"
+
+
+@pytest.mark.parametrize("module", MODULES, ids=lambda m: m.NAME)
+def test_a_deleted_env_is_garbage_collected(module):
+    # the spaces used to be cached with functools.cache on the method, which kept every env
+    # alive; they are plain dict lookups now
+    import gc
+    import weakref
+
+    env = module.parallel_env()
+    env.reset(seed=0)
+    for agent in env.possible_agents:
+        env.observation_space(agent), env.action_space(agent)
+    ref = weakref.ref(env)
+    del env
+    gc.collect()
+    assert ref() is None
+
+
+def test_pickled_envs_keep_read_only_systems():
+    import pickle
+
+    env = pickle.loads(pickle.dumps(sparse_attack_v0.parallel_env()))
+    assert not env.system.F.flags.writeable and not env.system.Q.flags.writeable
+    env.reset(seed=0)
+    assert env.step({"attacker": 1})[4]["attacker"]["budget_left"] == 4
