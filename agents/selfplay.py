@@ -122,6 +122,30 @@ def mix_of(population: list[int], weights: np.ndarray, n: int) -> np.ndarray:
     return out / out.sum()
 
 
+def current_mixes(
+    method: str, pops: dict[str, list[int]], n: dict[str, int], meta: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The defender's and attacker's strategies after an iteration of ``method``.
+
+    ``"ibr"``: each side's last best response; ``"fsp"``: the uniform mix over each population;
+    ``"psro"``: the equilibrium of the meta-game ``meta`` (populations × populations) spread
+    over the actions.
+    """
+    if method == "ibr":
+        return one_hot(pops["defender"][-1], n["defender"]), one_hot(
+            pops["attacker"][-1], n["attacker"]
+        )
+    if method == "fsp":
+        weights = {side: np.ones(len(pops[side])) for side in ("defender", "attacker")}
+    else:
+        sx, sy, _ = solve_zero_sum(meta)
+        weights = {"defender": sx, "attacker": sy}
+    return (
+        mix_of(pops["defender"], weights["defender"], n["defender"]),
+        mix_of(pops["attacker"], weights["attacker"], n["attacker"]),
+    )
+
+
 def initial_action(model: BaseAlgorithm, entry: Trainable, env_kwargs: dict[str, Any]) -> int:
     """The pure strategy of a learned policy: its deterministic action at the initial state."""
     with entry.make(**env_kwargs) as env:
@@ -463,19 +487,9 @@ def _iterate(
         gap_att = float((x @ L).max() - (x @ L)[pops["attacker"][-1]])
         gap_def = float((L @ y)[pops["defender"][-1]] - (L @ y).min())
 
-        if cfg.method == "ibr":
-            x, y = (
-                one_hot(pops["defender"][-1], n["defender"]),
-                one_hot(pops["attacker"][-1], n["attacker"]),
-            )
-        elif cfg.method == "fsp":
-            x = mix_of(pops["defender"], np.ones(len(pops["defender"])), n["defender"])
-            y = mix_of(pops["attacker"], np.ones(len(pops["attacker"])), n["attacker"])
-        else:
+        if cfg.method == "psro":
             meta = _grow_meta(meta, models, entries["attacker"], env_kwargs, cfg.run.seed)
-            sx, sy, _ = solve_zero_sum(meta)
-            x = mix_of(pops["defender"], sx, n["defender"])
-            y = mix_of(pops["attacker"], sy, n["attacker"])
+        x, y = current_mixes(cfg.method, pops, n, meta)
 
         e = exploitability(L, x, y, value)
         rec = {

@@ -293,6 +293,31 @@ def initial_mixes(policies: dict[str, Any], parallel: Any) -> dict[str, np.ndarr
     return out
 
 
+def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, dict[str, int]]:
+    """Check a matrix game's options; its registry entries, env kwargs, exact game, sizes.
+
+    Raises:
+        ValueError: For an unknown game, algorithm or env option, or an env that is not a
+            one-shot matrix game.
+    """
+    from agents.selfplay import SIDES
+    from agents.training import check_env_kwargs
+
+    if cfg.env not in game_names():
+        valid = [*game_names(), *CONTINUOUS_GAMES]
+        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
+    check_algo(cfg.algo)
+    entries = {side: get(cfg.env, side) for side in SIDES}
+    env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
+    with entries["attacker"].make(**env_kwargs) as env:
+        reference = entries["attacker"].reference_of(env)
+        n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
+    if reference is None or not reference.is_game:
+        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
+    return entries, env_kwargs, reference, n
+
+
 def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
     """Both players of ``cfg.env`` learning at once (``--method selfplay``), scored exactly.
 
@@ -314,28 +339,17 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
     from agents.rllib.envs import make_multi_agent
     from agents.rllib.policy import policy_of
     from agents.selfplay import SIDES, SelfPlayResult, _final_evaluations
-    from agents.training import check_env_kwargs
     from baselines.game import exploitability
 
     if cfg.method != "selfplay":
         return psro_rllib(cfg, report)
     if cfg.run.resume:
         raise ValueError("--resume is not supported with --backend rllib; start a new run")
-    if cfg.env not in game_names():
-        if cfg.env in CONTINUOUS_GAMES:
-            return _selfplay_continuous(cfg, report)
-        valid = [*game_names(), *CONTINUOUS_GAMES]
-        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
-    check_algo(cfg.algo)
+    if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
+        return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries = {side: get(cfg.env, side) for side in SIDES}
+    entries, env_kwargs, reference, _ = _matrix_game(cfg)
     hyperparameters = rllib_hyperparameters(cfg.hp)
-    env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
-    check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
-    with entries["attacker"].make(**env_kwargs) as env:
-        reference = entries["attacker"].reference_of(env)
-    if reference is None or not reference.is_game:
-        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     L, value = reference.payoff, reference.value
     run_dir = new_run_dir(
         cfg.run.runs_root,
@@ -526,32 +540,19 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         _final_evaluations,
         _grow_meta,
         _report_line,
-        mix_of,
-        one_hot,
+        current_mixes,
     )
-    from agents.training import check_env_kwargs
-    from baselines.game import exploitability, solve_zero_sum
+    from baselines.game import exploitability
 
     if cfg.method not in METHODS:
         raise ValueError(f"unknown method {cfg.method!r}; valid methods: {', '.join(METHODS)}")
     if cfg.run.resume:
         raise ValueError("--resume is not supported with --backend rllib; start a new run")
-    if cfg.env not in game_names():
-        if cfg.env in CONTINUOUS_GAMES:
-            return _selfplay_continuous(cfg, report)
-        valid = [*game_names(), *CONTINUOUS_GAMES]
-        raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(valid)}")
-    check_algo(cfg.algo)
+    if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
+        return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries = {side: get(cfg.env, side) for side in SIDES}
+    entries, env_kwargs, reference, n = _matrix_game(cfg)
     hyperparameters = rllib_hyperparameters(cfg.hp)
-    env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
-    check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
-    with entries["attacker"].make(**env_kwargs) as env:
-        reference = entries["attacker"].reference_of(env)
-        n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
-    if reference is None or not reference.is_game:
-        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     L, value = reference.payoff, reference.value
     run_dir = new_run_dir(
         cfg.run.runs_root,
@@ -586,17 +587,9 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
                 pops[side].append(action)
             gap_att = float((x @ L).max() - (x @ L)[pops["attacker"][-1]])
             gap_def = float((L @ y)[pops["defender"][-1]] - (L @ y).min())
-            if cfg.method == "ibr":
-                x = one_hot(pops["defender"][-1], n["defender"])
-                y = one_hot(pops["attacker"][-1], n["attacker"])
-            elif cfg.method == "fsp":
-                x = mix_of(pops["defender"], np.ones(len(pops["defender"])), n["defender"])
-                y = mix_of(pops["attacker"], np.ones(len(pops["attacker"])), n["attacker"])
-            else:
+            if cfg.method == "psro":
                 meta = _grow_meta(meta, models, entries["attacker"], env_kwargs, cfg.run.seed)
-                sx, sy, _ = solve_zero_sum(meta)
-                x = mix_of(pops["defender"], sx, n["defender"])
-                y = mix_of(pops["attacker"], sy, n["attacker"])
+            x, y = current_mixes(cfg.method, pops, n, meta)
             e = exploitability(L, x, y, value)
             rec = {
                 "iteration": it,
