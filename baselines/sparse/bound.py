@@ -120,6 +120,7 @@ class PairTerms:
         lev: (R, T·M) leverages ``l_q = λ_max(B_q' Σ_kk B_q)``.
         e: (R, T·M) ``a_q / (1 − l_q)``.
         cross: (R, T·M, T·M) ``‖Ô_qq'‖_F`` (zero on the diagonal), or None when not computed.
+        vectors: (R, T·M, nz, n) the ``c_q`` themselves (trace objective only, else None).
     """
 
     start: int
@@ -128,6 +129,7 @@ class PairTerms:
     lev: np.ndarray
     e: np.ndarray
     cross: np.ndarray | None
+    vectors: np.ndarray | None = None
 
 
 def pair_terms(
@@ -189,7 +191,8 @@ def pair_terms(
         cross *= scale[:, :, None] * scale[:, None, :]
         idx = np.arange(T * M)
         cross[:, idx, idx] = 0.0
-    return PairTerms(start, base, a_term, lev, e, cross)
+    vectors = c.reshape(R_, T * M, *c.shape[-2:]) if problem.objective == "trace" else None
+    return PairTerms(start, base, a_term, lev, e, cross, vectors)
 
 
 # --- combining terms into subtree bounds ---------------------------------------------------
@@ -363,8 +366,10 @@ def upper_bound(
 ) -> float:
     """A provable upper bound on ``max_{|A| = c} Φ(P[K+N|K+N])`` (the EXS optimum).
 
-    The smaller of two bounds (module docstring): the *smoother bound* and the *allocation
-    bound*. Why they are valid, in short: dropping measurements never decreases the filter's
+    The smallest of three bounds: the *smoother bound* and the *allocation bound* (module
+    docstring) and the *split bound* (:mod:`baselines.sparse.split`: the last step enumerated
+    exactly, earlier drops through a tangent of the posterior map, which is concave in the
+    prior). Why they are valid, in short: dropping measurements never decreases the filter's
     covariance in the Loewner order (so the optimum over sets of size c is bounded by any
     relaxation that drops at least as much information, step by step, as every feasible set),
     and the final covariance after dropping a set ``T`` is the *exact* covariance downdate
@@ -390,8 +395,13 @@ def upper_bound(
         >>> round(upper_bound("ch4-position", budget=5, horizon=6), 4)
         0.0328
     """
+    from baselines.sparse.split import split_bound  # it builds on this module's terms
+
     problem = make_problem(system_or_scenario, budget, horizon, objective)
-    return min(allocation_bound(problem)[0], root_bound(problem))
+    bounds = [allocation_bound(problem)[0], root_bound(problem)]
+    if problem.budget > 0:
+        bounds.append(split_bound(problem).bound)
+    return min(bounds)
 
 
 def brute_force_optimum(
