@@ -15,7 +15,8 @@ Run: ``python benchmarks/bnb.py [--repeats R] [--time-limit S] [--scenario NAME 
    model; preset names given with ``--scenario`` are added (skipped with a message when
    unknown, e.g. before the grid presets exist).
 
-``--old-bounds`` runs B&B without the mixed (tail-enumeration) bound, as before it existed.
+``--old-bounds`` runs B&B without the mixed (tail-enumeration) bound, as before it existed;
+``--no-split`` without the split bound (:mod:`baselines.sparse.split`), as before it existed.
 BLAS runs single-threaded unless ``OPENBLAS_NUM_THREADS`` is set.
 """
 
@@ -75,16 +76,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--old-bounds", action="store_true", help="B&B without the mixed bound (before/after)"
     )
+    parser.add_argument("--no-split", action="store_true", help="B&B without the split bound")
     args = parser.parse_args(argv)
     mixed = not args.old_bounds
-    print(f"bounds: {'smoother + allocation + mixed' if mixed else 'smoother + allocation'}")
+    opts = {"mixed_bound": mixed, "split": not args.no_split}
+    names = ["smoother", "allocation"] + ["mixed"] * mixed + ["split"] * opts["split"]
+    print(f"bounds: {' + '.join(names)}")
     print(f"machine: {machine()} ({platform.node()})")
 
     print("\n1. ch4-position, size 60 (N = 20, c = 5), median of", args.repeats, "calls")
     sys60 = scenarios.get("ch4-position").system
-    bnb, t_bnb = median_time(
-        lambda: branch_and_bound(sys60, 5, 20, mixed_bound=mixed), args.repeats
-    )
+    bnb, t_bnb = median_time(lambda: branch_and_bound(sys60, 5, 20, **opts), args.repeats)
     exs, t_exs = median_time(lambda: exhaustive(sys60, 5, 20), args.repeats)
     same = abs(bnb.value - exs.value) <= 1e-12 * exs.value
     print(f"  EXS {t_exs:.3f} s; B&B {t_bnb:.3f} s ({describe(bnb)})")
@@ -103,9 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         exs_here = not args.skip_exs and (system.n <= 2 or args.exs_grid)
         for objective in ("trace", "logdet"):
             t0 = time.perf_counter()
-            res = branch_and_bound(
-                system, 5, 6, objective, time_limit=args.time_limit, mixed_bound=mixed
-            )
+            res = branch_and_bound(system, 5, 6, objective, time_limit=args.time_limit, **opts)
             t_b = time.perf_counter() - t0
             line = f"  {name} {objective}: B&B {describe(res)}"
             ok = res.proved_optimal and t_b <= 10.0
@@ -128,9 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             big.append((name, sc, sc.budget or 5, sc.horizon or 6))
     for name, system, c, N in big:
         for objective in ("trace", "logdet"):
-            res = branch_and_bound(
-                system, c, N, objective, time_limit=args.time_limit, mixed_bound=mixed
-            )
+            res = branch_and_bound(system, c, N, objective, time_limit=args.time_limit, **opts)
             ok = res.proved_optimal or res.gap <= 0.01
             print(
                 f"  {name} {objective}: {describe(res)} (target ≤ 1 %: {'met' if ok else 'MISSED'})"

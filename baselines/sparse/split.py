@@ -55,6 +55,11 @@ ENUM_LIMIT = 1 << 22
 WEIGHT_WORK = 1 << 34
 # Sets per batch.
 CHUNK = 1 << 14
+# Largest (weights × sets) products one refinement step enumerates: with an earlier part to
+# bound (a new weight each), with none (a dot product each); and per batch.
+REFINE_LIMIT = 1 << 20
+LINEAR_LIMIT = 1 << 24
+PAIR_CHUNK = 1 << 13
 
 
 @dataclass(frozen=True)
@@ -120,13 +125,10 @@ class _Head:
         return np.where(np.isnan(out), np.inf, out)
 
 
-def _head(problem: SparseProblem, factors: np.ndarray, posts: np.ndarray) -> _Head | None:
-    """The head window's smoother terms (``None`` for a one-step window)."""
-    N = problem.horizon
-    if N < 2:
-        return None
-    head = SparseProblem(problem.system, budget=0, horizon=N - 1, objective="trace")
-    terms = pair_terms(head, factors, posts[:, : N - 1], 0, with_cross=True)
+def _head(problem: SparseProblem, factors: np.ndarray, posts: np.ndarray, end: int) -> _Head:
+    """Smoother terms of the window 0..``end`` (drops there, effect on ``P_end``)."""
+    head = SparseProblem(problem.system, budget=0, horizon=end + 1, objective="trace")
+    terms = pair_terms(head, factors, posts[:, : end + 1], 0, with_cross=True)
     c = terms.vectors[0]  # (L, nz, n)
     outer = np.einsum("lan,lam->lnm", c, c).reshape(len(c), -1)
     r_max = min(problem.budget, len(c))
@@ -135,14 +137,132 @@ def _head(problem: SparseProblem, factors: np.ndarray, posts: np.ndarray) -> _He
     srt = -np.sort(-cross, axis=1)
     for r in range(2, r_max + 1):
         omega[r] = srt[:, : r - 1].sum(axis=1).max()
-    every = np.empty_like(posts[:, : N - 1])
-    forward(head, every, np.ones((1, N - 1, problem.M), dtype=bool), 0)
-    full = (every[0, N - 2] - posts[0, N - 2]).reshape(-1)
+    every = np.empty_like(posts[:, : end + 1])
+    forward(head, every, np.ones((1, end + 1, problem.M), dtype=bool), 0)
+    full = (every[0, end] - posts[0, end]).reshape(-1)
     return _Head(outer, terms.lev[0], omega, full, cross)
 
 
+class _Step:
+    """Nominal quantities of step t: posterior, prediction information, Gram of its sensors."""
+
+    def __init__(self, problem: SparseProblem, factors: np.ndarray, posts: np.ndarray, t: int):
+        sys = problem.system
+        n, M, nz = sys.n, problem.M, factors.shape[2]
+        prev = posts[0, t - 1] if t >= 1 else problem.P_start
+        self.pred = predict_cov(prev, sys.F, sys.Q)
+        np.linalg.cholesky(self.pred)  # LinAlgError when singular: no tangent here
+        self.Y = spd_inv(self.pred)
+        self.P = posts[0, t]
+        U = factors.transpose(1, 0, 2).reshape(n, M * nz)
+        self.PU = self.P @ U
+        self.G = sym(U.T @ self.PU)
+        self.nz = nz
+
+    def drop(self, sets: np.ndarray) -> np.ndarray:
+        """(S, n, n) posterior of step t (nominal prior) after dropping each of ``sets``."""
+        S, b = sets.shape
+        if b == 0:
+            return np.broadcast_to(self.P, (S, *self.P.shape)).copy()
+        nz = self.nz
+        idx = (sets[:, :, None] * nz + np.arange(nz)).reshape(S, b * nz)
+        A = np.eye(b * nz) - self.G[idx[:, :, None], idx[:, None, :]]
+        V = self.PU[:, idx].transpose(1, 0, 2)  # (S, n, b·nz)
+        return sym(self.P + V @ np.linalg.solve(A, mT(V)))
+
+
+class _Split:
+    """The split bound's machinery: steps, heads and the recursive refinement."""
+
+    def __init__(self, problem: SparseProblem, factors: np.ndarray, deadline: float | None):
+        self.p = problem
+        self.factors = factors
+        self.deadline = deadline
+        N, n = problem.horizon, problem.system.n
+        self.posts = np.empty((1, N, n, n))
+        forward(problem, self.posts, np.zeros((1, N, problem.M), dtype=bool), 0)
+        self.steps: dict[int, _Step] = {}
+        self.heads: dict[int, _Head] = {}
+
+    def step(self, t: int) -> _Step:
+        if t not in self.steps:
+            self.steps[t] = _Step(self.p, self.factors, self.posts, t)
+        return self.steps[t]
+
+    def head(self, end: int) -> _Head:
+        if end not in self.heads:
+            self.heads[end] = _head(self.p, self.factors, self.posts, end)
+        return self.heads[end]
+
+    def late(self) -> bool:
+        return self.deadline is not None and time.perf_counter() > self.deadline
+
+    def counts(self, t: int, r: int) -> range:
+        """Drops at step t (largest first) when r drops go to steps 0..t."""
+        return range(min(r, self.p.M), max(0, r - t * self.p.M) - 1, -1)
+
+    def window(self, t: int, W: np.ndarray, r: int, need: np.ndarray, depth: int) -> np.ndarray:
+        """(S,) bound on ``max_{|H| = r, H ⊆ steps 0..t} tr(W_s (P_t(H) − P̂_t))``.
+
+        Rows whose cheap bound (smoother terms) is above ``need`` are refined by enumerating
+        step t's drop sets and recursing into steps 0..t−1 through the tangent (module
+        docstring), while ``depth`` lasts; every value returned is a valid bound.
+        """
+        S = len(W)
+        if r == 0:
+            return np.zeros(S)
+        M, F = self.p.M, self.p.system.F
+        if t == 0:  # one step from the fixed P_start: exact, no tangent
+            if comb(M, r) * S > ENUM_LIMIT:
+                return np.full(S, np.inf)
+            out = np.full(S, -np.inf)
+            st = self.step(0)
+            for sets in _subsets(M, r):
+                X = (st.drop(sets) - st.P).reshape(len(sets), -1)
+                out = np.maximum(out, (W.reshape(S, -1) @ X.T).max(axis=1))
+            return out
+        out = self.head(t).bound(W, r)
+        rows = np.nonzero(out > need)[0]
+        if depth <= 0 or len(rows) == 0 or self.late():
+            return out
+        try:
+            st = self.step(t)
+        except np.linalg.LinAlgError:
+            return out
+        inner = sum(comb(M, b) for b in self.counts(t, r) if b < r)
+        if len(rows) * inner > REFINE_LIMIT or len(rows) * comb(M, min(r, M)) > LINEAR_LIMIT:
+            return out
+        Wr, nr = W[rows], need[rows]
+        best = np.full(len(rows), -np.inf)
+        for b in self.counts(t, r):
+            for sets in _subsets(M, b, PAIR_CHUNK // len(rows)):
+                if self.late():
+                    return out
+                post = st.drop(sets)  # (D, n, n)
+                X = (post - st.P).reshape(len(sets), -1)
+                lin = Wr.reshape(len(rows), -1) @ X.T  # (rows, D)
+                if b < r:
+                    # tangent weights F' Y P_D W P_D Y F for every (row, set)
+                    A = st.Y @ post  # (D, n, n), A' = P_D Y
+                    Wn = mT(F) @ (A[None] @ Wr[:, None] @ mT(A)[None]) @ F
+                    inner = self.window(
+                        t - 1,
+                        Wn.reshape(-1, *W.shape[1:]),
+                        r - b,
+                        (nr[:, None] - lin).reshape(-1),
+                        depth - 1,
+                    ).reshape(lin.shape)
+                    lin = lin + inner
+                best = np.maximum(best, lin.max(axis=1))
+        out[rows] = np.minimum(out[rows], best)
+        return out
+
+
 def split_bound(
-    problem: SparseProblem, factors: np.ndarray | None = None, deadline: float | None = None
+    problem: SparseProblem,
+    factors: np.ndarray | None = None,
+    deadline: float | None = None,
+    depth: int = 3,
 ) -> SplitBound:
     """The split bound of ``problem`` (module docstring) and the best last-step attack.
 
@@ -151,86 +271,69 @@ def split_bound(
         factors: (M, n, nz) measurement factors (computed when not given).
         deadline: ``time.perf_counter()`` value after which the computation gives up (the
             bound is then ``inf``; the incumbent, found first, is kept).
+        depth: Earlier steps the refinement may enumerate below the last one.
 
     Returns:
         A :class:`SplitBound`; ``bound`` is ``inf`` when a last-step count it needs has more
         than :data:`ENUM_LIMIT` sets, the nominal prediction is singular, or the deadline passed.
     """
-    sys, N, M, c = problem.system, problem.horizon, problem.M, problem.budget
-    n = sys.n
+    N, M, c = problem.horizon, problem.M, problem.budget
     counts = range(min(c, M), max(0, c - (N - 1) * M) - 1, -1)  # b = c first: the incumbent
     if any(comb(M, b) > ENUM_LIMIT for b in counts):
         return SplitBound(np.inf, -np.inf, None)
     if factors is None:
         factors = measurement_factors(problem)
-    nz = factors.shape[2]
-    posts = np.empty((1, N, n, n))
-    forward(problem, posts, np.zeros((1, N, M), dtype=bool), 0)
-    prev = posts[0, N - 2] if N >= 2 else problem.P_start
-    pred = predict_cov(prev, sys.F, sys.Q)
+    work = _Split(problem, factors, deadline)
     try:
-        np.linalg.cholesky(pred)
+        last = work.step(N - 1)
     except np.linalg.LinAlgError:
         return SplitBound(np.inf, -np.inf, None)
-    Y = spd_inv(pred)
-    P = posts[0, N - 1]
-    U = factors.transpose(1, 0, 2).reshape(n, M * nz)
-    PU = P @ U
-    G = sym(U.T @ PU)
-    head = _head(problem, factors, posts)
-    F = sys.F
-    lam_pred = float(np.linalg.eigvalsh(pred)[-1])
-    uniform_W = mT(F) @ ((lam_pred * Y) if problem.objective == "trace" else Y) @ F
+    F, n = problem.system.F, problem.system.n
+    L = (N - 1) * M
+    trace = problem.objective == "trace"
+    lam_pred = float(np.linalg.eigvalsh(last.pred)[-1])
+    uniform_W = mT(F) @ ((lam_pred * last.Y) if trace else last.Y) @ F
 
-    best_bound, best_value, best_pairs = -np.inf, -np.inf, None
+    # b = c first: its best set is the incumbent, the target the refinement tries to beat
+    best_value, best_pairs, bound = -np.inf, None, -np.inf
     for b in counts:
         r = c - b
-        per_set = r > 0 and comb(M, b) * n * n * len(head.lev) <= WEIGHT_WORK
+        per_set = r > 0 and comb(M, b) * n * n * L <= WEIGHT_WORK
         count_best = -np.inf
-        for chunk in _subsets(M, b):
-            if deadline is not None and time.perf_counter() > deadline:
+        for sets in _subsets(M, b):
+            if work.late():
                 return SplitBound(np.inf, best_value, best_pairs)
-            values, post = _drop(problem, P, PU, G, chunk, nz)
-            if per_set:
-                grad = Y @ (post @ post if problem.objective == "trace" else post) @ Y
-                values = values + head.bound(mT(F) @ grad @ F, r)
+            post = last.drop(sets)
+            values = objective(post, problem.objective)
             i = int(np.argmax(values))
-            if values[i] > count_best:
-                count_best = float(values[i])
-                if r == 0:
-                    best_value = count_best
-                    best_pairs = [(N - 1, int(s)) for s in chunk[i]]
-        if r > 0 and not per_set:
-            count_best += float(head.bound(uniform_W[None], r)[0])
-        best_bound = max(best_bound, count_best)
-    scale = abs(best_bound) if problem.objective == "trace" else max(abs(best_bound), 1.0)
-    return SplitBound(best_bound + SAFETY * scale, best_value, best_pairs)
+            count_best = max(count_best, float(values[i]))
+            if r == 0:
+                if values[i] > best_value:
+                    best_value = float(values[i])
+                    best_pairs = [(N - 1, int(s)) for s in sets[i]]
+            elif per_set:
+                grad = last.Y @ (post @ post if trace else post) @ last.Y
+                W = mT(F) @ grad @ F
+                tangent = work.window(N - 2, W, r, best_value - values, depth)
+                bound = max(bound, float((values + tangent).max()))
+        if r == 0:
+            bound = max(bound, count_best)
+        elif not per_set:
+            need = np.array([best_value - count_best])
+            bound = max(
+                bound, count_best + float(work.window(N - 2, uniform_W[None], r, need, depth)[0])
+            )
+    if work.late():
+        return SplitBound(np.inf, best_value, best_pairs)
+    scale = abs(bound) if trace else max(abs(bound), 1.0)
+    return SplitBound(bound + SAFETY * scale, best_value, best_pairs)
 
 
-def _subsets(M: int, b: int):
-    """Chunks (≤ :data:`CHUNK`, b) of every b-subset of range(M), lexicographic."""
+def _subsets(M: int, b: int, chunk: int = CHUNK):
+    """Chunks (≤ ``chunk``, b) of every b-subset of range(M), lexicographic."""
     it = itertools.combinations(range(M), b)
     while True:
-        rows = list(itertools.islice(it, CHUNK))
+        rows = list(itertools.islice(it, max(1, chunk)))
         if not rows:
             return
         yield np.array(rows, dtype=np.intp).reshape(len(rows), b)
-
-
-def _drop(
-    problem: SparseProblem,
-    P: np.ndarray,
-    PU: np.ndarray,
-    G: np.ndarray,
-    sets: np.ndarray,
-    nz: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Φ and the last posterior after dropping each of ``sets`` (S, b) at the last step."""
-    S, b = sets.shape
-    if b == 0:
-        return np.full(S, objective(P, problem.objective)), np.broadcast_to(P, (S, *P.shape))
-    idx = (sets[:, :, None] * nz + np.arange(nz)).reshape(S, b * nz)
-    A = np.eye(b * nz) - G[idx[:, :, None], idx[:, None, :]]
-    V = PU[:, idx].transpose(1, 0, 2)  # (S, n, b·nz)
-    post = sym(P + V @ np.linalg.solve(A, mT(V)))
-    return objective(post, problem.objective), post
