@@ -73,6 +73,7 @@ def init_ray(run: RunSettings) -> None:
 
     Raises:
         ImportError: Without ray (naming the ``fdia-env[rllib]`` extra).
+        ConnectionError: When the cluster cannot be reached (with the token-auth hint).
     """
     require_ray()
     import ray
@@ -80,7 +81,15 @@ def init_ray(run: RunSettings) -> None:
     if ray.is_initialized():
         return
     if run.ray_address is not None:
-        ray.init(address=run.ray_address, include_dashboard=False)
+        try:
+            ray.init(address=run.ray_address, include_dashboard=False)
+        except ConnectionError as exc:
+            raise ConnectionError(
+                f"{exc} (--ray-address {run.ray_address}): is `ray start --head` running there? "
+                "A cluster with token authentication (Ray's default once ~/.ray/auth_token "
+                "exists) needs RAY_AUTH_MODE=token here, and the head's token in "
+                "~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN"
+            ) from exc
     else:
         ray.init(num_cpus=run.num_cpus, include_dashboard=False)
 
