@@ -474,3 +474,16 @@ def test_psro_resume_rebuilds_earlier_policies_from_weights_only_files(local_ray
         for record in state["policies"][side]:
             payload = torch.load(more.run_dir / "policies" / record["file"], weights_only=True)
             assert set(payload) == {"state_dicts", "variables"}
+
+
+def test_resume_with_other_options_lists_each_difference(one_iteration_run, tmp_path, capsys):
+    import train
+
+    run_dir = _copy_run(one_iteration_run, tmp_path)
+    code = train.cli(["attacker", "--backend", "rllib", "--resume", "--run-dir", str(run_dir),
+                      "--n-steps", "300", "--ent-coef", "0.01"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "options differ from its config.json" in err
+    assert "n-steps: saved 200, given 300" in err and "ent-coef: saved None, given 0.01" in err
+    assert not (run_dir / "progress.jsonl").read_text().count("\n") > 1  # nothing trained
