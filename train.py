@@ -37,7 +37,8 @@ DESCRIPTION = "\n\n".join(
         "python train.py attacker --resume (continues the latest run of that env, algo, seed).",
         "--backend rllib runs the attacker, defender and game commands on Ray RLlib (PPO; "
         "--num-env-runners K, --ray-address ADDR for a running cluster; game adds --method "
-        "selfplay, both players learning at once); sweep runs a Ray Tune grid over seeds, "
+        "selfplay, both players learning at once; --resume continues a run from its saved "
+        "weights, optimizer state and counters); sweep runs a Ray Tune grid over seeds, "
         "scenarios and hyperparameters. Both need the fdia-env[rllib] extra.",
         "Checkpoints hold tensors and JSON only and load without unpickling; --trust-checkpoint "
         "allows resuming runs saved as stable-baselines3 .zip files (pickle: can run code). "
@@ -107,7 +108,10 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
     from agents.checkpoint import read_json
     from agents.runs import config_from_dict, resume_dir
 
-    if isinstance(cfg, GameConfig):
+    if cfg.run.backend == "rllib":
+        from agents.rllib.state import STATE as marker
+        from agents.rllib.train import rllib_prefix as prefix_of
+    elif isinstance(cfg, GameConfig):
         from agents.selfplay import STATE as marker
         from agents.selfplay import game_prefix as prefix_of
     else:
@@ -165,6 +169,11 @@ def main(argv: Sequence[str] | None = None) -> object:
         from agents.rllib.sweep import run_sweep
 
         return run_sweep(cfg)
+    if cfg.run.resume and cfg.run.run_dir is not None and _backend_of(cfg.run.run_dir) == "rllib":
+        if cfg.run.backend != "rllib":
+            raise ValueError(
+                f"{cfg.run.run_dir} is an RLlib run: resume it with --backend rllib --resume"
+            )
     rllib = cfg.run.backend == "rllib"
     if rllib:
         from agents.rllib import require_ray
@@ -172,7 +181,7 @@ def main(argv: Sequence[str] | None = None) -> object:
         require_ray()
     elif isinstance(cfg, GameConfig) and cfg.method == "selfplay":
         raise ValueError("--method selfplay (both players learning at once) needs --backend rllib")
-    if cfg.run.resume and not rllib:
+    if cfg.run.resume:
         cfg = with_saved_options(cfg, argv)
     if isinstance(cfg, GameConfig):
         if rllib:
@@ -216,6 +225,7 @@ def main(argv: Sequence[str] | None = None) -> object:
         print(
             f"\nRLlib PPO {cfg.agent} on {learned.env_id}, {result.timesteps} steps in "
             f"{len(result.history)} iterations, {result.train_seconds:.0f} s (seed {cfg.run.seed})"
+            + (" (resumed)" if result.resumed else "")
             + (" (interrupted)" if result.interrupted else "")
             + (f"; last iteration's mean return: {returns}" if returns else "")
         )
@@ -283,13 +293,7 @@ def cli(argv: Sequence[str] | None = None) -> int:
     if signum is None:
         return 0
     name = signal.Signals(signum).name
-    if _backend_of(result.run_dir) == "rllib":
-        print(
-            f"train.py: stopped by {name}; the scores so far are saved in {result.run_dir} "
-            "(--backend rllib runs cannot be resumed)",
-            file=sys.stderr,
-        )
-        return exit_status(signum)
+    rllib = _backend_of(result.run_dir) == "rllib"
     if hasattr(result, "populations"):  # the game command
         if not result.history:
             print(
@@ -299,14 +303,18 @@ def cli(argv: Sequence[str] | None = None) -> int:
             )
             return exit_status(signum)
         done = f"{len(result.history)} iterations"
-        what = "state, policies and scores"
+        what = "state and scores" if rllib else "state, policies and scores"
+    elif rllib:
+        done = f"{result.timesteps} steps"
+        what = "state and scores"
     else:
         done = f"{result.model.num_timesteps} steps"
         what = "checkpoint, model and scores"
     command = next((a for a in (sys.argv[1:] if argv is None else argv) if a in COMMANDS), "")
+    backend = " --backend rllib" if rllib else ""
     print(
         f"train.py: stopped by {name} after {done}; {what} saved in {result.run_dir}; "
-        f"continue with: python train.py {command} --resume --run-dir {result.run_dir}",
+        f"continue with: python train.py {command}{backend} --resume --run-dir {result.run_dir}",
         file=sys.stderr,
     )
     return exit_status(signum)

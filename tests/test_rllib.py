@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -212,3 +213,277 @@ def test_an_iteration_that_samples_nothing_raises_naming_the_timeout():
     ok = {"env_runners": {"num_env_steps_sampled": 1000, "episode_return_mean": 0.03}}
     report(result=ok)
     assert ok["agent_returns"] == {"attacker": 0.03}  # the view's player, not "default_agent"
+
+
+# ---------------------------------------------------------------------------- --resume
+
+TINY_RUN = ["--n-steps", "200", "--batch-size", "100", "--n-epochs", "1",
+            "--final-eval-episodes", "2", "--no-progress-bar", "--num-cpus", "2"]  # fmt: skip
+
+
+class Evil:
+    """Unpickling it creates ``marker`` (what a crafted pickle in a run folder could do)."""
+
+    def __init__(self, marker) -> None:
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        import pathlib
+
+        return (pathlib.Path.touch, (pathlib.Path(self.marker),))
+
+
+@pytest.fixture(scope="module")
+def one_iteration_run(local_ray, tmp_path_factory):
+    """A finished 1-iteration RLlib attacker run (200-step train batch); copy it to change it."""
+    import train
+
+    root = tmp_path_factory.mktemp("rllib_runs")
+    result = train.main(
+        ["attacker", "--backend", "rllib", "--total-timesteps", "200", *TINY_RUN,
+         "--runs-root", str(root)]
+    )  # fmt: skip
+    return result
+
+
+def _copy_run(result, tmp_path):
+    import shutil
+
+    dst = tmp_path / "runs" / result.run_dir.name
+    shutil.copytree(result.run_dir, dst)
+    (dst / ".lock").unlink(missing_ok=True)
+    return dst
+
+
+def test_state_round_trip_restores_weights_optimizer_kl_and_the_lr_schedule(local_ray, tmp_path):
+    import torch
+
+    from agents.rllib.config import ppo_config
+    from agents.rllib.state import module_weights, read_state, restore_state, save_state
+
+    def build(seed):
+        return ppo_config(
+            "fdia_env/SparseAttack-v0", {"scenario": "ch4-position"},
+            hp=Hyperparameters(n_steps=200, batch_size=100, n_epochs=1),
+            total_timesteps=2000, seed=seed,
+        ).build_algo()  # fmt: skip
+
+    first = build(0)
+    try:
+        s1 = first.train()["env_runners"]["num_env_steps_sampled"]
+        save_state(first, tmp_path, {"timesteps": int(s1)})
+        saved_w = module_weights(first, "default_policy")
+        learner = first.learner_group._learner
+        (opt,) = learner._named_optimizers.values()
+        saved_opt = opt.state_dict()["state"]  # per parameter index: Adam's step and moments
+        assert len(saved_opt) == 8 and float(saved_opt[0]["step"]) > 0
+        saved_kl = float(learner.curr_kl_coeffs_per_module["default_policy"])
+    finally:
+        first.stop()
+    second = build(7)
+    try:
+        fresh = module_weights(second, "default_policy")
+        assert not all(torch.equal(fresh[k], v) for k, v in saved_w.items())  # test premise
+        meta, payload = read_state(tmp_path)
+        restore_state(second, meta, payload, tmp_path)
+        for got in (module_weights(second, "default_policy"), second.get_module().state_dict()):
+            for k, v in got.items():  # learner and (inference-only) env-runner module
+                assert torch.equal(v, saved_w[k]), k
+        learner = second.learner_group._learner
+        (opt,) = learner._named_optimizers.values()
+        got_opt = opt.state_dict()["state"]
+        assert sorted(got_opt) == sorted(saved_opt)
+        for i, st in saved_opt.items():
+            for k, v in st.items():
+                assert torch.equal(got_opt[i][k], v), (i, k)
+        assert float(learner.curr_kl_coeffs_per_module["default_policy"]) == saved_kl
+        assert second.iteration == 1
+        # the linear schedule 1e-3 -> 0 over 2000 steps continues from the saved step count
+        assert opt.param_groups[0]["lr"] == pytest.approx(1e-3 * (1 - s1 / 2000), rel=1e-6)
+        result = second.train()
+        s2 = result["env_runners"]["num_env_steps_sampled"]
+        assert result["training_iteration"] == 2
+        lr = result["learners"]["default_policy"]["default_optimizer_learning_rate"]
+        assert lr == pytest.approx(1e-3 * (1 - (s1 + s2) / 2000), rel=1e-6)
+    finally:
+        second.stop()
+
+
+def test_resume_continues_counters_from_the_saved_weights_and_never_reads_pickles(
+    one_iteration_run, tmp_path, monkeypatch
+):
+    import torch
+
+    import agents.rllib.state as state_module
+    import train
+
+    run_dir = _copy_run(one_iteration_run, tmp_path)
+    marker = tmp_path / "pwned"
+    pickles = sorted((run_dir / "checkpoint").rglob("*.pkl"))  # RLlib's own checkpoint
+    assert pickles  # test premise: the run folder holds RLlib's pickles
+    for path in pickles:
+        path.write_bytes(pickle.dumps(Evil(marker)))
+    saved = torch.load(run_dir / "rllib_state.pt", weights_only=True)["state_dicts"]
+    restored = {}
+    real_restore = state_module.restore_state
+
+    def spy(algo, meta, payload, source):
+        real_restore(algo, meta, payload, source)
+        restored.update(state_module.module_weights(algo, "default_policy"))
+
+    monkeypatch.setattr(state_module, "restore_state", spy)
+    steps1 = one_iteration_run.timesteps
+    more = train.main(
+        ["attacker", "--backend", "rllib", "--resume", "--total-timesteps", str(steps1 + 1),
+         "--no-progress-bar", "--runs-root", str(tmp_path / "runs")]
+    )  # fmt: skip
+    assert not marker.exists()
+    assert more.run_dir == run_dir and more.resumed
+    assert set(restored) == set(saved["rl_module/default_policy"])
+    for k, v in saved["rl_module/default_policy"].items():
+        assert torch.equal(restored[k], v), k  # before training went on
+    assert [h["iteration"] for h in more.history] == [1, 2]
+    steps = [h["timesteps"] for h in more.history]
+    assert steps[0] == steps1 and steps1 < steps[1] == more.timesteps <= steps1 + 256
+    assert more.train_seconds >= one_iteration_run.train_seconds
+    scores = json.loads((run_dir / "scores.json").read_text())
+    assert scores["iterations"] == 2 and scores["timesteps"] == steps[1] and scores["resumed"]
+    state = json.loads((run_dir / "rllib_state.json").read_text())
+    assert state["timesteps"] == steps[1] and state["iteration"] == 2 and state["records"] == 2
+    lifetime = state["lifetime_stats"]["env_runners--num_env_steps_sampled_lifetime"]
+    assert lifetime["lifetime_sum"] == steps[1]  # RLlib's own counter continued, too
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == [run_dir.name]
+
+
+def test_a_pickle_in_the_state_tensor_file_is_refused_even_when_trusted(
+    one_iteration_run, tmp_path, capsys
+):
+    import hashlib
+
+    import torch
+
+    import train
+
+    run_dir = _copy_run(one_iteration_run, tmp_path)
+    marker = tmp_path / "pwned"
+    tensors = run_dir / "rllib_state.pt"
+    torch.save({"state_dicts": {"rl_module/default_policy": Evil(marker)}, "variables": {}},
+               tensors)  # fmt: skip
+    state = json.loads((run_dir / "rllib_state.json").read_text())
+    state["sha256"] = hashlib.sha256(tensors.read_bytes()).hexdigest()  # a consistent forgery
+    (run_dir / "rllib_state.json").write_text(json.dumps(state))
+    for extra in ([], ["--trust-checkpoint"]):
+        code = train.cli(
+            ["attacker", "--backend", "rllib", "--resume", "--run-dir", str(run_dir),
+             "--total-timesteps", "1000", *extra]
+        )  # fmt: skip
+        err = capsys.readouterr().err
+        assert code == 2
+        assert "is not a weights-only torch file and was not loaded" in err
+        assert not marker.exists()
+    data = bytearray(tensors.read_bytes())
+    data[-1] ^= 1
+    tensors.write_bytes(bytes(data))  # changed after its SHA-256 was recorded
+    assert train.cli(["attacker", "--backend", "rllib", "--resume", "--run-dir", str(run_dir)]) == 2
+    assert "does not match the SHA-256" in capsys.readouterr().err
+
+
+def test_resume_without_a_saved_state_names_what_is_missing(tmp_path, capsys):
+    import train
+
+    assert train.cli(["attacker", "--backend", "rllib", "--resume",
+                      "--runs-root", str(tmp_path)]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "nothing to resume" in err and "rllib_state.json" in err
+    assert "sparse_attack_v0-rllib-PPO-s0" in err
+
+
+def test_sigint_stops_after_the_iteration_and_leaves_a_resumable_state(local_ray, tmp_path, capsys):
+    import os
+    import signal
+    import threading
+    import time
+
+    import train
+    from agents.rllib.state import read_state
+
+    def watch():
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if list((tmp_path / "runs").glob("*/progress.jsonl")):
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    code = train.cli(
+        ["attacker", "--backend", "rllib", "--total-timesteps", "100000000", *TINY_RUN,
+         "--runs-root", str(tmp_path / "runs")]
+    )  # fmt: skip
+    thread.join()
+    err = capsys.readouterr().err
+    assert code == 130
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    meta, _ = read_state(run_dir)
+    progress = [json.loads(line) for line in (run_dir / "progress.jsonl").read_text().splitlines()]
+    scores = json.loads((run_dir / "scores.json").read_text())
+    assert 1 <= meta["records"] == len(progress) == scores["iterations"] == meta["iteration"]
+    assert 0 < meta["timesteps"] == progress[-1]["timesteps"] == scores["timesteps"] < 10**8
+    assert scores["interrupted"] == signal.SIGINT
+    assert err.strip().splitlines()[-1] == (
+        f"train.py: stopped by SIGINT after {meta['timesteps']} steps; state and scores saved "
+        f"in {run_dir}; continue with: python train.py attacker --backend rllib --resume "
+        f"--run-dir {run_dir}"
+    )
+
+
+def test_psro_resume_rebuilds_earlier_policies_from_weights_only_files(local_ray, tmp_path):
+    import torch
+
+    import train
+    from baselines.game import exploitability, payoff_matrix
+    from fdia_env import sensor_game_v0
+
+    args = ["game", "--backend", "rllib", "--method", "psro", "--steps-per-iteration", "200",
+            "--no-progress-bar", "--runs-root", str(tmp_path)]  # fmt: skip
+    tiny = ["--n-steps", "200", "--batch-size", "100", "--n-epochs", "1",
+            "--final-eval-episodes", "2"]  # fmt: skip
+    first = train.main([*args, *tiny, "--iterations", "1"])
+    meta1 = json.loads((first.run_dir / "scores.json").read_text())["meta_payoff"]
+    more = train.main([*args, "--resume", "--iterations", "2"])
+    assert more.run_dir == first.run_dir
+    assert [h["iteration"] for h in more.history] == [1, 2]
+    assert [h["timesteps"] for h in more.history] == [400, 800]
+    scores = json.loads((more.run_dir / "scores.json").read_text())
+    meta = np.array(scores["meta_payoff"])
+    assert meta.shape == (2, 2) and meta[0, 0] == meta1[0][0]
+    # one-shot game, deterministic policies: each meta entry is the payoff of the pure pair; the
+    # new row and column were played against the earlier policies rebuilt from their files
+    pops = scores["populations"]
+    p = sensor_game_v0.parallel_env(scenario="ch5-game")
+    L = payoff_matrix(p.scenario, p.attack.power, p.attack.allocation)
+    for i in range(2):
+        for j in range(2):
+            assert meta[i, j] == pytest.approx(L[pops["defender"][i], pops["attacker"][j]],
+                                               rel=1e-9)  # fmt: skip
+    e = exploitability(L, more.x, more.y, more.value)
+    assert more.history[-1]["nash_conv"] == pytest.approx(e.nash_conv, rel=1e-12)
+    state = json.loads((more.run_dir / "rllib_state.json").read_text())
+    for side in ("attacker", "defender"):
+        for record in state["policies"][side]:
+            payload = torch.load(more.run_dir / "policies" / record["file"], weights_only=True)
+            assert set(payload) == {"state_dicts", "variables"}
+
+
+def test_resume_with_other_options_lists_each_difference(one_iteration_run, tmp_path, capsys):
+    import train
+
+    run_dir = _copy_run(one_iteration_run, tmp_path)
+    code = train.cli(["attacker", "--backend", "rllib", "--resume", "--run-dir", str(run_dir),
+                      "--n-steps", "300", "--ent-coef", "0.01"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "options differ from its config.json" in err
+    assert "n-steps: saved 200, given 300" in err and "ent-coef: saved None, given 0.01" in err
+    assert not (run_dir / "progress.jsonl").read_text().count("\n") > 1  # nothing trained

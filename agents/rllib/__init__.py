@@ -9,6 +9,8 @@ the ``fdia-env[rllib]`` extra (``pip install -e ".[rllib]"``).
   settings these one-step and few-step episodes need (see its docstring for the figures);
 - :mod:`agents.rllib.train`: ``train.py attacker|defender|game --backend rllib``: training,
   per-agent returns, zero-step sampling check, scoring by :func:`agents.evaluate.evaluate`;
+- :mod:`agents.rllib.state`: what ``--resume`` reads: RL-module weights, optimizer state and
+  counters as tensors (``torch.load(weights_only=True)``) and JSON, never a pickle;
 - :mod:`agents.rllib.sweep`: ``train.py sweep``: a Ray Tune sweep over seeds, scenarios and
   hyperparameters, one results table.
 """

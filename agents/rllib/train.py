@@ -7,10 +7,13 @@
   half of the run (simultaneous gradient play orbits the equilibrium; its average converges).
 
 A run folder ``runs/<env>[-<agent>]-rllib-PPO-s<seed>-<time>/`` holds ``config.json``,
-``progress.jsonl`` (one line per iteration: steps, per-agent returns, seconds), ``scores.json``
-and ``checkpoint/`` (RLlib's ``Algorithm.save_to_path``; restore with
-``Algorithm.from_checkpoint``). SIGINT/SIGTERM stop after the current iteration; the scores are
-still written. ``--resume`` is not supported with this backend.
+``progress.jsonl`` (one line per iteration: steps, per-agent returns, seconds), ``scores.json``,
+``rllib_state.json``/``rllib_state.pt`` (what ``--resume`` reads: weights, optimizer state and
+counters as tensors and JSON, :mod:`agents.rllib.state`) and ``checkpoint/`` (RLlib's own
+``Algorithm.save_to_path``, for ``Algorithm.from_checkpoint``; it holds pickles and ``--resume``
+never reads it). SIGINT/SIGTERM stop after the current iteration; the state and the scores are
+still written, and ``--resume`` continues the run (PSRO with RLlib best responses cannot resume:
+its policies live in memory only).
 """
 
 from __future__ import annotations
@@ -30,7 +33,19 @@ from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
 from agents.evaluate import Evaluation
 from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
-from agents.runs import config_dict, new_run_dir, removed_unless, run_lock, run_prefix, write_json
+from agents.rllib.state import STATE, load_module, save_module
+from agents.runs import (
+    check_resumable,
+    config_dict,
+    new_run_dir,
+    read_jsonl,
+    remove_stale_temp_files,
+    removed_unless,
+    resume_dir,
+    run_lock,
+    run_prefix,
+    write_json,
+)
 from agents.seeding import derived_seed, seed_everything
 
 ALGO = "PPO"
@@ -58,6 +73,7 @@ def init_ray(run: RunSettings) -> None:
 
     Raises:
         ImportError: Without ray (naming the ``fdia-env[rllib]`` extra).
+        ConnectionError: When the cluster cannot be reached (with the token-auth hint).
     """
     require_ray()
     import ray
@@ -65,7 +81,15 @@ def init_ray(run: RunSettings) -> None:
     if ray.is_initialized():
         return
     if run.ray_address is not None:
-        ray.init(address=run.ray_address, include_dashboard=False)
+        try:
+            ray.init(address=run.ray_address, include_dashboard=False)
+        except ConnectionError as exc:
+            raise ConnectionError(
+                f"{exc} (--ray-address {run.ray_address}): is `ray start --head` running there? "
+                "A cluster with token authentication (Ray's default once ~/.ray/auth_token "
+                "exists) needs RAY_AUTH_MODE=token here, and the head's token in "
+                "~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or RAY_AUTH_TOKEN"
+            ) from exc
     else:
         ray.init(num_cpus=run.num_cpus, include_dashboard=False)
 
@@ -95,7 +119,8 @@ class RLlibTrainResult:
         evaluations: Final evaluations by row name (learned, analytic answer, random).
         history: One record per RLlib iteration (steps, per-agent returns, seconds).
         timesteps: Env steps sampled.
-        train_seconds: Wall time of the iterations.
+        train_seconds: Wall time of the iterations (across resumes).
+        resumed: Whether the run continued a saved state.
         interrupted: The signal that stopped training early, or None.
     """
 
@@ -105,29 +130,36 @@ class RLlibTrainResult:
     history: list[dict[str, Any]] = field(default_factory=list)
     timesteps: int = 0
     train_seconds: float = 0.0
+    resumed: bool = False
     interrupted: int | None = None
 
 
 def _iterate(
     algo: Any,
     total_steps: int,
-    run_dir: Path,
+    run: Session,
     stop: Any,
     on_iteration: Callable[[dict[str, Any]], None] | None = None,
     progress: bool = False,
     desc: str = "",
+    checkpoint_every: int = 0,
 ) -> tuple[list[dict[str, Any]], int, float]:
-    """Train until ``total_steps`` env steps (or a stop request); write progress.jsonl."""
+    """Train until ``total_steps`` env steps (or a stop request); write progress.jsonl.
+
+    Continues ``run``'s history, steps and seconds (a resumed run's). The resumable state is
+    saved every ``checkpoint_every`` env steps (0: never here) and, whatever the reason the loop
+    ends (done, or a stop request), once at its end, before the caller's final evaluation.
+    """
     from agents.rllib.config import agent_returns, steps_sampled
     from agents.runs import write_jsonl
 
-    history: list[dict[str, Any]] = []
-    steps, seconds = 0, 0.0
+    history = run.history
+    steps, seconds = run.steps, run.seconds
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=total_steps, desc=desc, unit="step")
+        bar = tqdm(total=total_steps, initial=min(steps, total_steps), desc=desc, unit="step")
     while steps < total_steps and not stop.requested:
         start = time.perf_counter()
         result = algo.train()
@@ -143,23 +175,167 @@ def _iterate(
         if on_iteration is not None:
             on_iteration(rec)
         history.append(rec)
-        write_jsonl(run_dir / "progress.jsonl", history)
+        write_jsonl(run.run_dir / "progress.jsonl", history)
+        if checkpoint_every and steps // checkpoint_every > (steps - n) // checkpoint_every:
+            run.save(algo, steps, seconds)
         if bar is not None:
             bar.update(n)
     if bar is not None:
         bar.close()
+    run.save(algo, steps, seconds)
     return history, steps, seconds
+
+
+@dataclass
+class Session:
+    """A run folder being trained in: a new one, or a resumed one with its saved state.
+
+    Attributes:
+        run_dir: The run folder.
+        meta: The resumed state's description (``rllib_state.json``), or None for a new run.
+        payload: The resumed state's tensors, or None.
+        history: The progress records up to the saved state (``progress.jsonl``).
+        steps: Env steps sampled so far.
+        seconds: Training seconds so far.
+        extra: Loop state to save with the next checkpoint (:meth:`save`).
+    """
+
+    run_dir: Path
+    meta: dict[str, Any] | None = None
+    payload: dict[str, Any] | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
+    steps: int = 0
+    seconds: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def resumed(self) -> bool:
+        """Whether the run continues a saved state."""
+        return self.meta is not None
+
+    def seed(self, seed: int) -> int:
+        """RLlib's seed: the run's, or a fresh one derived from it after a resume."""
+        return derived_seed(seed, self.steps) if self.resumed else seed
+
+    def save(self, algo: Any, steps: int, seconds: float) -> None:
+        """Write the resumable state (:func:`agents.rllib.state.save_state`)."""
+        from agents.rllib.state import save_state
+
+        extra = {
+            "timesteps": steps,
+            "train_seconds": seconds,
+            "records": len(self.history),
+            **self.extra,
+        }
+        if algo is None:
+            from agents.rllib.state import FORMAT
+
+            write_json(self.run_dir / STATE, {"format": FORMAT, "algorithm": None, **extra})
+        else:
+            save_state(algo, self.run_dir, extra)
+
+
+def rllib_prefix(cfg: TrainConfig | GameConfig) -> str:
+    """Run folder name without its time: ``<env>[-<agent>|-<method>]-rllib-PPO-s<seed>``."""
+    if isinstance(cfg, GameConfig):
+        return run_prefix(f"{cfg.env}-{cfg.method}", f"rllib-{ALGO}", cfg.run.seed)
+    entry = get(cfg.env, cfg.agent)
+    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
+    return run_prefix(name, f"rllib-{ALGO}", cfg.run.seed)
+
+
+def open_run(
+    cfg: TrainConfig | GameConfig,
+    stack: ExitStack,
+    report: Callable[[str], None] | None = print,
+    with_algorithm: bool = True,
+) -> Session:
+    """The run folder of ``cfg``: a new one's path (not created yet), or the one to resume.
+
+    On ``--resume``: the folder (``--run-dir``, or the latest of this env, method or agent and
+    seed that holds ``rllib_state.json``) is locked, its config.json must agree with ``cfg``
+    (except the training length and how it runs), and its state is read and checked, never
+    unpickled (:func:`agents.rllib.state.read_state`); the progress records after the state
+    are dropped.
+
+    Raises:
+        ValueError: Nothing to resume, a run of another backend, options that differ, or a
+            corrupt, foreign or pickled state file.
+        FileExistsError: When a new run's folder exists.
+    """
+    from agents.checkpoint import read_json
+
+    say = report or (lambda line: None)
+    if not cfg.run.resume:
+        return Session(new_run_dir(cfg.run.runs_root, cfg.run.run_dir, rllib_prefix(cfg)))
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, rllib_prefix(cfg), STATE)
+    stack.enter_context(run_lock(run_dir))
+    saved = read_json(run_dir / "config.json", "run config")
+    if (saved.get("resolved") or {}).get("backend") != "rllib":
+        raise ValueError(f"cannot resume {run_dir} with --backend rllib: it is not an RLlib run")
+    check_resumable(saved.get("config", {}), config_dict(cfg), run_dir)
+    for stale in remove_stale_temp_files(run_dir):
+        say(f"removed a temporary file left by an interrupted write: {stale}")
+    if with_algorithm:
+        from agents.rllib.state import read_state
+
+        meta, payload = read_state(run_dir)
+    else:
+        from agents.checkpoint import read_json as read_meta
+
+        meta, payload = read_meta(run_dir / STATE, "RLlib state"), None
+    for key, kind in (("timesteps", int), ("train_seconds", float), ("records", int)):
+        value = meta.get(key)
+        if isinstance(value, bool) or not isinstance(value, kind | int) or value < 0:
+            raise ValueError(f"RLlib state {run_dir / STATE} is corrupt: {key!r} is {value!r}")
+    history = read_jsonl(run_dir / "progress.jsonl")[: meta["records"]]
+    if len(history) != meta["records"]:
+        raise ValueError(
+            f"cannot resume {run_dir}: progress.jsonl has {len(history)} records, its state "
+            f"{meta['records']}"
+        )
+    done = len(history)
+    say(
+        f"resuming {run_dir} from its state after {done} iteration{'s' * (done != 1)}, "
+        f"{meta['timesteps']} steps"
+    )
+    return Session(
+        run_dir, meta, payload, history, int(meta["timesteps"]), float(meta["train_seconds"])
+    )
+
+
+def begin(session: Session, algo: Any, stack: ExitStack) -> None:
+    """Start training in ``session``'s folder.
+
+    A new run: create and lock its folder (removed if it fails before its first state); a
+    resumed one: load its saved state into ``algo`` (None: a loop without an algorithm).
+    """
+    if session.resumed:
+        if algo is not None:
+            from agents.rllib.state import restore_state
+
+            restore_state(algo, session.meta, session.payload, session.run_dir / STATE)
+        return
+    session.run_dir.mkdir(parents=True)
+    stack.enter_context(removed_unless(session.run_dir, STATE))
+    stack.enter_context(run_lock(session.run_dir))
 
 
 def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Any:
     """Train ``cfg.agent`` of ``cfg.env`` with RLlib PPO, evaluate it, write the run folder.
 
+    With ``cfg.run.resume`` the run continues (:func:`open_run`): the algorithm is rebuilt from
+    its config, the saved weights, optimizer state and counters are loaded into it, and it
+    trains up to ``cfg.total_timesteps`` in all. The state is saved every
+    ``cfg.checkpoint_freq`` env steps and at the end (also when SIGINT/SIGTERM stop the run
+    after the current iteration).
+
     Raises:
         ImportError: Without ray (naming the ``fdia-env[rllib]`` extra).
         ValueError: For an unknown env or scenario, an algorithm other than PPO, a
-            hyperparameter that does not apply, an env option the env does not take, or
-            ``--resume``.
-        FileExistsError: When the run folder exists.
+            hyperparameter that does not apply, an env option the env does not take, nothing
+            to resume, a resume whose options differ, or a corrupt or pickled state file.
+        FileExistsError: When a new run's folder exists.
         agents.rllib.ZeroStepsSampled: When an iteration sampled nothing.
     """
     from agents.interrupt import stop_on_signals
@@ -168,22 +344,18 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
     from agents.rllib.policy import policy_of
     from agents.training import check_env_kwargs, final_evaluations
 
-    if cfg.run.resume:
-        raise ValueError("--resume is not supported with --backend rllib; start a new run")
     check_algo(cfg.algo)
     entry = get(cfg.env, cfg.agent)
     hyperparameters = rllib_hyperparameters(cfg.hp)
     env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(entry.gym_id, env_kwargs)
-    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
-    run_dir = new_run_dir(
-        cfg.run.runs_root, cfg.run.run_dir, run_prefix(name, f"rllib-{ALGO}", cfg.run.seed)
-    )
     env_config, eval_env = env_config_of(entry, env_kwargs, cfg.opponent)
     with ExitStack() as stack:
         stack.callback(eval_env.close)
+        run = open_run(cfg, stack, report)
+        run_dir = run.run_dir
         reference = entry.reference_of(eval_env)
-        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        seed_everything(run.seed(cfg.run.seed), cfg.run.torch_threads)
         init_ray(cfg.run)
         config = _with_run(
             ppo_config(
@@ -192,7 +364,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
                 hp=cfg.hp,
                 num_env_runners=cfg.run.num_env_runners,
                 envs_per_env_runner=cfg.run.envs_per_env_runner,
-                seed=cfg.run.seed,
+                seed=run.seed(cfg.run.seed),
                 total_timesteps=cfg.total_timesteps,
                 sample_timeout_s=cfg.run.sample_timeout_s,
             ),
@@ -200,18 +372,17 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         )
         algo = config.build_algo()
         stack.callback(algo.stop)
-        run_dir.mkdir(parents=True)
-        stack.enter_context(removed_unless(run_dir, SCORES))
-        stack.enter_context(run_lock(run_dir))
+        begin(run, algo, stack)
         _write_config(run_dir, cfg.agent, cfg, entry.gym_id, env_kwargs, hyperparameters, reference)
         stop = stack.enter_context(stop_on_signals())
         history, steps, seconds = _iterate(
             algo,
             cfg.total_timesteps,
-            run_dir,
+            run,
             stop,
             progress=cfg.run.progress_bar,
             desc=f"RLlib PPO {cfg.agent} on {entry.env}",
+            checkpoint_every=cfg.checkpoint_freq,
         )
         masked = is_masked(_view_space(entry.gym_id, env_config))
         policy = policy_of(algo, None, eval_env.action_space, masked)
@@ -227,11 +398,12 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
                 "iterations": len(history),
                 "agent_returns": history[-1]["agent_returns"] if history else {},
                 "interrupted": stop.signum,
+                "resumed": run.resumed,
                 "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
         )
         return RLlibTrainResult(
-            run_dir, policy, evaluations, history, steps, seconds, interrupted=stop.signum
+            run_dir, policy, evaluations, history, steps, seconds, run.resumed, stop.signum
         )
 
 
@@ -326,13 +498,16 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
     ``cfg.iterations`` iterations of ``cfg.steps_per_iteration`` env steps each; after each the
     exploitability of the players' current mixes and of their average over the second half of
     the iterations so far is computed on the exact payoff matrix. The result's ``x``/``y`` are
-    the average mixes (the last-iterate figures are in the history).
+    the average mixes (the last-iterate figures are in the history). ``--resume`` continues
+    to ``cfg.iterations`` in all (both modules' weights, optimizer states and counters, and the
+    mixes averaged so far, restored).
 
     Raises:
         ImportError: Without ray.
         ValueError: For a method other than selfplay, an env that is not a one-shot matrix game,
-            an unknown scenario, a hyperparameter that does not apply, or ``--resume``.
-        FileExistsError: When the run folder exists.
+            an unknown scenario, a hyperparameter that does not apply, nothing to resume, a
+            resume whose options differ, or a corrupt or pickled state file.
+        FileExistsError: When a new run's folder exists.
     """
     from agents.interrupt import stop_on_signals
     from agents.rllib.config import ppo_config, rllib_hyperparameters
@@ -343,22 +518,17 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
 
     if cfg.method != "selfplay":
         return psro_rllib(cfg, report)
-    if cfg.run.resume:
-        raise ValueError("--resume is not supported with --backend rllib; start a new run")
     if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries, env_kwargs, reference, _ = _matrix_game(cfg)
+    entries, env_kwargs, reference, n = _matrix_game(cfg)
     hyperparameters = rllib_hyperparameters(cfg.hp)
     L, value = reference.payoff, reference.value
-    run_dir = new_run_dir(
-        cfg.run.runs_root,
-        cfg.run.run_dir,
-        run_prefix(f"{cfg.env}-selfplay", f"rllib-{ALGO}", cfg.run.seed),
-    )
     parallel = make_multi_agent(cfg.env, env_kwargs).parallel
     with ExitStack() as stack:
-        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        run = open_run(cfg, stack, report)
+        run_dir = run.run_dir
+        seed_everything(run.seed(cfg.run.seed), cfg.run.torch_threads)
         init_ray(cfg.run)
         n_steps = hyperparameters["n_steps"]
         per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
@@ -369,7 +539,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
                 hp=cfg.hp,
                 num_env_runners=cfg.run.num_env_runners,
                 envs_per_env_runner=cfg.run.envs_per_env_runner,
-                seed=cfg.run.seed,
+                seed=run.seed(cfg.run.seed),
                 total_timesteps=cfg.iterations * per_iteration,
                 sample_timeout_s=cfg.run.sample_timeout_s,
             ),
@@ -377,15 +547,14 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         )
         algo = config.build_algo()
         stack.callback(algo.stop)
-        run_dir.mkdir(parents=True)
-        stack.enter_context(removed_unless(run_dir, SCORES))
-        stack.enter_context(run_lock(run_dir))
+        begin(run, algo, stack)
         _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
         stop = stack.enter_context(stop_on_signals())
         policies = {
             side: policy_of(algo, side, parallel.action_space(side), False) for side in SIDES
         }
-        mixes: dict[str, list[np.ndarray]] = {side: [] for side in SIDES}
+        # each RLlib iteration's current mixes (a resumed run's from its progress records)
+        mixes = {side: _saved_mixes(run, side, n[side]) for side in SIDES}
 
         def on_iteration(rec: dict[str, Any]) -> None:
             now = initial_mixes(policies, parallel)
@@ -404,6 +573,8 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
                 relative_nash_conv=mean.nash_conv / abs(value),
                 x=avg["defender"].tolist(),
                 y=avg["attacker"].tolist(),
+                last_defender=now["defender"].tolist(),
+                last_attacker=now["attacker"].tolist(),
             )
             if len(mixes["attacker"]) % (per_iteration // n_steps) == 0:
                 say(_selfplay_line(rec, value))
@@ -411,7 +582,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         history, steps, seconds = _iterate(
             algo,
             cfg.iterations * per_iteration,
-            run_dir,
+            run,
             stop,
             on_iteration,
             progress=cfg.run.progress_bar,
@@ -440,6 +611,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
                 "timesteps": steps,
                 "train_seconds": seconds,
                 "interrupted": stop.signum,
+                "resumed": run.resumed,
                 "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
         )
@@ -455,6 +627,24 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
             seconds,
             interrupted=stop.signum,
         )
+
+
+def _saved_mixes(run: Session, side: str, n: int) -> list[np.ndarray]:
+    """A resumed self-play run's current mixes of ``side``, one per saved progress record.
+
+    Raises:
+        ValueError: When a record has no mix of ``n`` probabilities.
+    """
+    out = []
+    for h in run.history:
+        mix = np.asarray(h.get(f"last_{side}", ()), dtype=float)
+        if mix.shape != (n,) or not np.all(np.isfinite(mix)):
+            raise ValueError(
+                f"cannot resume {run.run_dir}: progress.jsonl record {h.get('iteration')} has "
+                f"no last_{side} mix of {n} probabilities"
+            )
+        out.append(mix)
+    return out
 
 
 def _selfplay_line(rec: dict[str, Any], value: float) -> str:
@@ -522,13 +712,16 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
 
     The loop of :mod:`agents.selfplay` (same meta-solver, same exploitability records) with a
     fresh RLlib PPO learner per best response (single-agent view, the other side's current mix
-    as its fixed opponent). The learned policies stay in memory; the run folder holds
-    config.json, progress.jsonl (one record per iteration) and scores.json.
+    as its fixed opponent). The run folder holds config.json, progress.jsonl (one record per
+    iteration), scores.json, each best response's weights (``policies/<side>_<k>.pt``) and
+    ``rllib_state.json`` (populations, meta-game, mixes, after every iteration), from which
+    ``--resume`` continues to ``cfg.iterations`` in all (PSRO's meta-game needs the earlier
+    policies: they are rebuilt from their weights, never unpickled).
 
     Raises:
         ImportError: Without ray.
         ValueError: As :func:`selfplay_rllib`.
-        FileExistsError: When the run folder exists.
+        FileExistsError: When a new run's folder exists.
     """
     from agents.interrupt import stop_on_signals
     from agents.rllib.config import rllib_hyperparameters
@@ -546,34 +739,25 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
 
     if cfg.method not in METHODS:
         raise ValueError(f"unknown method {cfg.method!r}; valid methods: {', '.join(METHODS)}")
-    if cfg.run.resume:
-        raise ValueError("--resume is not supported with --backend rllib; start a new run")
     if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
     entries, env_kwargs, reference, n = _matrix_game(cfg)
     hyperparameters = rllib_hyperparameters(cfg.hp)
     L, value = reference.payoff, reference.value
-    run_dir = new_run_dir(
-        cfg.run.runs_root,
-        cfg.run.run_dir,
-        run_prefix(f"{cfg.env}-{cfg.method}", f"rllib-{ALGO}", cfg.run.seed),
-    )
     with ExitStack() as stack:
+        run = open_run(cfg, stack, report, with_algorithm=False)
+        run_dir = run.run_dir
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        loop = _psro_loop_state(cfg, run, entries, env_kwargs, n)
         init_ray(cfg.run)
-        run_dir.mkdir(parents=True)
-        stack.enter_context(removed_unless(run_dir, SCORES))
-        stack.enter_context(run_lock(run_dir))
+        begin(run, None, stack)
         _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
         stop = stack.enter_context(stop_on_signals())
-        pops: dict[str, list[int]] = {side: [] for side in SIDES}
-        models: dict[str, list[Any]] = {side: [] for side in SIDES}
-        meta = np.zeros((0, 0))
-        x, y = np.full(n["defender"], 1 / n["defender"]), np.full(n["attacker"], 1 / n["attacker"])
-        history: list[dict[str, Any]] = []
-        start = time.perf_counter()
-        for it in range(1, cfg.iterations + 1):
+        pops, models, records, meta, x, y = loop
+        history = run.history
+        start = time.perf_counter() - run.seconds
+        for it in range(len(history) + 1, cfg.iterations + 1):
             if stop.requested:
                 break
             opponents = {"attacker": x, "defender": y}
@@ -585,6 +769,9 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
                 )  # fmt: skip
                 models[side].append(policy)
                 pops[side].append(action)
+                records[side].append(
+                    save_module(policy.module, run_dir / "policies" / f"{side}_{it - 1}.pt")
+                )
             gap_att = float((x @ L).max() - (x @ L)[pops["attacker"][-1]])
             gap_def = float((L @ y)[pops["defender"][-1]] - (L @ y).min())
             if cfg.method == "psro":
@@ -609,6 +796,11 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
             }
             history.append(rec)
             write_jsonl(run_dir / "progress.jsonl", history)
+            run.extra = {
+                "populations": pops, "policies": records, "meta_payoff": meta.tolist(),
+                "x": x.tolist(), "y": y.tolist(),
+            }  # fmt: skip
+            run.save(None, rec["timesteps"], rec["train_seconds"])
             say(_report_line(rec))
         if not history:
             return SelfPlayResult(
@@ -632,6 +824,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
                 "timesteps": history[-1]["timesteps"],
                 "train_seconds": seconds,
                 "interrupted": stop.signum,
+                "resumed": run.resumed,
                 "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
         )
@@ -639,6 +832,59 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
             run_dir, cfg.method, x, y, value, history, evaluations, pops, seconds,
             interrupted=stop.signum,
         )  # fmt: skip
+
+
+def _psro_loop_state(
+    cfg: GameConfig,
+    run: Session,
+    entries: dict[str, Trainable],
+    env_kwargs: dict[str, Any],
+    n: dict[str, int],
+) -> tuple[dict, dict, dict, np.ndarray, np.ndarray, np.ndarray]:
+    """PSRO/FSP/IBR's populations, policies, policy records, meta-game and mixes to continue.
+
+    A new run's are empty (uniform mixes); a resumed run's are read from its state and checked
+    (PSRO's earlier policies rebuilt from their weight files, :func:`load_module`).
+
+    Raises:
+        ValueError: For a state that is corrupt or does not fit the game.
+    """
+    from agents.selfplay import SIDES
+
+    if not run.resumed:
+        x, y = (np.full(n[side], 1 / n[side]) for side in ("defender", "attacker"))
+        return {s: [] for s in SIDES}, {s: [] for s in SIDES}, {s: [] for s in SIDES}, \
+            np.zeros((0, 0)), x, y  # fmt: skip
+    state, done, where = run.meta, len(run.history), run.run_dir / STATE
+    pops, records = state.get("populations"), state.get("policies")
+    ok = isinstance(pops, dict) and isinstance(records, dict)
+    for side in SIDES:
+        ok = ok and isinstance(pops.get(side), list) and isinstance(records.get(side), list)
+        ok = ok and len(pops[side]) == done == len(records[side])
+        ok = ok and all(isinstance(a, int) and 0 <= a < n[side] for a in pops[side])
+    try:
+        meta = np.array(state.get("meta_payoff"), dtype=float).reshape(
+            (done, done) if cfg.method == "psro" else (0, 0)
+        )
+        x, y = np.array(state.get("x"), dtype=float), np.array(state.get("y"), dtype=float)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or x.shape != (n["defender"],) or y.shape != (n["attacker"],):
+        raise ValueError(f"cannot resume {run.run_dir}: {where} is corrupt or not of this game")
+    models: dict[str, list[Any]] = {side: [] for side in SIDES}
+    if cfg.method == "psro":  # the meta-game plays new policies against the earlier ones
+        from agents.rllib.config import ppo_config
+        from agents.rllib.envs import make_view
+        from agents.rllib.policy import RLlibPolicy
+
+        for side in SIDES:
+            gym_id = entries[side].gym_id
+            config = ppo_config(gym_id, env_kwargs, hp=cfg.hp, total_timesteps=1)
+            with make_view(gym_id, env_kwargs) as env:
+                for record in records[side]:
+                    module = load_module(config, env, record, run.run_dir / "policies", run.run_dir)
+                    models[side].append(RLlibPolicy(module, env.action_space, False))
+    return pops, models, records, meta, x, y
 
 
 def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
@@ -663,13 +909,10 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     hyperparameters = rllib_hyperparameters(cfg.hp)
     env_kwargs = first.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(first.gym_id, env_kwargs)
-    run_dir = new_run_dir(
-        cfg.run.runs_root,
-        cfg.run.run_dir,
-        run_prefix(f"{cfg.env}-selfplay", f"rllib-{ALGO}", cfg.run.seed),
-    )
     with ExitStack() as stack:
-        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        run = open_run(cfg, stack, report)
+        run_dir = run.run_dir
+        seed_everything(run.seed(cfg.run.seed), cfg.run.torch_threads)
         init_ray(cfg.run)
         n_steps = hyperparameters["n_steps"]
         per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
@@ -679,15 +922,13 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
             hp=cfg.hp,
             num_env_runners=cfg.run.num_env_runners,
             envs_per_env_runner=cfg.run.envs_per_env_runner,
-            seed=cfg.run.seed,
+            seed=run.seed(cfg.run.seed),
             total_timesteps=cfg.iterations * per_iteration,
             sample_timeout_s=cfg.run.sample_timeout_s,
         )
         algo = _with_run(config, cfg.run).build_algo()
         stack.callback(algo.stop)
-        run_dir.mkdir(parents=True)
-        stack.enter_context(removed_unless(run_dir, SCORES))
-        stack.enter_context(run_lock(run_dir))
+        begin(run, algo, stack)
         _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, None)
         stop = stack.enter_context(stop_on_signals())
 
@@ -697,7 +938,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
                 say(f"iter {rec['iteration']:3d}  steps {rec['timesteps']:8d}  returns {returns}")
 
         history, steps, seconds = _iterate(
-            algo, cfg.iterations * per_iteration, run_dir, stop, on_iteration,
+            algo, cfg.iterations * per_iteration, run, stop, on_iteration,
             progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
         )  # fmt: skip
         evaluations = {}
@@ -724,6 +965,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
                 "timesteps": steps,
                 "train_seconds": seconds,
                 "interrupted": stop.signum,
+                "resumed": run.resumed,
                 "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
         )
