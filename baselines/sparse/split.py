@@ -55,10 +55,7 @@ ENUM_LIMIT = 1 << 22
 WEIGHT_WORK = 1 << 34
 # Sets per batch.
 CHUNK = 1 << 14
-# Largest (weights × sets) products one refinement step enumerates: with an earlier part to
-# bound (a new weight each), with none (a dot product each); and per batch.
-REFINE_LIMIT = 1 << 20
-LINEAR_LIMIT = 1 << 24
+# (weight, set) pairs per batch of the refinement.
 PAIR_CHUNK = 1 << 13
 
 
@@ -88,8 +85,11 @@ class _Head:
     full: np.ndarray  # (n²,) P_{N−2} with every head pair dropped, minus the nominal
     cross: np.ndarray  # (L, L) normalised off-diagonal norms ‖Ô_qq'‖ (zero diagonal)
 
-    def bound(self, W: np.ndarray, r: int) -> np.ndarray:
-        """(S,) bound on ``tr(W ΔP(H))`` over heads of r pairs, for (S, n, n) weights W."""
+    def bound(self, W: np.ndarray, r: int, need: np.ndarray | None = None) -> np.ndarray:
+        """(S,) bound on ``tr(W ΔP(H))`` over heads of r pairs, for (S, n, n) weights W.
+
+        The costlier per-pair term (r = 2) is only computed for rows still above ``need``.
+        """
         if r == 0:
             return np.zeros(len(W))
         a = np.clip(W.reshape(len(W), -1) @ self.outer.T, 0.0, None)  # (S, L)
@@ -104,11 +104,14 @@ class _Head:
             omega = self.omega[min(r, len(self.omega) - 1)]
             gersh = top_e / (1.0 - omega) if omega < 1.0 else np.full(len(W), np.inf)
         out = np.minimum(weyl, gersh)
-        if r == 2 and L >= 2:  # the 2×2 normalised block has λ_max ≤ ‖Ô_qq'‖: per pair
-            out = np.minimum(out, self._pairs(e))
         out = np.where(np.isnan(out), np.inf, out)
         # dropping every head pair is a Loewner upper bound on any head (monotonicity)
-        return np.minimum(out, np.clip(W.reshape(len(W), -1) @ self.full, 0.0, None))
+        out = np.minimum(out, np.clip(W.reshape(len(W), -1) @ self.full, 0.0, None))
+        if r == 2 and L >= 2:  # the 2×2 normalised block has λ_max ≤ ‖Ô_qq'‖: per pair
+            rows = np.arange(len(W)) if need is None else np.nonzero(out > need)[0]
+            if len(rows):
+                out[rows] = np.minimum(out[rows], self._pairs(e[rows]))
+        return out
 
     def _pairs(self, e: np.ndarray) -> np.ndarray:
         """(S,) ``max_{q≠q'} (e_q + e_q') / (1 − ‖Ô_qq'‖)`` (inf where the norm is ≥ 1)."""
@@ -183,6 +186,7 @@ class _Split:
         forward(problem, self.posts, np.zeros((1, N, problem.M), dtype=bool), 0)
         self.steps: dict[int, _Step] = {}
         self.heads: dict[int, _Head] = {}
+        self.units: dict[tuple[int, int], float] = {}
 
     def step(self, t: int) -> _Step:
         if t not in self.steps:
@@ -193,6 +197,23 @@ class _Split:
         if end not in self.heads:
             self.heads[end] = _head(self.p, self.factors, self.posts, end)
         return self.heads[end]
+
+    def unit(self, t: int, r: int) -> float:
+        """Bound of r drops in steps 0..t−1 for the weight ``F' Y_t F``.
+
+        ``Y_t`` is step t's prediction information; scaled by κ this bounds the tangent term
+        of every set of step t.
+        """
+        key = (t, r)
+        if key not in self.units:
+            st, F = self.step(t), self.p.system.F
+            W = (mT(F) @ st.Y @ F)[None]
+            if t - 1 == 0:
+                value = self.window(0, W, r, np.array([-np.inf]), 0)[0]
+            else:
+                value = self.head(t - 1).bound(W, r)[0]
+            self.units[key] = float(value)
+        return self.units[key]
 
     def late(self) -> bool:
         return self.deadline is not None and time.perf_counter() > self.deadline
@@ -221,7 +242,7 @@ class _Split:
                 X = (st.drop(sets) - st.P).reshape(len(sets), -1)
                 out = np.maximum(out, (W.reshape(S, -1) @ X.T).max(axis=1))
             return out
-        out = self.head(t).bound(W, r)
+        out = self.head(t).bound(W, r, need)
         rows = np.nonzero(out > need)[0]
         if depth <= 0 or len(rows) == 0 or self.late():
             return out
@@ -229,31 +250,31 @@ class _Split:
             st = self.step(t)
         except np.linalg.LinAlgError:
             return out
-        inner = sum(comb(M, b) for b in self.counts(t, r) if b < r)
-        if len(rows) * inner > REFINE_LIMIT or len(rows) * comb(M, min(r, M)) > LINEAR_LIMIT:
-            return out
         Wr, nr = W[rows], need[rows]
+        # A weight valid for every set of this step: Y P_D W P_D Y ⪯ κ Y with
+        # κ = λ_max(P̂⁻^{1/2} W P̂⁻^{1/2}) (P_D ⪯ P̂⁻), and every head bound is positively
+        # homogeneous in W, so the earlier part of any set is at most κ · u(r − b).
+        half = np.linalg.cholesky(st.pred)
+        kappa = np.clip(np.linalg.eigvalsh(sym(mT(half) @ Wr @ half))[:, -1], 0.0, None)
         best = np.full(len(rows), -np.inf)
         for b in self.counts(t, r):
-            for sets in _subsets(M, b, PAIR_CHUNK // len(rows)):
+            uniform = kappa * self.unit(t, r - b) if b < r else np.zeros(len(rows))
+            for sets in _subsets(M, b, max(64, PAIR_CHUNK // len(rows))):
                 if self.late():
                     return out
                 post = st.drop(sets)  # (D, n, n)
                 X = (post - st.P).reshape(len(sets), -1)
                 lin = Wr.reshape(len(rows), -1) @ X.T  # (rows, D)
-                if b < r:
-                    # tangent weights F' Y P_D W P_D Y F for every (row, set)
-                    A = st.Y @ post  # (D, n, n), A' = P_D Y
-                    Wn = mT(F) @ (A[None] @ Wr[:, None] @ mT(A)[None]) @ F
-                    inner = self.window(
-                        t - 1,
-                        Wn.reshape(-1, *W.shape[1:]),
-                        r - b,
-                        (nr[:, None] - lin).reshape(-1),
-                        depth - 1,
-                    ).reshape(lin.shape)
-                    lin = lin + inner
-                best = np.maximum(best, lin.max(axis=1))
+                val = lin + uniform[:, None]
+                ri, di = np.nonzero(val > nr[:, None]) if b < r else ((), ())
+                for lo in range(0, len(ri), PAIR_CHUNK):
+                    i, d = ri[lo : lo + PAIR_CHUNK], di[lo : lo + PAIR_CHUNK]
+                    # the set's own tangent weight F' Y P_D W P_D Y F
+                    A = st.Y @ post[d]  # A' = P_D Y
+                    Wn = mT(F) @ (A @ Wr[i] @ mT(A)) @ F
+                    inner = self.window(t - 1, Wn, r - b, nr[i] - lin[i, d], depth - 1)
+                    val[i, d] = np.minimum(val[i, d], lin[i, d] + inner)
+                best = np.maximum(best, val.max(axis=1))
         out[rows] = np.minimum(out[rows], best)
         return out
 
@@ -262,7 +283,7 @@ def split_bound(
     problem: SparseProblem,
     factors: np.ndarray | None = None,
     deadline: float | None = None,
-    depth: int = 3,
+    depth: int = 8,
 ) -> SplitBound:
     """The split bound of ``problem`` (module docstring) and the best last-step attack.
 
