@@ -85,14 +85,19 @@ def other_instances(time_limit: float, extra: list[str]) -> str:
         ("mixed-tracking-14", mixed_tracking(14), 5, 6, "logdet"),
         ("mixed-tracking-50", mixed_tracking(50), 5, 6, "trace"),
         ("dc-ieee14-14", dc_grid14(14), 5, 6, "trace"),
+        ("dc-ieee14-50", dc_grid14(50), 5, 6, "trace"),
+        ("dc-ieee14-50", dc_grid14(50), 5, 6, "logdet"),
     ]
     notes = []
+    if "grid-ieee14" in scenarios.names():  # about 300 pairs: 34 meters over N = 9
+        cases += [("grid-ieee14", "grid-ieee14", 5, 9, o) for o in ("trace", "logdet")]
     for name in dict.fromkeys([*GRID_PRESETS, *extra]):
         if name not in scenarios.names():
             notes.append(f"`{name}`: not a preset in this build; skipped.")
             continue
         sc = scenarios.get(name)
-        cases.append((name, sc, sc.budget or 5, sc.horizon or 6, "trace"))
+        for objective in ("trace", "logdet"):
+            cases.append((name, sc, sc.budget or 5, sc.horizon or 6, objective))
     rows = []
     for label, system, c, N, objective in cases:
         best = branch_and_bound(system, c, N, objective, time_limit=time_limit)
@@ -108,7 +113,9 @@ def other_instances(time_limit: float, extra: list[str]) -> str:
         "Where the optimum is not proved, the gaps are certified upper bounds (`≤`) computed "
         "against B&B's upper bound, not against the (unknown) optimum. mixed-tracking-M: M "
         "sensors alternating position+velocity and position (baselines/sparse/testbeds.py); "
-        "dc-ieee14-14: DC IEEE 14-bus model, 13 angle states, 14 injection meters.",
+        "dc-ieee14-M: DC IEEE 14-bus model, 13 angle states, M meters (14: the injections; "
+        "50: and the flows at both ends of every branch but four); grid-ieeeX: the pandapower "
+        "presets of fdia_env.scenarios (meter level, MATH.md §7).",
         table(
             ["instance", "c / N / Φ", "best found", "upper bound", "proof", *HEURISTICS],
             rows,
