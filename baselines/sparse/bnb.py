@@ -93,6 +93,10 @@ def _check_time_limit(time_limit: object) -> float | None:
     return value
 
 
+class _Timeout(Exception):
+    """The deadline passed while bounding a batch of children."""
+
+
 class _Search:
     def __init__(
         self,
@@ -149,6 +153,8 @@ class _Search:
         start = int((last.min() + 1) // p.M)
         pieces = []
         for lo in range(0, len(last), max(1, self._rows_per_call(start))):
+            if self.deadline is not None and time.perf_counter() > self.deadline:
+                raise _Timeout  # the caller keeps these nodes' own bounds
             sl = slice(lo, lo + max(1, self._rows_per_call(start)))
             cross = self._with_cross(len(last[sl]), p.horizon - start)
             terms = pair_terms(p, self.factors, posts[sl], start, cross)
@@ -269,7 +275,11 @@ class _Search:
         forward(p, posts, attacked, 0)
         self.nodes += 1
         stack: list[_Open] = []
-        root = self.children(attacked, np.array([-1]), posts, np.array([root_bound]))
+        try:
+            root = self.children(attacked, np.array([-1]), posts, np.array([root_bound]))
+        except _Timeout:
+            self.timed_out = True
+            return max(self.best_value, root_bound)
         if root is not None:
             stack.append(root)
         while stack:
@@ -289,7 +299,12 @@ class _Search:
             cut = np.searchsorted(-node.bounds[lo:hi], -self.threshold(), side="left")
             hi = lo + max(int(cut), 1)
             node.pos = hi
-            kids = self.expand(node, lo, hi)
+            try:
+                kids = self.expand(node, lo, hi)
+            except _Timeout:  # rows lo:hi were not bounded further: their own bounds stand
+                self.pruned_max = max(self.pruned_max, float(node.bounds[lo:hi].max()))
+                self.timed_out = True
+                break
             if kids is not None:
                 stack.append(kids)
         open_max = max(
