@@ -38,7 +38,7 @@ BOX_ALGORITHMS = ("SAC", "PPO", "A2C")
 # EXS is exact but costs C(M·N, c) evaluations (~10⁷/s); above this the reference is the best
 # of the polynomial heuristics ("best known heuristic where the optimum is out of reach").
 EXS_MAX_SETS = 20_000_000
-BNB_TIME_LIMIT = 30.0  # seconds of branch and bound for a sparse reference past EXS
+BNB_TIME_LIMIT = 60.0  # seconds of branch and bound for a sparse reference past EXS
 
 
 @dataclass(frozen=True)
