@@ -66,8 +66,11 @@ other player fixed to ``opponent=`` (any SB3-style policy, e.g.
 
 from __future__ import annotations
 
-from fdia_env._validation import check_int
+from collections.abc import Sequence
+
+from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.subset import SubsetAttack
+from fdia_env.attacks.typed import ATTACKER_MODELS, TypedSubsetAttack
 from fdia_env.defenses.selection import SensorSelection
 from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
@@ -80,15 +83,38 @@ NAME = "sensor_game_v0"
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch5-game",
     power: float | None = None,
-    allocation: str = "independent",
+    allocation: str | None = None,
     rounds: int | None = None,
     reward_mode: str = "per_step",
     dynamics: str = "expected",
     render_mode: str | None = None,
     max_cycles: int | None = None,
     max_subset_size: int | None = None,
+    types: Sequence[str] | None = None,
+    priors: Sequence[float] | None = None,
+    attacker_model: str = "informed",
 ) -> FdiaParallelEnv:
-    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
+    """The PettingZoo ``ParallelEnv`` (see the module docstring).
+
+    Raises:
+        ValueError: Naming the parameter, e.g. ``allocation`` together with ``types``,
+            ``priors`` or an ``"uninformed"`` ``attacker_model`` without ``types``, priors of
+            the wrong length, negative or not summing to 1, an unknown or repeated type.
+    """
+    if types is None:
+        if priors is not None:
+            raise ValueError("priors needs types: pass types=(...) with one prior per type")
+        if attacker_model != "informed":
+            check_choice("attacker_model", attacker_model, ATTACKER_MODELS)
+            raise ValueError(
+                f"attacker_model={attacker_model!r} needs types: without types there is one "
+                "attacker type and nothing to be informed of"
+            )
+    elif allocation is not None:
+        raise ValueError(
+            f"pass allocation (one rule for every episode) or types (nature draws the rule), "
+            f"not both: got allocation={allocation!r} and types={types!r}"
+        )
     if rounds is not None:
         rounds = check_int("rounds", rounds, minimum=1)
     sc, spec = episode_spec(
@@ -103,9 +129,14 @@ def parallel_env(
     )
     if max_subset_size is None:
         max_subset_size = sc.extra.get("max_subset_size")
-    attack = SubsetAttack(
-        scenario_default(sc, "power", power), allocation=allocation, max_subset_size=max_subset_size
-    )
+    power = scenario_default(sc, "power", power)
+    if types is None:
+        attack = SubsetAttack(
+            power, allocation="independent" if allocation is None else allocation,
+            max_subset_size=max_subset_size,
+        )  # fmt: skip
+    else:
+        attack = TypedSubsetAttack(power, types, priors, attacker_model, max_subset_size)
     defense = SensorSelection(max_subset_size)
     return FdiaParallelEnv(
         sc, attack, defense, spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles
