@@ -11,6 +11,20 @@ and the defender minus that. By default the game is one-shot (``rounds=1``); wit
 it is repeated and each player observes the other's last subset. The analytic solution is the LP
 equilibrium of ``baselines.game``.
 
+### Incomplete information (``types=``)
+
+``types=("independent", "dependent")`` with ``priors=(p_1, p_2)`` (default uniform) is the
+Bayesian game of MATH.md §5: at every reset nature draws the attacker's type (its allocation
+rule) from the env's seeded generator; the defender never observes it (neither in its
+observation nor in its infos). With ``attacker_model="informed"`` (default) the attacker
+observes its type and may condition on it; with ``"uninformed"`` it does not (the literature's
+formulation, whose game is the matrix game on ``L̄ = Σ_s p_s L_s``). The type is in the
+attacker's infos (``info["type"]``, an index into ``types``) and can be forced for one episode
+with ``reset(options={"attacker_type": "dependent"})`` (a name or an index; nature's uniform is
+drawn either way, so the episode's other draws do not change). The exact game and its
+equilibrium are ``baselines.game.bayesian_game(scenario, types, priors, attacker_model)``, the
+reference ``agents.registry`` scores learned policies against (exploitability).
+
 ## Action Space
 
 ``Discrete(2**M − 1)`` for each player: index j is the j-th subset by size then lexicographic
@@ -27,7 +41,8 @@ then the full set last). The power-grid presets set k (``scenario.extra["max_sub
 
 ``Box(float32)``: steps left / rounds, log variance growth and correlations of the actual error
 covariance after the last round (as in every fdia_env env; NIS too in sampled mode), then the
-other player's last subset as a 0/1 indicator per sensor.
+other player's last subset as a 0/1 indicator per sensor. With ``types`` and an informed
+attacker, the attacker's observation ends with its type as a one-hot vector of length S.
 
 ## Rewards
 
@@ -40,7 +55,8 @@ Terminates after ``rounds`` rounds.
 
 ## Arguments
 
-``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``,
+``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``
+(default ``"independent"``; not with ``types``), ``types``, ``priors``, ``attacker_model``,
 ``rounds`` (default 1, or ``max_cycles`` when only that is given), ``reward_mode``,
 ``dynamics``, ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``,
 ``max_subset_size``.
@@ -52,7 +68,8 @@ other player fixed to ``opponent=`` (any SB3-style policy, e.g.
 ## Version History
 
 - v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
-  ``render_mode="human"``.
+  ``render_mode="human"``. ``types``, ``priors``, ``attacker_model`` (incomplete
+  information); the default (no types) is unchanged.
 
 ## Example
 
