@@ -10,6 +10,7 @@ reference returns.
 import itertools
 import math
 import re
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -409,3 +410,42 @@ def test_bayesian_game_bad_input():
         TypedMixedStrategyPolicy([0.5, 0.5])
     with pytest.raises(ValueError, match="observation must end with the 2-entry type one-hot"):
         TypedMixedStrategyPolicy(np.eye(2)).predict(np.zeros(1))
+
+
+# --- train.py game on the typed game ---------------------------------------------------------
+
+
+def test_psro_meta_payoff_is_exact_over_natures_draw():
+    from agents.selfplay import empirical_payoff
+
+    kwargs = {"types": TYPES, "priors": [0.3, 0.7], "attacker_model": "uninformed"}
+    entry = get("sensor_game_v0", "attacker")
+    Ls = matrices()
+    for d, a in ((6, 6), (5, 1), (0, 3)):
+        attacker = MixedStrategyPolicy(np.eye(7)[a], seed=0)  # pure: deterministic
+        defender = MixedStrategyPolicy(np.eye(7)[d], seed=0)
+        got = empirical_payoff(attacker, defender, entry, kwargs, 1, seed=5)
+        assert got == pytest.approx(0.3 * Ls[0][d, a] + 0.7 * Ls[1][d, a], rel=1e-10)
+
+
+def test_game_command_on_the_uninformed_typed_game_scores_against_the_bayesian_game(tmp_path):
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py at the root
+    import train
+
+    args = [
+        "game", "--method", "psro", "--iterations", "2", "--steps-per-iteration", "64",
+        "--n-steps", "64", "--batch-size", "32", "--n-epochs", "2", "--no-progress-bar",
+        "--final-eval-episodes", "3", "--runs-root", str(tmp_path / "runs"), "--env-kwargs",
+        "types", '["independent","dependent"]', "priors", "[0.5,0.5]",
+        "attacker_model", "uninformed",
+    ]  # fmt: skip
+    result = train.main(args)
+    game = bayesian_game("ch5-game", TYPES, (0.5, 0.5), "uninformed")
+    assert result.value == pytest.approx(9.445039404, abs=1e-8)
+    for h in result.history:  # every iteration scored exactly against the Bayesian game
+        e = game.exploitability(h["x"], h["y"])
+        assert h["nash_conv"] == pytest.approx(e.nash_conv, abs=1e-9)
+        assert h["defender"] == pytest.approx(e.defender, abs=1e-9)
+    informed = [*args[: args.index("uninformed")], "informed"]
+    with pytest.raises(ValueError, match="informed-attacker Bayesian game is not a matrix game"):
+        train.main(informed)
