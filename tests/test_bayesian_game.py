@@ -449,3 +449,15 @@ def test_game_command_on_the_uninformed_typed_game_scores_against_the_bayesian_g
     informed = [*args[: args.index("uninformed")], "informed"]
     with pytest.raises(ValueError, match="informed-attacker Bayesian game is not a matrix game"):
         train.main(informed)
+
+
+def test_bad_forced_type_leaves_the_running_episode_untouched():
+    env = typed_env(rounds=3)
+    env.reset(seed=0, options={"attacker_type": 1})
+    env.step({"attacker": 6, "defender": 6})
+    before = (list(env.agents), env.sim.k, env.attack.type_index, env.state().copy())
+    with pytest.raises(ValueError, match="attacker_type must be one of"):
+        env.reset(seed=1, options={"attacker_type": "greedy"})
+    assert (list(env.agents), env.sim.k, env.attack.type_index) == before[:3]
+    np.testing.assert_array_equal(env.state(), before[3])
+    env.step({"attacker": 6, "defender": 6})  # the episode goes on

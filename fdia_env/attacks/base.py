@@ -102,6 +102,12 @@ class AttackModel(ABC):
         ``options`` (the keys in :attr:`reset_options`).
         """
 
+    def check_reset_options(self, options: dict[str, Any]) -> None:  # noqa: B027 - optional
+        """Raise ``ValueError`` for a bad value of one of :attr:`reset_options`.
+
+        Called before reset changes anything.
+        """
+
     def private_info(self) -> dict[str, Any]:
         """Information only the attacker receives (its infos, not the defender's)."""
         return {}

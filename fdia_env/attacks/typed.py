@@ -193,6 +193,11 @@ class TypedSubsetAttack(SubsetAttack):
             out += [1.0 if s == self.type_index else 0.0 for s in range(self.n_types)]
         return out
 
+    def check_reset_options(self, options: dict[str, Any]) -> None:
+        """A forced ``attacker_type`` must name a type (or index one)."""
+        if TYPE_OPTION in options:
+            self.type_of(options[TYPE_OPTION])
+
     def draw_nature(self, rng: np.random.Generator, options: dict[str, Any]) -> None:
         """At reset: draw the type (``options["attacker_type"]`` forces it)."""
         self.draw_type(rng, options.get(TYPE_OPTION))

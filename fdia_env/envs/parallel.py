@@ -137,10 +137,13 @@ class FdiaParallelEnv(ParallelEnv):
         """Start an episode at the window start; ``seed`` makes every draw reproducible.
 
         Raises:
-            ValueError: For a seed that is not a non-negative integer (``options`` are read by
-                no env: a non-empty dict draws a warning, see :func:`check_reset_args`).
+            ValueError: For a seed that is not a non-negative integer, or a bad value of an
+                option the env reads (only the typed sensor game reads one, ``attacker_type``;
+                other keys draw a warning, see :func:`check_reset_args`). Nothing changes
+                before the checks pass.
         """
         check_reset_args(seed, options, self.attack.reset_options)
+        self.attack.check_reset_options(dict(options or {}))
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(int(seed))
         self.agents = list(self.possible_agents)

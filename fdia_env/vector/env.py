@@ -143,6 +143,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             seeds = [None if s is None else int(s) for s in seed]
         else:
             raise ValueError(f"seed must be an int, a list of {B} ints or None, got {seed!r}")
+        self.attack.check_reset_options(dict(options or {}))
         super().reset(seed=None if seed is None or isinstance(seed, list | tuple) else int(seed))
         self._rngs = [seeding.np_random(s)[0] for s in seeds]
         if self._mix:  # one opponent generator per member, as each single env has its own
