@@ -3,7 +3,9 @@
 :func:`evaluate` plays a policy in a Gymnasium view for ``n_episodes`` seeded episodes and
 scores it against the analytic reference of :mod:`agents.registry`: the ratio to the optimum in
 single-player settings, the exploitability of the policy's mixed strategy in the one-shot game
-(``baselines.game.exploitability`` on the exact payoff matrix).
+(``baselines.game.exploitability`` on the exact payoff matrix; for the typed sensor game, where
+nature draws the attacker's type, against the exact Bayesian game,
+:meth:`baselines.game.BayesianGame.exploitability`).
 
 >>> from baselines.sparse import exhaustive
 >>> best = exhaustive("ch4-position", budget=5, horizon=6)
@@ -104,7 +106,8 @@ class Evaluation:
             objectives); game: the exploitability of the policy's mixed strategy (0 at an
             equilibrium). None without a reference.
         score_name: ``"ratio to optimum"``, ``"ratio to best known"`` or ``"exploitability"``.
-        strategy: Game only: the policy's mixed strategy over the agent's actions.
+        strategy: Game only: the policy's mixed strategy over the agent's actions ((S, n), one
+            row per type, for an informed attacker of the typed sensor game).
         extras: Further numbers: for games the exploitability relative to the value and the
             best-response value against the env's fixed opponent, when it is a known mix.
     """
@@ -204,17 +207,22 @@ def play(
     n_episodes: int,
     seed: int,
     deterministic: bool = True,
+    types: list[int] | None = None,
 ) -> tuple[np.ndarray, list[Any]]:
     """Episode returns (n_episodes,) and the first action of each episode.
 
     Episode ``i`` is reset with ``seed + i``; action masks are passed to policies whose
     ``predict`` takes ``action_masks`` (sb3-contrib's MaskablePPO, :class:`RandomPolicy`).
+    ``types``, when given, receives each episode's attacker type where the learning player's
+    reset info reports one (the typed sensor game's attacker).
     """
     masks_fn = getattr(env.unwrapped, "action_masks", None)
     pass_masks = masks_fn is not None and _accepts_masks(policy)
     returns, first_actions = np.zeros(n_episodes), []
     for i in range(n_episodes):
-        obs, _ = env.reset(seed=seed + i)
+        obs, info = env.reset(seed=seed + i)
+        if types is not None and "type" in info:
+            types.append(int(info["type"]))
         if hasattr(policy, "seed_episodes"):
             policy.seed_episodes([seed + i])
         done, total, first = False, 0.0, True
@@ -240,6 +248,7 @@ def play_batched(
     seed: int,
     num_envs: int,
     deterministic: bool = True,
+    types: list[int] | None = None,
 ) -> tuple[np.ndarray, list[Any]]:
     """:func:`play` on the native vector env: ``num_envs`` episodes per batched step.
 
@@ -257,7 +266,9 @@ def play_batched(
     pass_masks = _accepts_masks(policy)
     returns, first_actions = [], []
     for start in range(0, n_episodes, B):
-        obs, _ = venv.reset(seed=seed + start)
+        obs, info = venv.reset(seed=seed + start)
+        if types is not None and "type" in info:
+            types.extend(int(t) for t in info["type"])
         if hasattr(policy, "seed_episodes"):
             policy.seed_episodes([seed + start + j for j in range(B)])
         total, done, t = np.zeros(B), np.zeros(B, dtype=bool), 0
@@ -272,6 +283,8 @@ def play_batched(
             done |= terminated | truncated
             t += 1
         returns.append(total)
+    if types is not None:
+        del types[n_episodes:]
     return np.concatenate(returns)[:n_episodes], first_actions[:n_episodes]
 
 
@@ -297,19 +310,91 @@ def mixed_strategy(
         return np.asarray(probs, dtype=np.float64)
     if isinstance(policy, BaseAlgorithm):
         obs, _ = env.reset(seed=seed)
-        if deterministic or not hasattr(policy.policy, "get_distribution"):
-            out = np.zeros(n)
-            out[int(policy.predict(obs, deterministic=True)[0])] = 1.0
-            return out
-        import torch
-
-        obs_t, _ = policy.policy.obs_to_tensor(obs)
-        with torch.no_grad():
-            dist = policy.policy.get_distribution(obs_t).distribution
-        return dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+        return _sb3_strategy(policy, obs, n, deterministic)
     if not played:
         raise ValueError("played actions are needed for a policy without probs")
     return np.bincount([int(a) for a in played], minlength=n) / len(played)
+
+
+def typed_mixed_strategy(
+    policy: Any,
+    env: gym.Env,
+    n_types: int,
+    seed: int = 0,
+    deterministic: bool = True,
+    played: list[Any] | None = None,
+    types: list[int] | None = None,
+) -> np.ndarray:
+    """An informed attacker's (S, n) mixed strategy, one row per type it observes.
+
+    As :func:`mixed_strategy`, type by type: a policy's ``probs`` ((S, n), or (n,) for a
+    type-blind one); an SB3 model queried at each type's initial observation (the type forced
+    with ``reset(options={"attacker_type": s})``); otherwise the frequencies of ``played``
+    among the episodes of each type (``types``), the pooled frequencies for a type never drawn.
+    """
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    n = int(env.action_space.n)
+    probs = getattr(policy, "probs", None)
+    if probs is not None:
+        arr = np.asarray(probs, dtype=np.float64)
+        return np.tile(arr, (n_types, 1)) if arr.ndim == 1 else arr
+    if isinstance(policy, BaseAlgorithm):
+        rows = []
+        for s in range(n_types):
+            obs, _ = env.reset(seed=seed, options={"attacker_type": s})
+            rows.append(_sb3_strategy(policy, obs, n, deterministic))
+        return np.stack(rows)
+    if not played:
+        raise ValueError("played actions are needed for a policy without probs")
+    played_a = np.array([int(a) for a in played])
+    pooled = np.bincount(played_a, minlength=n) / len(played_a)
+    out = np.tile(pooled, (n_types, 1))
+    if types is not None and len(types) == len(played_a):
+        t = np.asarray(types)
+        for s in range(n_types):
+            if (t == s).any():
+                out[s] = np.bincount(played_a[t == s], minlength=n) / int((t == s).sum())
+    return out
+
+
+def _sb3_strategy(policy: Any, obs: Any, n: int, deterministic: bool) -> np.ndarray:
+    """An SB3 model's action distribution at ``obs`` (its action's one-hot if deterministic)."""
+    if deterministic or not hasattr(policy.policy, "get_distribution"):
+        out = np.zeros(n)
+        out[int(policy.predict(obs, deterministic=True)[0])] = 1.0
+        return out
+    import torch
+
+    obs_t, _ = policy.policy.obs_to_tensor(obs)
+    with torch.no_grad():
+        dist = policy.policy.get_distribution(obs_t).distribution
+    return dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+
+
+def _bayesian_score(
+    reference: Reference, env: gym.Env, strategy: np.ndarray
+) -> tuple[float, dict[str, float]]:
+    """Exploitability against the exact Bayesian game (``reference.bayes``)."""
+    game = reference.bayes
+    sol = game.solution
+    value = sol.value
+    agent = env.unwrapped.agent
+    if agent == "attacker":
+        expl = game.exploitability(sol.x, strategy, value).attacker
+    else:
+        expl = game.exploitability(strategy, sol.y, value).defender
+    extras = {"relative_exploitability": expl / abs(value) if value else math.nan}
+    opponent_probs = getattr(env.unwrapped.opponent, "probs", None)
+    if opponent_probs is not None and parallel_of(env).spec.horizon == 1:
+        p = np.asarray(opponent_probs)
+        # best response to the fixed opponent: the attacker's (type by type when informed)
+        # against the defender's mix p; the defender's against the attacker's strategy p
+        if agent == "attacker":
+            extras["best_response"] = game.defender_worst_case(p)
+        else:
+            extras["best_response"] = -game.attacker_worst_case(p)
+    return float(expl), extras
 
 
 def _game_score(
@@ -317,6 +402,8 @@ def _game_score(
 ) -> tuple[float, dict[str, float]]:
     from baselines.game import exploitability, solve_zero_sum
 
+    if reference.bayes is not None:
+        return _bayesian_score(reference, env, strategy)
     L = reference.payoff
     x_eq, y_eq, value = solve_zero_sum(L)
     parallel = parallel_of(env)
@@ -384,18 +471,29 @@ def evaluate(
         else:
             player = policy
         ref = _as_reference(reference, env)
+        types: list[int] = []
         if num_envs is None:
-            returns, first_actions = play(player, env, n_episodes, seed, deterministic)
+            returns, first_actions = play(player, env, n_episodes, seed, deterministic, types)
         else:
             returns, first_actions = play_batched(
-                player, env, n_episodes, seed, num_envs, deterministic
+                player, env, n_episodes, seed, num_envs, deterministic, types
             )
         mean = float(returns.mean())
         strategy, extras = None, {}
         if ref is None:
             score, score_name = None, "-"
         elif ref.is_game:
-            strategy = mixed_strategy(player, env, seed, deterministic, first_actions)
+            informed = (
+                ref.bayes is not None
+                and ref.bayes.attacker == "informed"
+                and env.unwrapped.agent == "attacker"
+            )
+            if informed:  # one mix per observed type
+                strategy = typed_mixed_strategy(
+                    player, env, ref.bayes.n_types, seed, deterministic, first_actions, types
+                )
+            else:
+                strategy = mixed_strategy(player, env, seed, deterministic, first_actions)
             score, extras = _game_score(ref, env, strategy)
             score_name = "exploitability"
         else:

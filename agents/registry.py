@@ -61,6 +61,11 @@ class Reference:
             true score.
         heuristic: ``(name, value)`` of a greedy answer (SFS) to compare with where the optimum
             is unknown.
+        bayes: The incomplete-information sensor game
+            (:class:`~baselines.game.bayesian.BayesianGame`) when nature draws the attacker's
+            type: policies are scored by exploitability against it. ``payoff`` is then its
+            ``L̄`` in the uninformed model (a matrix game over the attacker's actions) and None
+            in the informed one (whose attacker strategies are per type).
     """
 
     value: float
@@ -72,11 +77,30 @@ class Reference:
     cost: bool = False
     bound: float | None = None
     heuristic: tuple[str, float] | None = None
+    bayes: Any = field(default=None, repr=False, compare=False)
 
     @property
     def is_game(self) -> bool:
         """Whether the score is an exploitability (a game) rather than a ratio."""
-        return self.payoff is not None
+        return self.payoff is not None or self.bayes is not None
+
+    def matrix_game(self) -> np.ndarray:
+        """The payoff of a matrix game over the two players' actions, for self-play.
+
+        Raises:
+            ValueError: For a reference that is no such game (the informed-attacker Bayesian
+                game: its attacker's strategies depend on the type it observes).
+        """
+        if self.payoff is None:
+            why = (
+                "the informed-attacker Bayesian game is not a matrix game over the attacker's "
+                "actions (its strategy depends on the type it observes); use "
+                "attacker_model='uninformed'"
+                if self.bayes is not None
+                else f"{self.name} is not a game"
+            )
+            raise ValueError(why)
+        return self.payoff
 
     def ratio(self, mean_return: float, value: float | None = None) -> float:
         """Single-player score: the return as a fraction of the optimum (or of ``value``)."""
@@ -160,12 +184,48 @@ def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference |
 
     if env.spec.horizon != 1:
         return None  # repeated rounds: no exact matrix-game reference here
+    if getattr(env.attack, "types", None) is not None:
+        return bayesian_reference(env, agent)
     L = payoff_matrix(env.scenario, env.attack.power, env.attack.allocation)
     x, y, value = solve_zero_sum(L)
     if agent == "defender":
         policy = MixedStrategyPolicy(x, seed=0)
         return Reference(-value, "game value (LP)", "trace", True, L, policy)
     return Reference(value, "game value (LP)", "trace", True, L, MixedStrategyPolicy(y, seed=0))
+
+
+def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference:
+    """The typed sensor game's exact Bayesian game and its LP equilibrium.
+
+    The game of ``sensor_game_v0(types=..., priors=..., attacker_model=...)`` is a
+    :class:`~baselines.game.bayesian.BayesianGame` with one payoff matrix per type.
+
+    The value is the attacker's equilibrium payoff (the defender's return: minus it); the
+    policy is ``agent``'s equilibrium strategy (an informed attacker's: one mix per type, read
+    from its observation). ``payoff`` is ``L̄`` for an uninformed attacker, else None.
+    """
+    from baselines.game import MixedStrategyPolicy, TypedMixedStrategyPolicy, bayesian_game
+
+    attack = env.attack
+    game = bayesian_game(
+        env.scenario,
+        attack.types,
+        attack.priors,
+        attack.attacker_model,
+        attack.power,
+        attack.max_subset_size,
+    )
+    sol = game.solution
+    name = f"Bayesian equilibrium (LP, {attack.attacker_model} attacker)"
+    payoff = game.mean_payoff if game.attacker == "uninformed" else None
+    if agent == "defender":
+        policy = MixedStrategyPolicy(sol.x, seed=0)
+        return Reference(-sol.value, name, "trace", True, payoff, policy, bayes=game)
+    if game.attacker == "uninformed":
+        policy = MixedStrategyPolicy(sol.y[0], seed=0)
+    else:
+        policy = TypedMixedStrategyPolicy(sol.y, seed=0)
+    return Reference(sol.value, name, "trace", True, payoff, policy, bayes=game)
 
 
 def detection_reference(env: FdiaParallelEnv, agent: str = "defender") -> Reference | None:
@@ -364,7 +424,8 @@ _COVARIANCE_SCENARIOS = {
     "ch2-pv-1": {"power": 3000.0},
     "ch2-pv-2": {"power": 3000.0},
 }
-_GAME_SCENARIOS = {"ch5-game": {"power": 100.0, "allocation": "independent"}}
+# allocation is left to the env's default ("independent"): a typed game (types=...) takes none
+_GAME_SCENARIOS = {"ch5-game": {"power": 100.0}}
 
 register(
     Trainable(

@@ -14,7 +14,11 @@ then updates the mixes:
 In the one-shot game a policy acts once, on the constant initial observation, so a learned
 deterministic policy is a pure strategy (its action there) and a mix over policies is a mixed
 strategy over actions. After every iteration the exploitability of the current pair is measured
-exactly on ``baselines.game.payoff_matrix`` (:func:`baselines.game.exploitability`).
+exactly on ``baselines.game.payoff_matrix`` (:func:`baselines.game.exploitability`). In the
+typed sensor game (``--env-kwargs types '["independent","dependent"]' priors '[0.5,0.5]'
+attacker_model uninformed``) the matrix is the Bayesian game's ``L̄ = Σ_s p_s L_s`` and the
+meta-game's payoffs are exact averages over nature's draw; the informed-attacker game is not a
+matrix game over the attacker's actions and is refused.
 
 The learned policies are saved as ``policies/<side>_<k>.pt`` / ``.json`` in the format of
 :mod:`agents.checkpoint` (tensors and JSON; loading unpickles nothing) and ``state.json`` holds
@@ -196,9 +200,23 @@ def empirical_payoff(
     n_episodes: int,
     seed: int,
 ) -> float:
-    """The attacker's mean return when the two learned policies play each other in the env."""
+    """The attacker's mean return when the two learned policies play each other in the env.
+
+    In the typed sensor game (``types=``) the mean is exact over nature's draw: one episode per
+    type, forced with ``reset(options={"attacker_type": s})``, weighted by the priors (the
+    one-shot expected-dynamics payoff of two deterministic policies does not vary otherwise).
+    """
     with entry.view(opponent=defender, **env_kwargs) as env:
-        return evaluate(attacker, env, n_episodes, seed, reference=None).mean
+        priors = getattr(env.unwrapped.parallel.attack, "priors", None)
+        if priors is None:
+            return evaluate(attacker, env, n_episodes, seed, reference=None).mean
+        total = 0.0
+        for s, p in enumerate(priors):
+            obs, _ = env.reset(seed=seed, options={"attacker_type": s})
+            action, _ = attacker.predict(obs, deterministic=True)
+            _, reward, *_ = env.step(int(action))
+            total += float(p) * float(reward)
+        return total
 
 
 def _report_line(rec: dict[str, Any]) -> str:
@@ -324,7 +342,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)  # SB3 checks the options
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
-    L, value = reference.payoff, reference.value
+    L, value = reference.matrix_game(), reference.value  # the uninformed Bayesian game: L̄
     given = config_dict(cfg)
     trusted = cfg.run.trust_checkpoint
 

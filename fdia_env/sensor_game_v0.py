@@ -11,6 +11,20 @@ and the defender minus that. By default the game is one-shot (``rounds=1``); wit
 it is repeated and each player observes the other's last subset. The analytic solution is the LP
 equilibrium of ``baselines.game``.
 
+### Incomplete information (``types=``)
+
+``types=("independent", "dependent")`` with ``priors=(p_1, p_2)`` (default uniform) is the
+Bayesian game of MATH.md §5: at every reset nature draws the attacker's type (its allocation
+rule) from the env's seeded generator; the defender never observes it (neither in its
+observation nor in its infos). With ``attacker_model="informed"`` (default) the attacker
+observes its type and may condition on it; with ``"uninformed"`` it does not (the literature's
+formulation, whose game is the matrix game on ``L̄ = Σ_s p_s L_s``). The type is in the
+attacker's infos (``info["type"]``, an index into ``types``) and can be forced for one episode
+with ``reset(options={"attacker_type": "dependent"})`` (a name or an index; nature's uniform is
+drawn either way, so the episode's other draws do not change). The exact game and its
+equilibrium are ``baselines.game.bayesian_game(scenario, types, priors, attacker_model)``, the
+reference ``agents.registry`` scores learned policies against (exploitability).
+
 ## Action Space
 
 ``Discrete(2**M − 1)`` for each player: index j is the j-th subset by size then lexicographic
@@ -27,7 +41,8 @@ then the full set last). The power-grid presets set k (``scenario.extra["max_sub
 
 ``Box(float32)``: steps left / rounds, log variance growth and correlations of the actual error
 covariance after the last round (as in every fdia_env env; NIS too in sampled mode), then the
-other player's last subset as a 0/1 indicator per sensor.
+other player's last subset as a 0/1 indicator per sensor. With ``types`` and an informed
+attacker, the attacker's observation ends with its type as a one-hot vector of length S.
 
 ## Rewards
 
@@ -40,7 +55,8 @@ Terminates after ``rounds`` rounds.
 
 ## Arguments
 
-``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``,
+``scenario`` (default ``"ch5-game"``), ``power`` (default the preset's), ``allocation``
+(default ``"independent"``; not with ``types``), ``types``, ``priors``, ``attacker_model``,
 ``rounds`` (default 1, or ``max_cycles`` when only that is given), ``reward_mode``,
 ``dynamics``, ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``,
 ``max_subset_size``.
@@ -52,7 +68,8 @@ other player fixed to ``opponent=`` (any SB3-style policy, e.g.
 ## Version History
 
 - v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
-  ``render_mode="human"``.
+  ``render_mode="human"``. ``types``, ``priors``, ``attacker_model`` (incomplete
+  information); the default (no types) is unchanged.
 
 ## Example
 
@@ -66,8 +83,11 @@ other player fixed to ``opponent=`` (any SB3-style policy, e.g.
 
 from __future__ import annotations
 
-from fdia_env._validation import check_int
+from collections.abc import Sequence
+
+from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.subset import SubsetAttack
+from fdia_env.attacks.typed import ATTACKER_MODELS, TypedSubsetAttack
 from fdia_env.defenses.selection import SensorSelection
 from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
@@ -80,15 +100,38 @@ NAME = "sensor_game_v0"
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch5-game",
     power: float | None = None,
-    allocation: str = "independent",
+    allocation: str | None = None,
     rounds: int | None = None,
     reward_mode: str = "per_step",
     dynamics: str = "expected",
     render_mode: str | None = None,
     max_cycles: int | None = None,
     max_subset_size: int | None = None,
+    types: Sequence[str] | None = None,
+    priors: Sequence[float] | None = None,
+    attacker_model: str = "informed",
 ) -> FdiaParallelEnv:
-    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
+    """The PettingZoo ``ParallelEnv`` (see the module docstring).
+
+    Raises:
+        ValueError: Naming the parameter, e.g. ``allocation`` together with ``types``,
+            ``priors`` or an ``"uninformed"`` ``attacker_model`` without ``types``, priors of
+            the wrong length, negative or not summing to 1, an unknown or repeated type.
+    """
+    if types is None:
+        if priors is not None:
+            raise ValueError("priors needs types: pass types=(...) with one prior per type")
+        if attacker_model != "informed":
+            check_choice("attacker_model", attacker_model, ATTACKER_MODELS)
+            raise ValueError(
+                f"attacker_model={attacker_model!r} needs types: without types there is one "
+                "attacker type and nothing to be informed of"
+            )
+    elif allocation is not None:
+        raise ValueError(
+            f"pass allocation (one rule for every episode) or types (nature draws the rule), "
+            f"not both: got allocation={allocation!r} and types={types!r}"
+        )
     if rounds is not None:
         rounds = check_int("rounds", rounds, minimum=1)
     sc, spec = episode_spec(
@@ -103,9 +146,14 @@ def parallel_env(
     )
     if max_subset_size is None:
         max_subset_size = sc.extra.get("max_subset_size")
-    attack = SubsetAttack(
-        scenario_default(sc, "power", power), allocation=allocation, max_subset_size=max_subset_size
-    )
+    power = scenario_default(sc, "power", power)
+    if types is None:
+        attack = SubsetAttack(
+            power, allocation="independent" if allocation is None else allocation,
+            max_subset_size=max_subset_size,
+        )  # fmt: skip
+    else:
+        attack = TypedSubsetAttack(power, types, priors, attacker_model, max_subset_size)
     defense = SensorSelection(max_subset_size)
     return FdiaParallelEnv(
         sc, attack, defense, spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles

@@ -487,6 +487,7 @@ def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, 
         n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
+    reference.matrix_game()  # raises for the informed-attacker Bayesian game
     return entries, env_kwargs, reference, n
 
 

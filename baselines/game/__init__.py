@@ -5,6 +5,9 @@
 - :func:`solve_zero_sum`, :func:`solve_bayesian`, :func:`exploitability`: LP equilibria (HiGHS)
   of complete- and incomplete-information games and their quality;
 - :func:`strategy_bounds`: how much of a strategy is pinned down over all equilibria;
+- :class:`BayesianGame`, :func:`bayesian_game`: the incomplete-information game (nature draws
+  the attacker's type) with its equilibrium and exploitability, as ``sensor_game_v0(types=...)``
+  plays it;
 - :func:`solve_double_oracle`: exact equilibria of games too large to write down (M = 16:
   65,535 strategies each), certified by the best-response gap;
 - :class:`MixedStrategyPolicy`: an equilibrium strategy as an SB3-style policy;
@@ -16,6 +19,7 @@
 ([0.0, 0.0, 0.0, 0.0, 0.0, 0.4, 0.6], 8.106)
 """
 
+from baselines.game.bayesian import BayesianGame, bayesian_game
 from baselines.game.double_oracle import DoubleOracleResult, solve_double_oracle
 from baselines.game.interop import OpenSpielMatrixArgs, to_nashpy, to_openspiel_matrix
 from baselines.game.lp import (
@@ -33,17 +37,20 @@ from baselines.game.payoff import (
     make_game,
     payoff_matrix,
 )
-from baselines.game.policy import MixedStrategyPolicy
+from baselines.game.policy import MixedStrategyPolicy, TypedMixedStrategyPolicy
 
 __all__ = [
     "ALLOCATIONS",
+    "BayesianGame",
     "BayesianSolution",
     "DoubleOracleResult",
     "Exploitability",
     "MixedStrategyPolicy",
     "OpenSpielMatrixArgs",
     "SensorGame",
+    "TypedMixedStrategyPolicy",
     "attack_covariance",
+    "bayesian_game",
     "exploitability",
     "make_game",
     "payoff_matrix",

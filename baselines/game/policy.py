@@ -64,3 +64,64 @@ class MixedStrategyPolicy(FixedMix):
                 raise ValueError(f"support has {s!r}, not a non-empty subset of {M} sensors")
             probs[index[key]] += p
         return cls(probs, seed)
+
+
+class TypedMixedStrategyPolicy:
+    """An informed attacker's strategy: mix ``probs[s]`` when its type is s.
+
+    The type is read from the observation of ``sensor_game_v0(types=..., attacker_model=
+    "informed")``, whose last S entries are the type's one-hot; batched (B, d) observations
+    give (B,) actions, each member by its own type. ``deterministic`` is ignored (see
+    :class:`MixedStrategyPolicy`).
+
+    Args:
+        probs: (S, n) one probability vector per type (rows ≥ 0 summing to 1).
+        seed: Seed of the policy's own generator.
+
+    Example:
+        >>> policy = TypedMixedStrategyPolicy([[1, 0, 0], [0, 0.5, 0.5]], seed=0)
+        >>> int(policy.predict(np.array([0.3, 1.0, 0.0]))[0])  # type 0
+        0
+        >>> policy.predict(np.array([[0.3, 0.0, 1.0], [0.3, 1.0, 0.0]]))[0].tolist()
+        [1, 0]
+    """
+
+    def __init__(self, probs: Any, seed: int | None = None) -> None:
+        arr = np.asarray(probs, dtype=np.float64)
+        if arr.ndim != 2 or 0 in arr.shape:
+            raise ValueError(f"probs must be an (S, n) array, one strategy per type, got {probs!r}")
+        rows = np.stack([as_strategy(r, arr.shape[1], f"probs[{s}]") for s, r in enumerate(arr)])
+        self.probs = rows / rows.sum(axis=1, keepdims=True)
+        self.probs.setflags(write=False)
+        self.n_types, self.n_actions = self.probs.shape
+        self._cdf = np.cumsum(self.probs, axis=1)
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Restart the generator from ``seed`` (nothing happens without one)."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = False,
+    ) -> tuple[Any, Any]:
+        """Return ``(action, state)``: an action drawn from the observed type's mix."""
+        obs = observation["observation"] if isinstance(observation, Mapping) else observation
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.ndim not in (1, 2) or obs.shape[-1] < self.n_types:
+            raise ValueError(
+                f"observation must end with the {self.n_types}-entry type one-hot, got shape "
+                f"{obs.shape}"
+            )
+        batch = np.atleast_2d(obs)
+        s = np.argmax(batch[:, -self.n_types :], axis=1)
+        u = self.rng.random(len(s))
+        a = np.array(
+            [np.searchsorted(self._cdf[k], ui, side="right") for k, ui in zip(s, u, strict=True)]
+        )
+        a = np.minimum(a, self.n_actions - 1).astype(np.int64)
+        return (np.int64(a[0]) if obs.ndim == 1 else a), state

@@ -76,6 +76,7 @@ class AttackModel(ABC):
     """
 
     name: str = "attack"
+    reset_options: tuple[str, ...] = ()  # keys of reset(options=...) the model reads
     action_space: spaces.Space
     feature_low: np.ndarray
     feature_high: np.ndarray
@@ -91,6 +92,25 @@ class AttackModel(ABC):
     @abstractmethod
     def features(self) -> list[float]:
         """Model-specific observation features, scaled to order one."""
+
+    def draw_nature(  # noqa: B027 - optional hook
+        self, rng: np.random.Generator, options: dict[str, Any]
+    ) -> None:
+        """Nature's draws of an episode (e.g. the attacker's type), at every reset.
+
+        Called after the simulation's own draws, with the env's generator and reset's
+        ``options`` (the keys in :attr:`reset_options`).
+        """
+
+    def check_reset_options(self, options: dict[str, Any]) -> None:  # noqa: B027 - optional
+        """Raise ``ValueError`` for a bad value of one of :attr:`reset_options`.
+
+        Called before reset changes anything.
+        """
+
+    def private_info(self) -> dict[str, Any]:
+        """Information only the attacker receives (its infos, not the defender's)."""
+        return {}
 
     def observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
         """Called after each step with the other player's model (repeated games use it)."""
@@ -119,6 +139,18 @@ class AttackModel(ABC):
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Start episodes for the batch members ``where`` (all when None) of ``batch``."""
         raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
+
+    def batch_draw_nature(  # noqa: B027 - optional hook
+        self,
+        rngs: list[np.random.Generator],
+        where: np.ndarray | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> None:
+        """Batched :meth:`draw_nature`: member ``i`` draws from ``rngs[i]``."""
+
+    def batch_private_info(self) -> dict[str, np.ndarray]:
+        """Batched :meth:`private_info`."""
+        return {}
 
     def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
         """Batched :meth:`observe_opponent`."""

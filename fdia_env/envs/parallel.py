@@ -137,22 +137,25 @@ class FdiaParallelEnv(ParallelEnv):
         """Start an episode at the window start; ``seed`` makes every draw reproducible.
 
         Raises:
-            ValueError: For a seed that is not a non-negative integer (``options`` are read by
-                no env: a non-empty dict draws a warning, see :func:`check_reset_args`).
+            ValueError: For a seed that is not a non-negative integer, or a bad value of an
+                option the env reads (only the typed sensor game reads one, ``attacker_type``;
+                other keys draw a warning, see :func:`check_reset_args`). Nothing changes
+                before the checks pass.
         """
-        check_reset_args(seed, options)
+        check_reset_args(seed, options, self.attack.reset_options)
+        self.attack.check_reset_options(dict(options or {}))
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(int(seed))
         self.agents = list(self.possible_agents)
         self.attack.reset()
         self.defense.reset()
         self.sim.reset(self.np_random)
+        self.attack.draw_nature(self.np_random, dict(options or {}))
         self._done = False
         self._reset_called = True
         self._last_effect = None
         obs = {a: self._observe(a) for a in self.agents}
-        info = self._info()
-        return obs, {a: dict(info) for a in self.agents}
+        return obs, self._infos(self.agents)
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Apply both players' actions for one window step.
@@ -199,8 +202,7 @@ class FdiaParallelEnv(ParallelEnv):
         rewards = {a: rewards[a] for a in agents}
         terminations = dict.fromkeys(agents, done)
         truncations = dict.fromkeys(agents, truncated)
-        info = self._info()
-        infos = {a: dict(info) for a in agents}
+        infos = self._infos(agents)
         if done or truncated:
             self._done = True
             self.agents = []
@@ -216,6 +218,14 @@ class FdiaParallelEnv(ParallelEnv):
         for key, default in self._info_defaults.items():  # the defaults' types, always
             info[key] = type(default)(engine.get(key, default))
         return info
+
+    def _infos(self, agents: list[str]) -> dict[str, dict[str, Any]]:
+        """Each agent's info: the common one, plus the attack's private keys for the attacker."""
+        info = self._info()
+        infos = {a: dict(info) for a in agents}
+        if "attacker" in infos:
+            infos["attacker"].update(self.attack.private_info())
+        return infos
 
     def _reward(self, phi: float, phi_prev: float, done: bool) -> float:
         mode = self.spec.reward_mode
@@ -265,11 +275,12 @@ class FdiaParallelEnv(ParallelEnv):
         return np.array(self.sim.features(), dtype=np.float32)
 
 
-def check_reset_args(seed: Any, options: Any) -> None:
-    """``reset``'s arguments: a seed in [0, 2**64) or None; options are read by no env.
+def check_reset_args(seed: Any, options: Any, known: tuple[str, ...] = ()) -> None:
+    """``reset``'s arguments: a seed in [0, 2**64) or None; options the env reads (``known``).
 
-    Options are not an error, because PettingZoo's own ``parallel_api_test`` resets with
-    ``options={"options": 1}``; a non-empty dict draws a ``UserWarning`` naming its keys, so a
+    Only the typed sensor game reads an option (``attacker_type``, which forces nature's draw).
+    Other options are not an error, because PettingZoo's own ``parallel_api_test`` resets with
+    ``options={"options": 1}``; keys outside ``known`` draw a ``UserWarning`` naming them, so a
     setting passed there by mistake (instead of to the constructor) is not silently lost.
     """
     if seed is not None:
@@ -279,10 +290,12 @@ def check_reset_args(seed: Any, options: Any) -> None:
             raise ValueError(f"seed must be in [0, 2**64), got {seed}")
     if options is not None and not isinstance(options, dict):
         raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
-    if options:
+    unknown = sorted(str(k) for k in (options or {}) if k not in known)
+    if unknown:
+        reads = f"this env reads only {list(known)}" if known else "this env reads none"
         warnings.warn(
-            f"reset options {sorted(map(str, options))} are ignored: fdia_env envs read no "
-            "reset options (pass settings such as budget or horizon to the constructor)",
+            f"reset options {unknown} are ignored: {reads} (pass settings such as budget or "
+            "horizon to the constructor)",
             UserWarning,
             stacklevel=3,
         )

@@ -74,7 +74,7 @@ class SingleAgentEnv(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
         """Reset the underlying env; ``seed`` seeds every draw of the episode."""
-        check_reset_args(seed, options)
+        check_reset_args(seed, options, self.parallel.attack.reset_options)
         super().reset(seed=None if seed is None else int(seed))
         obs, infos = self.parallel.reset(seed=seed, options=options)
         if seed is not None and hasattr(self.opponent, "reset"):

@@ -130,18 +130,20 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
                 (None entries allowed); ``options`` as in :func:`check_reset_args`.
         """
         B = self.num_envs
+        known = self.attack.reset_options
         if seed is None or (isinstance(seed, int | np.integer) and not isinstance(seed, bool)):
-            check_reset_args(seed, options)
+            check_reset_args(seed, options, known)
             seeds = [None] * B if seed is None else [int(seed) + i for i in range(B)]
         elif isinstance(seed, list | tuple):
             if len(seed) != B:
                 raise ValueError(f"seed must be an int or a list of {B} seeds, got {len(seed)}")
             for s in seed:
                 check_reset_args(s, None)
-            check_reset_args(None, options)
+            check_reset_args(None, options, known)
             seeds = [None if s is None else int(s) for s in seed]
         else:
             raise ValueError(f"seed must be an int, a list of {B} ints or None, got {seed!r}")
+        self.attack.check_reset_options(dict(options or {}))
         super().reset(seed=None if seed is None or isinstance(seed, list | tuple) else int(seed))
         self._rngs = [seeding.np_random(s)[0] for s in seeds]
         if self._mix:  # one opponent generator per member, as each single env has its own
@@ -158,6 +160,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.sim.reset(None, self._rngs)
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
+        # nature's draws (the sensor game's type); options force them for this reset only: an
+        # autoreset draws them, as SyncVectorEnv's autoreset calls reset() without options
+        self.attack.batch_draw_nature(self._rngs, None, dict(options or {}))
         self._prev_done = np.zeros(B, dtype=bool)
         self._det_info = {
             key: np.full(B, value, dtype=type(value)) for key, value in self._det_defaults.items()
@@ -170,6 +175,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.sim.reset(where, rngs)
         self.attack.batch_reset(self.num_envs, where)
         self.defense.batch_reset(self.num_envs, where)
+        self.attack.batch_draw_nature(self._rngs, where)
         for key, value in self._det_defaults.items():
             self._det_info[key][where] = value
 
@@ -283,6 +289,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         # phi is a fresh array every step; k is updated in place, so it is copied
         values: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
         values.update(self.attack.batch_info())
+        if self.agent == "attacker":
+            values.update(self.attack.batch_private_info())
         for key, array in self._det_info.items():
             values[key] = array.copy()
         if self._masked:
