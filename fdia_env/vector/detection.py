@@ -83,7 +83,7 @@ def batched_detection_step(
         }
         sim._set_P(np.array(P_d0))
         sim._M = cov
-        sim.consistent = np.zeros(B, dtype=bool)
+        sim._set_consistent(np.zeros(B, dtype=bool))
         return
     # sampled: uniform for H1, then process noise, measurement noise, and the bias under H1
     attacked = np.zeros(B, dtype=bool)
@@ -112,7 +112,7 @@ def batched_detection_step(
     sim.x_hat = x_pred + np.einsum("bij,bj->bi", K, y)
     sim.x = x_next
     sim._set_P(np.where(detected[:, None, None], P_d1, P_d0))
-    sim.consistent = np.ones(B, dtype=bool)
+    sim._set_consistent(np.ones(B, dtype=bool))
     sim.value_override = None
     if rule.criterion == "bayes_cost":  # the fixed cost of the case each member met
         C = Pzz0 + sigma * attacked[:, None, None]

@@ -155,7 +155,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if self.sim is None:
             self.sim = BatchedSimulation(self.parallel.sim, B)
         self.sim.rngs = self._rngs
-        self.sim.reset(None, self._rngs)
+        self.sim.reset(None)
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
         self._prev_done = np.zeros(B, dtype=bool)
@@ -166,8 +166,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
 
     def _reset_members(self, where: np.ndarray) -> None:
         """Reset the members of the (B,) boolean mask ``where``."""
-        rngs = [self._rngs[i] for i in np.flatnonzero(where)] if self.sim.sampled else None
-        self.sim.reset(where, rngs)
+        self.sim.reset(where)
         self.attack.batch_reset(self.num_envs, where)
         self.defense.batch_reset(self.num_envs, where)
         for key, value in self._det_defaults.items():
