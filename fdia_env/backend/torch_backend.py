@@ -63,6 +63,11 @@ _NUMPY_DTYPES = {
 }
 
 
+def _shape(shape: Any) -> tuple[int, ...]:
+    """The ``shape`` argument of numpy (an int or a tuple) as a tuple for torch."""
+    return (int(shape),) if isinstance(shape, int | np.integer) else tuple(shape)
+
+
 class TorchBackend(Backend):
     """torch tensors on ``device`` (float64 unless told otherwise)."""
 
@@ -109,11 +114,11 @@ class TorchBackend(Backend):
 
     def zeros(self, shape: Any, dtype: Any = None) -> torch.Tensor:
         """Zeros (float64 unless ``dtype``)."""
-        return torch.zeros(shape, dtype=self._dtype(dtype), device=self.device)
+        return torch.zeros(_shape(shape), dtype=self._dtype(dtype), device=self.device)
 
     def ones(self, shape: Any, dtype: Any = None) -> torch.Tensor:
         """Ones (float64 unless ``dtype``)."""
-        return torch.ones(shape, dtype=self._dtype(dtype), device=self.device)
+        return torch.ones(_shape(shape), dtype=self._dtype(dtype), device=self.device)
 
     def full(self, shape: Any, value: Any, dtype: Any = None) -> torch.Tensor:
         """A tensor filled with ``value`` (dtype inferred from it unless given)."""
@@ -125,11 +130,11 @@ class TorchBackend(Backend):
                 if isinstance(value, int)
                 else torch.float64
             )
-        return torch.full(shape, value, dtype=self._dtype(dtype), device=self.device)
+        return torch.full(_shape(shape), value, dtype=self._dtype(dtype), device=self.device)
 
     def empty(self, shape: Any, dtype: Any = None) -> torch.Tensor:
         """Uninitialised (float64 unless ``dtype``)."""
-        return torch.empty(shape, dtype=self._dtype(dtype), device=self.device)
+        return torch.empty(_shape(shape), dtype=self._dtype(dtype), device=self.device)
 
     def arange(self, n: int) -> torch.Tensor:
         """``[0, n)`` as int64."""
@@ -245,4 +250,6 @@ class TorchBackend(Backend):
 
     def normal(self, generator: torch.Generator, shape: Any) -> torch.Tensor:
         """Standard normal float64 draws on the device."""
-        return torch.randn(shape, generator=generator, dtype=torch.float64, device=self.device)
+        return torch.randn(
+            _shape(shape), generator=generator, dtype=torch.float64, device=self.device
+        )

@@ -20,6 +20,14 @@ A fixed opponent (two-player envs) acts for the whole batch with one ``predict``
 (B, d) observations, except a :class:`~fdia_env.envs.opponents.FixedMix` (the default of the
 sensor game's views): it draws from one generator per member, seeded as the single env seeds its
 opponent (``seed + i + 1``), so member ``i`` replays the single env seeded ``seed + i``.
+
+``backend="torch", device="cpu" | "cuda"`` runs the same engine and models on torch tensors
+(float64) of that device (:data:`TORCH_IDS` so far): actions must be tensors on the device,
+observations (float32), rewards (float64), terminations, truncations, infos and action masks
+are tensors there, and ``reset(seed=s)`` seeds one ``torch.Generator`` on the device that every
+member draws from (sampled dynamics: equal to the numpy backend in distribution, not draw for
+draw; expected dynamics: equal member by member). In ``SAME_STEP`` mode ``infos["final_obs"]``
+is a (B, d) tensor (rows of the members whose ``_final_obs`` is False are zeros).
 """
 
 from __future__ import annotations
@@ -35,7 +43,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_int
-from fdia_env.envs.actions import check_batch_actions
+from fdia_env.backend import NUMPY, get_backend
+from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
 from fdia_env.envs.single_agent import Policy, check_agent, check_opponent
@@ -44,6 +53,9 @@ from fdia_env.vector.simulation import BatchedSimulation
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
 # sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
 MAX_NUM_ENVS = 2**20
+
+# the Gymnasium ids whose models run on torch (``backend="torch"``)
+TORCH_IDS = ("fdia_env/SparseAttack-v0", "fdia_env/CovarianceAttack-v0")
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
@@ -58,6 +70,12 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         max_episode_steps: Truncate each member's episode after this many steps (as
             Gymnasium's ``TimeLimit``: ``truncated`` is True at that step even if the episode
             also terminates there), or None.
+        backend: ``"numpy"`` (default) or ``"torch"`` (see the module doc).
+        device: torch only: ``"cpu"`` (default), ``"cuda"`` or ``"cuda:<i>"``.
+
+    Raises:
+        ValueError: For an unknown backend, a device that is not there (``"cuda"`` without a
+            GPU), or ``backend="torch"`` for an env whose models have no torch implementation.
     """
 
     def __init__(
@@ -68,8 +86,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         opponent: Policy | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         max_episode_steps: int | None = None,
+        backend: str = "numpy",
+        device: Any = None,
     ) -> None:
         self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
+        self.xp = xp = get_backend(backend, device)
         check_agent(agent, parallel.possible_agents)
         try:
             mode = AutoresetMode(autoreset_mode)
@@ -85,7 +106,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             if max_episode_steps is None
             else check_int("max_episode_steps", max_episode_steps, minimum=1)
         )
-        self.metadata = {"autoreset_mode": mode, "render_modes": []}
+        self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
         self.render_mode = None
         self.parallel = parallel
         self.agent = agent
@@ -95,6 +116,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             opponent = FixedMix.uniform(int(parallel.action_space(self.other).n))
         if self.other is not None:
             check_opponent(opponent, parallel.action_space(self.other))
+        if xp is not NUMPY:
+            _check_torch_support(parallel, self.other)
+        self.backend, self.device = xp.name, xp.device
         self.opponent = opponent
         self._mix = isinstance(opponent, FixedMix)  # drawn per member (see the module doc)
         self._opp_rngs: list[np.random.Generator] | None = None
@@ -111,9 +135,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         }
         self._models = {"attacker": self.attack, "defender": self.defense}
         self.sim: BatchedSimulation | None = None
-        self._prev_done = np.zeros(self.num_envs, dtype=bool)
-        self._all = np.ones(self.num_envs, dtype=bool)
-        self._all.setflags(write=False)  # the shared all-True `_key` mask of the infos
+        self._generator: Any = None  # torch: the device generator every member draws from
+        self._prev_done = xp.zeros(self.num_envs, dtype=xp.bool)
+        self._all = xp.ones(self.num_envs, dtype=xp.bool)  # the shared all-True `_key` mask
+        if xp is NUMPY:
+            self._all.setflags(write=False)
         self._det_defaults = self.defense.info_defaults(parallel.sim.sampled)
 
     @property
@@ -130,6 +156,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
                 (None entries allowed); ``options`` as in :func:`check_reset_args`.
         """
         B = self.num_envs
+        if self.xp is not NUMPY:
+            return self._reset_torch(seed, options)
         if seed is None or (isinstance(seed, int | np.integer) and not isinstance(seed, bool)):
             check_reset_args(seed, options)
             seeds = [None] * B if seed is None else [int(seed) + i for i in range(B)]
@@ -155,10 +183,32 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if self.sim is None:
             self.sim = BatchedSimulation(self.parallel.sim, B)
         self.sim.rngs = self._rngs
+        return self._reset_all()
+
+    def _reset_torch(self, seed: Any, options: dict | None):
+        """``reset`` on torch: an int ``seed`` seeds the device generator."""
+        if isinstance(seed, list | tuple):
+            raise ValueError(
+                "seed must be an int or None for backend='torch' (one torch.Generator on the "
+                f"device draws for every member), got a list of {len(seed)}"
+            )
+        check_reset_args(seed, options)
+        super().reset(seed=None if seed is None else int(seed))
+        if seed is not None or self._generator is None:
+            self._generator = self.xp.generator(None if seed is None else int(seed))
+        if self.sim is None:
+            self.sim = BatchedSimulation(self.parallel.sim, self.num_envs, self.xp)
+        self.sim.generator = self._generator
+        return self._reset_all()
+
+    def _reset_all(self):
+        """Every member at the window start: the engine, the models, the infos."""
+        B, xp = self.num_envs, self.xp
+        self.attack.xp = self.defense.xp = xp
         self.sim.reset(None)
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
-        self._prev_done = np.zeros(B, dtype=bool)
+        self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._det_info = {
             key: np.full(B, value, dtype=type(value)) for key, value in self._det_defaults.items()
         }
@@ -177,9 +227,12 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         """Step every member (NEXT_STEP: members finished last step are reset instead)."""
         if self.sim is None:
             raise RuntimeError("step() called before reset(): call reset() first")
-        B = self.num_envs
+        B, xp = self.num_envs, self.xp
         resetting = self._prev_done
-        check_batch_actions(self.single_action_space, actions, B, self.agent)
+        if xp is NUMPY:
+            check_batch_actions(self.single_action_space, actions, B, self.agent)
+        else:
+            check_batch_tensor_actions(self.single_action_space, actions, B, self.agent, xp)
         actions = {self.agent: actions}
         if self.other is not None:
             actions[self.other] = self._opponent_actions(~resetting)
@@ -208,23 +261,23 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
                 self._det_info[key] = np.where(resetting, self._det_info[key], values)
         k = self.sim.k
         done = k >= self.spec_episode.horizon
-        truncated = np.zeros(B, dtype=bool)
+        truncated = xp.zeros(B, dtype=xp.bool)
         if self.parallel.max_cycles is not None:  # the env's own limit (PettingZoo's)
             truncated |= ~done & (k >= self.parallel.max_cycles)
         if self.max_episode_steps is not None:  # Gymnasium's TimeLimit
             truncated |= k >= self.max_episode_steps
         mode = self.spec_episode.reward_mode
         if mode == "terminal":
-            reward = np.where(done, phi, 0.0)
+            reward = xp.where(done, phi, 0.0)
         elif mode == "shaped":
             reward = phi - phi_prev
         else:
-            reward = phi.copy()
+            reward = xp.copy(phi)
         if self.agent == "defender":
             reward = -reward
         infos: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
-            if resetting.any():
+            if xp.any(resetting):
                 self._reset_members(resetting)
                 reward[resetting] = 0.0
                 done[resetting] = False
@@ -234,18 +287,21 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         else:  # SAME_STEP: finished members restart now; their last step goes in infos
             obs = self._observe(self.agent)
             ended = done | truncated
-            if ended.any():
-                final = np.full(B, None, dtype=object)
-                for i in np.flatnonzero(ended):
-                    final[i] = obs[i].copy()
-                final_info = _masked(self._infos(), ended)
+            if xp.any(ended):
+                if xp is NUMPY:
+                    final = np.full(B, None, dtype=object)
+                    for i in np.flatnonzero(ended):
+                        final[i] = obs[i].copy()
+                else:  # torch has no object arrays: a (B, d) tensor, zeros where not ended
+                    final = xp.where(ended[:, None], obs, 0.0)
+                final_info = _masked(self._infos(), ended, xp)
                 infos = {
                     "final_obs": final,
-                    "_final_obs": ended.copy(),
+                    "_final_obs": xp.copy(ended),
                     "final_info": final_info,
-                    "_final_info": ended.copy(),
+                    "_final_info": xp.copy(ended),
                 }
-                self._reset_members(ended.copy())
+                self._reset_members(xp.copy(ended))
                 obs = self._observe(self.agent)
         infos.update(self._infos())
         return obs, reward, done, truncated, infos
@@ -272,7 +328,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
     # --- observations ----------------------------------------------------------------------------
     def _observe(self, agent: str) -> np.ndarray:
         """(B, d) float32 observations of ``agent``, a transposed view of a (d, B) buffer."""
-        rows = np.empty((self._dims[agent], self.num_envs), dtype=np.float32)
+        rows = self.xp.empty((self._dims[agent], self.num_envs), dtype=self.xp.float32)
         col = self.sim.features(rows)
         rows[col:] = self._models[agent].batch_features().T
         return rows.T
@@ -280,7 +336,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
     def _infos(self) -> dict[str, Any]:
         """Gymnasium vector infos: the single env's keys, each with its all-True ``_key``."""
         # phi is a fresh array every step; k is updated in place, so it is copied
-        values: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
+        values: dict[str, Any] = {"phi": self.sim.phi, "step": self.xp.copy(self.sim.k)}
         values.update(self.attack.batch_info())
         for key, array in self._det_info.items():
             values[key] = array.copy()
@@ -294,22 +350,39 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
 
     def action_masks(self) -> np.ndarray:
         """(B, A) legal actions of the learning player (all legal where unmasked)."""
+        xp = self.xp
         mask = self._models[self.agent].batch_action_mask()
         if mask is None:
-            return np.ones((self.num_envs, int(getattr(self.single_action_space, "n", 1))), bool)
-        return mask.astype(bool)
+            n = int(getattr(self.single_action_space, "n", 1))
+            return xp.ones((self.num_envs, n), dtype=xp.bool)
+        return xp.astype(mask, xp.bool)
 
 
-def _masked(infos: dict[str, Any], where: np.ndarray) -> dict[str, Any]:
+def _masked(infos: dict[str, Any], where: Any, xp=NUMPY) -> dict[str, Any]:
     """``infos`` reported by the members ``where`` only (their ``_key`` masks set to it)."""
     out: dict[str, Any] = {}
     for key, value in infos.items():
         if not key.startswith("_"):
-            out[key] = np.where(where.reshape(-1, *[1] * (value.ndim - 1)), value, 0).astype(
-                value.dtype
-            )
-            out["_" + key] = where.copy()
+            kept = xp.where(where.reshape(-1, *[1] * (value.ndim - 1)), value, 0)
+            out[key] = xp.astype(kept, value.dtype)
+            out["_" + key] = xp.copy(where)
     return out
+
+
+def _check_torch_support(parallel: FdiaParallelEnv, other: str | None) -> None:
+    """``ValueError`` unless this env's models run on torch (see :data:`TORCH_IDS`)."""
+    missing = [
+        type(m).__name__
+        for m in (parallel.attack, parallel.defense)
+        if "torch" not in m.batch_backends
+    ]
+    if missing or other is not None:
+        why = f"{', '.join(missing)} has no torch batch" if missing else "it has an opponent"
+        raise ValueError(
+            f"backend='torch' is not implemented for {parallel.metadata.get('name')} ({why}); "
+            f"backend='torch' supports {', '.join(TORCH_IDS)} (their options included); "
+            "use backend='numpy' for the others"
+        )
 
 
 def _box(space: spaces.Space) -> spaces.Box:
@@ -323,9 +396,16 @@ def make_vector(
     opponent: Policy | None = None,
     autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
     max_episode_steps: int | None = None,
+    backend: str = "numpy",
+    device: Any = None,
     **kwargs: Any,
 ) -> FdiaVectorEnv:
-    """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B."""
+    """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B.
+
+    ``backend`` and ``device`` choose numpy (default) or torch on a device (see
+    :class:`FdiaVectorEnv`); they are checked before the env is built.
+    """
+    get_backend(backend, device)  # an unknown backend or a missing GPU fails first
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
@@ -342,4 +422,6 @@ def make_vector(
         opponent=opponent,
         autoreset_mode=autoreset_mode,
         max_episode_steps=max_episode_steps,
+        backend=backend,
+        device=device,
     )
