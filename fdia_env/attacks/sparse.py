@@ -210,8 +210,10 @@ class SparseAttack(AttackModel):
 
     def batch_features(self) -> Any:
         """(B, 1) remaining budget fraction."""
-        scale = 1.0 / self.budget if self.budget else 0.0
-        return (self.xp.astype(self.b_remaining, self.xp.float64) * scale)[:, None]
+        # a 0-d float64 array: int64 × it is float64 on numpy and torch alike (a Python float
+        # would give torch's default float32)
+        scale = self.xp.asarray(np.float64(1.0 / self.budget if self.budget else 0.0))
+        return (self.b_remaining * scale)[:, None]
 
     def _batch_tables(self) -> None:
         """Tables indexed by [action, min(budget left, M)]: the trimmed action, and masks."""
