@@ -13,6 +13,7 @@ from gymnasium.vector import AutoresetMode
 
 from fdia_env import LinearSystem, Sensor
 from fdia_env.backend import NUMPY, get_backend, namespace
+from fdia_env.envs.opponents import FixedMix
 from fdia_env.kalman import inv2, joseph_update, logdet, predict_cov, psd_sqrt, small
 from fdia_env.vector import FdiaVectorEnv
 
@@ -72,6 +73,28 @@ EXPECTED_CASES = {
             "horizon": 3,
             "objective": "logdet",
             "reward_mode": "shaped",
+        },
+        AutoresetMode.NEXT_STEP,
+    ),
+    # the sensor game: steady restarts (a DARE per distinct subset), leaks through A ∩ D, an
+    # opponent (deterministic here, so that both backends see the same opponent actions)
+    "game-attacker": (
+        "fdia_env/SensorGameAttacker-v0",
+        {"rounds": 3, "opponent": FixedMix([0, 0, 0, 0, 0, 1.0, 0])},
+        AutoresetMode.NEXT_STEP,
+    ),
+    "game-defender-terminal-same-step": (
+        "fdia_env/SensorGameDefender-v0",
+        {"rounds": 2, "reward_mode": "terminal", "opponent": FixedMix([0, 0, 1.0, 0, 0, 0, 0])},
+        AutoresetMode.SAME_STEP,
+    ),
+    "game-attacker-dependent-small": (
+        "fdia_env/SensorGameAttacker-v0",
+        {
+            "rounds": 2,
+            "allocation": "dependent",
+            "max_subset_size": 2,
+            "opponent": FixedMix([0, 0, 0, 0, 0, 0, 1.0]),
         },
         AutoresetMode.NEXT_STEP,
     ),
@@ -223,13 +246,19 @@ SAMPLED_CASES = {
         {"scenario": "ch2-pv-2", "horizon": 3},
         [np.full(10, 0.3, np.float32), np.linspace(-1, 1, 10, dtype=np.float32)] * 2,
     ),
+    # the sensor game: steady restarts drawing the error afresh, a bias leaking through A ∩ D
+    "game-attacker": (
+        "fdia_env/SensorGameAttacker-v0",
+        {"rounds": 3, "opponent": FixedMix([0, 0, 0, 0, 0, 1.0, 0])},
+        [0, 3, 6],
+    ),
 }
 
 
 @pytest.mark.parametrize("case", sorted(SAMPLED_CASES))
 def test_sampled_dynamics_moments_equal_numpy_and_exact(case):
     env_id, options, plan = SAMPLED_CASES[case]
-    plan = plan[: options["horizon"]]
+    plan = plan[: options.get("horizon", options.get("rounds"))]
     B = 16000  # 5 standard errors of the mean of |e|² are about 4 % of it
     e_np = sampled_errors(env_id, options, "numpy", B, plan, seed=10)
     e_t = sampled_errors(env_id, options, "torch", B, plan, seed=10)
@@ -319,9 +348,9 @@ def test_device_with_numpy_backend_is_rejected():
 
 
 def test_env_without_torch_models_is_rejected():
-    with pytest.raises(ValueError, match=r"backend='torch' is not implemented for .*supports"):
+    with pytest.raises(ValueError, match=r"not implemented for detection_game_v0 .*supports"):
         gym.make_vec(
-            "fdia_env/SensorGameAttacker-v0",
+            "fdia_env/DetectionDefender-v0",
             num_envs=2,
             vectorization_mode="vector_entry_point",
             backend="torch",
@@ -420,3 +449,22 @@ def test_engine_partial_resets_equal_numpy(scenario, options):
         np.testing.assert_array_equal(sims["torch"].k.numpy(), sims["numpy"].k)
         np.testing.assert_allclose(M_np[where], np.broadcast_to(single.P_start, M_np[where].shape))
         assert (sims["numpy"].k[where] == 0).all() and (sims["numpy"].k[~where] > 0).all()
+
+
+def test_default_opponent_mix_draws_its_probabilities_on_torch():
+    """The sensor game's default opponent (uniform FixedMix) draws from the device generator."""
+    B = 20000
+    env = gym.make_vec(
+        "fdia_env/SensorGameAttacker-v0",
+        num_envs=B,
+        vectorization_mode="vector_entry_point",
+        backend="torch",
+    )
+    env.reset(seed=0)
+    actions = env._opponent_actions(torch.ones(B, dtype=torch.bool))
+    assert actions.dtype == torch.int64 and actions.device == TORCH.device
+    n = env.parallel.action_space("defender").n
+    freq = np.bincount(actions.numpy(), minlength=n) / B
+    p = 1.0 / n
+    np.testing.assert_array_less(np.abs(freq - p), 5 * np.sqrt(p * (1 - p) / B))
+    env.step(torch.zeros(B, dtype=torch.int64))  # the whole step runs with that opponent

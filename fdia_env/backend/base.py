@@ -207,5 +207,13 @@ class Backend(ABC):
     def normal(self, generator: Any, shape: Any) -> Any:
         """Standard normal float64 draws."""
 
+    @abstractmethod
+    def uniform(self, generator: Any, shape: Any) -> Any:
+        """Uniform float64 draws in [0, 1)."""
+
+    @abstractmethod
+    def searchsorted(self, sorted_values: Any, values: Any) -> Any:
+        """Insertion indices to the right of equal values (numpy's ``side="right"``)."""
+
     def __repr__(self) -> str:
         return f"Backend({self.name!r}, device={str(self.device)!r})"

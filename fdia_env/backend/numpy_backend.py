@@ -125,6 +125,14 @@ class NumpyBackend(Backend):
         """Standard normal draws."""
         return generator.standard_normal(shape)
 
+    def uniform(self, generator: np.random.Generator, shape: Any) -> np.ndarray:
+        """Uniform draws in [0, 1)."""
+        return generator.random(shape)
+
+    def searchsorted(self, sorted_values: np.ndarray, values: Any) -> np.ndarray:
+        """``np.searchsorted(sorted_values, values, side="right")``."""
+        return np.searchsorted(sorted_values, values, side="right")
+
 
 NUMPY = NumpyBackend()
 """The numpy backend (a singleton: compare with ``is``)."""

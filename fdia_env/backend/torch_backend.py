@@ -253,3 +253,13 @@ class TorchBackend(Backend):
         return torch.randn(
             _shape(shape), generator=generator, dtype=torch.float64, device=self.device
         )
+
+    def uniform(self, generator: torch.Generator, shape: Any) -> torch.Tensor:
+        """Uniform float64 draws in [0, 1) on the device."""
+        return torch.rand(
+            _shape(shape), generator=generator, dtype=torch.float64, device=self.device
+        )
+
+    def searchsorted(self, sorted_values: Any, values: torch.Tensor) -> torch.Tensor:
+        """Numpy's ``searchsorted(..., side="right")``."""
+        return torch.searchsorted(self.asarray(sorted_values), values, right=True)

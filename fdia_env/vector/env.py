@@ -55,7 +55,12 @@ from fdia_env.vector.simulation import BatchedSimulation
 MAX_NUM_ENVS = 2**20
 
 # the Gymnasium ids whose models run on torch (``backend="torch"``)
-TORCH_IDS = ("fdia_env/SparseAttack-v0", "fdia_env/CovarianceAttack-v0")
+TORCH_IDS = (
+    "fdia_env/SparseAttack-v0",
+    "fdia_env/CovarianceAttack-v0",
+    "fdia_env/SensorGameAttacker-v0",
+    "fdia_env/SensorGameDefender-v0",
+)
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
@@ -117,7 +122,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if self.other is not None:
             check_opponent(opponent, parallel.action_space(self.other))
         if xp is not NUMPY:
-            _check_torch_support(parallel, self.other)
+            _check_torch_support(parallel)
         self.backend, self.device = xp.name, xp.device
         self.opponent = opponent
         self._mix = isinstance(opponent, FixedMix)  # drawn per member (see the module doc)
@@ -196,6 +201,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         super().reset(seed=None if seed is None else int(seed))
         if seed is not None or self._generator is None:
             self._generator = self.xp.generator(None if seed is None else int(seed))
+        if seed is not None and not self._mix and hasattr(self.opponent, "reset"):
+            self.opponent.reset(seed=int(seed) + 1)  # a policy opponent, as on numpy
         if self.sim is None:
             self.sim = BatchedSimulation(self.parallel.sim, self.num_envs, self.xp)
         self.sim.generator = self._generator
@@ -236,9 +243,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         actions = {self.agent: actions}
         if self.other is not None:
             actions[self.other] = self._opponent_actions(~resetting)
-            check_batch_actions(
-                self.parallel.action_space(self.other), actions[self.other], B, self.other
-            )
+            space = self.parallel.action_space(self.other)
+            if xp is NUMPY:
+                check_batch_actions(space, actions[self.other], B, self.other)
+            else:
+                check_batch_tensor_actions(space, actions[self.other], B, self.other, xp)
         attacked, sigma = self.attack.batch_apply(actions["attacker"])
         used, leak, present, steady = self.defense.batch_apply(
             actions.get("defender"), attacked, sigma
@@ -308,16 +317,25 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
 
     def _opponent_actions(self, stepping: np.ndarray) -> np.ndarray:
         """The fixed opponent's (B, ...) actions; a FixedMix draws only for ``stepping``."""
-        B = self.num_envs
-        if self._mix:
+        B, xp = self.num_envs, self.xp
+        if self._mix and xp is not NUMPY:  # torch: the device generator draws for every member
             mix: FixedMix = self.opponent
+            index = xp.searchsorted(mix._cdf, xp.uniform(self._generator, B))
+            return xp.minimum(index, mix.n_actions - 1)
+        if self._mix:
+            mix = self.opponent
             u = np.zeros(B)
             for i in np.flatnonzero(stepping):  # each member's generator, as its single env's
                 u[i] = self._opp_rngs[i].random()
             return np.minimum(np.searchsorted(mix._cdf, u, side="right"), mix.n_actions - 1)
-        action, _ = self.opponent.predict(self._observe(self.other), deterministic=True)
+        obs = self._observe(self.other)
+        if xp is not NUMPY:  # a policy's predict takes and gives numpy (SB3's convention)
+            obs = xp.to_numpy(obs)
+        action, _ = self.opponent.predict(obs, deterministic=True)
         shape = self.parallel.action_space(self.other).shape or ()
         try:
+            if xp is not NUMPY:
+                return xp.asarray(np.asarray(action).reshape(B, *shape))
             return np.asarray(action).reshape(B, *shape)
         except ValueError as exc:
             raise ValueError(
@@ -369,17 +387,17 @@ def _masked(infos: dict[str, Any], where: Any, xp=NUMPY) -> dict[str, Any]:
     return out
 
 
-def _check_torch_support(parallel: FdiaParallelEnv, other: str | None) -> None:
+def _check_torch_support(parallel: FdiaParallelEnv) -> None:
     """``ValueError`` unless this env's models run on torch (see :data:`TORCH_IDS`)."""
     missing = [
         type(m).__name__
         for m in (parallel.attack, parallel.defense)
         if "torch" not in m.batch_backends
     ]
-    if missing or other is not None:
-        why = f"{', '.join(missing)} has no torch batch" if missing else "it has an opponent"
+    if missing:
         raise ValueError(
-            f"backend='torch' is not implemented for {parallel.metadata.get('name')} ({why}); "
+            f"backend='torch' is not implemented for {parallel.metadata.get('name')} "
+            f"({', '.join(missing)} has no torch batch implementation yet); "
             f"backend='torch' supports {', '.join(TORCH_IDS)} (their options included); "
             "use backend='numpy' for the others"
         )
