@@ -98,6 +98,22 @@ EXPECTED_CASES = {
         },
         AutoresetMode.NEXT_STEP,
     ),
+    # the detection game: the detector's step, exact expected errors computed on the host
+    "detection-defender-static": (
+        "fdia_env/DetectionDefender-v0",
+        {"horizon": 2},
+        AutoresetMode.NEXT_STEP,
+    ),
+    "detection-defender-tracking-same-step": (
+        "fdia_env/DetectionDefender-v0",
+        {"scenario": "ch3-tracking", "warmup": "steady", "horizon": 1},
+        AutoresetMode.SAME_STEP,
+    ),
+    "detection-attacker-bayes-incorporate": (
+        "fdia_env/DetectionAttacker-v0",
+        {"criterion": "bayes_cost", "horizon": 2, "on_detect": "incorporate"},
+        AutoresetMode.NEXT_STEP,
+    ),
 }
 
 DTYPES = {
@@ -276,6 +292,26 @@ def test_sampled_dynamics_moments_equal_numpy_and_exact(case):
     np.testing.assert_array_less(np.abs(e_np.mean(axis=1) - e_t.mean(axis=1)), 5 * se_diff)
 
 
+def test_sampled_detection_game_means_equal_numpy_and_exact():
+    """H1 drawn with probability p, the test decides per member, the filter continues.
+
+    The error is then a Gaussian mixture: its mean at the first step is the exact expected
+    error (expected dynamics, horizon 1); later steps are compared between the backends only
+    (expected dynamics stop after one detection in the tracking setting).
+    """
+    env_id = "fdia_env/DetectionDefender-v0"
+    options = {"scenario": "ch3-tracking", "warmup": "steady", "horizon": 3}
+    plan = [np.array([x], np.float32) for x in (0.9, 0.2, -0.5)]  # 0.9: rarely detected
+    B = 16000
+    e_np = -sampled_errors(env_id, options, "numpy", B, plan, seed=10)  # the defender pays −Φ
+    e_t = -sampled_errors(env_id, options, "torch", B, plan, seed=10)
+    mean, _ = exact_moments(env_id, {**options, "horizon": 1}, plan[:1])
+    for name, e in (("numpy", e_np), ("torch", e_t)):
+        assert abs(e[0].mean() - mean[0]) < 5 * e[0].std() / np.sqrt(B), name
+    se_diff = np.sqrt(e_np.var(axis=1) / B + e_t.var(axis=1) / B)
+    np.testing.assert_array_less(np.abs(e_np.mean(axis=1) - e_t.mean(axis=1)), 5 * se_diff)
+
+
 def test_sampled_torch_seed_reproduces_and_differs():
     options = {"budget": 5, "horizon": 6}
     plan = [0, 0, 1, 1, 1, 3]
@@ -347,14 +383,18 @@ def test_device_with_numpy_backend_is_rejected():
         get_backend("numpy", "cuda")
 
 
-def test_env_without_torch_models_is_rejected():
-    with pytest.raises(ValueError, match=r"not implemented for detection_game_v0 .*supports"):
-        gym.make_vec(
-            "fdia_env/DetectionDefender-v0",
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            backend="torch",
-        )
+def test_model_without_torch_batch_is_rejected():
+    """Every registered id runs on torch; a user's model without a torch batch is refused."""
+    from fdia_env import fdia_v0
+    from fdia_env.defenses import PerfectDetection
+
+    class NumpyOnlyDefense(PerfectDetection):
+        batch_backends = ("numpy",)
+
+    parallel = fdia_v0.parallel_env(defense=NumpyOnlyDefense(), attack_kwargs={"budget": 2})
+    with pytest.raises(ValueError, match=r"NumpyOnlyDefense has no torch batch .*supports"):
+        FdiaVectorEnv(parallel, 2, backend="torch")
+    FdiaVectorEnv(parallel, 2).reset(seed=0)  # numpy still takes it
 
 
 def torch_env(env_id=SPARSE, **options):

@@ -60,6 +60,8 @@ TORCH_IDS = (
     "fdia_env/CovarianceAttack-v0",
     "fdia_env/SensorGameAttacker-v0",
     "fdia_env/SensorGameDefender-v0",
+    "fdia_env/DetectionAttacker-v0",
+    "fdia_env/DetectionDefender-v0",
 )
 
 
@@ -217,7 +219,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.defense.batch_reset(B)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._det_info = {
-            key: np.full(B, value, dtype=type(value)) for key, value in self._det_defaults.items()
+            key: xp.full(B, value, dtype=np.dtype(type(value)))
+            for key, value in self._det_defaults.items()
         }
         return self._observe(self.agent), self._infos()
 
@@ -267,7 +270,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         )
         if self._det_defaults:  # the detector's per-member info, for the members that stepped
             for key, values in self.sim.detection_info.items():
-                self._det_info[key] = np.where(resetting, self._det_info[key], values)
+                self._det_info[key] = xp.where(resetting, self._det_info[key], values)
         k = self.sim.k
         done = k >= self.spec_episode.horizon
         truncated = xp.zeros(B, dtype=xp.bool)
@@ -357,7 +360,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         values: dict[str, Any] = {"phi": self.sim.phi, "step": self.xp.copy(self.sim.k)}
         values.update(self.attack.batch_info())
         for key, array in self._det_info.items():
-            values[key] = array.copy()
+            values[key] = self.xp.copy(array)
         if self._masked:
             values["action_mask"] = self._models[self.agent].batch_action_mask()
         infos: dict[str, Any] = {}

@@ -245,15 +245,13 @@ class BatchedSimulation:
             steady: Restart each member from the steady state of its ``used`` subset first.
             active: (B,) members whose step counts (the others are about to be reset).
             detection: The detection game's per-member detector (then ``leak`` is the attacker's
-                Σ and ``probability`` its attack probabilities; numpy backend only).
+                Σ and ``probability`` its attack probabilities).
             probability: (B,) attack probabilities (detection game).
 
         Returns:
             (B,) Φ after the step.
         """
         if detection is not None:  # the detection game: the detector decides per measurement
-            if self.xp is not NUMPY:
-                raise NotImplementedError("the detection game's step runs on numpy only")
             batched_detection_step(self, detection, leak, probability, active)
             self.k += 1
             self.phi = self._measure_all()
