@@ -19,6 +19,8 @@ from fdia_env.vector import FdiaVectorEnv
 
 torch = pytest.importorskip("torch")
 TORCH = get_backend("torch", "cpu")
+# the member-by-member comparison runs on every device present (CI: the CPU only)
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
 THREE_STATE = LinearSystem(
     F=np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 0.9]]),
@@ -125,42 +127,42 @@ DTYPES = {
 }
 
 
-def make_pair(env_id, options, B, autoreset=AutoresetMode.NEXT_STEP):
+def make_pair(env_id, options, B, autoreset=AutoresetMode.NEXT_STEP, device="cpu"):
     """The numpy and the torch vector env of the same id and options."""
     kw = {"num_envs": B, "vectorization_mode": "vector_entry_point", "autoreset_mode": autoreset}
     np_env = gym.make_vec(env_id, **kw, **options)
-    torch_env = gym.make_vec(env_id, **kw, backend="torch", device="cpu", **options)
+    torch_env = gym.make_vec(env_id, **kw, backend="torch", device=device, **options)
     assert isinstance(torch_env, FdiaVectorEnv) and torch_env.backend == "torch"
-    assert np_env.xp is NUMPY and torch_env.xp is TORCH
+    assert np_env.xp is NUMPY and torch_env.xp is get_backend("torch", device)
     return np_env, torch_env
 
 
-def assert_same(numpy_value, torch_value, where, rtol=1e-10, atol=1e-12):
+def assert_same(numpy_value, torch_value, where, rtol=1e-10, atol=1e-12, device=None):
     """A torch tensor equal to a numpy array: same shape, the matching dtype, equal values."""
     assert isinstance(torch_value, torch.Tensor), f"{where}: {type(torch_value)}"
-    assert torch_value.device == TORCH.device, where
+    assert torch_value.device == (device or TORCH.device), where
     assert tuple(torch_value.shape) == numpy_value.shape, where
     assert torch_value.dtype == DTYPES[numpy_value.dtype], f"{where}: {torch_value.dtype}"
-    got = torch_value.numpy()
+    got = torch_value.cpu().numpy()
     if np.issubdtype(numpy_value.dtype, np.floating):
         np.testing.assert_allclose(got, numpy_value, rtol=rtol, atol=atol, err_msg=where)
     else:
         np.testing.assert_array_equal(got, numpy_value, err_msg=where)
 
 
-def assert_infos_same(np_infos, torch_infos, where):
+def assert_infos_same(np_infos, torch_infos, where, device=None):
     assert sorted(np_infos) == sorted(torch_infos), where
     for key, value in np_infos.items():
         if key == "final_obs":  # numpy: an object array of rows; torch: a (B, d) tensor
             mask = np_infos["_final_obs"]
-            rows = torch_infos[key].numpy()
+            rows = torch_infos[key].cpu().numpy()
             for i in np.flatnonzero(mask):
                 np.testing.assert_allclose(rows[i], value[i], rtol=1e-6, atol=1e-6)
             assert not rows[~mask].any(), f"{where}: rows of members that did not end"
         elif isinstance(value, dict):
-            assert_infos_same(value, torch_infos[key], f"{where}/{key}")
+            assert_infos_same(value, torch_infos[key], f"{where}/{key}", device)
         else:
-            assert_same(value, torch_infos[key], f"{where}/{key}")
+            assert_same(value, torch_infos[key], f"{where}/{key}", device=device)
 
 
 def random_actions(env, rng, infos):
@@ -174,29 +176,32 @@ def random_actions(env, rng, infos):
     return rng.uniform(-1, 1, size=(B, *space.shape)).astype(np.float32)
 
 
+@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("case", sorted(EXPECTED_CASES))
-def test_expected_dynamics_equal_numpy_member_by_member(case):
+def test_expected_dynamics_equal_numpy_member_by_member(case, device):
     env_id, options, autoreset = EXPECTED_CASES[case]
     B = 6
-    np_env, torch_env = make_pair(env_id, options, B, autoreset)
+    np_env, torch_env = make_pair(env_id, options, B, autoreset, device)
+    dev = torch_env.xp.device
     obs_n, info_n = np_env.reset(seed=3)
     obs_t, info_t = torch_env.reset(seed=3)
-    assert_same(obs_n, obs_t, "reset obs", rtol=1e-6, atol=1e-6)
-    assert_infos_same(info_n, info_t, "reset")
+    assert_same(obs_n, obs_t, "reset obs", rtol=1e-6, atol=1e-6, device=dev)
+    assert_infos_same(info_n, info_t, "reset", dev)
     rng = np.random.default_rng(1)
     episodes = 0
     horizon = np_env.spec_episode.horizon
     for t in range(2 * (horizon + 1) + 1):  # two episodes of every member and their autoresets
         actions = random_actions(np_env, rng, info_n)
         obs_n, r_n, te_n, tr_n, info_n = np_env.step(actions)
-        obs_t, r_t, te_t, tr_t, info_t = torch_env.step(torch.as_tensor(actions))
-        assert_same(obs_n, obs_t, f"step {t} obs", rtol=1e-6, atol=1e-6)
-        assert_same(r_n, r_t, f"step {t} reward")
-        assert_same(te_n, te_t, f"step {t} terminated")
-        assert_same(tr_n, tr_t, f"step {t} truncated")
-        assert_infos_same(info_n, info_t, f"step {t}")
-        assert_same(np_env.action_masks(), torch_env.action_masks(), f"step {t} masks")
-        np.testing.assert_allclose(torch_env.sim.M.numpy(), np_env.sim.M, rtol=1e-10, atol=1e-14)
+        obs_t, r_t, te_t, tr_t, info_t = torch_env.step(torch.as_tensor(actions, device=dev))
+        assert_same(obs_n, obs_t, f"step {t} obs", rtol=1e-6, atol=1e-6, device=dev)
+        assert_same(r_n, r_t, f"step {t} reward", device=dev)
+        assert_same(te_n, te_t, f"step {t} terminated", device=dev)
+        assert_same(tr_n, tr_t, f"step {t} truncated", device=dev)
+        assert_infos_same(info_n, info_t, f"step {t}", dev)
+        assert_same(np_env.action_masks(), torch_env.action_masks(), f"step {t} masks", device=dev)
+        M_t = torch_env.sim.M.cpu().numpy()
+        np.testing.assert_allclose(M_t, np_env.sim.M, rtol=1e-10, atol=1e-14)
         episodes += int((te_n | tr_n).sum())
     assert episodes >= 2 * B  # every member went through at least two autoresets
 
