@@ -513,3 +513,16 @@ def test_default_opponent_mix_draws_its_probabilities_on_torch():
     p = 1.0 / n
     np.testing.assert_array_less(np.abs(freq - p), 5 * np.sqrt(p * (1 - p) / B))
     env.step(torch.zeros(B, dtype=torch.int64))  # the whole step runs with that opponent
+
+
+def test_torch_batch_limit_is_larger_than_numpys():
+    from fdia_env.vector.env import MAX_NUM_ENVS, MAX_NUM_ENVS_TORCH
+
+    kw = {"vectorization_mode": "vector_entry_point"}
+    with pytest.raises(ValueError, match=rf"num_envs must be <= {MAX_NUM_ENVS_TORCH}"):
+        gym.make_vec(SPARSE, num_envs=MAX_NUM_ENVS_TORCH + 1, backend="torch", **kw)
+    with pytest.raises(ValueError, match=rf"num_envs must be <= {MAX_NUM_ENVS}"):
+        gym.make_vec(SPARSE, num_envs=MAX_NUM_ENVS + 1, **kw)
+    env = gym.make_vec(SPARSE, num_envs=MAX_NUM_ENVS + 1, backend="torch", **kw)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (MAX_NUM_ENVS + 1, 5)

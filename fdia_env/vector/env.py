@@ -22,12 +22,14 @@ sensor game's views): it draws from one generator per member, seeded as the sing
 opponent (``seed + i + 1``), so member ``i`` replays the single env seeded ``seed + i``.
 
 ``backend="torch", device="cpu" | "cuda"`` runs the same engine and models on torch tensors
-(float64) of that device (:data:`TORCH_IDS` so far): actions must be tensors on the device,
-observations (float32), rewards (float64), terminations, truncations, infos and action masks
-are tensors there, and ``reset(seed=s)`` seeds one ``torch.Generator`` on the device that every
-member draws from (sampled dynamics: equal to the numpy backend in distribution, not draw for
-draw; expected dynamics: equal member by member). In ``SAME_STEP`` mode ``infos["final_obs"]``
-is a (B, d) tensor (rows of the members whose ``_final_obs`` is False are zeros).
+(float64) of that device, for every registered id (:data:`TORCH_IDS`): actions must be tensors
+on the device; observations (float32), rewards (float64), terminations, truncations, infos and
+action masks are tensors there; ``reset(seed=s)`` seeds one ``torch.Generator`` on the device
+that every member draws from (sampled dynamics: equal to the numpy backend in distribution, not
+draw for draw; expected dynamics: equal member by member). In ``SAME_STEP`` mode
+``infos["final_obs"]`` is a (B, d) tensor (rows of the members whose ``_final_obs`` is False are
+zeros). A policy opponent's ``predict`` gets and gives numpy (a host round trip); the detection
+game's exact expected errors are integrated on the host (see :mod:`fdia_env.vector.detection`).
 """
 
 from __future__ import annotations
@@ -53,6 +55,8 @@ from fdia_env.vector.simulation import BatchedSimulation
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
 # sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
 MAX_NUM_ENVS = 2**20
+# on torch (a GPU's memory) the batch may be larger: issue 13 benchmarks up to B = 2**24
+MAX_NUM_ENVS_TORCH = 2**24
 
 # the Gymnasium ids whose models run on torch (``backend="torch"``)
 TORCH_IDS = (
@@ -66,11 +70,11 @@ TORCH_IDS = (
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
-    """B environments of one fdia_env single-agent view, as batched numpy.
+    """B environments of one fdia_env single-agent view, as batched numpy or torch.
 
     Args:
         parallel: A two-player env instance; its scenario, models and episode spec are used.
-        num_envs: B (1..``MAX_NUM_ENVS``).
+        num_envs: B (1..``MAX_NUM_ENVS``; on torch 1..``MAX_NUM_ENVS_TORCH``).
         agent: The learning player.
         opponent: Policy of the other player (uniform mix over its actions by default).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` or ``AutoresetMode.SAME_STEP``.
@@ -96,8 +100,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         backend: str = "numpy",
         device: Any = None,
     ) -> None:
-        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
         self.xp = xp = get_backend(backend, device)
+        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
         check_agent(agent, parallel.possible_agents)
         try:
             mode = AutoresetMode(autoreset_mode)
@@ -390,6 +394,10 @@ def _masked(infos: dict[str, Any], where: Any, xp=NUMPY) -> dict[str, Any]:
     return out
 
 
+def _max_envs(xp) -> int:
+    return MAX_NUM_ENVS if xp is NUMPY else MAX_NUM_ENVS_TORCH
+
+
 def _check_torch_support(parallel: FdiaParallelEnv) -> None:
     """``ValueError`` unless this env's models run on torch (see :data:`TORCH_IDS`)."""
     missing = [
@@ -426,11 +434,11 @@ def make_vector(
     ``backend`` and ``device`` choose numpy (default) or torch on a device (see
     :class:`FdiaVectorEnv`); they are checked before the env is built.
     """
-    get_backend(backend, device)  # an unknown backend or a missing GPU fails first
+    xp = get_backend(backend, device)  # an unknown backend or a missing GPU fails first
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
-    check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
+    check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
