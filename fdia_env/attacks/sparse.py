@@ -204,6 +204,8 @@ class SparseAttack(AttackModel):
         if where is None:
             self.b_remaining = xp.full(batch, self.budget, dtype=xp.int64)
             self.b_attacked = xp.zeros((batch, self.M), dtype=xp.int8)
+            if self.format == "bitmask":
+                self._b_tables = self._tables()  # read every step: kept as an attribute
         else:
             self.b_remaining[where] = self.budget
             self.b_attacked[where] = 0
@@ -249,7 +251,7 @@ class SparseAttack(AttackModel):
             return xp.where(
                 (self.b_remaining > 0)[:, None], xp.asarray(self._open), xp.asarray(self._closed)
             )
-        _, mask_table, _ = self._tables()
+        _, mask_table, _ = self._b_tables
         return xp.take(mask_table, xp.minimum(self.b_remaining, self.M), axis=0)
 
     def _batch_apply_large(self, actions: Any) -> tuple[Any, None]:
@@ -298,7 +300,7 @@ class SparseAttack(AttackModel):
             a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
         else:
             a = xp.astype(actions, xp.int64)
-        trim, _, sizes = self._tables()
+        trim, _, sizes = self._b_tables
         if self.illegal_action != "trim":
             over = xp.take(sizes, a) > self.b_remaining
             if xp.any(over):

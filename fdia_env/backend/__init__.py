@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from fdia_env.backend.base import Backend
 from fdia_env.backend.numpy_backend import NUMPY
 
@@ -60,6 +62,8 @@ def is_torch(x: Any) -> bool:
 
 def namespace(x: Any) -> Backend:
     """The backend of an array: :data:`NUMPY` for numpy arrays, torch on the tensor's device."""
+    if type(x) is np.ndarray:  # the common case first, without a further call
+        return NUMPY
     if is_torch(x):
         return get_backend("torch", x.device)
     return NUMPY

@@ -6,6 +6,7 @@ backend costs what the direct numpy call costs (no wrapper frame).
 
 from __future__ import annotations
 
+import operator
 from typing import Any
 
 import numpy as np
@@ -51,14 +52,12 @@ class NumpyBackend(Backend):
     eigh = staticmethod(np.linalg.eigh)
     slogdet = staticmethod(np.linalg.slogdet)
     cholesky = staticmethod(np.linalg.cholesky)
+    # C-level callables, no Python frame: ``copy(x)`` is ``x.copy()`` (an independent copy)
+    copy = staticmethod(operator.methodcaller("copy"))
 
     def arange(self, n: int) -> np.ndarray:
         """``[0, n)`` as int64."""
         return np.arange(n, dtype=np.int64)
-
-    def copy(self, x: Any) -> np.ndarray:
-        """An independent copy."""
-        return np.array(x, copy=True)
 
     def astype(self, x: Any, dtype: Any) -> np.ndarray:
         """``x`` converted to ``dtype`` (a copy)."""

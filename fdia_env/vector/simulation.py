@@ -125,7 +125,7 @@ class BatchedSimulation:
     @property
     def M(self) -> Any:
         """(B, n, n) actual error covariances (P where no bias leaked)."""
-        if self.all_consistent():  # no member's filter has seen a bias: M is P
+        if self._clean or self.all_consistent():  # no member has seen a bias: M is P
             return self.P
         return self.xp.where(self.consistent[:, None, None], self.P, self._M)
 
@@ -258,7 +258,12 @@ class BatchedSimulation:
             return self.phi
         if steady:
             self._restart_steady(used, active)
-        if self.fast and leak is None and not self.sampled and self.all_consistent():
+        if (
+            self.fast
+            and leak is None
+            and not self.sampled
+            and (self._clean or self.all_consistent())
+        ):
             # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components
             info = small.inv2_stacked(small.predict2_stacked(self._comp, self._C, self._q))
             info += self._used_components(used)
@@ -398,7 +403,7 @@ class BatchedSimulation:
                 return self.value_override
             e = self.x - self.x_hat
             return xp.einsum("bi,bi->b", e, e)
-        if self._comp is not None and self.all_consistent():
+        if self._comp is not None and (self._clean or self.all_consistent()):
             a, b, d = self._comp
             if self.spec.objective == "trace":
                 return a + d
@@ -416,7 +421,7 @@ class BatchedSimulation:
         xp = self.xp
         n = self.system.n
         out[0] = (self.spec.horizon - self.k) / self.spec.horizon
-        if self._comp is not None and self.all_consistent():
+        if self._comp is not None and (self._clean or self.all_consistent()):
             a, b, d = self._comp
             a0, _, d0 = self._start2
             # the observation is float32: numpy computes its transcendental parts so
