@@ -184,7 +184,7 @@ class Backend(ABC):
 
     @abstractmethod
     def slogdet(self, a: Any) -> tuple[Any, Any]:
-        """Sign and log of |det|."""
+        """Sign and log of the absolute determinant."""
 
     @abstractmethod
     def cholesky(self, a: Any) -> Any:
