@@ -526,3 +526,14 @@ def test_torch_batch_limit_is_larger_than_numpys():
     env = gym.make_vec(SPARSE, num_envs=MAX_NUM_ENVS + 1, backend="torch", **kw)
     obs, _ = env.reset(seed=0)
     assert obs.shape == (MAX_NUM_ENVS + 1, 5)
+
+
+def test_backends_unpickle_to_the_same_instances():
+    import pickle
+
+    assert pickle.loads(pickle.dumps(NUMPY)) is NUMPY
+    assert pickle.loads(pickle.dumps(TORCH)) is TORCH
+    env = gym.make_vec(SPARSE, num_envs=3, vectorization_mode="vector_entry_point")
+    env.reset(seed=0)
+    clone = pickle.loads(pickle.dumps(env.unwrapped))
+    assert clone.xp is NUMPY and clone.sim.xp is NUMPY and clone.attack.xp is NUMPY

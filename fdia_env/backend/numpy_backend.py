@@ -55,6 +55,10 @@ class NumpyBackend(Backend):
     # C-level callables, no Python frame: ``copy(x)`` is ``x.copy()`` (an independent copy)
     copy = staticmethod(operator.methodcaller("copy"))
 
+    def __reduce__(self) -> str:
+        """Pickled as a reference to :data:`NUMPY`: code compares backends with ``is``."""
+        return "NUMPY"
+
     def arange(self, n: int) -> np.ndarray:
         """``[0, n)`` as int64."""
         return np.arange(n, dtype=np.int64)

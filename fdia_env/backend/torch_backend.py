@@ -94,6 +94,12 @@ class TorchBackend(Backend):
     def __init__(self, device: torch.device) -> None:
         self.device = device
 
+    def __reduce__(self) -> tuple:
+        """Unpickled through :func:`~fdia_env.backend.get_backend` (one instance per device)."""
+        from fdia_env.backend import get_backend
+
+        return get_backend, ("torch", str(self.device))
+
     def _dtype(self, dtype: Any, default: Any = torch.float64) -> Any:
         if dtype is None:
             return default
