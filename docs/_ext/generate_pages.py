@@ -28,6 +28,7 @@ API_PACKAGES = [
     ("fdia_env", "Top-level package: systems, episode spec, registration"),
     ("fdia_env.systems", "Linear systems, sensors, the tracking model, validation"),
     ("fdia_env.kalman", "The batched Kalman core"),
+    ("fdia_env.backend", "Array backends: numpy, or torch on one device"),
     ("fdia_env.attacks", "Attack models"),
     ("fdia_env.defenses", "Defense models"),
     ("fdia_env.envs", "The simulation engine, the PettingZoo env and its Gymnasium view"),

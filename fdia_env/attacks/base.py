@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from fdia_env.backend import NUMPY, Backend
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -135,6 +136,13 @@ class AttackModel(ABC):
     # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
     # The batch state lives in attributes prefixed ``b_``; it is independent of the single-env
     # state above, and each batch method must equal its single-env twin member by member.
+    # The batch arrays belong to the backend ``xp`` (the vector env sets it before
+    # ``batch_reset``); ``batch_backends`` names the backends a model implements. On torch, the
+    # vector env has checked the actions' type, device, shape and range before ``batch_apply``,
+    # and sensor sets may be (B, M) boolean masks instead of bitmasks.
+
+    xp: Backend = NUMPY
+    batch_backends: tuple[str, ...] = ("numpy",)
 
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Start episodes for the batch members ``where`` (all when None) of ``batch``."""

@@ -22,6 +22,7 @@ from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_power, check_psd
 from fdia_env.attacks.base import AttackEffect, AttackModel, mask_array_to_bits
+from fdia_env.backend import NUMPY, Backend, namespace
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman.linalg import psd_sqrt, sym
 from fdia_env.systems import LinearSystem, power_weight
@@ -59,20 +60,36 @@ class CovarianceMap:
         shape = np.eye(self.nz) / self.nz if total <= 0.0 else shape / total
         return sym(power * (self.w_inv_half @ shape @ self.w_inv_half))
 
-    def to_sigma_batch(self, entries: np.ndarray, power: np.ndarray) -> np.ndarray:
-        """(B, nz, nz) covariances from (B, size) entries and (B,) powers (as :meth:`to_sigma`)."""
+    def to_sigma_batch(self, entries: Any, power: Any) -> Any:
+        """(B, nz, nz) covariances from (B, size) entries and (B,) powers (as :meth:`to_sigma`).
+
+        numpy arrays or torch tensors (:mod:`fdia_env.backend`).
+        """
+        xp = namespace(entries)
+        tril, eye, w_inv_half = self._constants(xp)
         B = entries.shape[0]
-        L = np.zeros((B, self.nz, self.nz))
+        L = xp.zeros((B, self.nz, self.nz))
         start = 0
-        for block, (r, c) in zip(self.blocks, self._tril, strict=True):
-            L[:, block.start + r, block.start + c] = entries[:, start : start + len(r)]
-            start += len(r)
-        shape = L @ np.swapaxes(L, -1, -2)
-        total = np.trace(shape, axis1=-2, axis2=-1)
+        for rows, cols in tril:
+            L[:, rows, cols] = entries[:, start : start + len(rows)]
+            start += len(rows)
+        shape = L @ L.swapaxes(-1, -2)
+        total = xp.trace(shape)
         empty = total <= 0.0
-        shape = np.where(empty[:, None, None], np.eye(self.nz) / self.nz, shape)
-        shape = shape / np.where(empty, 1.0, total)[:, None, None]
-        return sym(power[:, None, None] * (self.w_inv_half @ shape @ self.w_inv_half))
+        shape = xp.where(empty[:, None, None], eye / self.nz, shape)
+        shape = shape / xp.where(empty, 1.0, total)[:, None, None]
+        return sym(power[:, None, None] * (w_inv_half @ shape @ w_inv_half))
+
+    def _constants(self, xp: Backend) -> tuple[list, Any, Any]:
+        """The factor's row/column indices, I and Ω^{-1/2} on the backend (moved once)."""
+        cached = getattr(self, "_xp_constants", None)
+        if cached is None or cached[0] is not xp:
+            tril = [
+                (xp.asarray(block.start + r), xp.asarray(block.start + c))
+                for block, (r, c) in zip(self.blocks, self._tril, strict=True)
+            ]
+            self._xp_constants = (xp, tril, xp.eye(self.nz), xp.asarray(self.w_inv_half))
+        return self._xp_constants[1:]
 
     def to_action(self, sigma: np.ndarray) -> np.ndarray:
         """Factor entries whose :meth:`to_sigma` is ``sigma`` (up to its power)."""
@@ -205,52 +222,60 @@ class CovarianceAttack(AttackModel):
         """Power spent this step and power left."""
         return {"power": float(self.last_power), "power_left": float(self.remaining)}
 
-    # --- batched (see AttackModel) ---------------------------------------------------------
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+    # --- batched (see AttackModel; numpy or torch arrays of the backend ``xp``) -------------
+    batch_backends = ("numpy", "torch")
+
+    def batch_reset(self, batch: int, where: Any = None) -> None:
         """Restore the full power of the members ``where``."""
+        xp = self.xp
         if where is None:
-            self.b_remaining = np.full(batch, self.power)
-            self.b_power = np.zeros(batch)
+            self.b_remaining = xp.full(batch, self.power, dtype=xp.float64)
+            self.b_power = xp.zeros(batch)
         else:
             self.b_remaining[where] = self.power
             self.b_power[where] = 0.0
 
-    def batch_features(self) -> np.ndarray:
+    def batch_features(self) -> Any:
         """(B, 1) power left / a² in budget mode, (B, 0) per step."""
         if self._budget:
             return (self.b_remaining / self.power)[:, None]
-        return np.zeros((self.b_remaining.shape[0], 0))
+        return self.xp.zeros((self.b_remaining.shape[0], 0))
 
-    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def batch_apply(self, actions: Any) -> tuple[Any, Any]:
         """Map (B, d) actions to covariances, spending power as :meth:`apply` does."""
-        a = np.asarray(actions, dtype=np.float64) if _numeric(actions) else None
-        if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
-            raise ValueError(
-                f"attacker actions must be an array of shape (B, {self.action_space.shape[0]}) "
-                f"in [-1, 1], got {actions!r}"
-            )
-        if not np.all(np.isfinite(a)):
-            raise ValueError("attacker actions must be finite (no NaN or inf)")
-        if np.any(np.abs(a) > 1.0 + 1e-6):
-            raise ValueError("attacker actions must lie in [-1, 1]")
-        a = np.clip(a, -1.0, 1.0)
+        xp = self.xp
+        if xp is NUMPY:
+            a = np.asarray(actions, dtype=np.float64) if _numeric(actions) else None
+            if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
+                raise ValueError(
+                    f"attacker actions must be an array of shape (B, {self.action_space.shape[0]})"
+                    f" in [-1, 1], got {actions!r}"
+                )
+            if not np.all(np.isfinite(a)):
+                raise ValueError("attacker actions must be finite (no NaN or inf)")
+            if np.any(np.abs(a) > 1.0 + 1e-6):
+                raise ValueError("attacker actions must lie in [-1, 1]")
+        else:  # checked by the vector env (type, device, shape, finite, in the Box)
+            a = xp.astype(actions, xp.float64)
+        a = xp.clip(a, -1.0, 1.0)
         if self._budget:
             spend = 0.5 * (a[:, 0] + 1.0) * self.b_remaining
             entries = a[:, 1:]
-            self.b_remaining = np.maximum(self.b_remaining - spend, 0.0)
+            self.b_remaining = xp.maximum(self.b_remaining - spend, 0.0)
         else:
-            spend, entries = np.full(a.shape[0], self.power), a
-        self.b_power = np.asarray(spend, dtype=np.float64).copy()
+            spend, entries = xp.full(a.shape[0], self.power, dtype=xp.float64), a
+        self.b_power = xp.copy(spend)
         sigma = self.map.to_sigma_batch(entries, spend)
-        rows = np.diagonal(sigma, axis1=-2, axis2=-1) > 0.0  # (B, nz)
+        rows = xp.diagonal(sigma) > 0.0  # (B, nz)
         # a sensor is attacked when any of its rows carries bias
         owner = np.zeros((self._row_sensor.size, self._M))
         owner[np.arange(self._row_sensor.size), self._row_sensor] = 1.0
-        return mask_array_to_bits(rows.astype(float) @ owner > 0.0), sigma
+        attacked = xp.astype(rows, xp.float64) @ xp.asarray(owner) > 0.0
+        return (mask_array_to_bits(attacked) if xp is NUMPY else attacked), sigma
 
-    def batch_info(self) -> dict[str, np.ndarray]:
+    def batch_info(self) -> dict[str, Any]:
         """Batched :meth:`info`."""
-        return {"power": self.b_power.copy(), "power_left": self.b_remaining.copy()}
+        return {"power": self.xp.copy(self.b_power), "power_left": self.xp.copy(self.b_remaining)}
 
 
 def _numeric(action: Any) -> bool:

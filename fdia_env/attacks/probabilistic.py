@@ -9,6 +9,7 @@ from gymnasium import spaces
 
 from fdia_env.attacks.base import AttackEffect
 from fdia_env.attacks.covariance import CovarianceAttack
+from fdia_env.backend import NUMPY
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -71,34 +72,38 @@ class ProbabilisticAttack(CovarianceAttack):
         super().reset()
         self.last_probability = 0.0
 
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+    def batch_reset(self, batch: int, where: Any = None) -> None:
         """Batched :meth:`reset`."""
         super().batch_reset(batch, where)
         if where is None:
-            self.b_probability = np.zeros(batch)
+            self.b_probability = self.xp.zeros(batch)
         else:
             self.b_probability[where] = 0.0
 
-    def batch_info(self) -> dict[str, np.ndarray]:
+    def batch_info(self) -> dict[str, Any]:
         """Batched :meth:`info`."""
-        return {**super().batch_info(), "attack_probability": self.b_probability.copy()}
+        return {**super().batch_info(), "attack_probability": self.xp.copy(self.b_probability)}
 
-    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def batch_apply(self, actions: Any) -> tuple[Any, Any]:
         """Batched :meth:`apply`; the attack probabilities are kept in ``b_probability``."""
-        a = np.asarray(actions, dtype=np.float64) if _is_vector(actions) else None
-        if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
-            raise ValueError(
-                f"attacker actions must be an array of shape (B, {self.action_space.shape[0]}) "
-                f"in [-1, 1], got {actions!r}"
-            )
-        if not np.all(np.isfinite(a[:, 0])) or np.any(np.abs(a[:, 0]) > 1.0 + 1e-6):
-            raise ValueError("attacker actions must be finite and in [-1, 1]")
+        xp = self.xp
+        if xp is NUMPY:
+            a = np.asarray(actions, dtype=np.float64) if _is_vector(actions) else None
+            if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
+                raise ValueError(
+                    f"attacker actions must be an array of shape (B, "
+                    f"{self.action_space.shape[0]}) in [-1, 1], got {actions!r}"
+                )
+            if not np.all(np.isfinite(a[:, 0])) or np.any(np.abs(a[:, 0]) > 1.0 + 1e-6):
+                raise ValueError("attacker actions must be finite and in [-1, 1]")
+        else:  # checked by the vector env
+            a = xp.astype(actions, xp.float64)
         self.action_space, space = self._cov_space, self.action_space
         try:
             attacked, sigma = super().batch_apply(a[:, 1:])
         finally:
             self.action_space = space
-        self.b_probability = 0.5 * (np.clip(a[:, 0], -1.0, 1.0) + 1.0)
+        self.b_probability = 0.5 * (xp.clip(a[:, 0], -1.0, 1.0) + 1.0)
         return attacked, sigma
 
 

@@ -16,6 +16,7 @@ from fdia_env.attacks.base import (
     bits_to_mask,
     mask_array_to_bits,
 )
+from fdia_env.backend import NUMPY
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -194,19 +195,26 @@ class SparseAttack(AttackModel):
         attacked = bits_to_mask(self.last_attacked, self.M).astype(np.int8)
         return {"attacked": attacked, "budget_left": int(self.remaining)}
 
-    # --- batched (see AttackModel) ---------------------------------------------------------
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+    # --- batched (see AttackModel; numpy or torch arrays of the backend ``xp``) -------------
+    batch_backends = ("numpy", "torch")
+
+    def batch_reset(self, batch: int, where: Any = None) -> None:
         """Restore the full budget of the members ``where``."""
+        xp = self.xp
         if where is None:
-            self.b_remaining = np.full(batch, self.budget, dtype=np.int64)
-            self.b_attacked = np.zeros((batch, self.M), dtype=np.int8)
+            self.b_remaining = xp.full(batch, self.budget, dtype=xp.int64)
+            self.b_attacked = xp.zeros((batch, self.M), dtype=xp.int8)
+            if self.format == "bitmask":
+                self._b_tables = self._tables()  # read every step: kept as an attribute
         else:
             self.b_remaining[where] = self.budget
             self.b_attacked[where] = 0
 
-    def batch_features(self) -> np.ndarray:
+    def batch_features(self) -> Any:
         """(B, 1) remaining budget fraction."""
-        scale = 1.0 / self.budget if self.budget else 0.0
+        # a 0-d float64 array: int64 × it is float64 on numpy and torch alike (a Python float
+        # would give torch's default float32)
+        scale = self.xp.asarray(np.float64(1.0 / self.budget if self.budget else 0.0))
         return (self.b_remaining * scale)[:, None]
 
     def _batch_tables(self) -> None:
@@ -222,69 +230,92 @@ class SparseAttack(AttackModel):
         self._trim_table = kept.reshape(-1)  # flat: index action * (M + 1) + left
         self._mask_table = (self._sizes[None, :] <= left.T).astype(np.int8)
 
-    def batch_action_mask(self) -> np.ndarray | None:
+    def _tables(self) -> tuple[Any, Any, Any]:
+        """``(trim, mask, sizes)`` tables on the backend (built once, moved once)."""
+        if self._trim_table is None:  # bind() cleared it: new tables, nothing cached
+            self._batch_tables()
+            self._xp_tables = None
+        xp = self.xp
+        cached = self._xp_tables
+        if cached is None or cached[0] is not xp:
+            arrays = (self._trim_table, self._mask_table, np.asarray(self._sizes, np.int64))
+            self._xp_tables = (xp, *(xp.asarray(a) for a in arrays))
+        return self._xp_tables[1:]
+
+    def batch_action_mask(self) -> Any:
         """(B, A) legal actions of each member for its budget left (see :meth:`action_mask`)."""
+        xp = self.xp
         if self.format == "multibinary":
             return None
         if self.format == "single":
-            return np.where((self.b_remaining > 0)[:, None], self._open, self._closed)
-        if self._trim_table is None:
-            self._batch_tables()
-        return np.take(self._mask_table, np.minimum(self.b_remaining, self.M), axis=0)
+            return xp.where(
+                (self.b_remaining > 0)[:, None], xp.asarray(self._open), xp.asarray(self._closed)
+            )
+        _, mask_table, _ = self._b_tables
+        return xp.take(mask_table, xp.minimum(self.b_remaining, self.M), axis=0)
 
-    def _batch_apply_large(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
+    def _batch_apply_large(self, actions: Any) -> tuple[Any, None]:
         """Batched ``"multibinary"`` / ``"single"`` actions: the same trimming rule."""
+        xp = self.xp
         B = self.b_remaining.shape[0]
         if self.format == "single":
-            j = as_index_array(actions, self.M + 1, "attacker", "0 = none, j = sensor j")
-            chosen = np.zeros((B, self.M), dtype=bool)
-            hit = np.flatnonzero(j > 0)
-            chosen[hit, j[hit] - 1] = True
+            if xp is NUMPY:
+                j = as_index_array(actions, self.M + 1, "attacker", "0 = none, j = sensor j")
+            else:
+                j = xp.astype(actions, xp.int64)
+            chosen = (j[:, None] - 1) == xp.arange(self.M)  # j = 0 matches no sensor
         else:
-            a = np.asarray(actions)
-            if (
-                a.shape != (B, self.M)
-                or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
-                or not np.isin(a, (0, 1)).all()
-            ):
-                raise ValueError(
-                    f"attacker actions must be a 0/1 integer array of shape ({B}, {self.M}) "
-                    f"(MultiBinary), got {actions!r}"
-                )
-            chosen = a.astype(bool)
-        over = chosen.sum(axis=1) > self.b_remaining
-        if over.any() and self.illegal_action != "trim":
-            i = int(np.flatnonzero(over)[0])
-            bits = int(mask_array_to_bits(chosen[i : i + 1])[0])
-            self._illegal(bits, int(self.b_remaining[i]), actions[i])  # raises for "error"
+            a = actions
+            if xp is NUMPY:
+                a = np.asarray(actions)
+                if (
+                    a.shape != (B, self.M)
+                    or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
+                    or not np.isin(a, (0, 1)).all()
+                ):
+                    raise ValueError(
+                        f"attacker actions must be a 0/1 integer array of shape ({B}, {self.M}) "
+                        f"(MultiBinary), got {actions!r}"
+                    )
+            chosen = xp.astype(a, xp.bool)
+        over = xp.sum(chosen, 1) > self.b_remaining
+        if self.illegal_action != "trim" and xp.any(over):
+            i = int(xp.flatnonzero(over)[0])
+            bits = int(mask_array_to_bits(xp.to_numpy(chosen[i : i + 1]))[0])
+            shown = xp.to_numpy(actions[i]) if self.format == "multibinary" else int(actions[i])
+            self._illegal(bits, int(self.b_remaining[i]), shown)  # raises for "error"
             chosen = chosen & ~over[:, None]  # "noop"
         # keep the lowest-numbered chosen sensors that fit each member's budget left
-        kept = chosen & (np.cumsum(chosen, axis=1) <= self.b_remaining[:, None])
-        self.b_remaining = self.b_remaining - kept.sum(axis=1)
-        self.b_attacked = kept.astype(np.int8)
-        return mask_array_to_bits(kept), None
+        kept = chosen & (xp.cumsum(chosen, 1) <= self.b_remaining[:, None])
+        self.b_remaining = self.b_remaining - xp.sum(kept, 1)
+        self.b_attacked = xp.astype(kept, xp.int8)
+        return (mask_array_to_bits(kept) if xp is NUMPY else kept), None
 
-    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, None]:
+    def batch_apply(self, actions: Any) -> tuple[Any, None]:
         """Attack each member's subset, trimmed to its budget (same rule as :meth:`apply`)."""
         if self.format != "bitmask":
             return self._batch_apply_large(actions)
-        a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
-        if self._trim_table is None:
-            self._batch_tables()
+        xp = self.xp
+        if xp is NUMPY:
+            a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
+        else:
+            a = xp.astype(actions, xp.int64)
+        trim, _, sizes = self._b_tables
         if self.illegal_action != "trim":
-            over = np.take(self._sizes, a) > self.b_remaining
-            if over.any():
-                i = int(np.flatnonzero(over)[0])
+            over = xp.take(sizes, a) > self.b_remaining
+            if xp.any(over):
+                i = int(xp.flatnonzero(over)[0])
                 self._illegal(int(a[i]), int(self.b_remaining[i]), int(a[i]))  # raises: "error"
-                a = np.where(over, 0, a)
-        a = np.take(self._trim_table, a * (self.M + 1) + np.minimum(self.b_remaining, self.M))
-        self.b_remaining = self.b_remaining - np.take(self._sizes, a)
-        self.b_attacked = ((a[:, None] >> np.arange(self.M)) & 1).astype(np.int8)
+                a = xp.where(over, 0, a)
+        a = xp.take(trim, a * (self.M + 1) + xp.minimum(self.b_remaining, self.M))
+        self.b_remaining = self.b_remaining - xp.take(sizes, a)
+        self.b_attacked = xp.astype((a[:, None] >> xp.arange(self.M)) & 1, xp.int8)
         return a, None
 
-    def batch_info(self) -> dict[str, np.ndarray]:
+    def batch_info(self) -> dict[str, Any]:
         """Batched :meth:`info`."""
-        return {"attacked": self.b_attacked.copy(), "budget_left": self.b_remaining.copy()}
+        xp = self.xp
+        return {"attacked": xp.copy(self.b_attacked), "budget_left": xp.copy(self.b_remaining)}
 
 
 def _sensors(bits: int) -> list[int]:

@@ -20,6 +20,7 @@ import numpy as np
 from fdia_env._validation import check_choice, check_int, check_power
 from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array, bits_to_mask
 from fdia_env.attacks.subsets import SubsetChoice
+from fdia_env.backend import NUMPY, namespace
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -49,25 +50,29 @@ def attack_directions(system: LinearSystem, masks: np.ndarray, allocation: str) 
 
     Args:
         system: A system of scalar sensors (so measurement row i is sensor i).
-        masks: (k, M) booleans, each row a non-empty attacked subset.
+        masks: (k, M) booleans, each row a non-empty attacked subset (numpy, or a torch tensor:
+            the directions are then a tensor of its device).
         allocation: ``"independent"`` or ``"dependent"``.
 
     Returns:
         (k, M) directions: one-hot (independent) or ``∝ 1/σ_i²`` on A (dependent).
     """
     check_choice("allocation", allocation, ALLOCATIONS)
-    sigma = sensor_sigmas(system)
-    masks = np.asarray(masks, dtype=bool)
-    if masks.ndim != 2 or masks.shape[1] != system.M or not masks.any(axis=1).all():
+    xp = namespace(masks)
+    sigma = xp.asarray(sensor_sigmas(system))
+    masks = np.asarray(masks, dtype=bool) if xp is NUMPY else masks
+    if masks.ndim != 2 or masks.shape[1] != system.M or not xp.all(masks.any(1)):
         raise ValueError(f"masks must be (k, {system.M}) booleans, every row non-empty")
     if allocation == "independent":
         # Prop. 2: the smallest-σ sensor of A takes all the power (argmin: the first on ties)
-        u = np.zeros(masks.shape)
-        u[np.arange(len(masks)), np.argmin(np.where(masks, sigma, np.inf), axis=1)] = 1.0
+        u = xp.zeros(tuple(masks.shape))
+        u[xp.arange(len(masks)), xp.where(masks, sigma, np.inf).argmin(1)] = 1.0
         return u
     # Prop. 3: σ_b,i = c_i a / ||c||, c ∝ 1/σ_i² on A; the normalisation of c cancels
-    w = np.where(masks, 1.0 / sigma**2, 0.0)
-    return w / np.linalg.norm(w, axis=1, keepdims=True)
+    w = xp.where(masks, 1.0 / sigma**2, 0.0)
+    if xp is NUMPY:
+        return w / np.linalg.norm(w, axis=1, keepdims=True)
+    return w / xp.sqrt(xp.sum(w * w, 1))[:, None]
 
 
 def as_subset(subset: Sequence[int], M: int) -> tuple[int, ...]:
@@ -181,22 +186,27 @@ class SubsetAttack(SubsetChoice, AttackModel):
         return {"attacked": bits_to_mask(bits, self.M).astype(np.int8)}
 
     # --- batched (see AttackModel) ---------------------------------------------------------
-    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def batch_apply(self, actions: Any) -> tuple[Any, Any]:
         """Σ_A of each member's subset (rank one, from the allocation directions)."""
-        j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")
+        xp = self.xp
+        if xp is NUMPY:
+            j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")
+        else:  # checked by the vector env
+            j = xp.astype(actions, xp.int64)
         self.b_last = j
-        self.b_attacked = self._masks[j].astype(np.int8)
+        self.b_attacked = xp.astype(self._masks[j], xp.int8)
         u = attack_directions(self._system, self._masks[j], self.allocation)
         return self._bits_arr[j], self.power * (u[:, :, None] * u[:, None, :])
 
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+    def batch_reset(self, batch: int, where: Any = None) -> None:
         """Batched :meth:`reset`."""
         super().batch_reset(batch, where)
+        xp = self.xp
         if where is None:
-            self.b_attacked = np.zeros((batch, self.M), dtype=np.int8)
+            self.b_attacked = xp.zeros((batch, self.M), dtype=xp.int8)
         else:
             self.b_attacked[where] = 0
 
-    def batch_info(self) -> dict[str, np.ndarray]:
+    def batch_info(self) -> dict[str, Any]:
         """Batched :meth:`info`."""
-        return {"attacked": self.b_attacked.copy()}
+        return {"attacked": self.xp.copy(self.b_attacked)}

@@ -32,6 +32,7 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.base import as_index, bit_array
+from fdia_env.backend import NUMPY
 
 PLAYERS = ("attacker", "defender")
 MAX_STRATEGIES = 2**16 - 1
@@ -166,22 +167,32 @@ class SubsetChoice:
         """The other player's last subset as indicators."""
         return [1.0 if i in self.opponent_last else 0.0 for i in range(self.M)]
 
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
-        """Forget the last round of the members ``where`` (all when None)."""
+    batch_backends = ("numpy", "torch")
+
+    def batch_reset(self, batch: int, where: Any = None) -> None:
+        """Forget the last round of the members ``where`` (all when None).
+
+        The batch arrays belong to the backend ``self.xp`` (numpy or torch, see AttackModel).
+        """
+        xp = getattr(self, "xp", NUMPY)
         if where is None:
             self._batch = batch
-            self.b_last = np.zeros(batch, dtype=np.int64)
-            self.b_opponent = np.zeros((batch, self.M))
-            self._bits_arr = bit_array(self.bits, self.M)
-            self._masks = np.zeros((len(self.subsets), self.M), dtype=bool)
+            self.b_last = xp.zeros(batch, dtype=xp.int64)
+            self.b_opponent = xp.zeros((batch, self.M))
+            masks = np.zeros((len(self.subsets), self.M), dtype=bool)
             for j, s in enumerate(self.subsets):
-                self._masks[j, list(s)] = True
+                masks[j, list(s)] = True
+            self._masks_np = masks
+            bits = bit_array(self.bits, self.M)  # at most 16 sensors: int64
+            self._bits_arr = bits if xp is NUMPY else xp.asarray(bits)
+            self._masks = masks if xp is NUMPY else xp.asarray(masks)
         else:
             self.b_opponent[where] = 0.0
 
     def batch_observe_opponent(self, other: Any) -> None:
         """Every member's opponent subset (from the opponent's own subset list)."""
-        self.b_opponent = other._masks[other.b_last].astype(float)
+        xp = getattr(self, "xp", NUMPY)
+        self.b_opponent = xp.astype(other._masks[other.b_last], xp.float64)
 
     def batch_features(self) -> np.ndarray:
         """(B, M) the other player's last subsets as indicators."""

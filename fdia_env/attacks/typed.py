@@ -98,6 +98,9 @@ class TypedSubsetAttack(SubsetAttack):
         max_subset_size: As :class:`~fdia_env.attacks.subset.SubsetAttack`.
     """
 
+    # nature's draw uses the members' numpy generators: no torch implementation (yet)
+    batch_backends = ("numpy",)
+
     name = "typed_subset"
     reset_options = (TYPE_OPTION,)
 

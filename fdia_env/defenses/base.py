@@ -10,6 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env.attacks.base import AttackEffect
+from fdia_env.backend import NUMPY, Backend
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -129,6 +130,10 @@ class DefenseModel(ABC):
         """Decide what the filter uses given the defender's action and the attack."""
 
     # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
+    # As for AttackModel: ``xp`` is the batch arrays' backend, ``batch_backends`` those supported.
+
+    xp: Backend = NUMPY
+    batch_backends: tuple[str, ...] = ("numpy",)
 
     def batch_detection(self) -> BatchDetection | None:
         """The detector of the last :meth:`batch_apply`, for the detection game; else None."""
@@ -147,7 +152,7 @@ class DefenseModel(ABC):
 
     def batch_features(self) -> np.ndarray:
         """(B, f) features of every batch member (none by default)."""
-        return np.zeros((self._batch, 0))
+        return self.xp.zeros((self._batch, 0))
 
     def batch_apply(
         self, actions: np.ndarray | None, attacked: np.ndarray, sigma: np.ndarray | None

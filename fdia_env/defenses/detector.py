@@ -9,6 +9,7 @@ from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_positive, check_psd
 from fdia_env.attacks.base import AttackEffect, bit_array
+from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import BatchDetection, DefenseModel, Detection, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -128,19 +129,25 @@ class ThresholdDetector(DefenseModel):
         )
 
     # --- batched (see DefenseModel) --------------------------------------------------------
+    batch_backends = ("numpy", "torch")
+
     def batch_apply(self, actions, attacked, sigma):
         """Every sensor is measured; the per-member thresholds go to :meth:`batch_detection`."""
-        try:
-            a = np.asarray(actions, dtype=np.float64).reshape(self._batch, -1)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"defender actions must be a (B, 1) array in [-1, 1], got {actions!r}"
-            ) from exc
-        if a.shape[1] != 1 or not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1.0 + 1e-6):
-            raise ValueError("defender actions must be one finite number in [-1, 1] per member")
-        x = np.clip(a[:, 0], -1.0, 1.0)
+        xp = self.xp
+        if xp is NUMPY:
+            try:
+                a = np.asarray(actions, dtype=np.float64).reshape(self._batch, -1)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(
+                    f"defender actions must be a (B, 1) array in [-1, 1], got {actions!r}"
+                ) from exc
+            if a.shape[1] != 1 or not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1.0 + 1e-6):
+                raise ValueError("defender actions must be one finite number in [-1, 1] per member")
+        else:  # checked by the vector env
+            a = xp.astype(actions, xp.float64).reshape(self._batch, -1)
+        x = xp.clip(a[:, 0], -1.0, 1.0)
         with np.errstate(divide="ignore"):
-            tau = np.where(x >= 1.0, np.inf, self.scale * (1.0 + x) / (1.0 - x))
+            tau = xp.where(x >= 1.0, np.inf, self.scale * (1.0 + x) / (1.0 - x))
         self._b_rule = BatchDetection(
             self.statistic,
             tau,
@@ -149,8 +156,11 @@ class ThresholdDetector(DefenseModel):
             self.fresh_prior,
             self.criterion,
         )
-        present = None if sigma is None else np.ones(attacked.shape, dtype=bool)
-        return bit_array([self._all] * len(attacked), self._M), sigma, present, False
+        B = attacked.shape[0]
+        present = None if sigma is None else xp.ones(B, dtype=xp.bool)
+        if xp is not NUMPY:  # sensor sets as (B, M) masks on torch (the detector reads none)
+            return xp.ones((B, self._M), dtype=xp.bool), sigma, present, False
+        return bit_array([self._all] * B, self._M), sigma, present, False
 
     def batch_detection(self) -> BatchDetection:
         """The per-member thresholds of the last batched step."""

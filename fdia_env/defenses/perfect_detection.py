@@ -15,6 +15,7 @@ class PerfectDetection(DefenseModel):
 
     name = "perfect_detection"
     passive = True
+    batch_backends = ("numpy", "torch")
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Nothing to build: the model has no action."""
@@ -25,5 +26,7 @@ class PerfectDetection(DefenseModel):
         return FilterInput(used=self._all & ~effect.attacked)
 
     def batch_apply(self, actions, attacked, sigma):
-        """Every un-attacked sensor, no leak."""
+        """Every un-attacked sensor, no leak (bitmasks, or (B, M) boolean masks)."""
+        if attacked.ndim == 2:
+            return ~attacked, None, None, False
         return self._all & ~attacked, None, None, False

@@ -8,6 +8,7 @@ import numpy as np
 
 from fdia_env.attacks.base import AttackEffect, as_index_array, bits_to_mask
 from fdia_env.attacks.subsets import SubsetChoice
+from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -46,15 +47,19 @@ class SensorSelection(SubsetChoice, DefenseModel):
         return FilterInput(used=used, leaked_sigma=leak, steady=True)
 
     # --- batched (see DefenseModel) --------------------------------------------------------
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
+    def batch_reset(self, batch: int, where: Any = None) -> None:
         """Forget the last round of the members ``where``; build the row masks once."""
         super().batch_reset(batch, where)
         if where is None:
-            self._row_masks = self._masks[:, self._row_sensor].astype(float)
+            self._row_masks = self.xp.asarray(self._masks_np[:, self._row_sensor].astype(float))
 
     def batch_apply(self, actions, attacked, sigma):
         """Each member's subset; Σ restricted to A ∩ D leaks; every round restarts steady."""
-        j = as_index_array(actions, len(self.subsets), "defender", "subset indices")
+        xp = self.xp
+        if xp is NUMPY:
+            j = as_index_array(actions, len(self.subsets), "defender", "subset indices")
+        else:  # checked by the vector env
+            j = xp.astype(actions, xp.int64)
         self.b_last = j
         rows = self._row_masks[j]
         used = self._bits_arr[j]

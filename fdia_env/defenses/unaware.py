@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from fdia_env.attacks.base import AttackEffect, bit_array
+from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -21,6 +20,7 @@ class UnawareFilter(DefenseModel):
 
     name = "unaware"
     passive = True
+    batch_backends = ("numpy", "torch")
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Nothing to build: the model has no action."""
@@ -32,6 +32,10 @@ class UnawareFilter(DefenseModel):
         return FilterInput(used=self._all, leaked_sigma=effect.sigma)
 
     def batch_apply(self, actions, attacked, sigma):
-        """Every sensor; the whole bias leaks."""
-        present = None if sigma is None else np.ones(attacked.shape, dtype=bool)
-        return bit_array([self._all] * len(attacked), self._M), sigma, present, False
+        """Every sensor; the whole bias leaks (torch: sensor sets as (B, M) boolean masks)."""
+        xp = self.xp
+        B = attacked.shape[0]
+        present = None if sigma is None else xp.ones(B, dtype=xp.bool)
+        if xp is not NUMPY:
+            return xp.ones((B, self._M), dtype=xp.bool), sigma, present, False
+        return bit_array([self._all] * B, self._M), sigma, present, False

@@ -137,3 +137,82 @@ def _check_values(space: spaces.Space, arr: np.ndarray, who: str) -> None:
             raise ValueError(f"{who} action must be integers for {space}, got {arr.tolist()}")
         if np.any(arr < space.start) or np.any(arr >= space.start + space.nvec):
             raise ValueError(f"{who} action must lie in {space}, got {arr.tolist()}")
+
+
+def check_batch_tensor_actions(
+    space: spaces.Space, actions: Any, batch: int, who: str, backend: Any
+) -> None:
+    """:func:`check_batch_actions` for the torch backend: a tensor of the env's device.
+
+    Args:
+        space: The single env's action space.
+        actions: (B, *space.shape) tensor on ``backend.device``: an integer dtype for
+            ``Discrete``/``MultiDiscrete``, integer or bool for ``MultiBinary``, float32 or
+            float64 for ``Box``.
+        batch: B.
+        who: ``"attacker"`` or ``"defender"``, for the message.
+        backend: The env's torch backend (:mod:`fdia_env.backend`).
+
+    Raises:
+        TypeError: For anything but a torch tensor, or a tensor of the wrong dtype.
+        ValueError: For a tensor on another device, of the wrong shape, or with values outside
+            the space.
+    """
+    import torch
+
+    want = (batch, *(space.shape or ()))
+    if not isinstance(actions, torch.Tensor):
+        raise TypeError(
+            f"{who} actions must be a torch.Tensor of shape {want} on device "
+            f"{backend.device} for backend='torch' (one action of {space} per member), got "
+            f"{type(actions).__module__}.{type(actions).__name__}"
+        )
+    if actions.device != backend.device:
+        raise ValueError(
+            f"{who} actions must be on the env's device {backend.device}, got a tensor on "
+            f"{actions.device} (move it with .to({str(backend.device)!r}))"
+        )
+    integer = not actions.dtype.is_floating_point and not actions.dtype.is_complex
+    if isinstance(space, spaces.Box):
+        allowed, ok = (
+            "torch.float32 or torch.float64",
+            actions.dtype
+            in (
+                torch.float32,
+                torch.float64,
+            ),
+        )
+    elif isinstance(space, spaces.MultiBinary):
+        allowed, ok = "an integer dtype or torch.bool", integer
+    else:
+        allowed, ok = "an integer dtype (torch.int64, ...)", integer and actions.dtype != torch.bool
+    if not ok:
+        raise TypeError(f"{who} actions must have {allowed} for {space}, got {actions.dtype}")
+    if tuple(actions.shape) != want:
+        raise ValueError(
+            f"{who} actions must be a tensor of shape {want} (one action of {space} for each "
+            f"of the {batch} members), got shape {tuple(actions.shape)}"
+        )
+    if isinstance(space, spaces.Discrete | spaces.MultiDiscrete):
+        low = space.start
+        high = space.start + (space.n if isinstance(space, spaces.Discrete) else space.nvec)
+        bad = (actions < backend.asarray(low)) | (actions >= backend.asarray(high))
+        if bool(bad.any()):
+            i = int(backend.flatnonzero(bad.reshape(batch, -1).any(dim=1))[0])
+            raise ValueError(
+                f"{who} actions must lie in {space}; member {i} has {actions[i].tolist()!r}"
+            )
+    elif isinstance(space, spaces.MultiBinary):
+        if actions.dtype != torch.bool and bool(((actions != 0) & (actions != 1)).any()):
+            raise ValueError(f"{who} actions must be 0/1 for {space}")
+    else:
+        if not bool(torch.isfinite(actions).all()):
+            raise ValueError(f"{who} actions must be finite (no NaN or inf)")
+        low = backend.asarray(space.low.astype(np.float64)) - _BOX_SLACK
+        high = backend.asarray(space.high.astype(np.float64)) + _BOX_SLACK
+        values = actions.to(torch.float64)
+        if bool(((values < low) | (values > high)).any()):
+            raise ValueError(
+                f"{who} actions must lie in [{space.low.min():g}, {space.high.max():g}] "
+                f"(the action space {space})"
+            )

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from fdia_env.backend import namespace
 from fdia_env.kalman.linalg import mT, spd_inv, sym
 from fdia_env.systems import LinearSystem
 
 
 def predict_cov(P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """``P[k+1|k] = F P[k|k] F' + Q``."""
-    return sym(F @ P @ F.T + Q)
+    """``P[k+1|k] = F P[k|k] F' + Q`` (numpy or torch, all of one backend)."""
+    return sym(F @ P @ mT(F) + Q)
 
 
 def predict(
@@ -102,6 +103,5 @@ def joseph_update(
     actually present in the measurement (``R + Σ`` under attack). Valid for any gain, which is
     why it is used for the actual error of a filter whose nominal gain ignores the attack.
     """
-    n = M_pred.shape[-1]
-    A = np.eye(n) - W @ H
+    A = namespace(M_pred).eye(M_pred.shape[-1]) - W @ H
     return sym(A @ M_pred @ mT(A) + W @ noise_cov @ mT(W))

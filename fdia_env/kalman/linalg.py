@@ -1,13 +1,19 @@
-"""Small batched linear-algebra helpers; every function accepts leading batch dimensions."""
+"""Small batched linear-algebra helpers; every function accepts leading batch dimensions.
+
+Each function works on numpy arrays and on torch tensors alike (:mod:`fdia_env.backend`), so
+the batched simulation engine runs the same code on either.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
+from fdia_env.backend import NUMPY, namespace
+
 
 def mT(a: np.ndarray) -> np.ndarray:
     """Transpose the last two axes."""
-    return np.swapaxes(a, -1, -2)
+    return a.swapaxes(-1, -2)
 
 
 def sym(a: np.ndarray) -> np.ndarray:
@@ -19,7 +25,7 @@ def spd_inv(a: np.ndarray) -> np.ndarray:
     """Inverse of symmetric positive definite matrices, symmetrised; (..., n, n) -> (..., n, n)."""
     if a.shape[-1] == 2:
         return inv2(a)
-    return sym(np.linalg.inv(a))
+    return sym(namespace(a).inv(a))
 
 
 _COFACTOR_SIGNS = np.array([[1.0, -1.0], [-1.0, 1.0]])
@@ -32,6 +38,16 @@ def inv2(a: np.ndarray) -> np.ndarray:
     determinant finish the adjugate formula. On component views this is many times faster than
     ``np.linalg.inv``'s per-matrix LAPACK call, and exact to rounding.
     """
+    xp = namespace(a)
+    if xp is not NUMPY:
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+        if not xp.all(xp.isfinite(det)):  # huge entries: as below, rescale (or give up: NaN)
+            scale = a.abs().amax(dim=(-2, -1), keepdim=True)
+            if not xp.all(xp.isfinite(scale)) or xp.any(scale == 0.0):
+                return xp.inv(a)
+            return inv2(a / scale) / scale
+        signs = xp.asarray(_COFACTOR_SIGNS)
+        return mT(xp.flip_last2(a)) * (signs / det[..., None, None])
     with np.errstate(over="ignore", invalid="ignore"):
         det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
     if not np.all(np.isfinite(det)):  # entries beyond ~1e154: invert a / max|a| instead
@@ -46,13 +62,14 @@ def inv2(a: np.ndarray) -> np.ndarray:
 
 def trace(a: np.ndarray) -> np.ndarray:
     """Trace over the last two axes."""
-    return np.trace(a, axis1=-2, axis2=-1)
+    return namespace(a).trace(a)
 
 
 def logdet(a: np.ndarray) -> np.ndarray:
     """Log-determinant of symmetric positive definite matrices (batched)."""
-    sign, value = np.linalg.slogdet(a)
-    return np.where(sign > 0, value, -np.inf)
+    xp = namespace(a)
+    sign, value = xp.slogdet(a)
+    return xp.where(sign > 0, value, -np.inf)
 
 
 def psd_sqrt(a: np.ndarray) -> np.ndarray:
@@ -61,8 +78,9 @@ def psd_sqrt(a: np.ndarray) -> np.ndarray:
     Uses the eigen-decomposition, so rank-deficient bias covariances (the optimal attacks are
     rank one) are handled without a Cholesky failure.
     """
-    w, v = np.linalg.eigh(sym(a))
-    return v * np.sqrt(np.clip(w, 0.0, None))[..., None, :]
+    xp = namespace(a)
+    w, v = xp.eigh(sym(a))
+    return v * xp.sqrt(xp.maximum(w, 0.0))[..., None, :]
 
 
 def objective(P: np.ndarray, kind: str) -> np.ndarray:

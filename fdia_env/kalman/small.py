@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from fdia_env.backend import namespace
+
 Sym2 = tuple[float, float, float]
 Mat2 = tuple[float, float, float, float]
 
@@ -98,19 +100,23 @@ def predict_matrix2(f: Mat2) -> np.ndarray:
 
 
 def predict2_stacked(comp: np.ndarray, C: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """``P[k+1|k] = F P F' + Q`` for (3, B) components: ``C comp + q``."""
+    """``P[k+1|k] = F P F' + Q`` for (3, B) components: ``C comp + q`` (numpy or torch)."""
     out = C @ comp
     out += q[:, None]
     return out
 
 
 def inv2_stacked(comp: np.ndarray) -> np.ndarray:
-    """``[[a, b], [b, d]]⁻¹ = [[d, −b], [−b, a]] / (a d − b²)`` for (3, B) components."""
+    """``[[a, b], [b, d]]⁻¹ = [[d, −b], [−b, a]] / (a d − b²)`` for (3, B) components.
+
+    ``comp`` may be a numpy array or a torch tensor (:mod:`fdia_env.backend`).
+    """
+    xp = namespace(comp)
     a, b, d = comp
     inv_det = 1.0 / (a * d - b * b)
-    out = np.empty_like(comp)
-    np.multiply(d, inv_det, out=out[0])
-    np.multiply(b, inv_det, out=out[1])
+    out = xp.empty_like(comp)
+    xp.multiply(d, inv_det, out=out[0])
+    xp.multiply(b, inv_det, out=out[1])
     out[1] *= -1.0
-    np.multiply(a, inv_det, out=out[2])
+    xp.multiply(a, inv_det, out=out[2])
     return out

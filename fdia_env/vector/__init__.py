@@ -1,4 +1,4 @@
-"""Native batched vector environments (B envs as one numpy computation) and the SB3 adapter."""
+"""Native batched vector environments (B envs as one numpy or torch computation), SB3 adapter."""
 
 from fdia_env.vector.env import FdiaVectorEnv, make_vector
 from fdia_env.vector.simulation import BatchedSimulation

@@ -20,6 +20,16 @@ A fixed opponent (two-player envs) acts for the whole batch with one ``predict``
 (B, d) observations, except a :class:`~fdia_env.envs.opponents.FixedMix` (the default of the
 sensor game's views): it draws from one generator per member, seeded as the single env seeds its
 opponent (``seed + i + 1``), so member ``i`` replays the single env seeded ``seed + i``.
+
+``backend="torch", device="cpu" | "cuda"`` runs the same engine and models on torch tensors
+(float64) of that device, for every registered id (:data:`TORCH_IDS`): actions must be tensors
+on the device; observations (float32), rewards (float64), terminations, truncations, infos and
+action masks are tensors there; ``reset(seed=s)`` seeds one ``torch.Generator`` on the device
+that every member draws from (sampled dynamics: equal to the numpy backend in distribution, not
+draw for draw; expected dynamics: equal member by member). In ``SAME_STEP`` mode
+``infos["final_obs"]`` is a (B, d) tensor (rows of the members whose ``_final_obs`` is False are
+zeros). A policy opponent's ``predict`` gets and gives numpy (a host round trip); the detection
+game's exact expected errors are integrated on the host (see :mod:`fdia_env.vector.detection`).
 """
 
 from __future__ import annotations
@@ -35,7 +45,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_int
-from fdia_env.envs.actions import check_batch_actions
+from fdia_env.backend import NUMPY, get_backend
+from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
 from fdia_env.envs.single_agent import Policy, check_agent, check_opponent
@@ -44,20 +55,38 @@ from fdia_env.vector.simulation import BatchedSimulation
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
 # sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
 MAX_NUM_ENVS = 2**20
+# on torch (a GPU's memory) the batch may be larger: issue 13 benchmarks up to B = 2**24
+MAX_NUM_ENVS_TORCH = 2**24
+
+# the Gymnasium ids whose models run on torch (``backend="torch"``)
+TORCH_IDS = (
+    "fdia_env/SparseAttack-v0",
+    "fdia_env/CovarianceAttack-v0",
+    "fdia_env/SensorGameAttacker-v0",
+    "fdia_env/SensorGameDefender-v0",
+    "fdia_env/DetectionAttacker-v0",
+    "fdia_env/DetectionDefender-v0",
+)
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
-    """B environments of one fdia_env single-agent view, as batched numpy.
+    """B environments of one fdia_env single-agent view, as batched numpy or torch.
 
     Args:
         parallel: A two-player env instance; its scenario, models and episode spec are used.
-        num_envs: B (1..``MAX_NUM_ENVS``).
+        num_envs: B (1..``MAX_NUM_ENVS``; on torch 1..``MAX_NUM_ENVS_TORCH``).
         agent: The learning player.
         opponent: Policy of the other player (uniform mix over its actions by default).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` or ``AutoresetMode.SAME_STEP``.
         max_episode_steps: Truncate each member's episode after this many steps (as
             Gymnasium's ``TimeLimit``: ``truncated`` is True at that step even if the episode
             also terminates there), or None.
+        backend: ``"numpy"`` (default) or ``"torch"`` (see the module doc).
+        device: torch only: ``"cpu"`` (default), ``"cuda"`` or ``"cuda:<i>"``.
+
+    Raises:
+        ValueError: For an unknown backend, a device that is not there (``"cuda"`` without a
+            GPU), or ``backend="torch"`` for an env whose models have no torch implementation.
     """
 
     def __init__(
@@ -68,8 +97,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         opponent: Policy | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         max_episode_steps: int | None = None,
+        backend: str = "numpy",
+        device: Any = None,
     ) -> None:
-        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
+        self.xp = xp = get_backend(backend, device)
+        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
         check_agent(agent, parallel.possible_agents)
         try:
             mode = AutoresetMode(autoreset_mode)
@@ -85,7 +117,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             if max_episode_steps is None
             else check_int("max_episode_steps", max_episode_steps, minimum=1)
         )
-        self.metadata = {"autoreset_mode": mode, "render_modes": []}
+        self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
         self.render_mode = None
         self.parallel = parallel
         self.agent = agent
@@ -95,6 +127,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             opponent = FixedMix.uniform(int(parallel.action_space(self.other).n))
         if self.other is not None:
             check_opponent(opponent, parallel.action_space(self.other))
+        if xp is not NUMPY:
+            _check_torch_support(parallel)
+        self.backend, self.device = xp.name, xp.device
         self.opponent = opponent
         self._mix = isinstance(opponent, FixedMix)  # drawn per member (see the module doc)
         self._opp_rngs: list[np.random.Generator] | None = None
@@ -111,9 +146,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         }
         self._models = {"attacker": self.attack, "defender": self.defense}
         self.sim: BatchedSimulation | None = None
-        self._prev_done = np.zeros(self.num_envs, dtype=bool)
-        self._all = np.ones(self.num_envs, dtype=bool)
-        self._all.setflags(write=False)  # the shared all-True `_key` mask of the infos
+        self._generator: Any = None  # torch: the device generator every member draws from
+        self._prev_done = xp.zeros(self.num_envs, dtype=xp.bool)
+        self._all = xp.ones(self.num_envs, dtype=xp.bool)  # the shared all-True `_key` mask
+        if xp is NUMPY:
+            self._all.setflags(write=False)
         self._det_defaults = self.defense.info_defaults(parallel.sim.sampled)
 
     @property
@@ -131,6 +168,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         """
         B = self.num_envs
         known = self.attack.reset_options
+        if self.xp is not NUMPY:
+            return self._reset_torch(seed, options)
         if seed is None or (isinstance(seed, int | np.integer) and not isinstance(seed, bool)):
             check_reset_args(seed, options, known)
             seeds = [None] * B if seed is None else [int(seed) + i for i in range(B)]
@@ -157,25 +196,51 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if self.sim is None:
             self.sim = BatchedSimulation(self.parallel.sim, B)
         self.sim.rngs = self._rngs
-        self.sim.reset(None, self._rngs)
+        return self._reset_all(options)
+
+    def _reset_torch(self, seed: Any, options: dict | None):
+        """``reset`` on torch: an int ``seed`` seeds the device generator."""
+        if isinstance(seed, list | tuple):
+            raise ValueError(
+                "seed must be an int or None for backend='torch' (one torch.Generator on the "
+                f"device draws for every member), got a list of {len(seed)}"
+            )
+        check_reset_args(seed, options, self.attack.reset_options)
+        super().reset(seed=None if seed is None else int(seed))
+        if seed is not None or self._generator is None:
+            self._generator = self.xp.generator(None if seed is None else int(seed))
+        if seed is not None and not self._mix and hasattr(self.opponent, "reset"):
+            self.opponent.reset(seed=int(seed) + 1)  # a policy opponent, as on numpy
+        if self.sim is None:
+            self.sim = BatchedSimulation(self.parallel.sim, self.num_envs, self.xp)
+        self.sim.generator = self._generator
+        return self._reset_all(options)
+
+    def _reset_all(self, options: dict | None = None):
+        """Every member at the window start: the engine, the models, the infos."""
+        B, xp = self.num_envs, self.xp
+        self.attack.xp = self.defense.xp = xp
+        self.sim.reset(None)
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
-        # nature's draws (the sensor game's type); options force them for this reset only: an
-        # autoreset draws them, as SyncVectorEnv's autoreset calls reset() without options
-        self.attack.batch_draw_nature(self._rngs, None, dict(options or {}))
-        self._prev_done = np.zeros(B, dtype=bool)
+        if xp is NUMPY:  # models with nature's draws (the typed sensor game) are numpy-only
+            # nature's draws (the sensor game's type); options force them for this reset only:
+            # an autoreset draws them, as SyncVectorEnv's autoreset calls reset() without options
+            self.attack.batch_draw_nature(self._rngs, None, dict(options or {}))
+        self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._det_info = {
-            key: np.full(B, value, dtype=type(value)) for key, value in self._det_defaults.items()
+            key: xp.full(B, value, dtype=np.dtype(type(value)))
+            for key, value in self._det_defaults.items()
         }
         return self._observe(self.agent), self._infos()
 
     def _reset_members(self, where: np.ndarray) -> None:
         """Reset the members of the (B,) boolean mask ``where``."""
-        rngs = [self._rngs[i] for i in np.flatnonzero(where)] if self.sim.sampled else None
-        self.sim.reset(where, rngs)
+        self.sim.reset(where)
         self.attack.batch_reset(self.num_envs, where)
         self.defense.batch_reset(self.num_envs, where)
-        self.attack.batch_draw_nature(self._rngs, where)
+        if self.xp is NUMPY:
+            self.attack.batch_draw_nature(self._rngs, where)
         for key, value in self._det_defaults.items():
             self._det_info[key][where] = value
 
@@ -184,15 +249,20 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         """Step every member (NEXT_STEP: members finished last step are reset instead)."""
         if self.sim is None:
             raise RuntimeError("step() called before reset(): call reset() first")
-        B = self.num_envs
+        B, xp = self.num_envs, self.xp
         resetting = self._prev_done
-        check_batch_actions(self.single_action_space, actions, B, self.agent)
+        if xp is NUMPY:
+            check_batch_actions(self.single_action_space, actions, B, self.agent)
+        else:
+            check_batch_tensor_actions(self.single_action_space, actions, B, self.agent, xp)
         actions = {self.agent: actions}
         if self.other is not None:
             actions[self.other] = self._opponent_actions(~resetting)
-            check_batch_actions(
-                self.parallel.action_space(self.other), actions[self.other], B, self.other
-            )
+            space = self.parallel.action_space(self.other)
+            if xp is NUMPY:
+                check_batch_actions(space, actions[self.other], B, self.other)
+            else:
+                check_batch_tensor_actions(space, actions[self.other], B, self.other, xp)
         attacked, sigma = self.attack.batch_apply(actions["attacker"])
         used, leak, present, steady = self.defense.batch_apply(
             actions.get("defender"), attacked, sigma
@@ -212,26 +282,26 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         )
         if self._det_defaults:  # the detector's per-member info, for the members that stepped
             for key, values in self.sim.detection_info.items():
-                self._det_info[key] = np.where(resetting, self._det_info[key], values)
+                self._det_info[key] = xp.where(resetting, self._det_info[key], values)
         k = self.sim.k
         done = k >= self.spec_episode.horizon
-        truncated = np.zeros(B, dtype=bool)
+        truncated = xp.zeros(B, dtype=xp.bool)
         if self.parallel.max_cycles is not None:  # the env's own limit (PettingZoo's)
             truncated |= ~done & (k >= self.parallel.max_cycles)
         if self.max_episode_steps is not None:  # Gymnasium's TimeLimit
             truncated |= k >= self.max_episode_steps
         mode = self.spec_episode.reward_mode
         if mode == "terminal":
-            reward = np.where(done, phi, 0.0)
+            reward = xp.where(done, phi, 0.0)
         elif mode == "shaped":
             reward = phi - phi_prev
         else:
-            reward = phi.copy()
+            reward = xp.copy(phi)
         if self.agent == "defender":
             reward = -reward
         infos: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
-            if resetting.any():
+            if xp.any(resetting):
                 self._reset_members(resetting)
                 reward[resetting] = 0.0
                 done[resetting] = False
@@ -241,34 +311,46 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         else:  # SAME_STEP: finished members restart now; their last step goes in infos
             obs = self._observe(self.agent)
             ended = done | truncated
-            if ended.any():
-                final = np.full(B, None, dtype=object)
-                for i in np.flatnonzero(ended):
-                    final[i] = obs[i].copy()
-                final_info = _masked(self._infos(), ended)
+            if xp.any(ended):
+                if xp is NUMPY:
+                    final = np.full(B, None, dtype=object)
+                    for i in np.flatnonzero(ended):
+                        final[i] = obs[i].copy()
+                else:  # torch has no object arrays: a (B, d) tensor, zeros where not ended
+                    final = xp.where(ended[:, None], obs, 0.0)
+                final_info = _masked(self._infos(), ended, xp)
                 infos = {
                     "final_obs": final,
-                    "_final_obs": ended.copy(),
+                    "_final_obs": xp.copy(ended),
                     "final_info": final_info,
-                    "_final_info": ended.copy(),
+                    "_final_info": xp.copy(ended),
                 }
-                self._reset_members(ended.copy())
+                self._reset_members(xp.copy(ended))
                 obs = self._observe(self.agent)
         infos.update(self._infos())
         return obs, reward, done, truncated, infos
 
     def _opponent_actions(self, stepping: np.ndarray) -> np.ndarray:
         """The fixed opponent's (B, ...) actions; a FixedMix draws only for ``stepping``."""
-        B = self.num_envs
-        if self._mix:
+        B, xp = self.num_envs, self.xp
+        if self._mix and xp is not NUMPY:  # torch: the device generator draws for every member
             mix: FixedMix = self.opponent
+            index = xp.searchsorted(mix._cdf, xp.uniform(self._generator, B))
+            return xp.minimum(index, mix.n_actions - 1)
+        if self._mix:
+            mix = self.opponent
             u = np.zeros(B)
             for i in np.flatnonzero(stepping):  # each member's generator, as its single env's
                 u[i] = self._opp_rngs[i].random()
             return np.minimum(np.searchsorted(mix._cdf, u, side="right"), mix.n_actions - 1)
-        action, _ = self.opponent.predict(self._observe(self.other), deterministic=True)
+        obs = self._observe(self.other)
+        if xp is not NUMPY:  # a policy's predict takes and gives numpy (SB3's convention)
+            obs = xp.to_numpy(obs)
+        action, _ = self.opponent.predict(obs, deterministic=True)
         shape = self.parallel.action_space(self.other).shape or ()
         try:
+            if xp is not NUMPY:
+                return xp.asarray(np.asarray(action).reshape(B, *shape))
             return np.asarray(action).reshape(B, *shape)
         except ValueError as exc:
             raise ValueError(
@@ -279,7 +361,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
     # --- observations ----------------------------------------------------------------------------
     def _observe(self, agent: str) -> np.ndarray:
         """(B, d) float32 observations of ``agent``, a transposed view of a (d, B) buffer."""
-        rows = np.empty((self._dims[agent], self.num_envs), dtype=np.float32)
+        rows = self.xp.empty((self._dims[agent], self.num_envs), dtype=self.xp.float32)
         col = self.sim.features(rows)
         rows[col:] = self._models[agent].batch_features().T
         return rows.T
@@ -287,12 +369,12 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
     def _infos(self) -> dict[str, Any]:
         """Gymnasium vector infos: the single env's keys, each with its all-True ``_key``."""
         # phi is a fresh array every step; k is updated in place, so it is copied
-        values: dict[str, Any] = {"phi": self.sim.phi, "step": self.sim.k.copy()}
+        values: dict[str, Any] = {"phi": self.sim.phi, "step": self.xp.copy(self.sim.k)}
         values.update(self.attack.batch_info())
         if self.agent == "attacker":
             values.update(self.attack.batch_private_info())
         for key, array in self._det_info.items():
-            values[key] = array.copy()
+            values[key] = self.xp.copy(array)
         if self._masked:
             values["action_mask"] = self._models[self.agent].batch_action_mask()
         infos: dict[str, Any] = {}
@@ -303,22 +385,43 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
 
     def action_masks(self) -> np.ndarray:
         """(B, A) legal actions of the learning player (all legal where unmasked)."""
+        xp = self.xp
         mask = self._models[self.agent].batch_action_mask()
         if mask is None:
-            return np.ones((self.num_envs, int(getattr(self.single_action_space, "n", 1))), bool)
-        return mask.astype(bool)
+            n = int(getattr(self.single_action_space, "n", 1))
+            return xp.ones((self.num_envs, n), dtype=xp.bool)
+        return xp.astype(mask, xp.bool)
 
 
-def _masked(infos: dict[str, Any], where: np.ndarray) -> dict[str, Any]:
+def _masked(infos: dict[str, Any], where: Any, xp=NUMPY) -> dict[str, Any]:
     """``infos`` reported by the members ``where`` only (their ``_key`` masks set to it)."""
     out: dict[str, Any] = {}
     for key, value in infos.items():
         if not key.startswith("_"):
-            out[key] = np.where(where.reshape(-1, *[1] * (value.ndim - 1)), value, 0).astype(
-                value.dtype
-            )
-            out["_" + key] = where.copy()
+            kept = xp.where(where.reshape(-1, *[1] * (value.ndim - 1)), value, 0)
+            out[key] = xp.astype(kept, value.dtype)
+            out["_" + key] = xp.copy(where)
     return out
+
+
+def _max_envs(xp) -> int:
+    return MAX_NUM_ENVS if xp is NUMPY else MAX_NUM_ENVS_TORCH
+
+
+def _check_torch_support(parallel: FdiaParallelEnv) -> None:
+    """``ValueError`` unless this env's models run on torch (see :data:`TORCH_IDS`)."""
+    missing = [
+        type(m).__name__
+        for m in (parallel.attack, parallel.defense)
+        if "torch" not in m.batch_backends
+    ]
+    if missing:
+        raise ValueError(
+            f"backend='torch' is not implemented for {parallel.metadata.get('name')} "
+            f"({', '.join(missing)} has no torch batch implementation yet); "
+            f"backend='torch' supports {', '.join(TORCH_IDS)} (their options included); "
+            "use backend='numpy' for the others"
+        )
 
 
 def _box(space: spaces.Space) -> spaces.Box:
@@ -332,13 +435,20 @@ def make_vector(
     opponent: Policy | None = None,
     autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
     max_episode_steps: int | None = None,
+    backend: str = "numpy",
+    device: Any = None,
     **kwargs: Any,
 ) -> FdiaVectorEnv:
-    """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B."""
+    """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B.
+
+    ``backend`` and ``device`` choose numpy (default) or torch on a device (see
+    :class:`FdiaVectorEnv`); they are checked before the env is built.
+    """
+    xp = get_backend(backend, device)  # an unknown backend or a missing GPU fails first
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
-    check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
+    check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
@@ -351,4 +461,6 @@ def make_vector(
         opponent=opponent,
         autoreset_mode=autoreset_mode,
         max_episode_steps=max_episode_steps,
+        backend=backend,
+        device=device,
     )

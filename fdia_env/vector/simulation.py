@@ -1,156 +1,245 @@
-"""The simulation engine for a batch of B environments, one numpy computation per step.
+"""The simulation engine for a batch of B environments, one array computation per step.
 
 Member ``i`` of the batch follows exactly the recursion of
 :class:`~fdia_env.envs.simulation.Simulation`: the 2-state case without a leaking bias runs the
 same closed-form kernels (:mod:`fdia_env.kalman.small`) on component arrays, everything else the
-generic batched functions of :mod:`fdia_env.kalman`. In sampled dynamics each member draws from
-its own generator, in the single environment's order, so seeds reproduce single-env episodes.
+generic batched functions of :mod:`fdia_env.kalman`.
+
+The engine is written once against an array backend (:mod:`fdia_env.backend`): numpy arrays on
+the CPU, or torch tensors on one device (CPU or CUDA; float64 throughout). The only part that
+differs by backend is where random draws come from: with numpy each member draws from its own
+generator in the single environment's order (so seeds reproduce single-env episodes); with
+torch every member draws from one ``torch.Generator`` on the device (so sampled dynamics are
+equal in distribution, not draw for draw).
+
+Sensor sets are (B,) bitmasks (bit i = sensor i) or (B, M) boolean masks; the torch models use
+masks where bitmasks would not fit an int64 (more than 62 sensors).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from fdia_env.attacks.base import bits_to_mask
+from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits
+from fdia_env.backend import NUMPY, Backend
 from fdia_env.defenses.base import BatchDetection
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
+    information_update,
     joseph_update,
     masked_gain,
     objective,
     predict_cov,
     psd_sqrt,
     small,
+    spd_inv,
     steady_state,
     sym,
 )
-from fdia_env.kalman.linalg import spd_inv
 from fdia_env.vector.detection import batched_detection_step
 
 
 class BatchedSimulation:
-    """B filters under attack.
+    """B filters under attack, on numpy or on torch.
+
+    Args:
+        single: The single environment's engine (its system, episode spec and start state).
+        batch: B.
+        backend: Where the arrays live (:data:`~fdia_env.backend.NUMPY` by default).
 
     Attributes:
         P, M: (B, n, n) the filters' and the actual error covariances (properties).
         k: (B,) window steps taken.
         phi: (B,) Φ after the last step.
         x, x_hat: (B, n) true states and estimates (sampled only).
+        rngs: numpy backend, sampled dynamics: one ``np.random.Generator`` per member.
+        generator: torch backend, sampled dynamics: the ``torch.Generator`` of every draw.
     """
 
-    def __init__(self, single: Simulation, batch: int) -> None:
+    def __init__(self, single: Simulation, batch: int, backend: Backend = NUMPY) -> None:
         self.single = single
         self.system = system = single.system
         self.spec: EpisodeSpec = single.spec
         self.B = batch
+        self.xp = xp = backend
         self.sampled = single.sampled
         self.fast = system.n == 2
-        self._F_identity = bool(np.array_equal(system.F, np.eye(system.n)))
-        self._eye = np.eye(system.n)
-        self._J_flat = system.J.reshape(system.M, -1)
-        self._start = single.P_start
-        self._start_diag = np.diag(self._start)
-        self._iu = np.triu_indices(system.n, 1)
-        if system.M <= 16:  # Σ_{i used} J_i for every subset, looked up by bitmask
-            bits = (np.arange(2**system.M)[:, None] >> np.arange(system.M)) & 1
-            self._jtab = (bits.astype(float) @ self._J_flat).reshape(-1, system.n, system.n)
+        n, M = system.n, system.M
+        c = xp.asarray  # the system's constants, once, on the backend's device
+        self._F_identity = bool(np.array_equal(system.F, np.eye(n)))
+        self._F, self._Q, self._H, self._R = c(system.F), c(system.Q), c(system.H), c(system.R)
+        self._Gu, self._x0 = c(system.Gu), c(system.x0)
+        self._HtRinv = c(system.HtRinv)
+        self._row_sensor = c(np.asarray(system.row_sensor, dtype=np.int64))
+        self._shifts = c(np.arange(M, dtype=np.int64)) if M <= 62 else np.arange(M)
+        self._eye = xp.eye(n)
+        self._eye_nz = xp.eye(system.nz)
+        self._J_flat = c(system.J.reshape(M, -1))
+        self._start = c(single.P_start)
+        self._start_diag = c(np.diag(single.P_start))
+        self._iu = tuple(c(np.asarray(i, dtype=np.int64)) for i in np.triu_indices(n, 1))
+        self._Q_factor_T = c(single._Q_factor.T)
+        self._R_factor_T = c(single._R_factor.T)
+        if M <= 16:  # Σ_{i used} J_i for every subset, looked up by bitmask
+            bits = (np.arange(2**M)[:, None] >> np.arange(M)) & 1
+            jtab = (bits.astype(float) @ system.J.reshape(M, -1)).reshape(-1, n, n)
+            self._jtab = c(jtab)
         else:
-            self._jtab = None
+            jtab = self._jtab = None
         if self.fast:
-            self._C = small.predict_matrix2(small.to_mat2(system.F))
-            self._q = np.array(small.to_sym2(system.Q))
-            self._start2 = small.to_sym2(self._start)
-            self._start_comp = np.array(self._start2)[:, None]
-            if self._jtab is not None:
-                self._jcomp = np.stack(
-                    [self._jtab[:, 0, 0], self._jtab[:, 0, 1], self._jtab[:, 1, 1]]
-                )
+            self._C = c(small.predict_matrix2(small.to_mat2(system.F)))
+            self._q = c(np.array(small.to_sym2(system.Q)))
+            self._start2 = small.to_sym2(single.P_start)
+            self._start_comp = c(np.array(self._start2)[:, None])
+            if jtab is not None:
+                self._jcomp = c(np.stack([jtab[:, 0, 0], jtab[:, 0, 1], jtab[:, 1, 1]]))
+        if self.sampled:  # the sampled reset's constants: start factor, or warm-up gains
+            warmup = self.spec.warmup
+            root = psd_sqrt(single.P_start if warmup == "steady" else system.P0)
+            self._start_root_T = c(root.T)
+            self._warm_gains_T = []
+            if warmup != "steady":
+                P = np.array(system.P0)
+                for _ in range(int(warmup)):
+                    P = information_update(predict_cov(P, system.F, system.Q), system.J)
+                    self._warm_gains_T.append(c(masked_gain(P, system).T))
         self.rngs: list[np.random.Generator] = []
-        self.value_override: np.ndarray | None = None
-        self.reset(None, None)  # the env's reset draws the sampled states
+        self.generator: Any = None
+        self.value_override: Any = None
+        self.reset(None, draw=False)  # the env's reset draws the sampled states
 
     # --- state -------------------------------------------------------------------------------
     @property
-    def P(self) -> np.ndarray:
+    def P(self) -> Any:
         """(B, n, n) filter covariances."""
         if self._comp is not None:
             a, b, d = self._comp
-            P = np.empty((self.B, 2, 2))
+            P = self.xp.empty((self.B, 2, 2))
             P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = a, b, b, d
             return P
         return self._P
 
     @property
-    def M(self) -> np.ndarray:
+    def M(self) -> Any:
         """(B, n, n) actual error covariances (P where no bias leaked)."""
-        if self.consistent.all():  # no member's filter has seen a bias: M is P
+        if self._clean or self.all_consistent():  # no member has seen a bias: M is P
             return self.P
-        return np.where(self.consistent[:, None, None], self.P, self._M)
+        return self.xp.where(self.consistent[:, None, None], self.P, self._M)
 
-    def _set_P(self, P: np.ndarray) -> None:
+    def all_consistent(self) -> bool:
+        """Whether no member's filter has seen a bias (then M is P).
+
+        Kept as a Python flag while it is known to hold, so the common case costs no reduction
+        (and, on a GPU, no synchronisation).
+        """
+        if not self._clean:
+            self._clean = self.xp.all(self.consistent)
+        return self._clean
+
+    def _set_P(self, P: Any) -> None:
         if self.fast:
-            self._comp = np.stack([P[:, 0, 0], 0.5 * (P[:, 0, 1] + P[:, 1, 0]), P[:, 1, 1]])
+            self._comp = self.xp.stack([P[:, 0, 0], 0.5 * (P[:, 0, 1] + P[:, 1, 0]), P[:, 1, 1]])
         else:
             self._comp = None
             self._P = P
 
-    def reset(self, where: np.ndarray | None, rngs: list[np.random.Generator] | None) -> None:
+    def _set_consistent(self, consistent: Any) -> None:
+        """Replace the (B,) consistency flags (the detection game's step sets them)."""
+        self.consistent = consistent
+        self._clean = False
+
+    def reset(self, where: Any = None, draw: bool = True) -> None:
         """Put the members ``where`` (a (B,) boolean mask; None = all) at the window start.
 
         Args:
             where: Members to reset.
-            rngs: Their generators, in member order (sampled dynamics), or None.
+            draw: Sampled dynamics: draw their true states and estimates (from :attr:`rngs`,
+                numpy, or :attr:`generator`, torch).
         """
+        xp = self.xp
         B, n = self.B, self.system.n
-        if where is None or where.all():
+        full = where is None or xp.all(where)
+        if full:
             if self.fast:
-                self._comp = np.repeat(self._start_comp, B, axis=1)
+                self._comp = xp.broadcast_to(self._start_comp, (3, B))
             else:
-                self._set_P(np.broadcast_to(self._start, (B, n, n)).copy())
+                self._set_P(xp.broadcast_to(self._start, (B, n, n)))
             self._M = None  # only read where a member is inconsistent
-            self.consistent = np.ones(B, dtype=bool)
-            self.k = np.zeros(B, dtype=np.int64)
-            self.nis = np.zeros(B)
+            self.consistent = xp.ones(B, dtype=xp.bool)
+            self._clean = True
+            self.k = xp.zeros(B, dtype=xp.int64)
+            self.nis = xp.zeros(B)
             if self.sampled:
-                self.x = np.zeros((B, n))
-                self.x_hat = np.zeros((B, n))
-            members = np.arange(B)
+                self.x = xp.zeros((B, n))
+                self.x_hat = xp.zeros((B, n))
         else:
             if self._comp is not None:
                 self._comp[:, where] = self._start_comp
             else:
                 self._P[where] = self._start
-            if not self.consistent.all():
+            if not self.all_consistent():
                 self._M[where] = self._start
             self.consistent[where] = True
             self.k[where] = 0
             self.nis[where] = 0.0
-            members = np.flatnonzero(where)
-        if self.sampled and rngs is not None:
-            for i, rng in zip(members, rngs, strict=True):  # one generator per member
-                self.single._reset_sampled(rng)
-                self.x[i], self.x_hat[i] = self.single.x, self.single.x_hat
+        if self.sampled and draw:
+            self._reset_sampled(None if full else where)
         override, self.value_override = self.value_override, None  # a fresh start: Φ of the state
         phi0 = self._measure_all()
-        self.value_override = None if where is None or where.all() else override
-        self.phi = phi0 if where is None or where.all() else np.where(where, phi0, self.phi)
+        self.value_override = None if full else override
+        self.phi = phi0 if full else xp.where(where, phi0, self.phi)
+
+    def _reset_sampled(self, where: Any) -> None:
+        """Draw the members' true states around the estimate, then run the warm-up steps."""
+        xp, sys = self.xp, self.system
+        x_hat = xp.broadcast_to(self._x0, (self.B, sys.n))
+        x = x_hat + self._normal(sys.n, where) @ self._start_root_T
+        for W_T in self._warm_gains_T:  # warmup = int: clean steps with every sensor
+            noise = self._normal(sys.n + sys.nz, where)
+            x, x_hat, _ = self._propagate(x, x_hat, W_T, noise, None)
+        if where is None:
+            self.x, self.x_hat = x, x_hat
+        else:
+            self.x = xp.where(where[:, None], x, self.x)
+            self.x_hat = xp.where(where[:, None], x_hat, self.x_hat)
+
+    # --- random draws: the only backend-specific part ------------------------------------------
+    def _normal(self, width: int, members: Any, counts: Any = None) -> Any:
+        """(B, width) standard normal draws for the members of the (B,) mask (None = all).
+
+        numpy: member ``i`` draws the first ``counts[i]`` (default ``width``) columns from its
+        own generator, in the single environment's order; the other entries are 0. torch: every
+        entry comes from :attr:`generator` (members outside ``members`` and columns beyond
+        ``counts`` are drawn too and ignored by the caller).
+        """
+        xp = self.xp
+        if xp is not NUMPY:
+            return xp.normal(self.generator, (self.B, width))
+        out = np.zeros((self.B, width))
+        idx = range(self.B) if members is None else np.flatnonzero(members)
+        for i in idx:
+            count = width if counts is None else int(counts[i])
+            out[i, :count] = self.rngs[i].standard_normal(count)
+        return out
 
     # --- step --------------------------------------------------------------------------------
     def step(
         self,
-        used: np.ndarray,
-        leak: np.ndarray | None,
-        present: np.ndarray | None,
+        used: Any,
+        leak: Any,
+        present: Any,
         steady: bool,
-        active: np.ndarray | None = None,
+        active: Any = None,
         detection: BatchDetection | None = None,
-        probability: np.ndarray | None = None,
-    ) -> np.ndarray:
+        probability: Any = None,
+    ) -> Any:
         """Advance every member one step; ``active`` members draw noise (sampled mode).
 
         Args:
-            used: (B,) bitmasks of the sensors each filter uses.
+            used: (B,) bitmasks or (B, M) boolean masks of the sensors each filter uses.
             leak: (B, nz, nz) bias covariance reaching each filter, or None.
             present: (B,) members with a leak (their single-env twin gets a leaked_sigma).
             steady: Restart each member from the steady state of its ``used`` subset first.
@@ -169,7 +258,12 @@ class BatchedSimulation:
             return self.phi
         if steady:
             self._restart_steady(used, active)
-        if self.fast and leak is None and not self.sampled and self.consistent.all():
+        if (
+            self.fast
+            and leak is None
+            and not self.sampled
+            and (self._clean or self.all_consistent())
+        ):
             # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components
             info = small.inv2_stacked(small.predict2_stacked(self._comp, self._C, self._q))
             info += self._used_components(used)
@@ -180,138 +274,172 @@ class BatchedSimulation:
         self.phi = self._measure_all()
         return self.phi
 
-    def _used_components(self, used: np.ndarray) -> np.ndarray:
+    def _mask_of(self, used: Any) -> Any:
+        """(B, M) boolean masks of (B,) bitmasks (masks pass through)."""
+        if used.ndim == 2:
+            return used
+        xp = self.xp
+        return xp.astype((used[:, None] >> self._shifts) & 1, xp.bool)
+
+    def _used_components(self, used: Any) -> Any:
         """(3, B) components of ``Σ_{i used} J_i`` per member."""
-        if self._jtab is not None:
-            return np.take(self._jcomp, used, axis=1)
+        xp = self.xp
+        if self._jtab is not None and used.ndim == 1:
+            return xp.take(self._jcomp, used, axis=1)
         J = self._used_information(used)
-        return np.stack([J[:, 0, 0], J[:, 0, 1], J[:, 1, 1]])
+        return xp.stack([J[:, 0, 0], J[:, 0, 1], J[:, 1, 1]])
 
-    def _used_information(self, used: np.ndarray) -> np.ndarray:
+    def _used_information(self, used: Any) -> Any:
         """(B, n, n) ``Σ_{i used} H_i' R_i⁻¹ H_i``."""
-        if self._jtab is not None:
-            return np.take(self._jtab, used, axis=0)
-        bits = (used[:, None] >> np.arange(self.system.M)) & 1
-        return (bits.astype(float) @ self._J_flat).reshape(-1, self.system.n, self.system.n)
+        xp = self.xp
+        if self._jtab is not None and used.ndim == 1:
+            return xp.take(self._jtab, used, axis=0)
+        mask = xp.astype(self._mask_of(used), xp.float64)
+        return (mask @ self._J_flat).reshape(-1, self.system.n, self.system.n)
 
-    def _restart_steady(self, used: np.ndarray, active: np.ndarray | None) -> None:
-        M_ = self.system.M
-        P = np.empty((self.B, self.system.n, self.system.n))
-        for u in np.unique(used):  # one cached DARE per distinct subset, not per member
-            P[used == u] = steady_state(self.system, bits_to_mask(u, M_))[1]
+    def _restart_steady(self, used: Any, active: Any) -> None:
+        """P = M = the steady state of each member's subset (one cached DARE per subset)."""
+        xp, sys = self.xp, self.system
+        bits = xp.to_numpy(used)
+        if bits.ndim == 2:
+            bits = mask_array_to_bits(bits)
+        P = np.empty((self.B, sys.n, sys.n))
+        for u in np.unique(bits):  # the DARE runs on numpy, once per distinct subset
+            P[bits == u] = steady_state(sys, bits_to_mask(u, sys.M))[1]
+        P = xp.asarray(P)
         self._set_P(P)
-        self._M = P.copy()
-        self.consistent[:] = True
-        if self.sampled:
-            for i in range(self.B) if active is None else np.flatnonzero(active):
-                draw = self.rngs[i].standard_normal(self.system.n)
-                self.x[i] = self.x_hat[i] + psd_sqrt(P[i]) @ draw
+        self._M = xp.copy(P)
+        self.consistent = xp.ones(self.B, dtype=xp.bool)
+        self._clean = True
+        if self.sampled:  # a fresh error drawn from the steady-state covariance
+            draws = self._normal(sys.n, active)
+            x = self.x_hat + xp.einsum("bij,bj->bi", psd_sqrt(P), draws)
+            self.x = x if active is None else xp.where(active[:, None], x, self.x)
 
-    def _generic_step(self, used, leak, present, active) -> None:
-        sys = self.system
-        mask = ((used[:, None] >> np.arange(sys.M)) & 1).astype(bool)
+    def _generic_step(self, used: Any, leak: Any, present: Any, active: Any) -> None:
+        xp, sys = self.xp, self.system
+        mask = self._mask_of(used)
         P_prev, M_prev = self.P, self.M
         # P[k|k−1] = F P F' + Q; a random walk (F = I, the grid presets) skips the products
-        P_pred = P_prev + sys.Q if self._F_identity else predict_cov(P_prev, sys.F, sys.Q)
+        P_pred = P_prev + self._Q if self._F_identity else predict_cov(P_prev, self._F, self._Q)
         # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product,
         # computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]: one LU solve instead of two inverses
         # (I + P J is invertible: its eigenvalues are those of I + P^½ J P^½, all >= 1)
-        used_info = (mask.astype(float) @ self._J_flat).reshape(-1, sys.n, sys.n)
+        used_info = (xp.astype(mask, xp.float64) @ self._J_flat).reshape(-1, sys.n, sys.n)
         if sys.n > 2:
-            P_new = sym(np.linalg.solve(self._eye + P_pred @ used_info, P_pred))
+            P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
         else:
             P_new = spd_inv(spd_inv(P_pred) + used_info)
-        leaking = ~self.consistent if present is None else ~self.consistent | present
+        if present is None:
+            leaking = None if self.all_consistent() else ~self.consistent
+        else:
+            leaking = present if self.all_consistent() else ~self.consistent | present
+        any_leak = leaking is not None and xp.any(leaking)
         # the (B, n, nz) gain only where it is read (large for the power-grid systems)
-        W = masked_gain(P_new, sys, mask) if leaking.any() or self.sampled else None
-        if leaking.any():  # Joseph form for the members whose filter is not optimal
-            noise = sys.R if leak is None else sys.R + leak
-            M_new = joseph_update(predict_cov(M_prev, sys.F, sys.Q), W, sys.H, noise)
-            self._M = np.where(leaking[:, None, None], M_new, P_new)
+        W = self._gain(P_new, mask) if any_leak or self.sampled else None
+        if any_leak:  # Joseph form for the members whose filter is not optimal
+            noise = self._R if leak is None else self._R + leak
+            M_new = joseph_update(predict_cov(M_prev, self._F, self._Q), W, self._H, noise)
+            self._M = xp.where(leaking[:, None, None], M_new, P_new)
             self.consistent = self.consistent & ~leaking
+            self._clean = False
         self._set_P(P_new)
         if self.sampled:
             self._sampled_step(mask, P_pred, W, leak, present, active)
 
+    def _gain(self, P_post: Any, mask: Any) -> Any:
+        """(B, n, nz) nominal gain ``P H' R⁻¹`` with zero columns for the unused sensors."""
+        xp = self.xp
+        rows = xp.astype(mask[:, self._row_sensor], xp.float64)
+        return P_post @ (self._HtRinv * rows[:, None, :])
+
+    def _propagate(self, x: Any, x_hat: Any, W: Any, noise: Any, bias: Any) -> tuple:
+        """One step of the true system and of the filter (MATH.md §1), batched.
+
+        ``x[k+1] = F x + G u + v``, ``z = H x[k+1] + w (+ b)``,
+        ``x̂ = x̂[k+1|k] + W (z − H x̂[k+1|k])``, with ``v, w`` from the first n + nz columns of
+        ``noise``; ``W`` is (B, n, nz) per member or the (nz, n) transpose of a shared gain.
+
+        Returns:
+            ``(x_next, x_hat_next, innovation)``.
+        """
+        n, nz = self.system.n, self.system.nz
+        x_next = x @ self._F.T + self._Gu + noise[:, :n] @ self._Q_factor_T
+        z = x_next @ self._H.T + noise[:, n : n + nz] @ self._R_factor_T
+        if bias is not None:
+            z = z + bias
+        x_pred = x_hat @ self._F.T + self._Gu
+        innovation = z - x_pred @ self._H.T
+        if W.ndim == 2:
+            return x_next, x_pred + innovation @ W, innovation
+        return x_next, x_pred + self.xp.einsum("bij,bj->bi", W, innovation), innovation
+
     def _sampled_step(self, mask, P_pred, W, leak, present, active) -> None:
-        sys = self.system
-        n, nz, B = sys.n, sys.nz, self.B
-        noise = np.zeros((B, n + 2 * nz))
-        has_bias = np.zeros(B, dtype=bool) if present is None else present
-        members = range(B) if active is None else np.flatnonzero(active)
-        for i in members:  # each member's own generator, in the single env's draw order
-            noise[i, : n + nz + (nz if has_bias[i] else 0)] = self.rngs[i].standard_normal(
-                n + nz + (nz if has_bias[i] else 0)
-            )
-        v = noise[:, :n] @ self.single._Q_factor.T
-        w = noise[:, n : n + nz] @ self.single._R_factor.T
-        x_next = self.x @ sys.F.T + sys.Gu + v
-        z = x_next @ sys.H.T + w
-        if has_bias.any():
+        xp, sys = self.xp, self.system
+        n, nz = sys.n, sys.nz
+        has_bias = present is not None and xp.any(present)
+        counts = None
+        if xp is NUMPY:  # each member's draws in its single env's order: v, w, then the bias
+            counts = np.full(self.B, n + nz) if present is None else n + nz + nz * present
+        noise = self._normal(n + 2 * nz, active, counts)
+        bias = None
+        if has_bias:
             L = psd_sqrt(leak)
-            z = z + np.einsum("bij,bj->bi", L, noise[:, n + nz :]) * has_bias[:, None]
-        x_pred = self.x_hat @ sys.F.T + sys.Gu
-        innovation = z - x_pred @ sys.H.T
-        self.x_hat = x_pred + np.einsum("bij,bj->bi", W, innovation)
-        self.x = x_next
-        rows = sys.row_mask(mask).astype(float)  # NIS over the used rows
-        S = sys.H @ P_pred @ sys.H.T + sys.R
-        S = S * rows[:, :, None] * rows[:, None, :] + np.eye(nz) * (1.0 - rows)[:, None, :]
+            bias = xp.einsum("bij,bj->bi", L, noise[:, n + nz :]) * present[:, None]
+        self.x, self.x_hat, innovation = self._propagate(self.x, self.x_hat, W, noise, bias)
+        rows = xp.astype(mask[:, self._row_sensor], xp.float64)  # NIS over the used rows
+        S = self._H @ P_pred @ self._H.T + self._R
+        S = S * rows[:, :, None] * rows[:, None, :] + self._eye_nz * (1.0 - rows)[:, None, :]
         nu = innovation * rows
-        count = rows.sum(axis=1)
-        nis = np.einsum("bi,bi->b", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-        self.nis = np.where(count > 0, nis / np.maximum(count, 1.0), 0.0)
+        count = xp.sum(rows, 1)
+        nis = xp.einsum("bi,bi->b", nu, xp.solve(S, nu[..., None])[..., 0])
+        self.nis = xp.where(count > 0, nis / xp.maximum(count, 1.0), 0.0)
 
     # --- outputs -----------------------------------------------------------------------------
-    def _measure_all(self) -> np.ndarray:
+    def _measure_all(self) -> Any:
+        xp = self.xp
         if self.sampled:
             if self.value_override is not None:  # the detection game's fixed Bayes costs
                 return self.value_override
             e = self.x - self.x_hat
-            return np.einsum("bi,bi->b", e, e)
-        if self._comp is not None and self.consistent.all():
+            return xp.einsum("bi,bi->b", e, e)
+        if self._comp is not None and (self._clean or self.all_consistent()):
             a, b, d = self._comp
             if self.spec.objective == "trace":
                 return a + d
             det = a * d - b * b
             with np.errstate(divide="ignore", invalid="ignore"):
-                return np.where(det > 0, np.log(det), -np.inf)
+                return xp.where(det > 0, xp.log(det), -np.inf)
         return objective(self.M, self.spec.objective)
 
-    def features(self, out: np.ndarray) -> int:
+    def features(self, out: Any) -> int:
         """Write the common features into the rows ``out[:f]`` of a (d, B) float32 buffer.
 
         Same features as :meth:`Simulation.features`, one row per feature (rows are contiguous,
         so the batch is written without strided stores); returns f.
         """
+        xp = self.xp
         n = self.system.n
         out[0] = (self.spec.horizon - self.k) / self.spec.horizon
-        if self._comp is not None and self.consistent.all():
+        if self._comp is not None and (self._clean or self.all_consistent()):
             a, b, d = self._comp
             a0, _, d0 = self._start2
-            f32 = np.float32  # the observation is float32: compute its transcendental parts so
-            np.log(a * (1.0 / a0), dtype=f32, out=out[1])
-            np.log(d * (1.0 / d0), dtype=f32, out=out[2])
-            _clip(out[1:3], 30.0)
-            np.divide(b, np.sqrt(a * d), out=out[3], casting="same_kind")
-            _clip(out[3], 1.0)
+            # the observation is float32: numpy computes its transcendental parts so
+            xp.log_into(a * (1.0 / a0), out[1])
+            xp.log_into(d * (1.0 / d0), out[2])
+            xp.clip_(out[1:3], 30.0)
+            xp.divide(b, xp.sqrt(a * d), out=out[3])
+            xp.clip_(out[3], 1.0)
             col = 4
         else:
             M = self.M
-            var = np.diagonal(M, axis1=-2, axis2=-1)
-            out[1 : 1 + n] = np.clip(np.log(var / self._start_diag), -30.0, 30.0).T
+            var = xp.diagonal(M)
+            out[1 : 1 + n] = xp.clip(xp.log(var / self._start_diag), -30.0, 30.0).T
             i, j = self._iu
-            corr = M[:, i, j] / np.sqrt(var[:, i] * var[:, j])
-            out[1 + n : 1 + n + len(i)] = np.clip(corr, -1.0, 1.0).T
+            corr = M[:, i, j] / xp.sqrt(var[:, i] * var[:, j])
+            out[1 + n : 1 + n + len(i)] = xp.clip(corr, -1.0, 1.0).T
             col = 1 + n + len(i)
         if self.sampled:
-            out[col] = np.where(np.isfinite(self.nis), np.minimum(self.nis, 1e3), 1e3)
+            out[col] = xp.where(xp.isfinite(self.nis), xp.minimum(self.nis, 1e3), 1e3)
             col += 1
         return col
-
-
-def _clip(x: np.ndarray, bound: float) -> np.ndarray:
-    """``x`` clipped to [−bound, bound] in place (np.clip's wrapper costs more here)."""
-    np.minimum(x, bound, out=x)
-    np.maximum(x, -bound, out=x)
-    return x
