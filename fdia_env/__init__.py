@@ -1,6 +1,7 @@
 """fdia_env: Gymnasium and PettingZoo environments for false data injection on Kalman filters.
 
-See the README for the environments, the scenarios and the baselines.
+See the README and the documentation site (``docs/``, built by ``make docs``) for the
+environments, the scenarios and the baselines.
 """
 
 from fdia_env import scenarios

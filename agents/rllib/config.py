@@ -21,7 +21,7 @@ Gymnasium view). What it sets beyond RLlib's defaults:
   players: 0 in every zero-sum iteration), and :class:`ZeroStepsSampled` raised when an
   iteration sampled nothing (RLlib only logs its sample timeout).
 
-Measured figures are in the README section "RLlib and Ray Tune" and ``benchmarks/rllib.py``.
+Measured figures are in ``docs/guide/rllib.md`` and ``benchmarks/rllib.py``.
 """
 
 from __future__ import annotations

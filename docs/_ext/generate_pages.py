@@ -1,4 +1,4 @@
-"""Build-time pages: the environments, the API reference and the benchmarks.
+"""Build-time pages: the environments and the API reference.
 
 One page per environment module (from its docstring, with a rendered image) and one per public
 package of the API (from its ``__all__``).
@@ -152,17 +152,9 @@ def _write_if_changed(path: Path, text: str) -> None:
         path.write_text(text, encoding="utf-8")
 
 
-def benchmarks_page(readme: Path) -> str:
-    """The README's "Performance" section (the measured figures), as a page of its own."""
-    text = readme.read_text(encoding="utf-8")
-    section = text.split("\n## Performance\n", 1)[1].split("\n## ", 1)[0]
-    return "# Benchmarks\n" + section.rstrip() + "\n"
-
-
 def generate(app) -> None:
     """Write the generated pages before Sphinx reads the sources."""
     src = Path(app.srcdir)
-    _write_if_changed(src / "benchmarks.md", benchmarks_page(src.parent / "README.md"))
     static = src / "_static" / "envs"
     for name in ENV_MODULES:
         _write_if_changed(src / "environments" / f"{name}.md", env_page(name, static))

@@ -1,7 +1,10 @@
 """Native vector environments: many envs as one numpy computation, the same episodes as one.
 
-Run: ``python docs/tutorials/vector_envs.py``. A GPU (torch) backend is not part of fdia_env yet:
-everything here runs in numpy on the CPU.
+Run: ``python docs/tutorials/vector_envs.py``. Each section is a function, run in order by the
+``__main__`` block below and shown as its own part of the tutorial page
+(``docs/tutorials/vector_envs.md``, one ``literalinclude :pyobject:`` per section). Everything here
+runs in numpy on the CPU; a section for another backend (a torch backend on a GPU, once
+fdia_env has one) is one more function appended to ``SECTIONS`` and one more part of the page.
 """
 
 import time
@@ -11,30 +14,44 @@ import numpy as np
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
 
-# 1. B = 4096 sparse-attack envs, stepped together
-venv = gym.make_vec(
-    "fdia_env/SparseAttack-v0", num_envs=4096, vectorization_mode="vector_entry_point"
-)
-obs, info = venv.reset(seed=0)
-rng = np.random.default_rng(0)
-start, steps = time.perf_counter(), 0
-for _ in range(60):
-    legal = info["action_mask"].astype(bool)
-    actions = np.argmax(rng.random(legal.shape) * legal, axis=1)  # random legal subsets
-    obs, rewards, terminated, truncated, info = venv.step(actions)
-    steps += venv.num_envs
-keys = sorted(k for k in info if not k.startswith("_"))
-print(f"{steps / (time.perf_counter() - start):,.0f} env-steps/s; info keys: {keys}")
 
-# 2. Member i is the single env seeded seed + i
-single = gym.make("fdia_env/SparseAttack-v0")
-venv3 = gym.make_vec("fdia_env/SparseAttack-v0", num_envs=3)
-obs3, _ = venv3.reset(seed=7)
-obs1, _ = single.reset(seed=9)
-print("member 2 == single env seeded 9:", np.array_equal(obs3[2], obs1))
+def numpy_batch(num_envs: int = 4096, steps: int = 60) -> None:
+    """1. B = 4096 sparse-attack envs, stepped together (numpy, CPU)."""
+    venv = gym.make_vec(
+        "fdia_env/SparseAttack-v0", num_envs=num_envs, vectorization_mode="vector_entry_point"
+    )
+    _, info = venv.reset(seed=0)
+    rng = np.random.default_rng(0)
+    start, done = time.perf_counter(), 0
+    for _ in range(steps):
+        legal = info["action_mask"].astype(bool)
+        actions = np.argmax(rng.random(legal.shape) * legal, axis=1)  # random legal subsets
+        _, _, _, _, info = venv.step(actions)
+        done += venv.num_envs
+    keys = sorted(k for k in info if not k.startswith("_"))
+    print(f"{done / (time.perf_counter() - start):,.0f} env-steps/s; info keys: {keys}")
 
-# 3. stable-baselines3 sees a VecEnv
-from fdia_env.vector.sb3 import make_sb3_vec_env  # noqa: E402
 
-sb3_env = make_sb3_vec_env("fdia_env/SparseAttack-v0", num_envs=8)
-print(type(sb3_env).__name__, sb3_env.num_envs, sb3_env.observation_space.shape)
+def members_are_single_envs() -> None:
+    """2. Member i is the single env seeded seed + i."""
+    single = gym.make("fdia_env/SparseAttack-v0")
+    venv3 = gym.make_vec("fdia_env/SparseAttack-v0", num_envs=3)
+    obs3, _ = venv3.reset(seed=7)
+    obs1, _ = single.reset(seed=9)
+    print("member 2 == single env seeded 9:", np.array_equal(obs3[2], obs1))
+
+
+def sb3_vec_env() -> None:
+    """3. stable-baselines3 sees a VecEnv."""
+    from fdia_env.vector.sb3 import make_sb3_vec_env
+
+    sb3_env = make_sb3_vec_env("fdia_env/SparseAttack-v0", num_envs=8)
+    print(type(sb3_env).__name__, sb3_env.num_envs, sb3_env.observation_space.shape)
+
+
+# the tutorial's sections, in order; a new backend's section is appended here
+SECTIONS = [numpy_batch, members_are_single_envs, sb3_vec_env]
+
+if __name__ == "__main__":
+    for section in SECTIONS:
+        section()
