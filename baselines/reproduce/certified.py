@@ -135,7 +135,7 @@ def certified(args: argparse.Namespace) -> Section:
             "sparse attack of MATH.md §4 or returns a certified gap; its bound is "
             "`baselines.sparse.upper_bound`.",
             random_seeds(3 if quick else 20, (0.1,) if quick else (0.1, 1.0)),
-            other_instances(2.0 if quick else 30.0, getattr(args, "scenario", None) or []),
+            other_instances(2.0 if quick else 60.0, getattr(args, "scenario", None) or []),
         ]
     )
     return Section("Certified optima: branch and bound", body)
