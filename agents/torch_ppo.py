@@ -20,10 +20,10 @@ the host during a rollout except what the env itself needs (its few Python-level
   device), one ``torch.Generator`` on the device for sampling and minibatches, ``env.reset(seed)``.
 
 :func:`train_torch_ppo` returns a :class:`TorchPPOResult` whose ``policy`` has SB3's
-``predict(obs, deterministic=True, action_masks=None)`` on numpy, so :func:`agents.evaluate.evaluate`
-scores it like any other policy. :func:`save_policy` / :func:`load_policy` write and read it in the
-tensor-only format of :mod:`agents.checkpoint` (``torch.load(weights_only=True)``, a SHA-256 in
-the JSON; nothing is unpickled).
+``predict(obs, deterministic=True, action_masks=None)`` on numpy, so
+:func:`agents.evaluate.evaluate` scores it like any other policy. :func:`save_policy` /
+:func:`load_policy` write and read it in the tensor-only format of :mod:`agents.checkpoint`
+(``torch.load(weights_only=True)``, a SHA-256 in the JSON; nothing is unpickled).
 """
 
 from __future__ import annotations
@@ -277,7 +277,7 @@ class ActorCritic(nn.Module):
     def log_prob_entropy(
         self, x: torch.Tensor, action: torch.Tensor, mask: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """log π(action | x) and the entropy of π(· | x), each (N,)."""
+        """The log-probability log π(action | x) and the entropy of π(· | x), each (N,)."""
         a, b = self.distribution(x, mask)
         if self.box:
             dist = torch.distributions.Normal(a, b)
