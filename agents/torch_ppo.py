@@ -432,7 +432,7 @@ def train_torch_ppo(
     config: TorchPPOConfig,
     seed: int = 0,
     stop: Callable[[], bool] | None = None,
-    log: Callable[[dict[str, float]], None] | None = None,
+    log: Callable[[dict[str, float], TorchPolicy], None] | None = None,
 ) -> TorchPPOResult:
     """Train a policy on a torch vector env (SAME_STEP autoreset) with PPO, all on its device.
 
@@ -441,7 +441,7 @@ def train_torch_ppo(
         config: Hyperparameters.
         seed: Seed of the network's initial weights, the device generator and the env.
         stop: Polled once per iteration; True ends training after the current iteration.
-        log: Called with each iteration's history record.
+        log: Called after each iteration with its history record and the current policy.
 
     Raises:
         ValueError: For an env that is not a torch vector env in SAME_STEP mode, or whose B
@@ -577,7 +577,8 @@ def train_torch_ppo(
         }
         history.append(record)
         if log is not None:
-            log(record)
+            log(record, TorchPolicy(model, seed))
+            model.train()
         if stop is not None and stop():
             interrupted = iteration < config.iterations
             break
