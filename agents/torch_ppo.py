@@ -530,14 +530,7 @@ def train_torch_ppo(
                 rew_buf[t] = reward.float()
                 done_buf[t] = ended.float()
             next_value = model.value(model.normalize(next_obs))
-            adv = torch.zeros((T, B), **f32)
-            last = torch.zeros(B, **f32)
-            for t in reversed(range(T)):
-                value_next = next_value if t == T - 1 else val_buf[t + 1]
-                nonterminal = 1.0 - done_buf[t]
-                delta = rew_buf[t] + config.gamma * value_next * nonterminal - val_buf[t]
-                last = delta + config.gamma * config.gae_lambda * nonterminal * last
-                adv[t] = last
+            adv = gae(rew_buf, val_buf, done_buf, next_value, config.gamma, config.gae_lambda)
             returns = adv + val_buf
         timesteps += B * T
 
@@ -584,6 +577,33 @@ def train_torch_ppo(
             break
     seconds = time.perf_counter() - start
     return TorchPPOResult(TorchPolicy(model, seed), timesteps, seconds, history, interrupted)
+
+
+def gae(
+    rewards: torch.Tensor,
+    values: torch.Tensor,
+    dones: torch.Tensor,
+    next_value: torch.Tensor,
+    gamma: float,
+    lam: float,
+) -> torch.Tensor:
+    """Generalised advantage estimates of a (T, B) rollout.
+
+    ``dones[t]`` is 1 where the member's episode ended at step t (its ``values[t + 1]`` is the
+    next episode's start and is not bootstrapped); ``next_value`` (B,) is V of the observation
+    after the last step. ``A_t = δ_t + γλ(1 − d_t) A_{t+1}``, ``δ_t = r_t + γ(1 − d_t)
+    V_{t+1} − V_t``.
+    """
+    T = rewards.shape[0]
+    adv = torch.zeros_like(rewards)
+    last = torch.zeros_like(next_value)
+    for t in reversed(range(T)):
+        value_next = next_value if t == T - 1 else values[t + 1]
+        nonterminal = 1.0 - dones[t]
+        delta = rewards[t] + gamma * value_next * nonterminal - values[t]
+        last = delta + gamma * lam * nonterminal * last
+        adv[t] = last
+    return adv
 
 
 def _fold(stats: torch.Tensor, x: torch.Tensor) -> None:
