@@ -14,7 +14,7 @@ from typing import Annotated
 
 import tyro
 
-from agents.config import GameConfig, SweepConfig, TrainConfig
+from agents.config import GameConfig, SweepConfig, TrainConfig, is_torch_ppo
 from agents.evaluate import Evaluation
 
 COMMANDS = ("attacker", "defender", "game", "sweep")
@@ -34,7 +34,9 @@ DESCRIPTION = "\n\n".join(
         "python train.py attacker --env covariance_attack_v0 --algo SAC; "
         "python train.py defender --algo DQN; "
         "python train.py game --method psro; "
-        "python train.py attacker --resume (continues the latest run of that env, algo, seed).",
+        "python train.py attacker --resume (continues the latest run of that env, algo, seed); "
+        "python train.py attacker --algo torch-ppo --device cuda --num-envs 4096 "
+        "--total-timesteps 2000000 (PPO with env, rollout buffer and policy on the device).",
         "--backend rllib runs the attacker, defender and game commands on Ray RLlib (PPO; "
         "--num-env-runners K, --ray-address ADDR for a running cluster; game adds --method "
         "selfplay, both players learning at once; --resume continues a run from its saved "
@@ -169,6 +171,28 @@ def main(argv: Sequence[str] | None = None) -> object:
         from agents.rllib.sweep import run_sweep
 
         return run_sweep(cfg)
+    torch_ppo = isinstance(cfg, TrainConfig) and is_torch_ppo(cfg.algo)
+    if torch_ppo and cfg.run.backend != "sb3":
+        raise ValueError("--algo torch-ppo runs in this process (--backend sb3, the default)")
+    if isinstance(cfg, TrainConfig) and cfg.num_envs is not None and not torch_ppo:
+        raise ValueError(
+            f"--num-envs applies to --algo torch-ppo only (got --algo {cfg.algo or 'default'}; "
+            "the stable-baselines3 and RLlib runs choose their own envs)"
+        )
+    if torch_ppo:
+        from agents.torch_ppo_train import train_torch_ppo_run
+
+        run = train_torch_ppo_run(cfg)
+        learned = next(iter(run.evaluations.values()))
+        print(
+            f"\ntorch-ppo {cfg.agent} on {learned.env_id}, {run.timesteps} steps in "
+            f"{run.train_seconds:.1f} s ({run.timesteps / max(run.train_seconds, 1e-9):,.0f} "
+            f"env-steps/s, {run.num_envs} envs on {run.device}, seed {cfg.run.seed})"
+            + (" (interrupted)" if run.interrupted else "")
+        )
+        print(f"  run folder: {run.run_dir}")
+        print(format_table(run.evaluations))
+        return run
     if cfg.run.resume and cfg.run.run_dir is not None and _backend_of(cfg.run.run_dir) == "rllib":
         if cfg.run.backend != "rllib":
             raise ValueError(
@@ -307,6 +331,13 @@ def cli(argv: Sequence[str] | None = None) -> int:
     elif rllib:
         done = f"{result.timesteps} steps"
         what = "state and scores"
+    elif not hasattr(result, "model"):  # torch-ppo: no resume
+        print(
+            f"train.py: stopped by {name} after {result.timesteps} steps; model and scores saved "
+            f"in {result.run_dir}",
+            file=sys.stderr,
+        )
+        return exit_status(signum)
     else:
         done = f"{result.model.num_timesteps} steps"
         what = "checkpoint, model and scores"

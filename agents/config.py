@@ -72,7 +72,30 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
         "lr_schedule": "constant",
         "net_arch": (64, 64),
     },
+    # agents/torch_ppo.py: env, buffer and policy on the device; n_steps per member per rollout
+    # (one rollout = num_envs × n_steps steps), 4 minibatches per epoch
+    "torch-ppo": {
+        "learning_rate": 3e-3,
+        "gamma": 1.0,
+        "n_steps": 12,
+        "n_epochs": 4,
+        "ent_coef": 0.01,
+        "gae_lambda": 0.95,
+        "clip_range": 0.2,
+        "lr_schedule": "linear",
+        "net_arch": (64, 64),
+    },
 }
+
+TORCH_PPO = "torch-ppo"
+# torch-ppo's default batch of members on the device (--num-envs)
+TORCH_PPO_NUM_ENVS = 4096
+MAX_NUM_ENVS = 2**24
+
+
+def is_torch_ppo(algo: str | None) -> bool:
+    """Whether ``--algo`` names the torch-native PPO (case, ``-`` and ``_`` insensitive)."""
+    return isinstance(algo, str) and algo.replace("_", "").replace("-", "").lower() == "torchppo"
 
 
 MAX_SEED = 2**32 - 1
@@ -187,15 +210,15 @@ class Hyperparameters:
     """stable-baselines3 hyperparameters; ``None`` means the algorithm's default."""
 
     learning_rate: float | None = None
-    """Adam step size (default: 1e-3; A2C 7e-4)."""
+    """Adam step size (default: 1e-3; A2C 7e-4; torch-ppo 3e-3)."""
     gamma: float | None = None
     """Discount factor (default: 1.0, the windows are a few steps long)."""
     n_steps: int | None = None
-    """PPO/A2C: steps per rollout (default: PPO 512, A2C 16)."""
+    """PPO/A2C: steps per rollout (default: PPO 512, A2C 16; torch-ppo: 12 per member)."""
     batch_size: int | None = None
     """PPO minibatch / DQN and SAC replay batch (default: PPO 128, DQN 64, SAC 256)."""
     n_epochs: int | None = None
-    """PPO: optimisation epochs per rollout (default: 10)."""
+    """PPO: optimisation epochs per rollout (default: 10; torch-ppo 4)."""
     ent_coef: float | None = None
     """PPO/A2C: entropy bonus (default: 0.01)."""
     gae_lambda: float | None = None
@@ -275,7 +298,7 @@ def resolved_hyperparameters(algo: str, hp: Hyperparameters) -> dict[str, Any]:
             users = [a for a, d in ALGO_DEFAULTS.items() if name in d]
             raise ValueError(f"{name} does not apply to {algo}; it applies to: {', '.join(users)}")
         values[name] = given
-    if algo in ("PPO", "MaskablePPO"):
+    if algo in ("PPO", "MaskablePPO"):  # torch-ppo's minibatches are num_envs·n_steps / 4
         for name in ("n_steps", "batch_size"):
             if values[name] < 2:
                 raise ValueError(
@@ -411,7 +434,11 @@ class TrainConfig:
     opponent: Literal["uniform", "equilibrium"] = "uniform"
     """Two-player envs: the fixed other player, the uniform mix or the LP equilibrium mix."""
     algo: str | None = None
-    """PPO, MaskablePPO, A2C, DQN or SAC, where it fits the env (default: the env's first)."""
+    """PPO, MaskablePPO, A2C, DQN or SAC, where it fits the env (default: the env's first), or
+    torch-ppo (every env: PPO with env, rollout buffer and policy on --device)."""
+    num_envs: int | None = None
+    """torch-ppo: members of the torch vector env stepped at once on --device (default 4096);
+    the stable-baselines3 algorithms train on one env and reject it."""
     total_timesteps: int = 100_000
     """Environment steps to train for, in total across resumes."""
     eval_freq: int = 10_000
@@ -433,6 +460,11 @@ class TrainConfig:
         check_choice("agent", self.agent, ("attacker", "defender"))
         check_choice("opponent", self.opponent, ("uniform", "equilibrium"))
         check_env_kwargs_format(self.env_kwargs)
+        if self.num_envs is not None:
+            check_number(
+                "num_envs", self.num_envs, int, lambda v: 1 <= v <= MAX_NUM_ENVS,
+                f"in [1, {MAX_NUM_ENVS}]",
+            )  # fmt: skip
         for name, kind in (
             ("total_timesteps", _AT_LEAST_1),
             ("eval_freq", (int, lambda v: v >= 0, ">= 0 (0: no evaluations during training)")),

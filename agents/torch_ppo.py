@@ -1,0 +1,689 @@
+"""PPO in one file on one torch device: env, rollout buffer and policy never leave it.
+
+In the spirit of CleanRL's ``ppo.py``: the torch backend of the vector envs
+(``gymnasium.make_vec(id, num_envs=B, vectorization_mode="vector_entry_point",
+backend="torch", device=...)``) steps B members as tensors on the device, the rollout buffer is a
+set of (T, B, ...) tensors there, and the actor-critic acts and learns there; nothing crosses to
+the host during a rollout except what the env itself needs (its few Python-level checks).
+
+- Discrete actions with action masks (the sparse attacker): the logits of illegal actions are set
+  to the dtype's minimum before sampling, so an illegal action has probability 0 exactly.
+- Box actions (the covariance attacker, the detection defender): a Gaussian policy in the
+  normalised space [-1, 1]^k (state-independent log std), clipped to it and mapped affinely to the
+  env's bounds; the log-probability is of the unclipped draw (as CleanRL).
+- GAE(λ), the clipped surrogate, minibatch epochs, advantage normalisation, gradient clipping,
+  optional linear learning-rate decay; running normalisation of observations and of rewards (by
+  the running std of the return), both kept in the policy (saved with its weights).
+- Autoreset: the env runs in ``SAME_STEP`` mode, so every transition is a real one; a truncated
+  (not terminated) member is bootstrapped with the value of its ``final_obs``.
+- Seeded: ``torch.manual_seed(seed)`` before the networks are built (same initial weights on any
+  device), one ``torch.Generator`` on the device for sampling and minibatches, ``env.reset(seed)``.
+
+:func:`train_torch_ppo` returns a :class:`TorchPPOResult` whose ``policy`` has SB3's
+``predict(obs, deterministic=True, action_masks=None)`` on numpy, so
+:func:`agents.evaluate.evaluate` scores it like any other policy. :func:`save_policy` /
+:func:`load_policy` write and read it in the tensor-only format of :mod:`agents.checkpoint`
+(``torch.load(weights_only=True)``, a SHA-256 in the JSON; nothing is unpickled).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+from torch import nn
+
+from agents.checkpoint import _sha256, inside, load_tensors, read_json
+from agents.runs import atomic_write, write_json
+
+ALGO = "torch-ppo"
+FORMAT = "fdia_env-torch-ppo-v1"
+MAX_NUM_ENVS = 2**24
+
+
+def _check_int(name: str, value: object, minimum: int, maximum: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise TypeError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if value < minimum or (maximum is not None and value > maximum):
+        allowed = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
+        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+    return int(value)
+
+
+def _check_real(name: str, value: object, ok: Callable[[float], bool], allowed: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{name} must be a number {allowed}, got {value!r}")
+    if not math.isfinite(value) or not ok(value):
+        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class TorchPPOConfig:
+    """Hyperparameters of :func:`train_torch_ppo` (CleanRL's names where they exist).
+
+    Attributes:
+        total_timesteps: Env steps to train for (rounded up to whole iterations of
+            ``num_envs × num_steps``).
+        num_envs: Members of the torch vector env, B.
+        num_steps: Steps of each member per rollout, T (one iteration = B·T env steps).
+        learning_rate: Adam step size (at the start, with ``anneal_lr``).
+        anneal_lr: Decay the learning rate linearly to 0 over the iterations.
+        gamma: Discount factor.
+        gae_lambda: GAE λ.
+        num_minibatches: Minibatches per epoch (each B·T / num_minibatches transitions).
+        update_epochs: Passes over the rollout per iteration.
+        clip_coef: PPO clipping range.
+        ent_coef: Entropy bonus.
+        vf_coef: Weight of the value loss.
+        max_grad_norm: Gradient-norm clip.
+        norm_adv: Normalise advantages per minibatch.
+        norm_obs: Running normalisation of observations (kept in the policy).
+        norm_reward: Scale rewards by the running std of the return.
+        hidden: Hidden layer sizes of the actor and of the critic (tanh).
+        init_log_std: Initial log std of the Gaussian policy (Box actions, normalised space).
+    """
+
+    total_timesteps: int = 1_000_000
+    num_envs: int = 4096
+    num_steps: int = 12
+    learning_rate: float = 3e-3
+    anneal_lr: bool = True
+    gamma: float = 1.0
+    gae_lambda: float = 0.95
+    num_minibatches: int = 4
+    update_epochs: int = 4
+    clip_coef: float = 0.2
+    ent_coef: float = 0.01
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    norm_adv: bool = True
+    norm_obs: bool = True
+    norm_reward: bool = True
+    hidden: tuple[int, ...] = (64, 64)
+    init_log_std: float = -0.5
+
+    def __post_init__(self) -> None:
+        _check_int("total_timesteps", self.total_timesteps, 1)
+        _check_int("num_envs", self.num_envs, 1, MAX_NUM_ENVS)
+        _check_int("num_steps", self.num_steps, 1)
+        _check_int("num_minibatches", self.num_minibatches, 1)
+        _check_int("update_epochs", self.update_epochs, 1)
+        if self.num_minibatches > self.num_envs * self.num_steps:
+            raise ValueError(
+                f"num_minibatches must be <= num_envs × num_steps = "
+                f"{self.num_envs * self.num_steps}, got {self.num_minibatches}"
+            )
+        _check_real("learning_rate", self.learning_rate, lambda v: v > 0, "> 0")
+        _check_real("gamma", self.gamma, lambda v: 0 < v <= 1, "in (0, 1]")
+        _check_real("gae_lambda", self.gae_lambda, lambda v: 0 <= v <= 1, "in [0, 1]")
+        _check_real("clip_coef", self.clip_coef, lambda v: v > 0, "> 0")
+        _check_real("ent_coef", self.ent_coef, lambda v: v >= 0, ">= 0")
+        _check_real("vf_coef", self.vf_coef, lambda v: v >= 0, ">= 0")
+        _check_real("max_grad_norm", self.max_grad_norm, lambda v: v > 0, "> 0")
+        _check_real("init_log_std", self.init_log_std, lambda v: True, "finite")
+        for name in ("anneal_lr", "norm_adv", "norm_obs", "norm_reward"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if not isinstance(self.hidden, tuple | list) or not self.hidden:
+            raise TypeError(
+                f"hidden must be a non-empty sequence of layer sizes, got {self.hidden!r}"
+            )
+        for size in self.hidden:
+            _check_int("hidden (each layer size)", size, 1)
+
+    @property
+    def batch_size(self) -> int:
+        """Transitions per iteration, B·T."""
+        return self.num_envs * self.num_steps
+
+    @property
+    def iterations(self) -> int:
+        """Iterations: ``ceil(total_timesteps / (B·T))``."""
+        return -(-self.total_timesteps // self.batch_size)
+
+
+# ---------------------------------------------------------------------------- the policy
+
+
+def _layer(n_in: int, n_out: int, std: float) -> nn.Linear:
+    layer = nn.Linear(n_in, n_out)
+    nn.init.orthogonal_(layer.weight, std)
+    nn.init.constant_(layer.bias, 0.0)
+    return layer
+
+
+def _mlp(n_in: int, hidden: tuple[int, ...], n_out: int, out_std: float) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for size in hidden:
+        layers += [_layer(n_in, size, math.sqrt(2)), nn.Tanh()]
+        n_in = size
+    return nn.Sequential(*layers, _layer(n_in, n_out, out_std))
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """What builds an :class:`ActorCritic` (saved in the checkpoint's JSON).
+
+    Attributes:
+        obs_dim: Observation length d.
+        kind: ``"discrete"`` (``Discrete(n)``) or ``"box"`` (``Box`` of ``n`` dimensions).
+        n: Actions (discrete) or action dimensions (box).
+        hidden: Hidden layer sizes.
+        low: Box lower bounds (empty for discrete).
+        high: Box upper bounds (empty for discrete).
+        init_log_std: Initial log std (box).
+    """
+
+    obs_dim: int
+    kind: str
+    n: int
+    hidden: tuple[int, ...] = (64, 64)
+    low: tuple[float, ...] = ()
+    high: tuple[float, ...] = ()
+    init_log_std: float = -0.5
+
+    def __post_init__(self) -> None:
+        _check_int("obs_dim", self.obs_dim, 1)
+        _check_int("n", self.n, 1)
+        if self.kind not in ("discrete", "box"):
+            raise ValueError(f"kind must be 'discrete' or 'box', got {self.kind!r}")
+        if self.kind == "box":
+            if len(self.low) != self.n or len(self.high) != self.n:
+                raise ValueError(f"low and high must have {self.n} entries each")
+            if not all(math.isfinite(lo) and math.isfinite(hi) and lo < hi
+                       for lo, hi in zip(self.low, self.high, strict=True)):  # fmt: skip
+                raise ValueError("a Box action space needs finite bounds with low < high")
+
+    @classmethod
+    def of(cls, obs_space: spaces.Space, action_space: spaces.Space, **kwargs: Any) -> PolicySpec:
+        """The spec for a (single-member) observation space and action space.
+
+        Raises:
+            ValueError: For an action space other than ``Discrete`` or a bounded ``Box``.
+        """
+        obs_dim = int(np.prod(obs_space.shape))
+        if isinstance(action_space, spaces.Discrete):
+            return cls(obs_dim, "discrete", int(action_space.n), **kwargs)
+        if isinstance(action_space, spaces.Box) and len(action_space.shape) == 1:
+            low = tuple(float(v) for v in action_space.low)
+            high = tuple(float(v) for v in action_space.high)
+            return cls(obs_dim, "box", int(action_space.shape[0]), low=low, high=high, **kwargs)
+        raise ValueError(
+            f"torch-ppo supports Discrete and 1-D bounded Box action spaces, got {action_space}"
+        )
+
+
+class ActorCritic(nn.Module):
+    """Separate actor and critic MLPs, with the running observation statistics as buffers."""
+
+    def __init__(self, spec: PolicySpec) -> None:
+        super().__init__()
+        self.spec = spec
+        self.critic = _mlp(spec.obs_dim, tuple(spec.hidden), 1, 1.0)
+        self.actor = _mlp(spec.obs_dim, tuple(spec.hidden), spec.n, 0.01)
+        self.box = spec.kind == "box"
+        if self.box:
+            self.log_std = nn.Parameter(torch.full((spec.n,), float(spec.init_log_std)))
+            self.register_buffer("low", torch.tensor(spec.low, dtype=torch.float32))
+            self.register_buffer("high", torch.tensor(spec.high, dtype=torch.float32))
+        self.register_buffer("obs_mean", torch.zeros(spec.obs_dim, dtype=torch.float64))
+        self.register_buffer("obs_var", torch.ones(spec.obs_dim, dtype=torch.float64))
+        self.register_buffer("obs_count", torch.tensor(0.0, dtype=torch.float64))
+
+    # --- observations
+    def update_obs_stats(self, obs: torch.Tensor) -> None:
+        """Fold a (N, d) batch into the running mean and variance (Chan et al.)."""
+        x = obs.reshape(-1, self.spec.obs_dim).double()
+        n = x.shape[0]
+        mean, var = x.mean(0), x.var(0, unbiased=False)
+        total = self.obs_count + n
+        delta = mean - self.obs_mean
+        m2 = self.obs_var * self.obs_count + var * n + delta**2 * self.obs_count * n / total
+        self.obs_mean.copy_(self.obs_mean + delta * n / total)
+        self.obs_var.copy_(m2 / total)
+        self.obs_count.copy_(total)
+
+    def normalize(self, obs: torch.Tensor) -> torch.Tensor:
+        """Observations scaled by the running statistics, clipped to ±10 (float32).
+
+        Without statistics (``norm_obs=False``: mean 0, variance 1) the raw values, clipped.
+        """
+        z = (obs.double() - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)
+        return z.clamp(-10.0, 10.0).float()
+
+    # --- heads
+    def value(self, x: torch.Tensor) -> torch.Tensor:
+        """V(x), shape (N,)."""
+        return self.critic(x).squeeze(-1)
+
+    def distribution(self, x: torch.Tensor, mask: torch.Tensor | None = None):
+        """(logits masked, None) for discrete actions; (mean, std) for Box actions."""
+        out = self.actor(x)
+        if self.box:
+            return out, self.log_std.exp().expand_as(out)
+        if mask is not None:
+            out = out.masked_fill(~mask, torch.finfo(out.dtype).min)
+        return out, None
+
+    def log_prob_entropy(
+        self, x: torch.Tensor, action: torch.Tensor, mask: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The log-probability log π(action | x) and the entropy of π(· | x), each (N,)."""
+        a, b = self.distribution(x, mask)
+        if self.box:
+            dist = torch.distributions.Normal(a, b)
+            return dist.log_prob(action).sum(-1), dist.entropy().sum(-1)
+        logp_all = torch.log_softmax(a, -1)
+        probs = logp_all.exp()
+        plogp = probs * logp_all
+        if mask is not None:
+            plogp = torch.where(mask, plogp, torch.zeros_like(plogp))
+        logp = logp_all.gather(-1, action.long().unsqueeze(-1)).squeeze(-1)
+        return logp, -plogp.sum(-1)
+
+    def sample(
+        self,
+        x: torch.Tensor,
+        mask: torch.Tensor | None,
+        generator: torch.Generator | None,
+        deterministic: bool = False,
+    ) -> torch.Tensor:
+        """An action per row: argmax / mean when ``deterministic``, else a draw."""
+        a, b = self.distribution(x, mask)
+        if self.box:
+            if deterministic:
+                return a
+            noise = torch.randn(a.shape, generator=generator, device=a.device, dtype=a.dtype)
+            return a + b * noise
+        if deterministic:
+            return a.argmax(-1)
+        u = torch.rand(a.shape, generator=generator, device=a.device, dtype=a.dtype)
+        gumbel = -torch.log(-torch.log(u.clamp_min(1e-20)))
+        return (a + gumbel).argmax(-1)  # Gumbel-max: a draw from softmax(a)
+
+    def to_env(self, action: torch.Tensor) -> torch.Tensor:
+        """The env's action: discrete as is; Box clipped to [-1, 1] and mapped to its bounds."""
+        if not self.box:
+            return action
+        unit = action.clamp(-1.0, 1.0)
+        return self.low + (unit + 1.0) * 0.5 * (self.high - self.low)
+
+
+class TorchPolicy:
+    """A trained :class:`ActorCritic` behind SB3's ``predict`` (numpy in, numpy out).
+
+    Args:
+        model: The actor-critic (its device is where ``predict`` computes).
+        seed: Seed of the generator of ``deterministic=False`` draws.
+    """
+
+    def __init__(self, model: ActorCritic, seed: int = 0) -> None:
+        self.model = model.eval()
+        self.device = next(model.parameters()).device
+        self.generator = torch.Generator(device=self.device).manual_seed(int(seed))
+
+    @property
+    def spec(self) -> PolicySpec:
+        """The network's :class:`PolicySpec`."""
+        return self.model.spec
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+        action_masks: Any = None,
+    ) -> tuple[np.ndarray, None]:
+        """Actions for (d,) or (N, d) numpy observations, as SB3's ``predict``.
+
+        Args:
+            observation: One observation (d,) or a batch (N, d).
+            state: Ignored (no recurrent state).
+            episode_start: Ignored.
+            deterministic: Greedy action (argmax of the masked logits / the Gaussian mean).
+            action_masks: (A,) or (N, A) booleans of the legal actions (discrete), or None.
+
+        Returns:
+            ``(actions, None)``: int64 (), (N,) for discrete; float32 (k,), (N, k) for Box, in
+            the env's bounds.
+
+        Raises:
+            ValueError: For an observation of the wrong length, or masks of the wrong shape.
+        """
+        obs = np.asarray(observation, dtype=np.float32)
+        d = self.spec.obs_dim
+        single = obs.ndim == 1
+        if obs.shape[-1:] != (d,) or obs.ndim > 2:
+            raise ValueError(f"observation must have shape ({d},) or (N, {d}), got {obs.shape}")
+        x = torch.as_tensor(obs.reshape(-1, d), device=self.device)
+        mask = None
+        if action_masks is not None and self.spec.kind == "discrete":
+            m = np.asarray(action_masks, dtype=bool).reshape(-1, self.spec.n)
+            if m.shape[0] != x.shape[0]:
+                raise ValueError(
+                    f"action_masks must have shape ({self.spec.n},) or ({x.shape[0]}, "
+                    f"{self.spec.n}), got {np.shape(action_masks)}"
+                )
+            mask = torch.as_tensor(m, device=self.device)
+        with torch.no_grad():
+            action = self.model.sample(self.model.normalize(x), mask, self.generator, deterministic)
+            action = self.model.to_env(action)
+        out = action.cpu().numpy()
+        out = out.astype(np.int64) if self.spec.kind == "discrete" else out.astype(np.float32)
+        return (out[0] if single else out), None
+
+
+# ---------------------------------------------------------------------------- training
+
+
+@dataclass
+class TorchPPOResult:
+    """What :func:`train_torch_ppo` returns.
+
+    Attributes:
+        policy: The trained policy (``predict`` on numpy, for :func:`agents.evaluate.evaluate`).
+        timesteps: Env steps taken (whole iterations).
+        train_seconds: Wall time of the training loop (env steps and updates).
+        history: One record per iteration: ``iteration``, ``timesteps``, ``seconds``,
+            ``episodes`` ended in it and their ``mean_return`` (NaN when none ended),
+            ``learning_rate``.
+        interrupted: True when ``stop()`` ended training early.
+    """
+
+    policy: TorchPolicy
+    timesteps: int
+    train_seconds: float
+    history: list[dict[str, float]] = field(default_factory=list)
+    interrupted: bool = False
+
+    @property
+    def steps_per_second(self) -> float:
+        """End-to-end env steps per second (rollouts and updates)."""
+        return self.timesteps / self.train_seconds if self.train_seconds > 0 else math.nan
+
+
+def make_torch_env(
+    gym_id: str, num_envs: int, device: str, **env_kwargs: Any
+) -> gym.vector.VectorEnv:
+    """The torch vector env of ``gym_id`` on ``device``, in ``SAME_STEP`` autoreset mode."""
+    return gym.make_vec(
+        gym_id,
+        num_envs=num_envs,
+        vectorization_mode="vector_entry_point",
+        backend="torch",
+        device=device,
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+        **env_kwargs,
+    )
+
+
+def train_torch_ppo(
+    env: gym.vector.VectorEnv,
+    config: TorchPPOConfig,
+    seed: int = 0,
+    stop: Callable[[], bool] | None = None,
+    log: Callable[[dict[str, float], TorchPolicy], None] | None = None,
+) -> TorchPPOResult:
+    """Train a policy on a torch vector env (SAME_STEP autoreset) with PPO, all on its device.
+
+    Args:
+        env: From :func:`make_torch_env` (B = ``config.num_envs`` members).
+        config: Hyperparameters.
+        seed: Seed of the network's initial weights, the device generator and the env.
+        stop: Polled once per iteration; True ends training after the current iteration.
+        log: Called after each iteration with its history record and the current policy.
+
+    Raises:
+        ValueError: For an env that is not a torch vector env in SAME_STEP mode, or whose B
+            differs from ``config.num_envs``.
+    """
+    if getattr(env, "backend", None) != "torch":
+        raise ValueError("env must be a torch vector env (make_torch_env / backend='torch')")
+    if env.num_envs != config.num_envs:
+        raise ValueError(f"env has {env.num_envs} members, config.num_envs is {config.num_envs}")
+    if env.metadata.get("autoreset_mode") != gym.vector.AutoresetMode.SAME_STEP:
+        raise ValueError("env must run in AutoresetMode.SAME_STEP (make_torch_env does)")
+    _check_int("seed", seed, 0, 2**63 - 1)
+    device = torch.device(env.device)
+    B, T = config.num_envs, config.num_steps
+    torch.manual_seed(seed)
+    spec = PolicySpec.of(
+        env.single_observation_space,
+        env.single_action_space,
+        hidden=tuple(config.hidden),
+        init_log_std=config.init_log_std,
+    )
+    model = ActorCritic(spec).to(device)
+    gen = torch.Generator(device=device).manual_seed(seed)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=1e-5)
+    masked = spec.kind == "discrete"
+    d = spec.obs_dim
+    act_shape = () if masked else (spec.n,)
+    f32 = dict(device=device, dtype=torch.float32)
+
+    obs_buf = torch.zeros((T, B, d), **f32)
+    act_buf = torch.zeros(
+        (T, B, *act_shape), device=device, dtype=torch.int64 if masked else torch.float32
+    )
+    logp_buf = torch.zeros((T, B), **f32)
+    rew_buf = torch.zeros((T, B), **f32)
+    done_buf = torch.zeros((T, B), **f32)
+    val_buf = torch.zeros((T, B), **f32)
+    mask_buf = torch.ones((T, B, spec.n), device=device, dtype=torch.bool) if masked else None
+
+    # running std of the discounted return, for reward scaling (a scalar, on the device)
+    ret = torch.zeros(B, device=device, dtype=torch.float64)
+    ret_stats = torch.tensor([0.0, 0.0, 1.0], device=device, dtype=torch.float64)  # n, mean, var
+    ep_return = torch.zeros(B, device=device, dtype=torch.float64)
+
+    next_obs, _ = env.reset(seed=seed)
+    history: list[dict[str, float]] = []
+    timesteps, interrupted = 0, False
+    start = time.perf_counter()
+    for iteration in range(1, config.iterations + 1):
+        frac = 1.0 - (iteration - 1) / config.iterations if config.anneal_lr else 1.0
+        lr = frac * config.learning_rate
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        ended_sum = torch.zeros((), device=device, dtype=torch.float64)
+        ended_n = torch.zeros((), device=device, dtype=torch.float64)
+        with torch.no_grad():
+            for t in range(T):
+                if config.norm_obs:
+                    model.update_obs_stats(next_obs)
+                x = model.normalize(next_obs)
+                mask = env.action_masks() if masked else None
+                action = model.sample(x, mask, gen)
+                logp, _ = model.log_prob_entropy(x, action, mask)
+                obs_buf[t] = x
+                act_buf[t] = action
+                logp_buf[t] = logp
+                val_buf[t] = model.value(x)
+                if masked:
+                    mask_buf[t] = mask
+                next_obs, reward, terminated, truncated, infos = env.step(model.to_env(action))
+                reward = reward.double()
+                ep_return += reward
+                ended = terminated | truncated
+                ended_sum += torch.where(ended, ep_return, 0.0).sum()
+                ended_n += ended.sum()
+                ep_return = torch.where(ended, 0.0, ep_return)
+                if config.norm_reward:
+                    ret = ret * config.gamma + reward
+                    _fold(ret_stats, ret)
+                    ret = torch.where(ended, 0.0, ret)
+                    reward = reward / torch.sqrt(ret_stats[2] + 1e-8)
+                cut = truncated & ~terminated
+                if bool(cut.any()):  # bootstrap a truncated member from its last observation
+                    final = model.normalize(infos["final_obs"])
+                    reward = reward + config.gamma * torch.where(cut, model.value(final), 0.0)
+                rew_buf[t] = reward.float()
+                done_buf[t] = ended.float()
+            next_value = model.value(model.normalize(next_obs))
+            adv = gae(rew_buf, val_buf, done_buf, next_value, config.gamma, config.gae_lambda)
+            returns = adv + val_buf
+        timesteps += B * T
+
+        b_obs, b_act = obs_buf.reshape(B * T, d), act_buf.reshape(B * T, *act_shape)
+        b_logp, b_adv, b_ret = logp_buf.reshape(-1), adv.reshape(-1), returns.reshape(-1)
+        b_mask = mask_buf.reshape(B * T, spec.n) if masked else None
+        mb = B * T // config.num_minibatches
+        for _ in range(config.update_epochs):
+            order = torch.randperm(B * T, generator=gen, device=device)
+            for k in range(config.num_minibatches):
+                idx = order[k * mb : (k + 1) * mb]
+                new_logp, entropy = model.log_prob_entropy(
+                    b_obs[idx], b_act[idx], None if b_mask is None else b_mask[idx]
+                )
+                ratio = (new_logp - b_logp[idx]).exp()
+                a = b_adv[idx]
+                if config.norm_adv and a.numel() > 1:
+                    a = (a - a.mean()) / (a.std() + 1e-8)
+                pg_loss = torch.max(
+                    -a * ratio, -a * ratio.clamp(1 - config.clip_coef, 1 + config.clip_coef)
+                ).mean()
+                v_loss = 0.5 * ((model.value(b_obs[idx]) - b_ret[idx]) ** 2).mean()
+                loss = pg_loss - config.ent_coef * entropy.mean() + config.vf_coef * v_loss
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
+                optimizer.step()
+
+        n_ended = float(ended_n)  # one host sync per iteration
+        record = {
+            "iteration": iteration,
+            "timesteps": timesteps,
+            "seconds": time.perf_counter() - start,
+            "episodes": n_ended,
+            "mean_return": float(ended_sum) / n_ended if n_ended else math.nan,
+            "learning_rate": lr,
+        }
+        history.append(record)
+        if log is not None:
+            log(record, TorchPolicy(model, seed))
+            model.train()
+        if stop is not None and stop():
+            interrupted = iteration < config.iterations
+            break
+    seconds = time.perf_counter() - start
+    return TorchPPOResult(TorchPolicy(model, seed), timesteps, seconds, history, interrupted)
+
+
+def gae(
+    rewards: torch.Tensor,
+    values: torch.Tensor,
+    dones: torch.Tensor,
+    next_value: torch.Tensor,
+    gamma: float,
+    lam: float,
+) -> torch.Tensor:
+    """Generalised advantage estimates of a (T, B) rollout.
+
+    ``dones[t]`` is 1 where the member's episode ended at step t (its ``values[t + 1]`` is the
+    next episode's start and is not bootstrapped); ``next_value`` (B,) is V of the observation
+    after the last step. ``A_t = δ_t + γλ(1 − d_t) A_{t+1}``, ``δ_t = r_t + γ(1 − d_t)
+    V_{t+1} − V_t``.
+    """
+    T = rewards.shape[0]
+    adv = torch.zeros_like(rewards)
+    last = torch.zeros_like(next_value)
+    for t in reversed(range(T)):
+        value_next = next_value if t == T - 1 else values[t + 1]
+        nonterminal = 1.0 - dones[t]
+        delta = rewards[t] + gamma * value_next * nonterminal - values[t]
+        last = delta + gamma * lam * nonterminal * last
+        adv[t] = last
+    return adv
+
+
+def _fold(stats: torch.Tensor, x: torch.Tensor) -> None:
+    """Fold the batch ``x`` into ``stats = [n, mean, var]`` in place (on the device)."""
+    n, mean, var = stats[0], stats[1], stats[2]
+    m = x.numel()
+    b_mean, b_var = x.mean(), x.var(unbiased=False)
+    total = n + m
+    delta = b_mean - mean
+    new_var = (var * n + b_var * m + delta**2 * n * m / total) / total
+    stats.copy_(torch.stack([total, mean + delta * m / total, new_var]))
+
+
+# ---------------------------------------------------------------------------- checkpoints
+
+
+def save_policy(
+    policy: TorchPolicy,
+    path: Path,
+    config: TorchPPOConfig | None = None,
+    num_timesteps: int = 0,
+) -> Path:
+    """Write ``path.with_suffix(".pt")`` (tensors only) then its ``.json``, atomically.
+
+    The ``.pt`` holds ``{"state_dicts": {"policy": ...}, "variables": {}}`` (what
+    :func:`agents.checkpoint.load_tensors` accepts); the ``.json`` the format, the network's
+    :class:`PolicySpec`, the hyperparameters, the step count and the ``.pt``'s SHA-256.
+    Returns the ``.json`` path.
+    """
+    path = Path(path)
+    state = {k: v.detach().cpu().clone() for k, v in policy.model.state_dict().items()}
+    payload = {"state_dicts": {"policy": state}, "variables": {}}
+    tensors = atomic_write(path.with_suffix(".pt"), lambda fh: torch.save(payload, fh))
+    spec = asdict(policy.spec)
+    meta = {
+        "format": FORMAT,
+        "algo": ALGO,
+        "spec": {k: list(v) if isinstance(v, tuple) else v for k, v in spec.items()},
+        "hyperparameters": None if config is None else _jsonable(asdict(config)),
+        "num_timesteps": int(num_timesteps),
+        "tensors": tensors.name,
+        "sha256": _sha256(tensors),
+    }
+    return write_json(path.with_suffix(".json"), meta)
+
+
+def load_policy(path: Path, root: Path, device: str = "cpu", seed: int = 0) -> TorchPolicy:
+    """The policy :func:`save_policy` wrote at ``path`` (its ``.json``), on ``device``.
+
+    Raises:
+        ValueError: For a path outside ``root``, a missing or corrupt file, another format, a
+            SHA-256 mismatch, a tensor file holding anything but tensors, or weights that do not
+            fit the network the JSON describes.
+    """
+    path = inside(Path(path).parent, Path(path).name, root, "model file")
+    meta = read_json(path, "model description")
+    if meta.get("format") != FORMAT:
+        raise ValueError(f"model description {path}: format {meta.get('format')!r}, not {FORMAT}")
+    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
+    if not tensors.is_file():
+        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
+    if _sha256(tensors) != meta.get("sha256"):
+        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    try:
+        raw = dict(meta["spec"])
+        for key in ("hidden", "low", "high"):
+            raw[key] = tuple(raw.get(key, ()))
+        spec = PolicySpec(**raw)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"model description {path}: bad network spec ({exc})") from None
+    payload = load_tensors(tensors, device)
+    model = ActorCritic(spec).to(device)
+    try:
+        model.load_state_dict(payload["state_dicts"]["policy"], strict=True)
+    except (KeyError, RuntimeError) as exc:
+        raise ValueError(
+            f"checkpoint {tensors} does not fit the network of {path}: {exc}"
+        ) from None
+    return TorchPolicy(model, seed)
+
+
+def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}

@@ -1,0 +1,275 @@
+"""``train.py attacker|defender --algo torch-ppo``: a run of :mod:`agents.torch_ppo`.
+
+The same run folder and scoring as the stable-baselines3 runs (:mod:`agents.training`):
+``config.json``, ``evaluations.jsonl`` (an :func:`agents.evaluate.evaluate` of the policy every
+``eval_freq`` steps, at iteration boundaries), ``model.json`` / ``model.pt`` (the final policy in
+the tensor-only format of :func:`agents.torch_ppo.save_policy`), ``scores.json`` and
+``learning_curve.png``; the final table scores the learned policy, the analytic answer and random
+play against the registry's reference. Training runs on ``--device`` with ``--num-envs`` members
+of the torch vector env. Not supported here: ``--resume`` (only the final model is saved; a
+stopped run keeps its model and scores), ``--opponent equilibrium`` (a fixed mix is drawn on the
+device: the uniform one), ``--checkpoint-freq`` (ignored).
+"""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from agents.config import (
+    TORCH_PPO,
+    TORCH_PPO_NUM_ENVS,
+    TrainConfig,
+    check_device_available,
+    flag,
+    parse_env_kwargs,
+    resolved_hyperparameters,
+)
+from agents.evaluate import Evaluation, evaluate
+from agents.interrupt import stop_on_signals
+from agents.plots import learning_curve
+from agents.registry import get
+from agents.runs import (
+    config_dict,
+    new_run_dir,
+    removed_unless,
+    run_lock,
+    run_prefix,
+    write_json,
+    write_jsonl,
+)
+from agents.seeding import derived_seed, seed_everything
+from agents.torch_ppo import (
+    TorchPolicy,
+    TorchPPOConfig,
+    make_torch_env,
+    save_policy,
+    train_torch_ppo,
+)
+
+MODEL = "model.json"  # a run folder of this algo holds it once training has finished
+
+
+@dataclass
+class TorchPPORun:
+    """What :func:`train_torch_ppo_run` returns.
+
+    Attributes:
+        run_dir: The run folder.
+        policy: The trained policy (SB3-style ``predict``).
+        evaluations: Final evaluations by row name, as printed and in scores.json.
+        history: Evaluations during training (evaluations.jsonl).
+        timesteps: Env steps trained.
+        train_seconds: Wall time of the training loop.
+        device: The torch device it ran on.
+        num_envs: Members of the vector env.
+        interrupted: The signal that stopped training early, or None.
+    """
+
+    run_dir: Path
+    policy: TorchPolicy
+    evaluations: dict[str, Evaluation]
+    history: list[dict[str, Any]] = field(default_factory=list)
+    timesteps: int = 0
+    train_seconds: float = 0.0
+    device: str = "cpu"
+    num_envs: int = TORCH_PPO_NUM_ENVS
+    resumed: bool = False
+    interrupted: int | None = None
+
+
+def torch_ppo_config(cfg: TrainConfig) -> tuple[TorchPPOConfig, dict[str, Any]]:
+    """The :class:`TorchPPOConfig` of a train command, and its resolved hyperparameters.
+
+    Raises:
+        ValueError: For a hyperparameter that does not apply to torch-ppo (naming where it
+            does), or ``--n-epochs``/``--n-steps`` values torch-ppo rejects.
+    """
+    hp = resolved_hyperparameters(TORCH_PPO, cfg.hp)
+    num_envs = TORCH_PPO_NUM_ENVS if cfg.num_envs is None else cfg.num_envs
+    try:
+        config = TorchPPOConfig(
+            total_timesteps=cfg.total_timesteps,
+            num_envs=num_envs,
+            num_steps=hp["n_steps"],
+            learning_rate=hp["learning_rate"],
+            anneal_lr=hp["lr_schedule"] == "linear",
+            gamma=hp["gamma"],
+            gae_lambda=hp["gae_lambda"],
+            update_epochs=hp["n_epochs"],
+            clip_coef=hp["clip_range"],
+            ent_coef=hp["ent_coef"],
+            hidden=tuple(hp["net_arch"]),
+            num_minibatches=min(4, num_envs * hp["n_steps"]),
+        )
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--algo torch-ppo: {exc}") from None
+    return config, hp
+
+
+def _device(name: str) -> str:
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
+
+
+def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
+    """Train ``cfg.agent`` of ``cfg.env`` with torch-ppo, score it and write the run folder.
+
+    Every option is checked and the env built before the run folder is created; a run that
+    fails before its model is saved leaves no folder. SIGINT/SIGTERM end training after the
+    current iteration; the model and scores are still written.
+
+    Raises:
+        ValueError: For an unknown env or scenario, ``--resume``, ``--opponent equilibrium``, a
+            hyperparameter that does not apply, a device that is not there, or env options
+            the env rejects.
+        FileExistsError: When the run folder exists.
+    """
+    if cfg.run.resume:
+        raise ValueError(
+            f"{flag('resume')} is not supported with --algo torch-ppo (it saves its final model "
+            "only); start a new run"
+        )
+    if cfg.opponent != "uniform":
+        raise ValueError(
+            f"{flag('opponent')} {cfg.opponent!r} is not supported with --algo torch-ppo (the "
+            "fixed opponent is the uniform mix, drawn on the device)"
+        )
+    check_device_available(cfg.run.device)
+    device = _device(cfg.run.device)
+    entry = get(cfg.env, cfg.agent)
+    config, hyperparameters = torch_ppo_config(cfg)
+    env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    from agents.training import check_env_kwargs
+
+    check_env_kwargs(entry.gym_id, env_kwargs)
+    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
+    with ExitStack() as stack:
+        try:
+            eval_env = gym.make(entry.gym_id, **env_kwargs)
+            venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"{flag('env_kwargs')}: {entry.gym_id} rejected its options: {exc}"
+            ) from None
+        stack.callback(eval_env.close)
+        stack.callback(venv.close)
+        reference = entry.reference_of(eval_env)
+        run_dir = new_run_dir(
+            cfg.run.runs_root, cfg.run.run_dir, run_prefix(name, TORCH_PPO, cfg.run.seed)
+        )
+        seed_everything(cfg.run.seed, cfg.run.torch_threads)
+        run_dir.mkdir(parents=True)
+        stack.enter_context(removed_unless(run_dir, MODEL))
+        stack.enter_context(run_lock(run_dir))
+        write_json(
+            run_dir / "config.json",
+            {
+                "command": cfg.agent,
+                "config": config_dict(cfg),
+                "resolved": {
+                    "gym_id": entry.gym_id,
+                    "algo": TORCH_PPO,
+                    "backend": "torch",
+                    "device": device,
+                    "num_envs": config.num_envs,
+                    "env_kwargs": env_kwargs,
+                    "hyperparameters": hyperparameters,
+                    "reference": None
+                    if reference is None
+                    else {"name": reference.name, "value": reference.value},
+                },
+            },
+        )
+        stop = stack.enter_context(stop_on_signals())
+        history: list[dict[str, Any]] = []
+        history_path = run_dir / "evaluations.jsonl"
+        eval_seed = derived_seed(cfg.run.seed, 10_000)
+        state = {"next": cfg.eval_freq, "policy": None}
+
+        def on_iteration(record: dict[str, float], policy: TorchPolicy) -> None:
+            if not cfg.eval_freq or record["timesteps"] < state["next"]:
+                return
+            state["next"] = (record["timesteps"] // cfg.eval_freq + 1) * cfg.eval_freq
+            ev = evaluate(policy, eval_env, cfg.eval_episodes, eval_seed, reference)
+            summary = ev.to_dict()
+            history.append(
+                {
+                    "timesteps": int(record["timesteps"]),
+                    "train_seconds": round(record["seconds"], 3),
+                    **{k: summary[k] for k in ("mean", "ci95", "reference", "score", "score_name")},
+                }
+            )
+            write_jsonl(history_path, history)
+
+        result = train_torch_ppo(
+            venv,
+            config,
+            seed=cfg.run.seed,
+            stop=lambda: stop.requested,
+            log=on_iteration,
+        )
+        save_policy(result.policy, run_dir / "model.json", config, result.timesteps)
+
+        final_seed = derived_seed(cfg.run.seed, 20_000)
+        rows = {
+            f"learned ({TORCH_PPO})": evaluate(
+                result.policy, eval_env, cfg.final_eval_episodes, final_seed, reference
+            )
+        }
+        if reference is not None and reference.policy is not None:
+            rows[reference.name] = evaluate(
+                reference.policy, eval_env, cfg.final_eval_episodes, final_seed, reference
+            )
+        rows["random"] = evaluate(
+            "random", eval_env, cfg.final_eval_episodes, final_seed, reference
+        )
+        learned = rows[f"learned ({TORCH_PPO})"]
+        if not history or history[-1]["timesteps"] != result.timesteps:
+            summary = learned.to_dict()
+            history.append(
+                {
+                    "timesteps": result.timesteps,
+                    "train_seconds": round(result.train_seconds, 3),
+                    **{k: summary[k] for k in ("mean", "ci95", "reference", "score", "score_name")},
+                }
+            )
+            write_jsonl(history_path, history)
+        write_json(
+            run_dir / "scores.json",
+            {
+                "num_timesteps": result.timesteps,
+                "train_seconds": result.train_seconds,
+                "steps_per_second": result.steps_per_second,
+                "device": device,
+                "num_envs": config.num_envs,
+                "interrupted": stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in rows.items()},
+            },
+        )
+        learning_curve(
+            run_dir / "learning_curve.png",
+            history,
+            None if reference is None else reference.value,
+            None if reference is None else reference.name,
+            f"torch-ppo {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), "
+            f"seed {cfg.run.seed}, B={config.num_envs} on {device}",
+        )
+        return TorchPPORun(
+            run_dir,
+            result.policy,
+            rows,
+            history,
+            result.timesteps,
+            result.train_seconds,
+            device,
+            config.num_envs,
+            interrupted=stop.signum,
+        )
