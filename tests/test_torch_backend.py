@@ -537,3 +537,17 @@ def test_backends_unpickle_to_the_same_instances():
     env.reset(seed=0)
     clone = pickle.loads(pickle.dumps(env.unwrapped))
     assert clone.xp is NUMPY and clone.sim.xp is NUMPY and clone.attack.xp is NUMPY
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+def test_torch_backend_outside_the_native_vector_env_names_the_way_to_it(mode):
+    # make_vec's sync/async modes build single envs, which run numpy: a clear ValueError (it
+    # was a TypeError about an unexpected keyword from deep inside the env creator)
+    with pytest.raises(ValueError, match="vector_entry_point"):
+        gym.make_vec(
+            "fdia_env/SparseAttack-v0", num_envs=2, vectorization_mode=mode, backend="torch"
+        )
+    with pytest.raises(ValueError, match="backend='numpy', device='cpu'"):
+        gym.make("fdia_env/SparseAttack-v0", device="cuda")
+    env = gym.make("fdia_env/SparseAttack-v0", backend="numpy", device="cpu")  # the defaults
+    assert env.reset(seed=0)[0].shape == (5,)

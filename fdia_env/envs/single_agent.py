@@ -147,7 +147,20 @@ def make_single_agent(
 
     When the env has another player and no ``opponent`` is given, it plays the uniform mixed
     strategy over its discrete actions (:class:`~fdia_env.envs.opponents.FixedMix`).
+
+    Raises:
+        ValueError: For ``backend``/``device`` other than numpy on the CPU: the single env (and
+            so ``gymnasium.make`` and ``make_vec``'s ``"sync"``/``"async"`` modes) runs numpy;
+            the torch backend is the native vector env's.
     """
+    backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", "cpu")
+    if backend != "numpy" or device not in ("cpu", None):
+        raise ValueError(
+            f"backend={backend!r}, device={device!r}: the single env runs numpy on the CPU "
+            "(backend='numpy', device='cpu'); for torch tensors on a device use "
+            "gymnasium.make_vec(id, num_envs=B, vectorization_mode='vector_entry_point', "
+            "backend='torch', device=...)"
+        )
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
