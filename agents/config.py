@@ -348,7 +348,7 @@ def check_env_kwargs_format(env_kwargs: object) -> None:
 
     Raises:
         TypeError: For something that is not a dict.
-        ValueError: For a name that is not an identifier.
+        ValueError: For a name that is not an identifier, or ``scenario`` (its own flag).
     """
     if not isinstance(env_kwargs, dict):
         raise TypeError(f"{flag('env_kwargs')} must map option names to values")
@@ -357,6 +357,11 @@ def check_env_kwargs_format(env_kwargs: object) -> None:
             raise ValueError(
                 f"{flag('env_kwargs')} takes name value pairs (e.g. --env-kwargs budget 4); "
                 f"{key!r} is not an option name"
+            )
+        if key == "scenario":  # the scenario has its own flag (and the run folder's name)
+            raise ValueError(
+                f"{flag('env_kwargs')} must not set scenario; pass it with "
+                f"{flag('scenario')} (e.g. --scenario ch3-tracking)"
             )
 
 

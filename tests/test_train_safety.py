@@ -387,6 +387,7 @@ def test_tensorboard_ranges_do_not_overlap_after_a_resume(tmp_path):
         (["--gamma", "0"], "gamma (--gamma) must be in (0, 1], got 0.0"),
         (["--env-kwargs", "bogus", "3"], "--env-kwargs): unknown option(s) 'bogus'"),
         (["--env-kwargs", "budget", "-3"], "--env-kwargs): fdia_env/SparseAttack-v0 rejected"),
+        (["--env-kwargs", "scenario", "ch4-random"], "must not set scenario; pass it with"),
         (["--device", "gpu"], "device (--device) must be cpu, cuda, cuda:<index>, mps or auto"),
         (["--total-timesteps", "0"], "total_timesteps (--total-timesteps) must be >= 1"),
     ],
