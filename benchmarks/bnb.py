@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -33,21 +32,12 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from baselines.reproduce import machine
+from baselines.reproduce.common import timed
 from baselines.sparse import branch_and_bound, exhaustive
 from baselines.sparse.testbeds import dc_grid14, mixed_tracking
 from fdia_env import scenarios
 
 GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57")
-
-
-def median_time(run, repeats: int) -> tuple[object, float]:
-    result = run()  # warm-up
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = run()
-        times.append(time.perf_counter() - t0)
-    return result, statistics.median(times)
 
 
 def describe(result) -> str:
@@ -88,8 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     if "1" in args.parts:
         print("\n1. ch4-position, size 60 (N = 20, c = 5), median of", args.repeats, "calls")
         sys60 = scenarios.get("ch4-position").system
-        bnb, t_bnb = median_time(lambda: branch_and_bound(sys60, 5, 20, **opts), args.repeats)
-        exs, t_exs = median_time(lambda: exhaustive(sys60, 5, 20), args.repeats)
+        bnb, t_bnb = timed(lambda: branch_and_bound(sys60, 5, 20, **opts), args.repeats)
+        exs, t_exs = timed(lambda: exhaustive(sys60, 5, 20), args.repeats)
         same = abs(bnb.value - exs.value) <= 1e-12 * exs.value
         print(f"  EXS {t_exs:.3f} s; B&B {t_bnb:.3f} s ({describe(bnb)})")
         print(

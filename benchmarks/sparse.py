@@ -14,9 +14,7 @@ import argparse
 import os
 import platform
 import resource
-import statistics
 import sys
-import time
 import tracemalloc
 from pathlib import Path
 
@@ -24,22 +22,13 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from baselines.reproduce import CH4_LITERATURE_TIMES, SOLVER_LABELS, machine
+from baselines.reproduce.common import timed
 from baselines.sparse import SOLVERS, exhaustive
 from fdia_env import scenarios
 
 SIZES = (6, 10, 20)  # horizons N; M = 3 gives sizes 18 / 30 / 60
 EXS_TARGET_S = 3.0
 EXS_TARGET_BYTES = 2 * 2**30
-
-
-def median_time(run, repeats: int) -> float:
-    run()  # warm-up
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     exs_60 = None
     for col, N in enumerate(SIZES):
         for name, solver in SOLVERS.items():
-            seconds = median_time(lambda s=solver, n=N: s(system, 5, n), args.repeats)
+            seconds = timed(lambda s=solver, n=N: s(system, 5, n), args.repeats)[1]
             lit = CH4_LITERATURE_TIMES[name][col]
             ratio = "–" if lit is None else f"{lit / seconds:.1f}×"
             lit_text = "not feasible" if lit is None else f"{lit:.3f}"
