@@ -31,7 +31,6 @@ from agents.config import (
 )
 from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import stop_on_signals
-from agents.plots import learning_curve
 from agents.registry import get
 from agents.runs import (
     config_dict,
@@ -147,7 +146,7 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
     entry = get(cfg.env, cfg.agent)
     config, hyperparameters = torch_ppo_config(cfg)
     env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
-    from agents.training import check_env_kwargs
+    from agents.training import check_env_kwargs, write_scores
 
     check_env_kwargs(entry.gym_id, env_kwargs)
     name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
@@ -242,25 +241,19 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
                 }
             )
             write_jsonl(history_path, history)
-        write_json(
-            run_dir / "scores.json",
-            {
-                "num_timesteps": result.timesteps,
-                "train_seconds": result.train_seconds,
-                "steps_per_second": result.steps_per_second,
-                "device": device,
-                "num_envs": config.num_envs,
-                "interrupted": stop.signum,
-                "evaluations": {k: v.to_dict() for k, v in rows.items()},
-            },
-        )
-        learning_curve(
-            run_dir / "learning_curve.png",
+        write_scores(
+            run_dir,
             history,
-            None if reference is None else reference.value,
-            None if reference is None else reference.name,
+            reference,
             f"torch-ppo {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), "
             f"seed {cfg.run.seed}, B={config.num_envs} on {device}",
+            rows,
+            num_timesteps=result.timesteps,
+            train_seconds=result.train_seconds,
+            steps_per_second=result.steps_per_second,
+            device=device,
+            num_envs=config.num_envs,
+            interrupted=stop.signum,
         )
         return TorchPPORun(
             run_dir,

@@ -665,25 +665,39 @@ def _train_and_score(
     if not history or history[-1]["timesteps"] != model.num_timesteps:
         history.append(history_record(learned, model.num_timesteps, train_seconds))
         write_jsonl(history_path, history)
-    write_json(
-        run_dir / "scores.json",
-        {
-            "num_timesteps": model.num_timesteps,
-            "train_seconds": train_seconds,
-            "interrupted": stop.signum,
-            "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
-        },
+    write_scores(
+        run_dir,
+        history,
+        reference,
+        f"{algo} {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), seed {cfg.run.seed}",
+        evaluations,
+        num_timesteps=model.num_timesteps,
+        train_seconds=train_seconds,
+        interrupted=stop.signum,
     )
+    model.logger.close()
+    return TrainResult(
+        run_dir, model, evaluations, history, train_seconds, resumed, interrupted=stop.signum
+    )
+
+
+def write_scores(
+    run_dir: Path,
+    history: list[dict[str, Any]],
+    reference: Reference | None,
+    title: str,
+    evaluations: dict[str, Evaluation],
+    **fields: Any,
+) -> None:
+    """A finished run's ``scores.json`` (``fields``, then the evaluations) and learning curve."""
+    evals = {k: v.to_dict() for k, v in evaluations.items()}
+    write_json(run_dir / "scores.json", {**fields, "evaluations": evals})
     learning_curve(
         run_dir / "learning_curve.png",
         history,
         None if reference is None else reference.value,
         None if reference is None else reference.name,
-        f"{algo} {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), seed {cfg.run.seed}",
-    )
-    model.logger.close()
-    return TrainResult(
-        run_dir, model, evaluations, history, train_seconds, resumed, interrupted=stop.signum
+        title,
     )
 
 
