@@ -434,6 +434,7 @@ def test_policy_replays_the_value_on_a_custom_system():
         ({"time_limit": True}, "time_limit"),
         ({"chunk": 0}, "chunk"),
         ({"mixed_bound": 1}, "mixed_bound"),
+        ({"split": "yes"}, "split must be True or False"),
     ],
 )
 def test_bad_input_names_the_parameter(kwargs, match):
