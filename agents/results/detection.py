@@ -1,25 +1,22 @@
-"""Learned against analytic where it is hard: re-runnable result tables (issue 16, in progress).
+"""``detection``: where the detection game separates a good defender from a poor one.
 
-Run: ``python -m agents.results detection [--quick]``. Each table is produced by one seeded
-command; ``--quick`` runs a reduced version in seconds (exercised by the test suite).
-
-``detection``: the detection game's defender at the Bayes-cost criterion, where OBDD's
-threshold α is the optimum (MATH.md §3), over attack powers a² and both chapter-3 scenarios:
-the score of random thresholds (the uniform policy over the defender's action box, evaluated
-by :func:`agents.evaluate.evaluate` in expected dynamics) against OBDD's optimal Bayes cost.
-Settings where random play scores at most 80 % separate policies; the literature's default
-setting does not.
+The detection game's defender at the Bayes-cost criterion, where OBDD's threshold α is the optimum
+(MATH.md §3), over attack powers a² and both chapter-3 scenarios: the score of random thresholds
+(the uniform policy over the defender's action box, evaluated by :func:`agents.evaluate.evaluate` in
+expected dynamics) against OBDD's optimal Bayes cost. Settings where random play scores at most 80 %
+separate policies; the literature's default setting does not.
 """
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
+from pathlib import Path
 
 import gymnasium as gym
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
 from agents.evaluate import evaluate
+from agents.results.common import write_rows
 
 SCENARIOS = ("ch3-static", "ch3-tracking")
 POWERS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
@@ -90,20 +87,12 @@ def format_detection(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m agents.results detection [--quick]``: print the table."""
-    parser = argparse.ArgumentParser(prog="python -m agents.results", description=__doc__)
-    parser.add_argument("table", choices=["detection"], help="which result table")
-    parser.add_argument("--quick", action="store_true", help="reduced run (seconds)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random policies")
-    args = parser.parse_args(argv)
-    if args.quick:
-        rows = detection_separation(("ch3-static",), (0.01, 10.0, 1e3), episodes=50, seed=args.seed)
+def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
+    """The ``detection`` table (Markdown); ``quick``: one scenario, three powers, 50 episodes."""
+    if quick:
+        rows = detection_separation(("ch3-static",), (0.01, 10.0, 1e3), episodes=50, seed=seed)
     else:
-        rows = detection_separation(seed=args.seed)
-    print(format_detection(rows))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+        rows = detection_separation(seed=seed)
+    if out is not None:
+        write_rows(out / "detection.json", rows)
+    return format_detection(rows)
