@@ -174,25 +174,6 @@ def main(argv: Sequence[str] | None = None) -> object:
     torch_ppo = isinstance(cfg, TrainConfig) and is_torch_ppo(cfg.algo)
     if torch_ppo and cfg.run.backend != "sb3":
         raise ValueError("--algo torch-ppo runs in this process (--backend sb3, the default)")
-    if isinstance(cfg, TrainConfig) and cfg.num_envs is not None and not torch_ppo:
-        raise ValueError(
-            f"--num-envs applies to --algo torch-ppo only (got --algo {cfg.algo or 'default'}; "
-            "the stable-baselines3 and RLlib runs choose their own envs)"
-        )
-    if torch_ppo:
-        from agents.torch_ppo_train import train_torch_ppo_run
-
-        run = train_torch_ppo_run(cfg)
-        learned = next(iter(run.evaluations.values()))
-        print(
-            f"\ntorch-ppo {cfg.agent} on {learned.env_id}, {run.timesteps} steps in "
-            f"{run.train_seconds:.1f} s ({run.timesteps / max(run.train_seconds, 1e-9):,.0f} "
-            f"env-steps/s, {run.num_envs} envs on {run.device}, seed {cfg.run.seed})"
-            + (" (interrupted)" if run.interrupted else "")
-        )
-        print(f"  run folder: {run.run_dir}")
-        print(format_table(run.evaluations))
-        return run
     if cfg.run.resume and cfg.run.run_dir is not None and _backend_of(cfg.run.run_dir) == "rllib":
         if cfg.run.backend != "rllib":
             raise ValueError(
@@ -207,6 +188,27 @@ def main(argv: Sequence[str] | None = None) -> object:
         raise ValueError("--method selfplay (both players learning at once) needs --backend rllib")
     if cfg.run.resume:
         cfg = with_saved_options(cfg, argv)
+        torch_ppo = isinstance(cfg, TrainConfig) and is_torch_ppo(cfg.algo)
+    if isinstance(cfg, TrainConfig) and cfg.num_envs is not None and not torch_ppo:
+        raise ValueError(
+            f"--num-envs applies to --algo torch-ppo only (got --algo {cfg.algo or 'default'}; "
+            "the stable-baselines3 and RLlib runs choose their own envs)"
+        )
+    if torch_ppo:
+        from agents.torch_ppo_train import train_torch_ppo_run
+
+        run = train_torch_ppo_run(cfg)
+        learned = next(iter(run.evaluations.values()))
+        print(
+            f"\ntorch-ppo {cfg.agent} on {learned.env_id}, {run.timesteps} steps in "
+            f"{run.train_seconds:.1f} s ({run.timesteps / max(run.train_seconds, 1e-9):,.0f} "
+            f"env-steps/s, {run.num_envs} envs on {run.device}, seed {cfg.run.seed})"
+            + (" (resumed)" if run.resumed else "")
+            + (" (interrupted)" if run.interrupted else "")
+        )
+        print(f"  run folder: {run.run_dir}")
+        print(format_table(run.evaluations))
+        return run
     if isinstance(cfg, GameConfig):
         if rllib:
             from agents.rllib.train import selfplay_rllib as run_selfplay
@@ -331,13 +333,9 @@ def cli(argv: Sequence[str] | None = None) -> int:
     elif rllib:
         done = f"{result.timesteps} steps"
         what = "state and scores"
-    elif not hasattr(result, "model"):  # torch-ppo: no resume
-        print(
-            f"train.py: stopped by {name} after {result.timesteps} steps; model and scores saved "
-            f"in {result.run_dir}",
-            file=sys.stderr,
-        )
-        return exit_status(signum)
+    elif not hasattr(result, "model"):  # torch-ppo
+        done = f"{result.timesteps} steps"
+        what = "training state, model and scores"
     else:
         done = f"{result.model.num_timesteps} steps"
         what = "checkpoint, model and scores"

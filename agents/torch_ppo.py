@@ -412,6 +412,31 @@ class TorchPPOResult:
         return self.timesteps / self.train_seconds if self.train_seconds > 0 else math.nan
 
 
+@dataclass
+class TrainingState:
+    """Everything :func:`train_torch_ppo` needs to continue after ``iteration``.
+
+    Attributes:
+        iteration: Iterations done.
+        timesteps: Env steps taken.
+        seconds: Wall time of the training loop so far.
+        model: The actor-critic's state dict (weights and observation statistics).
+        optimizer: Adam's state dict (moments and step counts).
+        generator: The device generator's state (a CPU byte tensor).
+        ret_stats: The running (count, mean, variance) of the discounted return.
+        history: The per-iteration records so far.
+    """
+
+    iteration: int
+    timesteps: int
+    seconds: float
+    model: dict[str, torch.Tensor]
+    optimizer: dict[str, Any]
+    generator: torch.Tensor
+    ret_stats: torch.Tensor
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
 def make_torch_env(
     gym_id: str, num_envs: int, device: str, **env_kwargs: Any
 ) -> gym.vector.VectorEnv:
@@ -433,6 +458,9 @@ def train_torch_ppo(
     seed: int = 0,
     stop: Callable[[], bool] | None = None,
     log: Callable[[dict[str, float], TorchPolicy], None] | None = None,
+    resume: TrainingState | None = None,
+    checkpoint: Callable[[TrainingState], None] | None = None,
+    checkpoint_freq: int = 0,
 ) -> TorchPPOResult:
     """Train a policy on a torch vector env (SAME_STEP autoreset) with PPO, all on its device.
 
@@ -442,10 +470,19 @@ def train_torch_ppo(
         seed: Seed of the network's initial weights, the device generator and the env.
         stop: Polled once per iteration; True ends training after the current iteration.
         log: Called after each iteration with its history record and the current policy.
+        resume: A state from ``checkpoint`` to continue from (same config and env): weights,
+            Adam's state, the generator, the return statistics and the counters are restored;
+            the env members start fresh episodes (reset with a seed derived from ``seed`` and
+            the iteration), so a resumed run is not bit-identical to an uninterrupted one.
+        checkpoint: Called with the current state after the first iteration at or past every
+            multiple of ``checkpoint_freq`` env steps and after the last iteration (also when
+            ``stop()`` ended training).
+        checkpoint_freq: Env steps between checkpoints (0: the last iteration only).
 
     Raises:
         ValueError: For an env that is not a torch vector env in SAME_STEP mode, or whose B
-            differs from ``config.num_envs``.
+            differs from ``config.num_envs``, a bad ``checkpoint_freq``, or a ``resume`` state
+            that does not fit the network.
     """
     if getattr(env, "backend", None) != "torch":
         raise ValueError("env must be a torch vector env (make_torch_env / backend='torch')")
@@ -454,6 +491,7 @@ def train_torch_ppo(
     if env.metadata.get("autoreset_mode") != gym.vector.AutoresetMode.SAME_STEP:
         raise ValueError("env must run in AutoresetMode.SAME_STEP (make_torch_env does)")
     _check_int("seed", seed, 0, 2**63 - 1)
+    _check_int("checkpoint_freq", checkpoint_freq, 0)
     device = torch.device(env.device)
     B, T = config.num_envs, config.num_steps
     torch.manual_seed(seed)
@@ -486,11 +524,30 @@ def train_torch_ppo(
     ret_stats = torch.tensor([0.0, 0.0, 1.0], device=device, dtype=torch.float64)  # n, mean, var
     ep_return = torch.zeros(B, device=device, dtype=torch.float64)
 
-    next_obs, _ = env.reset(seed=seed)
     history: list[dict[str, float]] = []
-    timesteps, interrupted = 0, False
-    start = time.perf_counter()
-    for iteration in range(1, config.iterations + 1):
+    timesteps, interrupted, first, offset = 0, False, 1, 0.0
+    if resume is not None:
+        _restore(resume, model, optimizer, gen, ret_stats)
+        history = list(resume.history)
+        timesteps, first, offset = resume.timesteps, resume.iteration + 1, resume.seconds
+    next_obs, _ = env.reset(seed=seed if resume is None else _resume_seed(seed, resume.iteration))
+    start = time.perf_counter() - offset
+    last_saved = timesteps
+
+    def state(iteration: int) -> TrainingState:
+        return TrainingState(
+            iteration=iteration,
+            timesteps=timesteps,
+            seconds=time.perf_counter() - start,
+            model={k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+            optimizer=_to_cpu(optimizer.state_dict()),
+            generator=gen.get_state(),
+            ret_stats=ret_stats.detach().cpu().clone(),
+            history=list(history),
+        )
+
+    iteration = first - 1
+    for iteration in range(first, config.iterations + 1):
         frac = 1.0 - (iteration - 1) / config.iterations if config.anneal_lr else 1.0
         lr = frac * config.learning_rate
         for group in optimizer.param_groups:
@@ -572,11 +629,49 @@ def train_torch_ppo(
         if log is not None:
             log(record, TorchPolicy(model, seed))
             model.train()
-        if stop is not None and stop():
+        stopping = stop is not None and stop()
+        due = checkpoint_freq and timesteps // checkpoint_freq > last_saved // checkpoint_freq
+        if checkpoint is not None and (due or stopping or iteration == config.iterations):
+            checkpoint(state(iteration))
+            last_saved = timesteps
+        if stopping:
             interrupted = iteration < config.iterations
             break
     seconds = time.perf_counter() - start
     return TorchPPOResult(TorchPolicy(model, seed), timesteps, seconds, history, interrupted)
+
+
+def _resume_seed(seed: int, iteration: int) -> int:
+    """The env's reset seed when a run resumes after ``iteration`` (fresh episodes)."""
+    return int(np.random.SeedSequence([seed, iteration]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def _to_cpu(obj: Any) -> Any:
+    """A copy of a (nested) state dict with every tensor on the CPU."""
+    if isinstance(obj, torch.Tensor):
+        return obj.detach().cpu().clone()
+    if isinstance(obj, dict):
+        return {k: _to_cpu(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_to_cpu(v) for v in obj]
+    return obj
+
+
+def _restore(
+    resume: TrainingState,
+    model: ActorCritic,
+    optimizer: torch.optim.Optimizer,
+    gen: torch.Generator,
+    ret_stats: torch.Tensor,
+) -> None:
+    """Load a :class:`TrainingState` into a freshly built model, optimizer and generator."""
+    try:
+        model.load_state_dict(resume.model, strict=True)
+        optimizer.load_state_dict(_to_cpu(resume.optimizer))  # a copy: Adam updates in place
+        gen.set_state(resume.generator.cpu())
+        ret_stats.copy_(resume.ret_stats.to(ret_stats))
+    except (KeyError, RuntimeError, ValueError, TypeError) as exc:
+        raise ValueError(f"resume state does not fit this network and config: {exc}") from None
 
 
 def gae(
@@ -683,6 +778,69 @@ def load_policy(path: Path, root: Path, device: str = "cpu", seed: int = 0) -> T
             f"checkpoint {tensors} does not fit the network of {path}: {exc}"
         ) from None
     return TorchPolicy(model, seed)
+
+
+STATE_FORMAT = "fdia_env-torch-ppo-state-v1"
+
+
+def save_training_state(state: TrainingState, path: Path) -> Path:
+    """Write a :class:`TrainingState`: ``path.with_suffix(".pt")`` (tensors only), then ``path``.
+
+    The ``.pt`` holds the model's and Adam's state dicts and the generator and return
+    statistics (what :func:`agents.checkpoint.load_tensors` accepts); the JSON the counters, the
+    per-iteration history and the ``.pt``'s SHA-256. Both are written atomically, the JSON last,
+    so a run stopped mid-write keeps its previous state. Returns the JSON path.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {
+        "state_dicts": {"policy": state.model, "optimizer": state.optimizer},
+        "variables": {"generator": state.generator, "ret_stats": state.ret_stats},
+    }
+    tensors = atomic_write(path.with_suffix(".pt"), lambda fh: torch.save(payload, fh))
+    meta = {
+        "format": STATE_FORMAT,
+        "iteration": int(state.iteration),
+        "timesteps": int(state.timesteps),
+        "seconds": float(state.seconds),
+        "history": state.history,
+        "tensors": tensors.name,
+        "sha256": _sha256(tensors),
+    }
+    return write_json(path, meta)
+
+
+def load_training_state(path: Path, root: Path) -> TrainingState:
+    """The :class:`TrainingState` :func:`save_training_state` wrote at ``path`` (on the CPU).
+
+    Raises:
+        ValueError: For a path outside ``root``, a missing or corrupt file, another format, a
+            SHA-256 mismatch or a tensor file holding anything but tensors.
+    """
+    path = inside(Path(path).parent, Path(path).name, root, "training state")
+    meta = read_json(path, "training state")
+    if meta.get("format") != STATE_FORMAT:
+        fmt = meta.get("format")
+        raise ValueError(f"training state {path}: format {fmt!r}, not {STATE_FORMAT}")
+    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
+    if not tensors.is_file():
+        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
+    if _sha256(tensors) != meta.get("sha256"):
+        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    payload = load_tensors(tensors, "cpu")
+    try:
+        return TrainingState(
+            iteration=int(meta["iteration"]),
+            timesteps=int(meta["timesteps"]),
+            seconds=float(meta["seconds"]),
+            model=payload["state_dicts"]["policy"],
+            optimizer=payload["state_dicts"]["optimizer"],
+            generator=payload["variables"]["generator"],
+            ret_stats=payload["variables"]["ret_stats"],
+            history=list(meta.get("history", [])),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"training state {path} is incomplete ({exc})") from None
 
 
 def _jsonable(d: dict[str, Any]) -> dict[str, Any]:

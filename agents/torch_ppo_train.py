@@ -6,9 +6,12 @@ The same run folder and scoring as the stable-baselines3 runs (:mod:`agents.trai
 the tensor-only format of :func:`agents.torch_ppo.save_policy`), ``scores.json`` and
 ``learning_curve.png``; the final table scores the learned policy, the analytic answer and random
 play against the registry's reference. Training runs on ``--device`` with ``--num-envs`` members
-of the torch vector env. Not supported here: ``--resume`` (only the final model is saved; a
-stopped run keeps its model and scores), ``--opponent equilibrium`` (a fixed mix is drawn on the
-device: the uniform one), ``--checkpoint-freq`` (ignored).
+of the torch vector env. ``checkpoints/state.json`` + ``state.pt`` hold the training state
+(weights, Adam's moments, the device generator, the return statistics, the counters; tensors only,
+SHA-256 checked) every ``--checkpoint-freq`` steps and when training ends or is stopped
+(SIGINT/SIGTERM end it after the current iteration), so ``--resume`` continues a stopped run; the
+env members start fresh episodes there. Not supported here: ``--opponent equilibrium`` (a fixed
+mix is drawn on the device: the uniform one).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from agents.checkpoint import read_json
 from agents.config import (
     TORCH_PPO,
     TORCH_PPO_NUM_ENVS,
@@ -33,9 +37,13 @@ from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import stop_on_signals
 from agents.registry import get
 from agents.runs import (
+    check_resumable,
     config_dict,
     new_run_dir,
+    read_jsonl,
+    remove_stale_temp_files,
     removed_unless,
+    resume_dir,
     run_lock,
     run_prefix,
     write_json,
@@ -45,12 +53,17 @@ from agents.seeding import derived_seed, seed_everything
 from agents.torch_ppo import (
     TorchPolicy,
     TorchPPOConfig,
+    TrainingState,
+    load_training_state,
     make_torch_env,
     save_policy,
+    save_training_state,
     train_torch_ppo,
 )
 
 MODEL = "model.json"  # a run folder of this algo holds it once training has finished
+# a run folder that --resume can continue holds it (the SB3 runs' marker name, another format)
+CHECKPOINT = "checkpoints/state.json"
 
 
 @dataclass
@@ -130,12 +143,9 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
             hyperparameter that does not apply, a device that is not there, or env options
             the env rejects.
         FileExistsError: When the run folder exists.
+        ValueError: With ``--resume``: nothing to resume, options that differ from the run's,
+            or a training state that is corrupt, outside the run folder or does not fit.
     """
-    if cfg.run.resume:
-        raise ValueError(
-            f"{flag('resume')} is not supported with --algo torch-ppo (it saves its final model "
-            "only); start a new run"
-        )
     if cfg.opponent != "uniform":
         raise ValueError(
             f"{flag('opponent')} {cfg.opponent!r} is not supported with --algo torch-ppo (the "
@@ -161,18 +171,28 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
         stack.callback(eval_env.close)
         stack.callback(venv.close)
         reference = entry.reference_of(eval_env)
-        run_dir = new_run_dir(
-            cfg.run.runs_root, cfg.run.run_dir, run_prefix(name, TORCH_PPO, cfg.run.seed)
-        )
+        prefix = run_prefix(name, TORCH_PPO, cfg.run.seed)
+        given = config_dict(cfg)
+        resume: TrainingState | None = None
+        if cfg.run.resume:
+            run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix, CHECKPOINT)
+            stack.enter_context(run_lock(run_dir))
+            saved = read_json(run_dir / "config.json", "run config")
+            check_resumable(saved.get("config", {}), given, run_dir)
+            remove_stale_temp_files(run_dir)
+            resume = load_training_state(run_dir / CHECKPOINT, run_dir)
+        else:
+            run_dir = new_run_dir(cfg.run.runs_root, cfg.run.run_dir, prefix)
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        run_dir.mkdir(parents=True)
-        stack.enter_context(removed_unless(run_dir, MODEL))
-        stack.enter_context(run_lock(run_dir))
+        if resume is None:
+            run_dir.mkdir(parents=True)
+            stack.enter_context(removed_unless(run_dir, CHECKPOINT))
+            stack.enter_context(run_lock(run_dir))
         write_json(
             run_dir / "config.json",
             {
                 "command": cfg.agent,
-                "config": config_dict(cfg),
+                "config": given,
                 "resolved": {
                     "gym_id": entry.gym_id,
                     "algo": TORCH_PPO,
@@ -188,10 +208,14 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
             },
         )
         stop = stack.enter_context(stop_on_signals())
-        history: list[dict[str, Any]] = []
         history_path = run_dir / "evaluations.jsonl"
+        history: list[dict[str, Any]] = []
+        done = 0 if resume is None else resume.timesteps
+        if resume is not None:
+            history = [h for h in read_jsonl(history_path) if h["timesteps"] <= done]
+            write_jsonl(history_path, history)
         eval_seed = derived_seed(cfg.run.seed, 10_000)
-        state = {"next": cfg.eval_freq, "policy": None}
+        state = {"next": (done // cfg.eval_freq + 1) * cfg.eval_freq if cfg.eval_freq else 0}
 
         def on_iteration(record: dict[str, float], policy: TorchPolicy) -> None:
             if not cfg.eval_freq or record["timesteps"] < state["next"]:
@@ -214,6 +238,9 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
             seed=cfg.run.seed,
             stop=lambda: stop.requested,
             log=on_iteration,
+            resume=resume,
+            checkpoint=lambda st: save_training_state(st, run_dir / CHECKPOINT),
+            checkpoint_freq=cfg.checkpoint_freq,
         )
         save_policy(result.policy, run_dir / "model.json", config, result.timesteps)
 
@@ -264,5 +291,6 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
             result.train_seconds,
             device,
             config.num_envs,
+            resumed=resume is not None,
             interrupted=stop.signum,
         )

@@ -55,10 +55,12 @@ from agents.checkpoint import (
     save_replay_buffer,
 )
 from agents.config import (
+    TORCH_PPO,
     TrainConfig,
     algo_kwargs,
     check_device_available,
     flag,
+    is_torch_ppo,
     parse_env_kwargs,
     resolved_hyperparameters,
 )
@@ -466,10 +468,11 @@ class TrainResult:
 
 
 def train_prefix(cfg: TrainConfig) -> str:
-    """Run folder name without its time: ``<env>[-defender]-<algo>-s<seed>``."""
+    """Run folder name without its time: ``<env>[-defender]-<algo>-s<seed>`` (also torch-ppo's)."""
     entry = get(cfg.env, cfg.agent)
     name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
-    return run_prefix(name, entry.algorithm(cfg.algo), cfg.run.seed)
+    algo = TORCH_PPO if is_torch_ppo(cfg.algo) else entry.algorithm(cfg.algo)
+    return run_prefix(name, algo, cfg.run.seed)
 
 
 def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> TrainResult:

@@ -27,8 +27,10 @@ from agents.torch_ppo import (
     TorchPPOConfig,
     gae,
     load_policy,
+    load_training_state,
     make_torch_env,
     save_policy,
+    save_training_state,
     train_torch_ppo,
 )
 
@@ -168,6 +170,60 @@ def test_same_seed_same_training(sparse_run):
     ]
 
 
+def _tiny(iterations: int) -> TorchPPOConfig:
+    return TorchPPOConfig(total_timesteps=iterations * 32 * 12, num_envs=32)
+
+
+def test_a_stopped_run_resumes_from_its_training_state(tmp_path):
+    kwargs = SPARSE.env_kwargs("ch4-position")
+    saved = []
+    env = make_torch_env(SPARSE.gym_id, 32, "cpu", **kwargs)
+    first = train_torch_ppo(
+        env, _tiny(4), seed=1, stop=lambda: True, checkpoint=saved.append, checkpoint_freq=0
+    )
+    assert first.interrupted and first.timesteps == 384 and len(saved) == 1  # stop: checkpoint
+    path = save_training_state(saved[0], tmp_path / "ckpt" / "state.json")
+    state = load_training_state(path, tmp_path)
+    assert (state.iteration, state.timesteps) == (1, 384)
+    weights = first.policy.model.state_dict()
+    assert all(torch.equal(state.model[k], weights[k]) for k in weights)
+    assert state.optimizer["state"][0]["step"].item() == 4 * 4  # epochs x minibatches
+    # nothing left to train: the resumed policy is the saved one, bit for bit
+    env = make_torch_env(SPARSE.gym_id, 32, "cpu", **kwargs)
+    same = train_torch_ppo(env, _tiny(1), seed=1, resume=state)
+    assert same.timesteps == 384 and all(
+        torch.equal(same.policy.model.state_dict()[k], weights[k]) for k in weights
+    )
+    # the continuation: counters, history and Adam's step count go on from the checkpoint,
+    # checkpoints every 768 steps (after iterations 2 and 4, and the last one)
+    ends = []
+    runs = []
+    for _ in range(2):
+        env = make_torch_env(SPARSE.gym_id, 32, "cpu", **kwargs)
+        runs.append(
+            train_torch_ppo(
+                env, _tiny(4), 1, resume=state, checkpoint=ends.append, checkpoint_freq=768
+            )
+        )
+    rest = runs[0]
+    assert rest.timesteps == 4 * 384 and not rest.interrupted
+    assert [h["iteration"] for h in rest.history] == [1, 2, 3, 4]
+    assert [e.iteration for e in ends[:2]] == [2, 4]
+    assert ends[1].optimizer["state"][0]["step"].item() == 4 * 16
+    assert rest.train_seconds >= state.seconds
+    a, b = (r.policy.model.state_dict() for r in runs)  # a resume is deterministic
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    # a state that does not fit the network is refused by name
+    wrong = TorchPPOConfig(total_timesteps=768, num_envs=32, hidden=(8,))
+    env = make_torch_env(SPARSE.gym_id, 32, "cpu", **kwargs)
+    with pytest.raises(ValueError, match="resume state does not fit"):
+        train_torch_ppo(env, wrong, 1, resume=state)
+    pt = path.with_suffix(".pt")
+    pt.write_bytes(pt.read_bytes()[:-1])
+    with pytest.raises(ValueError, match="SHA-256"):
+        load_training_state(path, tmp_path)
+
+
 def test_saved_policy_loads_back_and_refuses_tampering(sparse_run, tmp_path):
     result = sparse_run[0]
     path = save_policy(result.policy, tmp_path / "model.json", num_timesteps=result.timesteps)
@@ -243,6 +299,35 @@ def test_cli_trains_and_writes_scores(tmp_path, capsys):
     assert isinstance(loaded, TorchPolicy)
 
 
+def test_cli_resumes_a_stopped_run(tmp_path, monkeypatch):
+    import agents.torch_ppo_train as runner
+
+    argv = ["attacker", "--algo", "torch-ppo", "--device", "cpu", "--num-envs", "32",
+            "--total-timesteps", "1536", "--final-eval-episodes", "2", "--eval-episodes", "2",
+            "--eval-freq", "768", "--runs-root", str(tmp_path / "runs")]  # fmt: skip
+    real = runner.train_torch_ppo
+
+    def stopped_after_one(*args, **kwargs):  # as if SIGINT came during the first iteration
+        return real(*args, **{**kwargs, "stop": lambda: True})
+
+    monkeypatch.setattr(runner, "train_torch_ppo", stopped_after_one)
+    first = train.main(argv)
+    assert first.timesteps == 384 and not first.resumed
+    state = json.loads((first.run_dir / "checkpoints" / "state.json").read_text())
+    assert (state["iteration"], state["timesteps"]) == (1, 384)
+    monkeypatch.setattr(runner, "train_torch_ppo", real)
+    with pytest.raises(ValueError, match=r"options differ.*num-envs: saved 32, given 64"):
+        train.main([*argv[:-2], "--num-envs", "64", "--resume", *argv[-2:]])
+    # the saved options are the defaults of a resume: --run-dir alone continues it
+    more = train.main(["attacker", "--resume", "--run-dir", str(first.run_dir)])
+    assert more.run_dir == first.run_dir and more.resumed
+    assert more.timesteps == 1536
+    history = [json.loads(line) for line in (more.run_dir / "evaluations.jsonl").open()]
+    assert [h["timesteps"] for h in history] == [384, 768, 1536]
+    scores = json.loads((more.run_dir / "scores.json").read_text())
+    assert scores["num_timesteps"] == 1536
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [  # options checked while parsing: status 2, the message on stderr (tyro's box)
@@ -265,7 +350,7 @@ def test_cli_rejects_bad_options_naming_the_flag(tmp_path, capsys, args, message
     ("args", "message"),
     [  # checked by the torch-ppo run before anything is written: ValueError (train.py: status 2)
         (["--batch-size", "64"], "batch_size does not apply to torch-ppo"),
-        (["--resume"], r"resume \(--resume\) is not supported with --algo torch-ppo"),
+        (["--resume"], "nothing to resume: no run folder"),
         (["--backend", "rllib"], "--algo torch-ppo runs in this process"),
     ],
 )
