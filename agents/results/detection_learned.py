@@ -683,7 +683,7 @@ def plot(res: dict[str, Any], out: Path) -> list[Path]:
     ax.set(
         xlabel="defender action a (τ = (1 + a) / (1 − a))",
         ylabel="defender reward",
-        title=f"Threshold vs the preset attack, {_setting(dict(zip(('scenario', 'power'), GAME_SETTING)))}",
+        title=f"Threshold vs the preset attack, {GAME_SETTING[0]} a²={GAME_SETTING[1]:g}",
     )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
