@@ -124,7 +124,7 @@ class DetectionGame:
     def threshold(self, action: Any) -> float:
         """The defender's τ of ``action`` (a number or (1,) array in [-1, 1])."""
         a = _unit("defender action", np.asarray(action, dtype=np.float64).reshape(-1), 1)[0]
-        return math.inf if a >= 1.0 else self.scale * (1.0 + a) / (1.0 - a)
+        return math.inf if a >= 1.0 else float(self.scale * (1.0 + a) / (1.0 - a))
 
     def threshold_action(self, threshold: float) -> np.ndarray:
         """The defender's (1,) float32 action of ``threshold`` (negative ones: a = -1)."""
