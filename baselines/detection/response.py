@@ -24,7 +24,7 @@ attacker's (p, Σ) as the truth (:class:`DetectionGame`).
 >>> game = DetectionGame.of(env)
 >>> best = best_threshold(game, game.preset_probability, game.preset_sigma)
 >>> round(best.threshold, 2), round(best.value, 2)  # OBDD (always detect) pays -200
-(1.86, -168.87)
+(1.88, -168.87)
 """
 
 from __future__ import annotations
