@@ -305,7 +305,7 @@ def learned_attacker(ref: dict[str, Any], budget: Budget, seed: int) -> dict[str
     kw = _kwargs(ref["scenario"], ref["power"], "mse", game.statistic, game.on_detect)
     defend = game.threshold_action(ref["threshold"])
     reference = Reference(ref["br_value"], "numerical best response")
-    scores, values, curves, start = [], [], [], time.perf_counter()
+    scores, values, probs, curves, start = [], [], [], [], time.perf_counter()
     for s in range(budget.seeds):
         env = view("attacker", defend, **kw)
         model, curve = train_sac(
@@ -318,6 +318,7 @@ def learned_attacker(ref: dict[str, Any], budget: Budget, seed: int) -> dict[str
         result = evaluate(model, env, 1, seed=seed, reference=reference)
         scores.append(result.score)
         values.append(result.mean)
+        probs.append(game.attack(action_of(model, env.reset(seed=seed)[0]))[0])
         curves.append(curve)
     rand = evaluate(
         "random", view("attacker", defend, **kw), budget.random_episodes, seed, reference
@@ -326,6 +327,7 @@ def learned_attacker(ref: dict[str, Any], budget: Budget, seed: int) -> dict[str
         **{k: ref[k] for k in ("scenario", "power", "detector", "br_value", "preset_value")},
         "learned": mean_ci95(values),
         "learned_score": mean_ci95(scores),
+        "learned_p": mean_ci95(probs),
         "random_mean": rand.mean,
         "random_score": rand.score,
         "steps": budget.attacker_steps,
@@ -448,7 +450,9 @@ def alternating(defenders: Sequence[float], budget: Budget, seed: int) -> list[d
 # --- the table --------------------------------------------------------------------------------
 def _pm(pair: tuple[float, float], fmt: str = ".4g") -> str:
     mean, half = pair
-    return f"{mean:{fmt}}" if math.isnan(half) else f"{mean:{fmt}} ± {half:.2g}"
+    if math.isnan(half):
+        return f"{mean:{fmt}}"
+    return f"{mean:{fmt}} ± {half:.1%}" if fmt.endswith("%") else f"{mean:{fmt}} ± {half:.2g}"
 
 
 def _setting(row: dict[str, Any]) -> str:
@@ -490,14 +494,15 @@ def format_tables(res: dict[str, Any]) -> str:
         )
     out += ["", "**2. Learned attacker (SAC, MSE criterion) against each fixed detector**", ""]
     out += [
-        "| setting | detector | steps | learned reward | best response | learned's score "
-        "| random attacks' score | preset's score |",
-        "|---|---|---|---|---|---|---|---|",
+        "| setting | detector | steps | learned reward | learned p | best response "
+        "| learned's score | random attacks' score | preset's score |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in res["learned_attackers"]:
         out.append(
             f"| {_setting(r)} | {r['detector']} | {r['steps']} | {_pm(r['learned'])} "
-            f"| {r['br_value']:.5g} | {_pm(r['learned_score'], '.1%')} | {r['random_score']:.1%} "
+            f"| {_pm(r['learned_p'], '.3f')} | {r['br_value']:.5g} "
+            f"| {_pm(r['learned_score'], '.1%')} | {r['random_score']:.1%} "
             f"| {r['preset_value'] / r['br_value']:.1%} |"
         )
     out += ["", "**3. Learned defender (SAC, MSE criterion) against the preset attack**", ""]
@@ -671,7 +676,8 @@ def plot(res: dict[str, Any], out: Path) -> list[Path]:
         if (r["scenario"], r["power"]) != GAME_SETTING:
             continue
         ax.plot(r["curve"]["action"], r["curve"]["value"], label=f"criterion {r['criterion']}")
-        ax.axvline(r["best_action"], ls=":", color=ax.lines[-1].get_color())
+        color = ax.lines[-1].get_color()
+        ax.axvline(r["best_action"], ls=":", color=color, label=f"best τ ({r['criterion']})")
     for r in res["learned_defenders"]:
         if (r["scenario"], r["power"]) == GAME_SETTING:
             ax.plot(
