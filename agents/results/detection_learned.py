@@ -183,7 +183,7 @@ def fixed_defender(
     return DetectionGame.of(env), tau
 
 
-def env_reward(game: DetectionGame, attack: np.ndarray, defend: np.ndarray, **kwargs: Any) -> float:
+def env_reward(attack: np.ndarray, defend: np.ndarray, **kwargs: Any) -> float:
     """The attacker's reward of one env step (the cross-check of the exact reward)."""
     env = view("attacker", defend, **kwargs)
     env.reset(seed=0)
@@ -235,7 +235,9 @@ def action_of(model: Any, obs: np.ndarray) -> np.ndarray:
 
 
 # --- 1. analytic references -----------------------------------------------------------------
-def defender_reference(scenario: str, power: float, criterion: str) -> dict[str, Any]:
+def defender_reference(
+    scenario: str, power: float, criterion: str, seed: int = 0
+) -> dict[str, Any]:
     """The best threshold against the preset attack, OBDD's α, and the env's cross-check."""
     kw = _kwargs(scenario, power, criterion, "quadratic", "discard")
     game = DetectionGame.of(view("defender", np.zeros(4), **kw))
@@ -244,7 +246,7 @@ def defender_reference(scenario: str, power: float, criterion: str) -> dict[str,
     obdd = DETECTORS["OBDD"](problem_of(scenario, power))
     obdd_value = -game.attacker_reward(game.preset_probability, game.preset_sigma, obdd.threshold)
     env = view("defender", preset, **kw)
-    rand = evaluate("random", env, 200, seed=0, reference=Reference(best.value, "best", cost=True))
+    rand = evaluate("random", env, 200, seed, Reference(best.value, "best", cost=True))
     return {
         "scenario": scenario,
         "power": power,
@@ -252,7 +254,7 @@ def defender_reference(scenario: str, power: float, criterion: str) -> dict[str,
         "best_threshold": best.threshold,
         "best_action": float(best.action[0]),
         "best_value": best.value,
-        "env_value": -env_reward(game, preset, best.action, **kw),
+        "env_value": -env_reward(preset, best.action, **kw),
         "obdd_threshold": obdd.threshold,
         "obdd_value": obdd_value,
         "obdd_score": best.value / obdd_value,
@@ -291,7 +293,7 @@ def attacker_reference(
         "br_sigma": br.sigma.tolist(),
         "br_action": br.action.tolist(),
         "br_value": br.value,
-        "env_value": env_reward(game, br.action, defend, **kw),
+        "env_value": env_reward(br.action, defend, **kw),
         "br_gain": br.value / preset,
     }
 
@@ -571,7 +573,7 @@ def run_budget(budget: Budget, seed: int = 0) -> dict[str, Any]:
     optimal: dict[tuple[str, float], float] = {}
     for scenario, power in budget.settings:
         for criterion in CRITERIA:
-            ref = defender_reference(scenario, power, criterion)
+            ref = defender_reference(scenario, power, criterion, seed)
             res["defender_refs"].append(ref)
             if criterion == "mse":
                 optimal[scenario, power] = ref["best_threshold"]
