@@ -6,6 +6,9 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
 ``out``, writes its rows as JSON (and its plots) there. Tables:
 
 - ``detection`` (:mod:`agents.results.detection`): where the detection game separates policies.
+- ``detection_learned`` (:mod:`agents.results.detection_learned`): learned defenders and
+  attackers (p, Σ) of the detection game against the analytic detectors, best responses and
+  each other, under the Bayes cost and the true MSE.
 """
 
 from agents.results.cli import TABLES, main, run_table
