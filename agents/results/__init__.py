@@ -6,6 +6,8 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
 ``out``, writes its rows as JSON (and its plots) there. Tables:
 
 - ``detection`` (:mod:`agents.results.detection`): where the detection game separates policies.
+- ``sparse_grid`` (:mod:`agents.results.sparse_grid`): sparse attacks on power grids, MaskablePPO
+  and torch PPO against SFS, SBS, SFS-SS, DP and the certified optimum (or bound).
 """
 
 from agents.results.cli import TABLES, main, run_table
