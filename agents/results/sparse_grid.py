@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import platform
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -460,12 +461,15 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
         instances, budget, seeds = (QUICK_INSTANCE,), QUICK_BUDGET, [seed]
     else:
         instances, budget, seeds = FULL_INSTANCES, FULL_BUDGET, [seed + i for i in range(SEEDS)]
-    rows = [run_instance(inst, budget, seeds) for inst in instances]
+    rows = []
+    for inst in instances:
+        rows.append(run_instance(inst, budget, seeds))
+        if out is not None:  # after every instance, so a long run keeps what it has done
+            write_rows(out / "sparse_grid.json", rows)
+        if not quick:
+            print(f"sparse_grid: {inst.label} done at {time.perf_counter() - start:.0f} s",
+                  file=sys.stderr, flush=True)  # fmt: skip
     if out is not None:
-        write_rows(
-            out / "sparse_grid.json",
-            [{k: v for k, v in r.items()} for r in rows],
-        )
         if not quick:
             curve_row = next(r for r in rows if r["instance"] == CURVE_INSTANCE.label)
             plot_curves(curve_row, out / "results_sparse_grid_curve.png")
