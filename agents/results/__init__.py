@@ -9,6 +9,8 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
 - ``detection_learned`` (:mod:`agents.results.detection_learned`): learned defenders and
   attackers (p, Σ) of the detection game against the analytic detectors, best responses and
   each other, under the Bayes cost and the true MSE.
+- ``sparse_grid`` (:mod:`agents.results.sparse_grid`): sparse attacks on power grids, MaskablePPO
+  and torch PPO against SFS, SBS, SFS-SS, DP and the certified optimum (or bound).
 """
 
 from agents.results.cli import TABLES, main, run_table

@@ -12,6 +12,7 @@ from pathlib import Path
 TABLES: dict[str, str] = {
     "detection": "agents.results.detection",
     "detection_learned": "agents.results.detection_learned",
+    "sparse_grid": "agents.results.sparse_grid",
 }
 
 

@@ -1,0 +1,482 @@
+"""``sparse_grid``: sparse attacks on power grids, learned against the heuristics and the optimum.
+
+For each instance (a DC grid model, meter-level or bus-level (RTU) sensors, budget c, window N,
+objective Φ = tr or log det of ``P[K+N|K+N]``): SFS, SBS, SFS-SS and DP
+(:mod:`baselines.sparse`), the certified optimum of ``branch_and_bound`` (split bound; when it is
+not proved within its time limit, the best set found and the certified upper bound), and two
+learners trained on the identical instance, 3 seeds each: sb3-contrib's MaskablePPO (the
+project's SB3 model, :func:`agents.algos.build_model` with the defaults of
+:data:`agents.config.ALGO_DEFAULTS`; SB3's ``VecNormalize`` scales its rewards, as torch-ppo
+scales its own) and the torch PPO (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's
+defaults). Both play the plan format of :mod:`agents.results.sparse_grid_plan` (``c`` masked
+picks of sensor-time pairs, then the plan is played in ``sparse_attack_v0``), since the
+env's own actions are ``Discrete(2**M)`` (too large for these learners at M = 14) or, above 16
+sensors, an unmasked ``MultiBinary(M)``.
+
+Scores, the project's (:meth:`agents.registry.Reference.ratio`): value / optimum for the trace,
+the determinant ratio ``exp(Φ − Φ*)`` for log det. Where only a bound is known, a score is given
+against the best known value and as "≥ x % of the bound" (a lower bound on the true score).
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.results.common import mean_ci95, write_rows
+from agents.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
+from fdia_env.systems import LinearSystem
+
+OBJECTIVES = ("trace", "logdet")
+EXS_MAX_SETS = 200_000  # below this many attack sets EXS also runs (a check of B&B)
+
+
+def _ieee14_bus() -> LinearSystem:
+    from fdia_env.systems import grid_system
+
+    return grid_system("ieee14", sensors="bus")
+
+
+def _dc14_50() -> LinearSystem:
+    from baselines.sparse.testbeds import dc_grid14
+
+    return dc_grid14(50)
+
+
+def _preset(name: str) -> Callable[[], LinearSystem]:
+    def build() -> LinearSystem:
+        from fdia_env import scenarios
+
+        return scenarios.get(name).system
+
+    return build
+
+
+# system key -> (description, sensors, builder)
+SYSTEMS: dict[str, tuple[str, str, Callable[[], LinearSystem]]] = {
+    "ieee14-rtu": ("pandapower IEEE 14, one RTU per bus", "bus", _ieee14_bus),
+    "dc-ieee14-50": ("DC IEEE 14 testbed, 50 meters", "meter", _dc14_50),
+    "grid-ieee14": ("grid-ieee14 preset (pandapower), 34 meters", "meter", _preset("grid-ieee14")),
+    "grid-ieee30": ("grid-ieee30 preset (pandapower), 71 meters", "meter", _preset("grid-ieee30")),
+    "grid-ieee118": (
+        "grid-ieee118 preset (pandapower), 304 meters",
+        "meter",
+        _preset("grid-ieee118"),
+    ),
+}
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One sparse-attack instance of the table.
+
+    Attributes:
+        system: A key of :data:`SYSTEMS`.
+        budget: c.
+        horizon: N.
+        objective: ``"trace"`` or ``"logdet"``.
+        bnb_limit: Seconds of branch and bound (None: until proved).
+    """
+
+    system: str
+    budget: int
+    horizon: int
+    objective: str
+    bnb_limit: float | None = 60.0
+
+    def __post_init__(self) -> None:
+        if self.system not in SYSTEMS:
+            raise ValueError(f"system must be one of {sorted(SYSTEMS)}, got {self.system!r}")
+        for name in ("budget", "horizon"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
+        lim = self.bnb_limit
+        if lim is not None and (
+            isinstance(lim, bool) or not isinstance(lim, int | float) or not lim > 0
+        ):
+            raise ValueError(f"bnb_limit must be a positive number or None, got {lim!r}")
+
+    @property
+    def label(self) -> str:
+        """Short label, e.g. ``ieee14-rtu c=6 N=6 logdet``."""
+        return f"{self.system} c={self.budget} N={self.horizon} {self.objective}"
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Training budget of one learner run (per seed).
+
+    Attributes:
+        maskable_steps: MaskablePPO env steps (decisions).
+        torch_steps: torch-ppo env steps.
+        torch_envs: torch-ppo vector members B.
+        evals: Evaluations along training (learning curve points).
+    """
+
+    maskable_steps: int
+    torch_steps: int
+    torch_envs: int = 256
+    evals: int = 10
+
+    def __post_init__(self) -> None:
+        for name in ("maskable_steps", "torch_steps", "torch_envs", "evals"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+
+
+FULL_INSTANCES = (
+    Instance("ieee14-rtu", 6, 6, "logdet"),
+    Instance("dc-ieee14-50", 5, 6, "trace"),
+    Instance("grid-ieee14", 5, 9, "logdet"),
+    Instance("grid-ieee30", 6, 4, "trace", bnb_limit=30.0),
+    Instance("grid-ieee118", 6, 3, "trace", bnb_limit=30.0),
+)
+FULL_BUDGET = Budget(maskable_steps=25_000, torch_steps=200_000)
+QUICK_INSTANCE = Instance("ieee14-rtu", 3, 3, "logdet")
+QUICK_BUDGET = Budget(maskable_steps=6_000, torch_steps=60_000, evals=3)
+CURVE_INSTANCE = FULL_INSTANCES[0]  # the learning-curve plot's hard instance
+SEEDS = 3
+
+
+def ratio(value: float, reference: float, objective: str) -> float:
+    """The project's score of ``value`` against ``reference``: ratio, or det ratio for log det."""
+    if objective == "logdet":
+        return math.exp(value - reference)
+    return value / reference
+
+
+def solve(inst: Instance, system: LinearSystem) -> dict[str, Any]:
+    """SFS, SBS, SFS-SS, DP, branch and bound (and EXS when small) on ``inst``.
+
+    Returns:
+        ``values`` and ``seconds`` per solver, the B&B ``proved``, ``bound``, ``gap`` and
+        ``nodes``, ``optimum`` (the B&B value when proved, else the best value known: of B&B's
+        incumbent and the heuristics),
+        the B&B attack set, SFS's result, and ``exs`` (None when not run).
+    """
+    from baselines.sparse import branch_and_bound, dp, exhaustive, sbs, sfs, sfs_ss
+
+    args = (system, inst.budget, inst.horizon, inst.objective)
+    values, seconds, results = {}, {}, {}
+    for name, fn in (("SFS", sfs), ("SBS", sbs), ("SFS-SS", sfs_ss), ("DP", dp)):
+        t = time.perf_counter()
+        results[name] = fn(*args)
+        seconds[name] = time.perf_counter() - t
+        values[name] = results[name].value
+    t = time.perf_counter()
+    proof = branch_and_bound(*args, time_limit=inst.bnb_limit)
+    seconds["B&B"] = time.perf_counter() - t
+    exs = None
+    if math.comb(system.M * inst.horizon, inst.budget) <= EXS_MAX_SETS:
+        t = time.perf_counter()
+        exs = exhaustive(*args).value
+        seconds["EXS"] = time.perf_counter() - t
+    # where the optimum is not proved a heuristic may beat the B&B incumbent: the best known
+    best = proof.value if proof.proved_optimal else max(proof.value, *values.values())
+    return {
+        "values": values,
+        "seconds": seconds,
+        "optimum": best,
+        "proved": bool(proof.proved_optimal),
+        "bound": float(proof.upper_bound),
+        "gap": float(proof.gap),
+        "nodes": int(proof.nodes),
+        "bnb": proof,
+        "sfs": results["SFS"],
+        "exs": exs,
+    }
+
+
+def _play(policy: Any, env: PlanSparseEnv, episodes: int = 1, seed: int = 0) -> float:
+    from agents.evaluate import evaluate
+
+    return evaluate(policy, env, episodes, seed, reference=1.0).mean
+
+
+def replay_native(result: Any, system: LinearSystem, inst: Instance) -> float:
+    """The return of ``result.policy()`` in ``sparse_attack_v0`` itself (its own action format)."""
+    import gymnasium as gym
+
+    from agents.evaluate import evaluate
+
+    env = gym.make(
+        "fdia_env/SparseAttack-v0",
+        scenario=system,
+        budget=inst.budget,
+        horizon=inst.horizon,
+        objective=inst.objective,
+    )
+    try:
+        return evaluate(result.policy(), env, 1, 0, reference=1.0).mean
+    finally:
+        env.close()
+
+
+def train_maskable(
+    system: LinearSystem, inst: Instance, budget: Budget, seed: int
+) -> tuple[Any, list[tuple[int, float]], float]:
+    """MaskablePPO on the plan env: ``(model, curve [(steps, return)], train seconds)``."""
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from agents.algos import build_model
+    from agents.config import Hyperparameters, algo_kwargs
+
+    torch.set_num_threads(1)
+    args = (system, inst.budget, inst.horizon, inst.objective)
+    eval_env = PlanSparseEnv(*args)
+    venv = VecNormalize(
+        DummyVecEnv([lambda: PlanSparseEnv(*args)]), norm_obs=False, norm_reward=True, gamma=1.0
+    )
+    model = build_model("MaskablePPO", venv, algo_kwargs("MaskablePPO", Hyperparameters()), seed)
+    every = max(1, budget.maskable_steps // budget.evals)
+    curve: list[tuple[int, float]] = []
+
+    class Curve(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps % every == 0:
+                curve.append((self.num_timesteps, _play(self.model, eval_env)))
+            return True
+
+    start = time.perf_counter()
+    model.learn(budget.maskable_steps, callback=Curve())
+    seconds = time.perf_counter() - start
+    if not curve or curve[-1][0] != model.num_timesteps:
+        curve.append((model.num_timesteps, _play(model, eval_env)))
+    venv.close()
+    eval_env.close()
+    return model, curve, seconds
+
+
+def train_torch(
+    system: LinearSystem, inst: Instance, budget: Budget, seed: int
+) -> tuple[Any, list[tuple[int, float]], float]:
+    """torch-ppo on the plan vector env: ``(policy, curve [(steps, return)], train seconds)``."""
+    import torch
+
+    from agents.config import ALGO_DEFAULTS, TORCH_PPO
+    from agents.torch_ppo import TorchPPOConfig, train_torch_ppo
+
+    torch.set_num_threads(1)
+    hp = ALGO_DEFAULTS[TORCH_PPO]
+    config = TorchPPOConfig(
+        total_timesteps=budget.torch_steps,
+        num_envs=budget.torch_envs,
+        num_steps=hp["n_steps"],
+        learning_rate=hp["learning_rate"],
+        anneal_lr=hp["lr_schedule"] == "linear",
+        gamma=hp["gamma"],
+        gae_lambda=hp["gae_lambda"],
+        update_epochs=hp["n_epochs"],
+        clip_coef=hp["clip_range"],
+        ent_coef=hp["ent_coef"],
+        hidden=tuple(hp["net_arch"]),
+    )
+    args = (system, inst.budget, inst.horizon, inst.objective)
+    eval_env = PlanSparseEnv(*args)
+    venv = PlanVectorEnv(*args, num_envs=budget.torch_envs)
+    every = max(1, config.iterations // budget.evals)
+    curve: list[tuple[int, float]] = []
+
+    def log(record: dict[str, float], policy: Any) -> None:
+        if record["iteration"] % every == 0 or record["iteration"] == config.iterations:
+            curve.append((int(record["timesteps"]), _play(policy, eval_env)))
+
+    result = train_torch_ppo(venv, config, seed=seed, log=log)
+    venv.close()
+    eval_env.close()
+    return result.policy, curve, result.train_seconds
+
+
+def run_instance(
+    inst: Instance, budget: Budget, seeds: list[int], random_episodes: int = 200
+) -> dict[str, Any]:
+    """Solve ``inst``, train both learners per seed, score everything; one table row."""
+    t0 = time.perf_counter()
+    system = SYSTEMS[inst.system][2]()
+    sol = solve(inst, system)
+    opt, obj = sol["optimum"], inst.objective
+    env = PlanSparseEnv(system, inst.budget, inst.horizon, inst.objective)
+    sfs_plan = _play(PlanPolicy(sol["sfs"]), env)
+    bnb_plan = _play(PlanPolicy(sol["bnb"]), env)
+    sfs_native = replay_native(sol["sfs"], system, inst)
+    random_return = _play("random", env, random_episodes, seeds[0])
+    env.close()
+    solve_seconds = time.perf_counter() - t0
+    learners: dict[str, Any] = {}
+    for name, trainer in (("MaskablePPO", train_maskable), ("torch-ppo", train_torch)):
+        runs = []
+        for s in seeds:
+            _, curve, secs = trainer(system, inst, budget, s)
+            runs.append({"seed": s, "value": curve[-1][1], "curve": curve, "seconds": secs})
+        scores = [ratio(r["value"], opt, obj) for r in runs]
+        mean, half = mean_ci95(scores)
+        bound_scores = [ratio(r["value"], sol["bound"], obj) for r in runs]
+        learners[name] = {
+            "runs": runs,
+            "scores": scores,
+            "mean": mean,
+            "ci95": half,
+            "bound_mean": float(np.mean(bound_scores)),
+            "seconds": float(sum(r["seconds"] for r in runs)),
+        }
+    return {
+        "instance": inst.label,
+        "system": inst.system,
+        "description": SYSTEMS[inst.system][0],
+        "sensors": SYSTEMS[inst.system][1],
+        "M": system.M,
+        "n": system.n,
+        "budget": inst.budget,
+        "horizon": inst.horizon,
+        "objective": obj,
+        "pairs": system.M * inst.horizon,
+        "values": sol["values"],
+        "heuristic_scores": {k: ratio(v, opt, obj) for k, v in sol["values"].items()},
+        "heuristic_bound_scores": {
+            k: ratio(v, sol["bound"], obj) for k, v in sol["values"].items()
+        },
+        "optimum": opt,
+        "proved": sol["proved"],
+        "bound": sol["bound"],
+        "gap": sol["gap"],
+        "nodes": sol["nodes"],
+        "bnb_attacks": [list(p) for p in sol["bnb"].attacks],
+        "exs": sol["exs"],
+        "solver_seconds": sol["seconds"],
+        "sfs_plan_return": sfs_plan,
+        "sfs_native_return": sfs_native,
+        "bnb_plan_return": bnb_plan,
+        "random_return": random_return,
+        "random_score": ratio(random_return, opt, obj),
+        "learners": learners,
+        "solve_seconds": solve_seconds,
+        "wall_seconds": time.perf_counter() - t0,
+    }
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f} %"
+
+
+def _heur(row: dict[str, Any], name: str) -> str:
+    s = row["heuristic_scores"][name]
+    if row["proved"]:
+        return "100 %" if abs(s - 1) < 1e-9 else _pct(s)
+    return f"{_pct(s)} (≥ {_pct(row['heuristic_bound_scores'][name])})"
+
+
+def _learner(row: dict[str, Any], name: str) -> str:
+    ln = row["learners"][name]
+    half = "" if math.isnan(ln["ci95"]) else f" ± {100 * ln['ci95']:.1f}"
+    text = f"{100 * ln['mean']:.1f}{half} %"
+    if not row["proved"]:
+        text += f" (≥ {_pct(ln['bound_mean'])} of the bound)"
+    return text
+
+
+def format_rows(rows: list[dict[str, Any]]) -> str:
+    """The rows as Markdown: the scores table, then the wall-time table."""
+    lines = [
+        "| instance | sensors | M, n | c, N | Φ | pairs | SFS | SBS | SFS-SS | DP "
+        "| certified optimum | MaskablePPO | torch PPO | random |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if r["proved"]:
+            cert = f"{r['optimum']:.6g} (proved, {r['nodes']} nodes)"
+        else:
+            cert = (
+                f"best known {r['optimum']:.6g}, bound {r['bound']:.6g} "
+                f"(gap {_pct(r['gap'])}, not proved)"
+            )
+        lines.append(
+            f"| {r['system']} | {r['sensors']} | {r['M']}, {r['n']} | {r['budget']}, "
+            f"{r['horizon']} | {r['objective']} | {r['pairs']} | "
+            + " | ".join(_heur(r, k) for k in ("SFS", "SBS", "SFS-SS", "DP"))
+            + f" | {cert} | {_learner(r, 'MaskablePPO')} | {_learner(r, 'torch-ppo')} "
+            f"| {_pct(r['random_score'])} |"
+        )
+    lines += [
+        "",
+        "| instance | SFS / SBS / SFS-SS / DP (s) | B&B (s) | MaskablePPO (s, all seeds) "
+        "| torch PPO (s, all seeds) | row wall (s) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        s = r["solver_seconds"]
+        lines.append(
+            f"| {r['instance']} | "
+            + " / ".join(f"{s[k]:.1f}" for k in ("SFS", "SBS", "SFS-SS", "DP"))
+            + f" | {s['B&B']:.1f} | {r['learners']['MaskablePPO']['seconds']:.0f} "
+            f"| {r['learners']['torch-ppo']['seconds']:.0f} | {r['wall_seconds']:.0f} |"
+        )
+    return "\n".join(lines)
+
+
+def plot_curves(row: dict[str, Any], path: Path) -> Path:
+    """Learning curves (score per seed, mean line) with the optimum and SFS as horizontal lines."""
+    import matplotlib.pyplot as plt
+
+    from agents.plots import _save
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    opt, obj = row["optimum"], row["objective"]
+    for (name, ln), color in zip(row["learners"].items(), ("C0", "C1"), strict=True):
+        for run in ln["runs"]:
+            steps = [p[0] for p in run["curve"]]
+            ax.plot(steps, [ratio(p[1], opt, obj) for p in run["curve"]], color=color, alpha=0.35)
+        ax.plot([], [], color=color, label=f"{name} ({len(ln['runs'])} seeds)")
+    ax.axhline(1.0, color="k", ls="--", label="certified optimum (B&B)")
+    sfs = row["heuristic_scores"]["SFS"]
+    ax.axhline(sfs, color="C3", ls=":", label=f"SFS ({_pct(sfs)})")
+    ax.set_xscale("log")
+    ax.set_xlabel("environment steps (plan decisions)")
+    ax.set_ylabel("score (det ratio to the optimum)" if obj == "logdet" else "score")
+    ax.set_title(f"sparse attack, {row['instance']}")
+    ax.set_ylim(-0.02, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
+    """The ``sparse_grid`` table (Markdown); ``quick``: one small instance, 1 seed, short runs."""
+    start = time.perf_counter()
+    if quick:
+        instances, budget, seeds = (QUICK_INSTANCE,), QUICK_BUDGET, [seed]
+    else:
+        instances, budget, seeds = FULL_INSTANCES, FULL_BUDGET, [seed + i for i in range(SEEDS)]
+    rows = []
+    for inst in instances:
+        rows.append(run_instance(inst, budget, seeds))
+        if out is not None:  # after every instance, so a long run keeps what it has done
+            write_rows(out / "sparse_grid.json", rows)
+        if not quick:
+            print(f"sparse_grid: {inst.label} done at {time.perf_counter() - start:.0f} s",
+                  file=sys.stderr, flush=True)  # fmt: skip
+    if out is not None:
+        if not quick:
+            curve_row = next(r for r in rows if r["instance"] == CURVE_INSTANCE.label)
+            plot_curves(curve_row, out / "results_sparse_grid_curve.png")
+    wall = time.perf_counter() - start
+    return (
+        format_rows(rows)
+        + f"\n\nWall time {wall:.0f} s on {platform.processor() or platform.machine()}, "
+        f"{len(seeds)} seed(s) per learner, MaskablePPO {budget.maskable_steps} steps, "
+        f"torch PPO {budget.torch_steps} steps (B = {budget.torch_envs})."
+    )
