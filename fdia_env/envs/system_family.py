@@ -83,6 +83,7 @@ from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, tracking_system
 
 OBJECTIVES = ("trace", "logdet")
+ACTIONS = ("bitmask", "sequential")
 CLIP = 10.0
 LOGDET_EFFECT_MAX = 30.0
 SIGMA_W_FLOOR = 1e-6  # as ch4-random: U(0, 1) can return exactly 0; a sensor needs R > 0
@@ -246,6 +247,9 @@ class SystemFamilyEnv(gym.Env):
             ``log det P̄`` (log det).
         describe: Append the description; ``False`` gives the sparse env's observation alone
             (the ablation "no description").
+        action: ``"bitmask"`` (one subset per window step, ``Discrete(2**max_sensors)``) or
+            ``"sequential"`` (one sensor per decision, ``Discrete(max_sensors + 1)``; see the
+            module docstring).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -258,6 +262,7 @@ class SystemFamilyEnv(gym.Env):
         objective: str = "trace",
         normalize_reward: bool = True,
         describe: bool = True,
+        action: str = "bitmask",
     ) -> None:
         if not isinstance(family, TrackingFamily):
             raise ValueError(f"family must be a TrackingFamily, got {type(family).__name__}")
@@ -271,6 +276,7 @@ class SystemFamilyEnv(gym.Env):
             max_sensors = family.num_sensors
         check_int("max_sensors", max_sensors, minimum=family.num_sensors, maximum=MAX_SENSORS)
         check_choice("objective", objective, OBJECTIVES)
+        check_choice("action", action, ACTIONS)
         for name, flag in (("normalize_reward", normalize_reward), ("describe", describe)):
             if not isinstance(flag, bool):
                 raise ValueError(f"{name} must be True or False, got {flag!r}")
@@ -280,32 +286,49 @@ class SystemFamilyEnv(gym.Env):
         self.objective = objective
         self.normalize_reward = normalize_reward
         self.describe = describe
+        self.action = action
+        self.sequential = action == "sequential"
         n = family.state_size
-        sparse_lo = [0.0, *([-30.0] * n), *([-1.0] * (n * (n - 1) // 2)), 0.0]
-        sparse_hi = [1.0, *([30.0] * n), *([1.0] * (n * (n - 1) // 2)), 1.0]
-        self.sparse_size = len(sparse_lo)
-        lo, hi = np.array(sparse_lo), np.array(sparse_hi)
+        lo = [0.0, *([-30.0] * n), *([-1.0] * (n * (n - 1) // 2)), 0.0]
+        hi = [1.0, *([30.0] * n), *([1.0] * (n * (n - 1) // 2)), 1.0]
+        self.sparse_size = len(lo)
+        if self.sequential:
+            lo, hi = lo + [0.0] * self.max_sensors, hi + [1.0] * self.max_sensors
+        self.description_start = len(lo)
+        lo, hi = np.array(lo), np.array(hi)
         if describe:
             dlo, dhi = _description_bounds(n, self.max_sensors, objective)
             lo, hi = np.concatenate([lo, dlo]), np.concatenate([hi, dhi])
         self.observation_space = spaces.Box(lo.astype(np.float32), hi.astype(np.float32))
-        self.action_space = spaces.Discrete(2**self.max_sensors)
+        n_actions = self.max_sensors + 1 if self.sequential else 2**self.max_sensors
+        self.action_space = spaces.Discrete(n_actions)
         self.system: LinearSystem | None = None
         self.system_seed: int | None = None
         self.description: np.ndarray | None = None
         self._inner: SingleAgentEnv | None = None
         self._scale = 1.0
-        self._mask = np.zeros(self.action_space.n, dtype=np.int8)
+        self._mask = np.zeros(n_actions, dtype=np.int8)
+        self._sparse_obs = np.zeros(self.sparse_size)
+        self._chosen = 0  # sequential: bitmask picked for the current window step
+        self._left = 0  # sequential: budget left after the committed steps
 
     def _observation(self, sparse_obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        self._sparse_obs = np.asarray(sparse_obs, dtype=np.float64)
         self._mask = np.zeros(self.action_space.n, dtype=np.int8)
-        self._mask[: mask.size] = mask
-        obs = np.asarray(sparse_obs, dtype=np.float64)
+        parts = [self._sparse_obs]
+        if self.sequential:
+            chosen = (self._chosen >> np.arange(self.max_sensors)) & 1
+            self._mask[0] = 1  # commit the step
+            if bin(self._chosen).count("1") < self._left:
+                self._mask[1 : 1 + self.system.M] = 1 - chosen[: self.system.M]
+            parts.append(chosen.astype(np.float64))
+        else:
+            self._mask[: mask.size] = mask
         if self.describe:
-            obs = np.concatenate([obs, self.description])
-        return np.clip(obs, self.observation_space.low, self.observation_space.high).astype(
-            np.float32
-        )
+            parts.append(self.description)
+        obs = np.concatenate(parts)
+        low, high = self.observation_space.low, self.observation_space.high
+        return np.clip(obs, low, high).astype(np.float32)
 
     def reset(
         self, *, seed: int | None = None, options: dict | None = None
@@ -341,17 +364,27 @@ class SystemFamilyEnv(gym.Env):
         self.description = describe_system(self.system, self.max_sensors, self.objective)
         P_pred = steady_state(self.system)[0]
         self._scale = float(objective(P_pred, self.objective))
+        self._chosen, self._left = 0, self.family.budget
         obs, info = self._inner.reset(seed=int(self.np_random.integers(2**31)))
         out = self._observation(obs, info["action_mask"])
         return out, {**info, "action_mask": self._mask.copy(), "system_seed": k}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
-        """Attack the sensors of bitmask ``action`` (absent sensors' bits ignored)."""
+        """Play ``action``: a bitmask (absent sensors' bits ignored) or a sequential decision."""
         if self._inner is None:
             raise RuntimeError("call reset() before step()")
         a = int(action)
         if not 0 <= a < self.action_space.n:
             raise ValueError(f"action must be in [0, {self.action_space.n}), got {action!r}")
+        if self.sequential:
+            if a > 0:  # pick sensor a − 1 for this step; an illegal pick changes nothing
+                if self._mask[a]:
+                    self._chosen |= 1 << (a - 1)
+                out = self._observation(self._sparse_obs, self._mask)
+                info = {"action_mask": self._mask.copy(), "system_seed": self.system_seed}
+                return out, 0.0, False, False, info
+            a, self._chosen = self._chosen, 0
+            self._left -= bin(a).count("1")
         a &= (1 << self.system.M) - 1
         obs, reward, term, trunc, info = self._inner.step(a)
         if self.normalize_reward and term:  # the terminal reward is the only one
@@ -361,5 +394,10 @@ class SystemFamilyEnv(gym.Env):
         return out, float(reward), term, trunc, info
 
     def action_masks(self) -> np.ndarray:
-        """Legal actions now: subsets of present sensors within the budget left."""
+        """Legal actions now.
+
+        Bitmask: the subsets of present sensors within the budget left. Sequential: commit
+        (0) always; pick sensor j (action j + 1) if it is present, not picked yet this step,
+        and the picks so far leave budget.
+        """
         return self._mask.astype(bool)
