@@ -18,13 +18,16 @@ seeded reset sequence is reproducible. ``reset(options={"system_seed": k})`` pin
 
 ## Observation
 
-``Box(float32)`` of size ``d_sparse + d_description``:
+``Box(float32)`` of size ``d_sparse (+ max_sensors) + d_description``:
 
 - ``[0 : d_sparse]``: the sparse env's observation (steps left / N, log variance growth,
   covariance correlations, budget left / c; see :mod:`fdia_env.sparse_attack_v0`);
-- then the description (:meth:`SystemFamilyEnv.describe`), with ``P̄ = F P F' + Q`` the
-  steady-state predicted covariance, ``P`` the steady-state filtered covariance (all sensors)
-  and ``s = tr P̄`` the scale:
+  ``d_sparse = 2 + n + n(n−1)/2`` (5 for the tracking systems);
+- ``action="sequential"`` only: ``max_sensors`` 0/1 entries, the sensors picked so far for the
+  current window step;
+- then (unless ``describe=False``) the description (:func:`describe_system`), with
+  ``P̄ = F P F' + Q`` the steady-state predicted covariance, ``P`` the steady-state filtered
+  covariance (all sensors) and ``s = tr P̄`` the scale:
 
 | entries | feature | range |
 |---|---|---|
@@ -48,10 +51,19 @@ For ``n = 2`` and ``max_sensors = 10`` the description has 61 entries.
 
 ## Action
 
-``Discrete(2**max_sensors)``: a bitmask of attacked sensors as in ``sparse_attack_v0``. Bits of
-absent sensor slots (``j >= M``) are ignored; a subset above the budget left is trimmed to its
-lowest-numbered sensors (the sparse env's ``"trim"`` rule). ``action_masks()`` and
-``info["action_mask"]`` mark the subsets of present sensors within the budget left.
+``action="bitmask"`` (default): ``Discrete(2**max_sensors)``, a bitmask of attacked sensors per
+window step as in ``sparse_attack_v0``. Bits of absent sensor slots (``j >= M``) are ignored; a
+subset above the budget left is trimmed to its lowest-numbered sensors (the sparse env's
+``"trim"`` rule). ``action_masks()`` and ``info["action_mask"]`` mark the subsets of present
+sensors within the budget left.
+
+``action="sequential"``: ``Discrete(max_sensors + 1)``, the same attack built one sensor per
+decision: action ``j + 1`` adds sensor j to the current window step's subset (reward 0, the
+window does not advance), action 0 commits the subset and plays the step. The mask allows 0
+always and ``j + 1`` for a present sensor not picked yet this step while the picks leave budget;
+an illegal pick changes nothing. An episode has N commits and at most c picks. Every attack
+set of the bitmask format is reachable; the policy's output has M + 1 entries instead of 2^M,
+which learns far faster (see ``docs/results/general.md``).
 
 ## Reward
 
@@ -61,8 +73,11 @@ across systems; ``info["phi"]`` is always the raw objective.
 
 >>> env = SystemFamilyEnv(TrackingFamily(), system_seeds=range(0, 1000))
 >>> obs, info = env.reset(seed=0)
->>> obs.shape, env.action_space.n, info["system_seed"] in range(0, 1000)
+>>> obs.shape, int(env.action_space.n), info["system_seed"] in range(0, 1000)
 ((66,), 1024, True)
+>>> env = SystemFamilyEnv(TrackingFamily(), action="sequential", max_sensors=12)
+>>> env.reset(seed=0)[0].shape, int(env.action_space.n)
+((88,), 13)
 """
 
 from __future__ import annotations
