@@ -10,7 +10,7 @@ import scipy.linalg
 from gymnasium.utils.env_checker import check_env
 
 from agents.results import general
-from baselines.sparse import branch_and_bound, exhaustive, make_problem
+from baselines.sparse import branch_and_bound, exhaustive, make_problem, sfs
 from fdia_env import scenarios
 from fdia_env.envs.system_family import (
     SystemFamilyEnv,
@@ -171,6 +171,23 @@ def test_normalized_reward_is_phi_over_the_scale():
     _, r1, term, _, info = env.step(2)
     assert term and r0 == 0.0
     assert r1 == pytest.approx(info["phi"] / scale, rel=1e-12)
+
+
+def test_reward_reference_divides_the_terminal_reward():
+    family = TrackingFamily(num_sensors=4, budget=2, horizon=2)
+    env = SystemFamilyEnv(family, reward_reference=general.sfs_value)
+    env.reset(seed=3)
+    reference = sfs(env.system, 2, 2).value
+    env.step(0)
+    _, reward, term, _, info = env.step(3)
+    assert term and reward == pytest.approx(info["phi"] / reference, rel=1e-12)
+    with pytest.raises(ValueError, match="reward_reference"):
+        SystemFamilyEnv(family, reward_reference=1.0)
+    with pytest.raises(ValueError, match="reward_reference"):
+        SystemFamilyEnv(family, reward_reference=general.sfs_value, objective="logdet")
+    env = SystemFamilyEnv(family, reward_reference=lambda *_: 0.0)
+    with pytest.raises(ValueError, match="reward_reference"):
+        env.reset(seed=0)
 
 
 def test_per_system_optimum_equals_exs_recomputed():

@@ -54,6 +54,7 @@ PPO_KWARGS: dict[str, Any] = {
 }
 N_ENVS = 8
 ACTION = "sequential"  # SystemFamilyEnv action format of every learned policy
+REWARD_REFERENCE: Any = None  # per-system reward scale in training (None: tr P̄)
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,11 @@ class _Curve(BaseCallback):
         self._record()
 
 
+def sfs_value(system: Any, budget: int, horizon: int) -> float:
+    """SFS's value of the system's sparse problem (the training reward's per-system scale)."""
+    return sfs(system, budget, horizon).value
+
+
 def train_policy(
     family: TrackingFamily,
     timesteps: int,
@@ -174,7 +180,11 @@ def train_policy(
     vec = DummyVecEnv(
         [
             lambda: SystemFamilyEnv(
-                family, system_seeds=system_seeds, describe=describe, action=ACTION
+                family,
+                system_seeds=system_seeds,
+                describe=describe,
+                action=ACTION,
+                reward_reference=REWARD_REFERENCE,
             )
             for _ in range(N_ENVS)
         ]

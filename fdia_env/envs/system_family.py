@@ -68,7 +68,8 @@ which learns far faster (see ``docs/results/general.md``).
 ## Reward
 
 The sparse env's terminal reward Φ(P[K+N|K+N]) (``info["phi"]``), divided by ``s`` for the
-trace when ``normalize_reward`` (for log det: minus ``log det P̄``), so rewards are comparable
+trace when ``normalize_reward`` (for log det: minus ``log det P̄``), or by a per-system
+reference value when ``reward_reference`` is given, so rewards are comparable
 across systems; ``info["phi"]`` is always the raw objective.
 
 >>> env = SystemFamilyEnv(TrackingFamily(), system_seeds=range(0, 1000))
@@ -83,6 +84,7 @@ across systems; ``info["phi"]`` is always the raw objective.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -260,6 +262,10 @@ class SystemFamilyEnv(gym.Env):
         objective: Φ, ``"trace"`` or ``"logdet"``.
         normalize_reward: Divide the terminal reward by ``s = tr P̄`` (trace) or subtract
             ``log det P̄`` (log det).
+        reward_reference: ``None``, or a callable ``(system, budget, horizon) -> float`` (a
+            positive number, computed once per reset, e.g. a heuristic's value of the
+            system's sparse problem): the terminal reward is then divided by it (trace only;
+            replaces ``normalize_reward``'s scale). The env itself calls no solver.
         describe: Append the description; ``False`` gives the sparse env's observation alone
             (the ablation "no description").
         action: ``"bitmask"`` (one subset per window step, ``Discrete(2**max_sensors)``) or
@@ -278,6 +284,7 @@ class SystemFamilyEnv(gym.Env):
         normalize_reward: bool = True,
         describe: bool = True,
         action: str = "bitmask",
+        reward_reference: Callable[[LinearSystem, int, int], float] | None = None,
     ) -> None:
         if not isinstance(family, TrackingFamily):
             raise ValueError(f"family must be a TrackingFamily, got {type(family).__name__}")
@@ -295,6 +302,17 @@ class SystemFamilyEnv(gym.Env):
         for name, flag in (("normalize_reward", normalize_reward), ("describe", describe)):
             if not isinstance(flag, bool):
                 raise ValueError(f"{name} must be True or False, got {flag!r}")
+        if reward_reference is not None:
+            if not callable(reward_reference):
+                raise ValueError(
+                    "reward_reference must be None or a callable (system, budget, horizon) -> "
+                    f"float, got {type(reward_reference).__name__}"
+                )
+            if objective != "trace":
+                raise ValueError(
+                    f"reward_reference needs objective='trace' (a ratio), got {objective!r}"
+                )
+        self.reward_reference = reward_reference
         self.family = family
         self.system_seeds = system_seeds
         self.max_sensors = int(max_sensors)
@@ -379,6 +397,11 @@ class SystemFamilyEnv(gym.Env):
         self.description = describe_system(self.system, self.max_sensors, self.objective)
         P_pred = steady_state(self.system)[0]
         self._scale = float(objective(P_pred, self.objective))
+        if self.reward_reference is not None:
+            ref = self.reward_reference(self.system, self.family.budget, self.family.horizon)
+            if not (isinstance(ref, (int, float, np.floating)) and math.isfinite(ref) and ref > 0):
+                raise ValueError(f"reward_reference must return a number > 0, got {ref!r}")
+            self._scale = float(ref)
         self._chosen, self._left = 0, self.family.budget
         obs, info = self._inner.reset(seed=int(self.np_random.integers(2**31)))
         out = self._observation(obs, info["action_mask"])
@@ -402,7 +425,8 @@ class SystemFamilyEnv(gym.Env):
             self._left -= bin(a).count("1")
         a &= (1 << self.system.M) - 1
         obs, reward, term, trunc, info = self._inner.step(a)
-        if self.normalize_reward and term:  # the terminal reward is the only one
+        scaled = self.normalize_reward or self.reward_reference is not None
+        if scaled and term:  # the terminal reward is the only one
             reward = reward / self._scale if self.objective == "trace" else reward - self._scale
         out = self._observation(obs, info["action_mask"])
         info = {**info, "action_mask": self._mask.copy(), "system_seed": self.system_seed}
