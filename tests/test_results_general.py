@@ -173,6 +173,21 @@ def test_normalized_reward_is_phi_over_the_scale():
     assert r1 == pytest.approx(info["phi"] / scale, rel=1e-12)
 
 
+def test_spend_budget_masks_commit_on_the_last_step_while_a_pick_is_legal():
+    family = TrackingFamily(num_sensors=3, budget=2, horizon=2)
+    for spend, commit_legal in ((True, False), (False, True)):
+        env = SystemFamilyEnv(family, action="sequential", spend_budget=spend)
+        env.reset(seed=0)
+        env.step(0)  # step 1: no attack; the last step starts with the whole budget
+        assert env.action_masks()[0] == commit_legal
+        env.step(2)
+        assert env.action_masks()[0] == commit_legal
+        env.step(3)  # budget spent: commit is the only legal action
+        assert np.flatnonzero(env.action_masks()).tolist() == [0]
+        _, _, term, _, _ = env.step(0)
+        assert term
+
+
 def test_reward_reference_divides_the_terminal_reward():
     family = TrackingFamily(num_sensors=4, budget=2, horizon=2)
     env = SystemFamilyEnv(family, reward_reference=general.sfs_value)
@@ -231,6 +246,7 @@ def test_family_bad_input_names_the_parameter(kwargs, name):
         ({"describe": 1}, "describe"),
         ({"normalize_reward": "yes"}, "normalize_reward"),
         ({"action": "single"}, "action"),
+        ({"spend_budget": None}, "spend_budget"),
     ],
 )
 def test_env_bad_input_names_the_parameter(kwargs, name):

@@ -60,10 +60,14 @@ sensors within the budget left.
 ``action="sequential"``: ``Discrete(max_sensors + 1)``, the same attack built one sensor per
 decision: action ``j + 1`` adds sensor j to the current window step's subset (reward 0, the
 window does not advance), action 0 commits the subset and plays the step. The mask allows 0
-always and ``j + 1`` for a present sensor not picked yet this step while the picks leave budget;
-an illegal pick changes nothing. An episode has N commits and at most c picks. Every attack
-set of the bitmask format is reachable; the policy's output has M + 1 entries instead of 2^M,
-which learns far faster (see ``docs/results/general.md``).
+always (on the last window step only once no pick is legal, with ``spend_budget``: attacking
+more never lowers Φ, so no optimum is excluded) and ``j + 1`` for a present sensor not picked
+yet this step while the picks leave budget; an illegal pick or commit changes nothing. An
+episode has N commits and at most c picks. Every attack set of the bitmask format is reachable
+(with ``spend_budget``, those that spend the budget left, or attack every sensor, on the last
+step: every optimum among them); the policy's
+output has M + 1 entries instead of 2^M, which learns far faster (see
+``docs/results/general.md``).
 
 ## Reward
 
@@ -271,6 +275,9 @@ class SystemFamilyEnv(gym.Env):
         action: ``"bitmask"`` (one subset per window step, ``Discrete(2**max_sensors)``) or
             ``"sequential"`` (one sensor per decision, ``Discrete(max_sensors + 1)``; see the
             module docstring).
+        spend_budget: Sequential only: on the last window step, commit is masked while a pick
+            is still legal (attacking more never lowers Φ under perfect detection, so no
+            optimum is excluded; it removes a costly mistake from exploration).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -285,6 +292,7 @@ class SystemFamilyEnv(gym.Env):
         describe: bool = True,
         action: str = "bitmask",
         reward_reference: Callable[[LinearSystem, int, int], float] | None = None,
+        spend_budget: bool = True,
     ) -> None:
         if not isinstance(family, TrackingFamily):
             raise ValueError(f"family must be a TrackingFamily, got {type(family).__name__}")
@@ -299,7 +307,12 @@ class SystemFamilyEnv(gym.Env):
         check_int("max_sensors", max_sensors, minimum=family.num_sensors, maximum=MAX_SENSORS)
         check_choice("objective", objective, OBJECTIVES)
         check_choice("action", action, ACTIONS)
-        for name, flag in (("normalize_reward", normalize_reward), ("describe", describe)):
+        flags = (
+            ("normalize_reward", normalize_reward),
+            ("describe", describe),
+            ("spend_budget", spend_budget),
+        )
+        for name, flag in flags:
             if not isinstance(flag, bool):
                 raise ValueError(f"{name} must be True or False, got {flag!r}")
         if reward_reference is not None:
@@ -321,6 +334,7 @@ class SystemFamilyEnv(gym.Env):
         self.describe = describe
         self.action = action
         self.sequential = action == "sequential"
+        self.spend_budget = spend_budget
         n = family.state_size
         lo = [0.0, *([-30.0] * n), *([-1.0] * (n * (n - 1) // 2)), 0.0]
         hi = [1.0, *([30.0] * n), *([1.0] * (n * (n - 1) // 2)), 1.0]
@@ -344,6 +358,7 @@ class SystemFamilyEnv(gym.Env):
         self._sparse_obs = np.zeros(self.sparse_size)
         self._chosen = 0  # sequential: bitmask picked for the current window step
         self._left = 0  # sequential: budget left after the committed steps
+        self._commits = 0  # sequential: window steps played
 
     def _observation(self, sparse_obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._sparse_obs = np.asarray(sparse_obs, dtype=np.float64)
@@ -351,9 +366,10 @@ class SystemFamilyEnv(gym.Env):
         parts = [self._sparse_obs]
         if self.sequential:
             chosen = (self._chosen >> np.arange(self.max_sensors)) & 1
-            self._mask[0] = 1  # commit the step
             if bin(self._chosen).count("1") < self._left:
                 self._mask[1 : 1 + self.system.M] = 1 - chosen[: self.system.M]
+            last = self._commits == self.family.horizon - 1
+            self._mask[0] = 0 if self.spend_budget and last and self._mask[1:].any() else 1
             parts.append(chosen.astype(np.float64))
         else:
             self._mask[: mask.size] = mask
@@ -402,7 +418,7 @@ class SystemFamilyEnv(gym.Env):
             if not (isinstance(ref, (int, float, np.floating)) and math.isfinite(ref) and ref > 0):
                 raise ValueError(f"reward_reference must return a number > 0, got {ref!r}")
             self._scale = float(ref)
-        self._chosen, self._left = 0, self.family.budget
+        self._chosen, self._left, self._commits = 0, self.family.budget, 0
         obs, info = self._inner.reset(seed=int(self.np_random.integers(2**31)))
         out = self._observation(obs, info["action_mask"])
         return out, {**info, "action_mask": self._mask.copy(), "system_seed": k}
@@ -421,8 +437,13 @@ class SystemFamilyEnv(gym.Env):
                 out = self._observation(self._sparse_obs, self._mask)
                 info = {"action_mask": self._mask.copy(), "system_seed": self.system_seed}
                 return out, 0.0, False, False, info
+            if not self._mask[0]:  # commit masked (spend_budget): changes nothing
+                out = self._observation(self._sparse_obs, self._mask)
+                info = {"action_mask": self._mask.copy(), "system_seed": self.system_seed}
+                return out, 0.0, False, False, info
             a, self._chosen = self._chosen, 0
             self._left -= bin(a).count("1")
+            self._commits += 1
         a &= (1 << self.system.M) - 1
         obs, reward, term, trunc, info = self._inner.step(a)
         scaled = self.normalize_reward or self.reward_reference is not None
