@@ -6,6 +6,8 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
 ``out``, writes its rows as JSON (and its plots) there. Tables:
 
 - ``detection`` (:mod:`agents.results.detection`): where the detection game separates policies.
+- ``general`` (:mod:`agents.results.general`): one sparse attacker for many systems, on held-out
+  systems against each one's optimum and SFS.
 """
 
 from agents.results.cli import TABLES, main, run_table

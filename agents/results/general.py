@@ -39,6 +39,15 @@ SINGLE_SYSTEM_SEED = 0
 OPTIMAL = 0.99  # a score at or above this counts as optimal
 RANDOM_EPISODES = 10  # random-play episodes per held-out system (its value: their mean)
 
+POLICY_NAMES = (
+    "MaskablePPO, family + description",
+    "MaskablePPO, family, no description",
+    f"MaskablePPO, one system (seed {SINGLE_SYSTEM_SEED})",
+    "SFS (per system)",
+    "random play",
+)
+"""The rows of the table, in order."""
+
 FULL_FAMILY = TrackingFamily()  # ch4-random-like: M = 10, c = 10, N = 6, σ_v ∈ [0.1, 1]
 QUICK_FAMILY = TrackingFamily(num_sensors=6, budget=6, horizon=4)
 
@@ -283,19 +292,14 @@ def general_table(
     single, _ = train_policy(family, settings.single_timesteps, seed, one, describe=False)
     timings["single system"] = time.perf_counter() - t0
     random_policy = RandomPolicy(SystemFamilyEnv(family, action=ACTION).action_space, seed=seed)
-    scores = {
-        "MaskablePPO, family + description": play_values(model, family, held) / optima,
-        "MaskablePPO, family, no description": play_values(blind, family, held, False) / optima,
-        f"MaskablePPO, one system (seed {SINGLE_SYSTEM_SEED})": play_values(
-            single, family, held, False
-        )
-        / optima,
-        "SFS (per system)": sfs_scores,
-        "random play": play_values(
-            random_policy, family, held, episodes=RANDOM_EPISODES, deterministic=False
-        )
-        / optima,
-    }
+    values = [
+        play_values(model, family, held),
+        play_values(blind, family, held, describe=False),
+        play_values(single, family, held, describe=False),
+        sfs_scores * optima,
+        play_values(random_policy, family, held, episodes=RANDOM_EPISODES, deterministic=False),
+    ]
+    scores = {name: v / optima for name, v in zip(POLICY_NAMES, values, strict=True)}
     summary = [summarize(name, s, sfs_sub) for name, s in scores.items()]
     per_system = [
         {**r, **{name: float(s[j]) for name, s in scores.items()}} for j, r in enumerate(refs)
