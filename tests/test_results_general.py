@@ -51,6 +51,28 @@ def test_sequential_play_of_the_optimal_set_reaches_the_optimum():
     assert best.proved_optimal
 
 
+def test_sorted_slots_follow_the_attack_effect_and_actions_name_slots():
+    family = TrackingFamily()
+    best = branch_and_bound(family.scenario(5), family.budget, family.horizon)
+    env = SystemFamilyEnv(family, action="sequential", sort_sensors=True)
+    obs, info = env.reset(options={"system_seed": 5})
+    order = info["slot_sensors"]
+    assert sorted(order) == list(range(10))
+    slots = obs[env.description_start + 11 :].reshape(10, 5)
+    assert np.all(np.diff(slots[:, 4]) <= 0)  # decreasing attack effect
+    # for position sensors the effect decreases with σ_w: slot 0 is the most accurate sensor
+    np.testing.assert_array_equal(order, np.argsort(np.diag(env.system.R), kind="stable"))
+    unsorted = describe_system(env.system, 10)[11:].reshape(10, 5)
+    np.testing.assert_allclose(slots, unsorted[order], rtol=1e-6, atol=1e-7)
+    slot_of = np.argsort(order)
+    for bitmask in best.actions():
+        for i in range(10):
+            if bitmask >> i & 1:
+                env.step(int(slot_of[i]) + 1)
+        _, _, term, _, info = env.step(0)
+    assert term and info["phi"] == pytest.approx(best.value, rel=1e-12)
+
+
 def test_sequential_masks_stop_picks_when_the_budget_is_used():
     env = SystemFamilyEnv(TrackingFamily(num_sensors=4, budget=2, horizon=2), action="sequential")
     env.reset(seed=1)
@@ -250,6 +272,7 @@ def test_family_bad_input_names_the_parameter(kwargs, name):
         ({"normalize_reward": "yes"}, "normalize_reward"),
         ({"action": "single"}, "action"),
         ({"spend_budget": None}, "spend_budget"),
+        ({"sort_sensors": 0}, "sort_sensors"),
     ],
 )
 def test_env_bad_input_names_the_parameter(kwargs, name):

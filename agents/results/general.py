@@ -64,6 +64,7 @@ PPO_KWARGS: dict[str, Any] = {
 N_ENVS = 8
 ACTION = "sequential"  # SystemFamilyEnv action format of every learned policy
 REWARD_REFERENCE: Any = None  # per-system reward scale in training (None: tr P̄)
+SORT_SENSORS = True  # slots ordered by attack effect (SystemFamilyEnv sort_sensors)
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,13 @@ def play_values(
 
     With ``episodes > 1`` the value is the mean over that many episodes (random play).
     """
-    env = SystemFamilyEnv(family, system_seeds=TRAIN_SEEDS, describe=describe, action=ACTION)
+    env = SystemFamilyEnv(
+        family,
+        system_seeds=TRAIN_SEEDS,
+        describe=describe,
+        action=ACTION,
+        sort_sensors=SORT_SENSORS,
+    )
     values = np.zeros(len(seeds))
     for j, k in enumerate(seeds):
         total = 0.0
@@ -194,6 +201,7 @@ def train_policy(
                 describe=describe,
                 action=ACTION,
                 reward_reference=REWARD_REFERENCE,
+                sort_sensors=SORT_SENSORS,
             )
             for _ in range(N_ENVS)
         ]

@@ -41,7 +41,9 @@ seeded reset sequence is reproducible. ``reset(options={"system_seed": k})`` pin
 | max_sensors | attack effect e_j (below) | [0, 1] (trace) |
 
 The per-sensor entries are stored slot by slot: slot j holds (present, H_j / ‖H_j‖, log SNR,
-e_j), ``n + 3`` numbers, zeros for a padding slot.
+e_j), ``n + 3`` numbers, zeros for a padding slot. Slot j is sensor j, or, with
+``sort_sensors=True``, the sensor with the j-th largest attack effect (``info["slot_sensors"]``
+maps slots to sensors; actions then name slots).
 
 The attack effect of sensor j is what dropping it alone, for one step from steady state, adds
 to the objective: ``e_j = (tr P_{−j} − tr P) / s`` for the trace (in [0, 1]) and
@@ -190,7 +192,10 @@ def _upper(a: np.ndarray) -> np.ndarray:
 
 
 def describe_system(
-    system: LinearSystem, max_sensors: int, objective_name: str = "trace"
+    system: LinearSystem,
+    max_sensors: int,
+    objective_name: str = "trace",
+    order: np.ndarray | None = None,
 ) -> np.ndarray:
     """The fixed-size description of ``system`` (see the module docstring), float64.
 
@@ -198,6 +203,8 @@ def describe_system(
         system: A system with scalar sensors and at most ``max_sensors`` of them.
         max_sensors: Number of sensor slots (padding with zeros).
         objective_name: ``"trace"`` or ``"logdet"`` (the attack effect terms' objective).
+        order: Slot j describes sensor ``order[j]`` (a permutation of ``range(M)``; default
+            the identity).
 
     Raises:
         ValueError: For a system with a non-scalar sensor or more than ``max_sensors``.
@@ -227,15 +234,25 @@ def describe_system(
     else:
         effect = objective(P_minus, "logdet") - objective(P, "logdet")
         effect = np.clip(effect, 0.0, LOGDET_EFFECT_MAX)
-    for j, sensor in enumerate(system.sensors):
+    order = np.arange(system.M) if order is None else np.asarray(order)
+    if sorted(order.tolist()) != list(range(system.M)):
+        raise ValueError(f"order must be a permutation of range({system.M}), got {order!r}")
+    for j, i in enumerate(order.tolist()):
+        sensor = system.sensors[i]
         h = sensor.H.reshape(-1)
         norm = float(np.linalg.norm(h))
         snr = s * norm**2 / float(sensor.R[0, 0])
         slots[j, 0] = 1.0
         slots[j, 1 : 1 + n] = h / norm if norm > 0 else 0.0
         slots[j, 1 + n] = np.clip(math.log10(snr), -CLIP, CLIP) if snr > 0 else -CLIP
-        slots[j, 2 + n] = effect[j]
+        slots[j, 2 + n] = effect[i]
     return np.concatenate([*(np.asarray(h, float) for h in head), slots.reshape(-1)])
+
+
+def effect_order(system: LinearSystem, objective_name: str = "trace") -> np.ndarray:
+    """Sensors by decreasing attack effect ``e_j`` (ties: lower index first)."""
+    effect = describe_system(system, system.M, objective_name)[-system.M * (system.n + 3) :]
+    return np.argsort(-effect.reshape(system.M, -1)[:, -1], kind="stable")
 
 
 def description_size(state_size: int, max_sensors: int) -> int:
@@ -275,6 +292,9 @@ class SystemFamilyEnv(gym.Env):
         action: ``"bitmask"`` (one subset per window step, ``Discrete(2**max_sensors)``) or
             ``"sequential"`` (one sensor per decision, ``Discrete(max_sensors + 1)``; see the
             module docstring).
+        sort_sensors: Order the sensor slots by decreasing attack effect ``e_j`` (slot j is
+            sensor ``info["slot_sensors"][j]``; actions name slots), so one action index means
+            "the j-th most effective sensor" on every system. Default: slot j is sensor j.
         spend_budget: Sequential only: on the last window step, commit is masked while a pick
             is still legal (attacking more never lowers Φ under perfect detection, so no
             optimum is excluded; it removes a costly mistake from exploration).
@@ -293,6 +313,7 @@ class SystemFamilyEnv(gym.Env):
         action: str = "bitmask",
         reward_reference: Callable[[LinearSystem, int, int], float] | None = None,
         spend_budget: bool = True,
+        sort_sensors: bool = False,
     ) -> None:
         if not isinstance(family, TrackingFamily):
             raise ValueError(f"family must be a TrackingFamily, got {type(family).__name__}")
@@ -311,6 +332,7 @@ class SystemFamilyEnv(gym.Env):
             ("normalize_reward", normalize_reward),
             ("describe", describe),
             ("spend_budget", spend_budget),
+            ("sort_sensors", sort_sensors),
         )
         for name, flag in flags:
             if not isinstance(flag, bool):
@@ -335,6 +357,8 @@ class SystemFamilyEnv(gym.Env):
         self.action = action
         self.sequential = action == "sequential"
         self.spend_budget = spend_budget
+        self.sort_sensors = sort_sensors
+        self.order = np.zeros(0, dtype=np.int64)  # slot j -> sensor order[j]
         n = family.state_size
         lo = [0.0, *([-30.0] * n), *([-1.0] * (n * (n - 1) // 2)), 0.0]
         hi = [1.0, *([30.0] * n), *([1.0] * (n * (n - 1) // 2)), 1.0]
@@ -410,7 +434,12 @@ class SystemFamilyEnv(gym.Env):
             objective=self.objective,
         )
         self._inner = SingleAgentEnv(parallel, agent="attacker")
-        self.description = describe_system(self.system, self.max_sensors, self.objective)
+        M = self.system.M
+        self.order = effect_order(self.system, self.objective) if self.sort_sensors else None
+        self.order = np.arange(M) if self.order is None else self.order
+        self.description = describe_system(
+            self.system, self.max_sensors, self.objective, self.order
+        )
         P_pred = steady_state(self.system)[0]
         self._scale = float(objective(P_pred, self.objective))
         if self.reward_reference is not None:
@@ -421,7 +450,8 @@ class SystemFamilyEnv(gym.Env):
         self._chosen, self._left, self._commits = 0, self.family.budget, 0
         obs, info = self._inner.reset(seed=int(self.np_random.integers(2**31)))
         out = self._observation(obs, info["action_mask"])
-        return out, {**info, "action_mask": self._mask.copy(), "system_seed": k}
+        extra = {"system_seed": k, "slot_sensors": self.order.tolist()}
+        return out, {**info, "action_mask": self._mask.copy(), **extra}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         """Play ``action``: a bitmask (absent sensors' bits ignored) or a sequential decision."""
@@ -445,6 +475,7 @@ class SystemFamilyEnv(gym.Env):
             self._left -= bin(a).count("1")
             self._commits += 1
         a &= (1 << self.system.M) - 1
+        a = sum(1 << int(self.order[j]) for j in range(self.system.M) if a >> j & 1)
         obs, reward, term, trunc, info = self._inner.step(a)
         scaled = self.normalize_reward or self.reward_reference is not None
         if scaled and term:  # the terminal reward is the only one
