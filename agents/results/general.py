@@ -51,14 +51,22 @@ POLICY_NAMES = (
 FULL_FAMILY = TrackingFamily()  # ch4-random-like: M = 10, c = 10, N = 6, σ_v ∈ [0.1, 1]
 QUICK_FAMILY = TrackingFamily(num_sensors=6, budget=6, horizon=4)
 
+LEARNING_RATE = 1e-3
+
+
+def _decayed(progress_remaining: float) -> float:
+    """Learning rate decayed linearly from :data:`LEARNING_RATE` to 0 over training."""
+    return LEARNING_RATE * progress_remaining
+
+
 PPO_KWARGS: dict[str, Any] = {
-    "n_steps": 256,
-    "batch_size": 256,
+    "n_steps": 512,
+    "batch_size": 512,
     "n_epochs": 10,
-    "learning_rate": 3e-4,
+    "learning_rate": _decayed,
     "gamma": 1.0,
     "gae_lambda": 0.95,
-    "ent_coef": 0.01,
+    "ent_coef": 0.0,
     "policy_kwargs": {"net_arch": [128, 128]},
 }
 N_ENVS = 8
@@ -78,8 +86,8 @@ class Settings:
     curve_every: int
 
 
-FULL = Settings(FULL_FAMILY, 300_000, 100_000, 200, 20_000)
-QUICK = Settings(QUICK_FAMILY, 16_384, 8_192, 100, 4_096)
+FULL = Settings(FULL_FAMILY, 400_000, 50_000, 200, 20_000)
+QUICK = Settings(QUICK_FAMILY, 12_288, 4_096, 100, 4_096)
 
 
 def heldout_seeds(n_heldout: int) -> range:
