@@ -86,7 +86,7 @@ class Settings:
     curve_every: int
 
 
-FULL = Settings(FULL_FAMILY, 400_000, 50_000, 200, 20_000)
+FULL = Settings(FULL_FAMILY, 250_000, 30_000, 200, 25_000)
 QUICK = Settings(QUICK_FAMILY, 12_288, 4_096, 100, 4_096)
 
 
