@@ -2,7 +2,8 @@
 
 MaskablePPO is trained on :class:`fdia_env.envs.system_family.SystemFamilyEnv` (a new random
 tracking system at every reset, as in ``ch4-random``, with a fixed-size description of the
-system in the observation), then played once on each of ``n_heldout`` held-out systems (system
+system in the observation; sequential picks with slots sorted by attack effect, the last
+step's budget always spent), then played once on each of ``n_heldout`` held-out systems (system
 seeds disjoint from the training seeds). Each system's value is scored against its own optimum
 (branch and bound, proved) and against SFS run on that system. Compared: the same training
 without the description, a policy trained on one system of the family, and random play.
