@@ -11,6 +11,8 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
   each other, under the Bayes cost and the true MSE.
 - ``sparse_grid`` (:mod:`agents.results.sparse_grid`): sparse attacks on power grids, MaskablePPO
   and torch PPO against SFS, SBS, SFS-SS, DP and the certified optimum (or bound).
+- ``general`` (:mod:`agents.results.general`): one sparse attacker for many systems, on held-out
+  systems against each one's optimum and SFS.
 """
 
 from agents.results.cli import TABLES, main, run_table

@@ -13,6 +13,7 @@ TABLES: dict[str, str] = {
     "detection": "agents.results.detection",
     "detection_learned": "agents.results.detection_learned",
     "sparse_grid": "agents.results.sparse_grid",
+    "general": "agents.results.general",
 }
 
 

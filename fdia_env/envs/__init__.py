@@ -3,5 +3,14 @@
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.simulation import Simulation
 from fdia_env.envs.single_agent import Policy, SingleAgentEnv, make_single_agent
+from fdia_env.envs.system_family import SystemFamilyEnv, TrackingFamily
 
-__all__ = ["FdiaParallelEnv", "Policy", "Simulation", "SingleAgentEnv", "make_single_agent"]
+__all__ = [
+    "FdiaParallelEnv",
+    "Policy",
+    "Simulation",
+    "SingleAgentEnv",
+    "SystemFamilyEnv",
+    "TrackingFamily",
+    "make_single_agent",
+]
