@@ -6,6 +6,8 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
 ``out``, writes its rows as JSON (and its plots) there. Tables:
 
 - ``detection`` (:mod:`agents.results.detection`): where the detection game separates policies.
+- ``game`` (:mod:`agents.results.game`): PSRO with learned best responses on the sensor game at
+  M = 10 and on grid-ieee14 against the exact (double-oracle and LP) equilibrium.
 """
 
 from agents.results.cli import TABLES, main, run_table

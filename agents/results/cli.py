@@ -11,6 +11,7 @@ from pathlib import Path
 # table name -> module with ``run(quick, seed, out) -> str`` (imported when the table runs)
 TABLES: dict[str, str] = {
     "detection": "agents.results.detection",
+    "game": "agents.results.game",
 }
 
 
