@@ -79,7 +79,7 @@ def test_quick_psro_meta_game_is_the_exact_matrix_on_the_learned_actions(quick):
 
 
 def test_quick_psro_exploitability_falls_by_half_or_more(quick):
-    """At seed 0 the relative NashConv falls from 79 % after iteration 1 to below 40 % by 3."""
+    """At seed 0 the relative NashConv falls from 130 % after iteration 1 to 42 % after 3."""
     _, row, _ = quick
     hist = row["history"]
     for h in hist:  # re-scored on the matrix: the self-play's own NashConv agrees

@@ -60,7 +60,7 @@ class PsroSetting:
             raise ValueError(f"algo must be one of PPO, A2C, DQN, got {self.algo!r}")
 
 
-FULL = (PsroSetting("game-m10", 14, 8192), PsroSetting("grid-ieee14", 20, 4096))
+FULL = (PsroSetting("game-m10", 10, 16384), PsroSetting("grid-ieee14", 24, 4096))
 QUICK = (PsroSetting("game-m10", 3, 2048),)
 
 
@@ -184,8 +184,8 @@ def psro_against_exact(
 def plot_row(row: dict[str, Any], path: Path) -> Path:
     """The exploitability per PSRO iteration, with 0 (the exact equilibrium) and 1 % lines."""
     title = (
-        f"PSRO ({row['algo']} BRs, {row['steps_per_br']} steps) on {row['scenario']}: "
-        f"{row['strategies'][0]}×{row['strategies'][1]}, v = {row['lp_value']:.4g} (LP = DO)"
+        f"PSRO ({row['algo']}, {row['steps_per_br']} steps per BR) on {row['scenario']}, "
+        f"v = {row['lp_value']:.4g}"
     )
     return exploitability_curve(path, row["history"], row["lp_value"], title)
 
@@ -224,15 +224,17 @@ def format_game(rows: list[dict[str, Any]]) -> str:
             f"PSRO on {r['scenario']}, per iteration (NashConv / v; learned actions and the gap "
             "of each to an exact best response):",
             "",
-            "| iteration | NashConv / v | defender expl. | attacker expl. | BR defender (gap) "
-            "| BR attacker (gap) | wall |",
+            "| iteration | NashConv / v | defender expl. / v | attacker expl. / v "
+            "| BR defender (gap / v) | BR attacker (gap / v) | wall |",
             "|---|---|---|---|---|---|---|",
         ]
+        v = abs(r["lp_value"])
         for h in r["history"]:
             lines.append(
-                f"| {h['iteration']} | {h['relative_nash_conv']:.2%} | {h['defender']:.4g} "
-                f"| {h['attacker']:.4g} | {h['br_defender']} ({h['br_gap_defender']:.3g}) "
-                f"| {h['br_attacker']} ({h['br_gap_attacker']:.3g}) | {h['train_seconds']:.0f} s |"
+                f"| {h['iteration']} | {h['relative_nash_conv']:.2%} | {h['defender'] / v:.2%} "
+                f"| {h['attacker'] / v:.2%} | {h['br_defender']} ({h['br_gap_defender'] / v:.2%}) "
+                f"| {h['br_attacker']} ({h['br_gap_attacker'] / v:.2%}) "
+                f"| {h['train_seconds']:.0f} s |"
             )
     return "\n".join(lines)
 
