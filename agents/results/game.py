@@ -193,7 +193,7 @@ def plot_row(row: dict[str, Any], path: Path) -> Path:
 def format_game(rows: list[dict[str, Any]]) -> str:
     """The rows as two Markdown tables: the exact solvers, then PSRO per iteration."""
     lines = [
-        "| game | strategies (def × att) | LP value | DO value | |LP − DO| / v "
+        "| game | strategies (def × att) | LP value | DO value | abs(LP − DO) / v "
         "| DO iterations (support) | DO wall | LP wall |",
         "|---|---|---|---|---|---|---|---|",
     ]
