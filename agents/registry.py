@@ -425,7 +425,7 @@ _COVARIANCE_SCENARIOS = {
     "ch2-pv-2": {"power": 3000.0},
 }
 # allocation is left to the env's default ("independent"): a typed game (types=...) takes none
-_GAME_SCENARIOS = {"ch5-game": {"power": 100.0}}
+_GAME_SCENARIOS = {"ch5-game": {"power": 100.0}, "game-m10": {"power": 100.0}, "grid-ieee14": {}}
 
 register(
     Trainable(

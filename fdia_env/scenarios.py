@@ -18,6 +18,17 @@ filter in steady state at the window start; the prior mean is the case's DC powe
 | grid-ieee57 | IEEE 57-bus, n = 56, M = 137 | c = 6, N = 3, a² = 0.01, game k = 1 |
 | grid-ieee118 | IEEE 118-bus, n = 117, M = 304 | c = 6, N = 3, a² = 0.01, game k = 1 |
 
+Beyond the literature, a larger sensor game in the spirit of ``ch5-game``:
+
+| name | model | values |
+|---|---|---|
+| game-m10 | 10 position sensors | σ_w = 3.0, 3.5, ..., 7.5; σ_v, T, x̂0, P0, a² as ch5-game |
+
+``game-m10`` continues ch5-game's σ_w = 3, 4, 5 to ten sensors in steps of 0.5: 1,023 strategies
+per player, small enough for the full LP on ``payoff_matrix`` (value 2.956, independent rule) and
+mixed at equilibrium (the defender drops 0 to 3 of the best sensors, the attacker hits one of
+the four best), so the double oracle needs several iterations.
+
 Why these values: with σ and q as above the steady-state ``tr P`` is 0.27 (ieee14) to 0.34
 (ieee118) of the static estimator's ``tr (H' R⁻¹ H)⁻¹``, so prediction and measurements both
 matter (MATH.md §7); a² = 0.01 pu² (a 10 MW bias standard deviation) makes the single-meter
@@ -192,6 +203,23 @@ GRID_PRESETS: dict[str, tuple[str, int, int, int]] = {
 GRID_POWER = 0.01
 
 
+def _game_m10() -> Scenario:
+    sys = tracking_system(
+        0.5,
+        [3.0 + 0.5 * i for i in range(10)],
+        x0=[1.0, 1.0],
+        P0=np.array([[0.25, 0.25], [0.25, 0.5]]),
+        name="game-m10",
+    )
+    return Scenario(
+        "game-m10",
+        sys,
+        "10 position sensors, σ_w = 3.0..7.5, sensor-selection game (ch. 5 setting, M = 10)",
+        power=100.0,
+        attack_step=100,
+    )
+
+
 def _grid(name: str) -> Callable[[], Scenario]:
     @functools.cache
     def build() -> Scenario:
@@ -224,6 +252,7 @@ _PRESETS: dict[str, Callable[..., Scenario]] = {
     "ch4-pv-case3": _ch4_pv(3),
     "ch4-random": _ch4_random,
     "ch5-game": _ch5_game,
+    "game-m10": _game_m10,
     **{name: _grid(name) for name in GRID_PRESETS},
 }
 

@@ -145,8 +145,16 @@ def test_every_preset_builds_with_finite_valid_matrices(name):
 
 
 def test_scenario_names_cover_the_literature_table():
-    """The eleven parameter sets of MATH.md §6, in order (then the grid presets of §7)."""
-    assert [n for n in scenarios.names() if not n.startswith("grid-")] == [
+    """The eleven parameter sets of MATH.md §6, in order (then game-m10 and the §7 grid presets)."""
+    literature = [n for n in scenarios.names() if not n.startswith(("grid-", "game-"))]
+    assert [n for n in scenarios.names() if n not in literature] == [
+        "game-m10",
+        "grid-ieee14",
+        "grid-ieee30",
+        "grid-ieee57",
+        "grid-ieee118",
+    ]
+    assert literature == [
         "ch2-position",
         "ch2-pv-1",
         "ch2-pv-2",

@@ -14,6 +14,7 @@ TABLES: dict[str, str] = {
     "detection_learned": "agents.results.detection_learned",
     "sparse_grid": "agents.results.sparse_grid",
     "general": "agents.results.general",
+    "game": "agents.results.game",
 }
 
 
