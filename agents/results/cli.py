@@ -10,11 +10,11 @@ from pathlib import Path
 
 # table name -> module with ``run(quick, seed, out) -> str`` (imported when the table runs)
 TABLES: dict[str, str] = {
-    "detection": "agents.results.detection",
-    "detection_learned": "agents.results.detection_learned",
     "sparse_grid": "agents.results.sparse_grid",
     "general": "agents.results.general",
     "game": "agents.results.game",
+    "detection": "agents.results.detection",
+    "detection_learned": "agents.results.detection_learned",
 }
 
 
