@@ -107,6 +107,21 @@ def _sha256(path: Path) -> str:
 # ---------------------------------------------------------------------------- models
 
 
+def tensor_file(meta: dict[str, Any], path: Path, root: Path) -> Path:
+    """The tensor file a JSON description at ``path`` names, checked before anything loads it.
+
+    Raises:
+        ValueError: For a file outside ``root``, a missing one or one whose SHA-256 is not the
+            description's ``sha256``.
+    """
+    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
+    if not tensors.is_file():
+        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
+    if _sha256(tensors) != meta.get("sha256"):
+        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    return tensors
+
+
 def save_model(
     model: BaseAlgorithm, path: Path, algo: str, hyperparameters: dict[str, Any]
 ) -> Path:
@@ -185,11 +200,7 @@ def load_model(
         raise ValueError(f"model description {path} holds a {meta.get('algo')} model, not {algo}")
     if meta.get("algo") not in ALGO_CLASSES:
         raise ValueError(f"model description {path}: unknown algorithm {meta.get('algo')!r}")
-    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
-    if not tensors.is_file():
-        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
-    if _sha256(tensors) != meta.get("sha256"):
-        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    tensors = tensor_file(meta, path, root)
     payload = load_tensors(tensors, device)
     if kwargs is None:
         kwargs = algo_kwargs(meta["algo"], Hyperparameters(**meta["hyperparameters"]))

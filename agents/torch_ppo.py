@@ -41,7 +41,7 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
-from agents.checkpoint import _sha256, inside, load_tensors, read_json
+from agents.checkpoint import _sha256, inside, load_tensors, read_json, tensor_file
 from agents.runs import atomic_write, write_json
 
 ALGO = "torch-ppo"
@@ -139,6 +139,30 @@ class TorchPPOConfig:
             )
         for size in self.hidden:
             _check_int("hidden (each layer size)", size, 1)
+
+    @classmethod
+    def from_hyperparameters(
+        cls, hp: dict[str, Any], total_timesteps: int, num_envs: int
+    ) -> TorchPPOConfig:
+        """The config of resolved ``train.py`` hyperparameters (``agents.config`` names).
+
+        Raises:
+            ValueError: For a value the config rejects (naming it).
+        """
+        return cls(
+            total_timesteps=total_timesteps,
+            num_envs=num_envs,
+            num_steps=hp["n_steps"],
+            learning_rate=hp["learning_rate"],
+            anneal_lr=hp["lr_schedule"] == "linear",
+            gamma=hp["gamma"],
+            gae_lambda=hp["gae_lambda"],
+            update_epochs=hp["n_epochs"],
+            clip_coef=hp["clip_range"],
+            ent_coef=hp["ent_coef"],
+            hidden=tuple(hp["net_arch"]),
+            num_minibatches=min(4, num_envs * hp["n_steps"]),
+        )
 
     @property
     def batch_size(self) -> int:
@@ -757,11 +781,7 @@ def load_policy(path: Path, root: Path, device: str = "cpu", seed: int = 0) -> T
     meta = read_json(path, "model description")
     if meta.get("format") != FORMAT:
         raise ValueError(f"model description {path}: format {meta.get('format')!r}, not {FORMAT}")
-    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
-    if not tensors.is_file():
-        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
-    if _sha256(tensors) != meta.get("sha256"):
-        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    tensors = tensor_file(meta, path, root)
     try:
         raw = dict(meta["spec"])
         for key in ("hidden", "low", "high"):
@@ -822,11 +842,7 @@ def load_training_state(path: Path, root: Path) -> TrainingState:
     if meta.get("format") != STATE_FORMAT:
         fmt = meta.get("format")
         raise ValueError(f"training state {path}: format {fmt!r}, not {STATE_FORMAT}")
-    tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
-    if not tensors.is_file():
-        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
-    if _sha256(tensors) != meta.get("sha256"):
-        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    tensors = tensor_file(meta, path, root)
     payload = load_tensors(tensors, "cpu")
     try:
         return TrainingState(

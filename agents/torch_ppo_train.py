@@ -104,20 +104,7 @@ def torch_ppo_config(cfg: TrainConfig) -> tuple[TorchPPOConfig, dict[str, Any]]:
     hp = resolved_hyperparameters(TORCH_PPO, cfg.hp)
     num_envs = TORCH_PPO_NUM_ENVS if cfg.num_envs is None else cfg.num_envs
     try:
-        config = TorchPPOConfig(
-            total_timesteps=cfg.total_timesteps,
-            num_envs=num_envs,
-            num_steps=hp["n_steps"],
-            learning_rate=hp["learning_rate"],
-            anneal_lr=hp["lr_schedule"] == "linear",
-            gamma=hp["gamma"],
-            gae_lambda=hp["gae_lambda"],
-            update_epochs=hp["n_epochs"],
-            clip_coef=hp["clip_range"],
-            ent_coef=hp["ent_coef"],
-            hidden=tuple(hp["net_arch"]),
-            num_minibatches=min(4, num_envs * hp["n_steps"]),
-        )
+        config = TorchPPOConfig.from_hyperparameters(hp, cfg.total_timesteps, num_envs)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"--algo torch-ppo: {exc}") from None
     return config, hp

@@ -626,6 +626,34 @@ def run_budget(budget: Budget, seed: int = 0) -> dict[str, Any]:
     return res
 
 
+def _ratio_plot(
+    rows: list[dict[str, Any]],
+    ratio: Any,
+    label: Any,
+    reference: str,
+    ylabel: str,
+    title: str,
+    path: Path,
+    legend_size: int,
+) -> Path:
+    """Learning curves of ``ratio(row, point)`` (mean over seeds) with the reference at 1."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for r in rows:
+        steps = [c["timesteps"] for c in r["curves"][0]]
+        mean = np.mean([[ratio(r, c) for c in cur] for cur in r["curves"]], 0)
+        ax.plot(steps, mean, marker="o", ms=3, label=label(r))
+    ax.axhline(1.0, color="k", ls="--", label=reference)
+    ax.set(xlabel="environment steps", ylabel=ylabel, title=title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=legend_size, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def plot(res: dict[str, Any], out: Path) -> list[Path]:
     """Learning curves (score against the exact reference line) and the threshold curve."""
     import matplotlib
@@ -635,43 +663,30 @@ def plot(res: dict[str, Any], out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for r in res["learned_attackers"]:
-        steps = [c["timesteps"] for c in r["curves"][0]]
-        ratio = np.mean([[c["reward"] / r["br_value"] for c in cur] for cur in r["curves"]], 0)
-        ax.plot(steps, ratio, marker="o", ms=3, label=f"{_setting(r)} {r['detector']}")
-    ax.axhline(1.0, color="k", ls="--", label="numerical best response = 1")
-    ax.set(
-        xlabel="environment steps",
-        ylabel="reward / best response (mean over seeds)",
-        title="Learned attacker (SAC) against fixed detectors, MSE",
-    )
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=6, loc="lower right")
-    fig.tight_layout()
-    paths.append(out / "results_detection_learned_attacker.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for r in res["learned_defenders"]:
-        steps = [c["timesteps"] for c in r["curves"][0]]
-        ratio = np.mean([[r["best_value"] / c["reward"] for c in cur] for cur in r["curves"]], 0)
-        ax.plot(
-            steps, ratio, marker="o", ms=3, label=f"{_setting(r)} (OBDD: {r['obdd_score']:.1%})"
+    paths.append(
+        _ratio_plot(
+            res["learned_attackers"],
+            lambda r, c: c["reward"] / r["br_value"],
+            lambda r: f"{_setting(r)} {r['detector']}",
+            "numerical best response = 1",
+            "reward / best response (mean over seeds)",
+            "Learned attacker (SAC) against fixed detectors, MSE",
+            out / "results_detection_learned_attacker.png",
+            legend_size=6,
         )
-    ax.axhline(1.0, color="k", ls="--", label="τ*_MSE (exact optimum) = 1")
-    ax.set(
-        xlabel="environment steps",
-        ylabel="optimal cost / learned cost (mean over seeds)",
-        title="Learned defender (SAC) against the preset attack, MSE",
     )
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    paths.append(out / "results_detection_learned_defender.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
+    paths.append(
+        _ratio_plot(
+            res["learned_defenders"],
+            lambda r, c: r["best_value"] / c["reward"],
+            lambda r: f"{_setting(r)} (OBDD: {r['obdd_score']:.1%})",
+            "τ*_MSE (exact optimum) = 1",
+            "optimal cost / learned cost (mean over seeds)",
+            "Learned defender (SAC) against the preset attack, MSE",
+            out / "results_detection_learned_defender.png",
+            legend_size=7,
+        )
+    )
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for r in res["defender_refs"]:

@@ -272,19 +272,7 @@ def train_torch(
 
     torch.set_num_threads(1)
     hp = ALGO_DEFAULTS[TORCH_PPO]
-    config = TorchPPOConfig(
-        total_timesteps=budget.torch_steps,
-        num_envs=budget.torch_envs,
-        num_steps=hp["n_steps"],
-        learning_rate=hp["learning_rate"],
-        anneal_lr=hp["lr_schedule"] == "linear",
-        gamma=hp["gamma"],
-        gae_lambda=hp["gae_lambda"],
-        update_epochs=hp["n_epochs"],
-        clip_coef=hp["clip_range"],
-        ent_coef=hp["ent_coef"],
-        hidden=tuple(hp["net_arch"]),
-    )
+    config = TorchPPOConfig.from_hyperparameters(hp, budget.torch_steps, budget.torch_envs)
     args = (system, inst.budget, inst.horizon, inst.objective)
     eval_env = PlanSparseEnv(*args)
     venv = PlanVectorEnv(*args, num_envs=budget.torch_envs)
