@@ -23,7 +23,6 @@ Learned rows: 3 seeds, mean ± 95 % CI. A policy of this one-step game is its ac
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -450,122 +449,6 @@ def alternating(defenders: Sequence[float], budget: Budget, seed: int) -> list[d
 
 
 # --- the table --------------------------------------------------------------------------------
-def _pm(pair: tuple[float, float], fmt: str = ".4g") -> str:
-    mean, half = pair
-    if math.isnan(half):
-        return f"{mean:{fmt}}"
-    return f"{mean:{fmt}} ± {half:.1%}" if fmt.endswith("%") else f"{mean:{fmt}} ± {half:.2g}"
-
-
-def _setting(row: dict[str, Any]) -> str:
-    return f"{row['scenario']} a²={row['power']:g}"
-
-
-def format_tables(res: dict[str, Any]) -> str:
-    """The four tables as Markdown."""
-    out = ["**1a. Defender's best threshold against the preset attack** (exact, 1-D search)", ""]
-    out += [
-        "| setting | criterion | τ* | τ*'s reward | env's reward at τ* | OBDD α | OBDD's reward "
-        "| OBDD's score | random thresholds' score |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in res["defender_refs"]:
-        out.append(
-            f"| {_setting(r)} | {r['criterion']} | {r['best_threshold']:.4g} "
-            f"| {r['best_value']:.6g} | {r['env_value']:.6g} | {r['obdd_threshold']:.4g} "
-            f"| {r['obdd_value']:.6g} | {r['obdd_score']:.1%} | {r['random_score']:.1%} |"
-        )
-    out += [
-        "",
-        "**1b. Attacker's best response (p, Σ) to each fixed detector** "
-        "(exact, multi-start search; preset: p1 = 0.85, c2-maximising Σ)",
-        "",
-    ]
-    out += [
-        "| setting | criterion | detector | τ | preset attack | best response | env's reward "
-        "| p* | Σ* | gain |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in res["attacker_refs"]:
-        sigma = np.round(np.asarray(r["br_sigma"]), 1).tolist()
-        note = " (always discards: constant)" if r["constant"] else ""
-        out.append(
-            f"| {_setting(r)} | {r['criterion']} | {r['detector']}{note} | {r['threshold']:.4g} "
-            f"| {r['preset_value']:.6g} | {r['br_value']:.6g} | {r['env_value']:.6g} "
-            f"| {r['br_probability']:g} | {sigma} | ×{r['br_gain']:.3f} |"
-        )
-    out += ["", "**2. Learned attacker (SAC, MSE criterion) against each fixed detector**", ""]
-    out += [
-        "| setting | detector | steps | learned reward | learned p | best response "
-        "| learned's score | random attacks' score | preset's score |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in res["learned_attackers"]:
-        out.append(
-            f"| {_setting(r)} | {r['detector']} | {r['steps']} | {_pm(r['learned'])} "
-            f"| {_pm(r['learned_p'], '.3f')} | {r['br_value']:.5g} "
-            f"| {_pm(r['learned_score'], '.1%')} | {r['random_score']:.1%} "
-            f"| {r['preset_value'] / r['br_value']:.1%} |"
-        )
-    out += ["", "**3. Learned defender (SAC, MSE criterion) against the preset attack**", ""]
-    out += [
-        "| setting | steps | learned reward | τ*'s reward | learned's score | OBDD α's score "
-        "| random thresholds' score |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for r in res["learned_defenders"]:
-        out.append(
-            f"| {_setting(r)} | {r['steps']} | {_pm(r['learned'])} | {r['best_value']:.6g} "
-            f"| {_pm(r['learned_score'], '.2%')} | {r['obdd_score']:.2%} "
-            f"| {r['random_score']:.1%} |"
-        )
-    if res["rounds"]:
-        out += [
-            "",
-            "**4. Learned against learned** "
-            f"({GAME_SETTING[0]} a²={GAME_SETTING[1]:g}, MSE; alternating SAC best "
-            "responses from the learned defender of table 3)",
-            "",
-        ]
-        out += [
-            "| round | side | payoff against the other | its exact best response's | score "
-            "| counterpart against the same opponent | worst case over all attacks |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        rounds = sorted({(r["round"], r["side"]) for r in res["rounds"]}, key=_order)
-        for k, side in rounds:
-            rs = [r for r in res["rounds"] if r["round"] == k and r["side"] == side]
-            if k == 0:
-                out.append(
-                    f"| 0 | defender (table 3) | | | | | "
-                    f"{_pm(mean_ci95([r['worst_case'] for r in rs]))} |"
-                )
-                continue
-            cols = [_pm(mean_ci95([r[c] for r in rs])) for c in ("payoff", "best_response")]
-            score = _pm(mean_ci95([r["score"] for r in rs]), ".1%")
-            if side == "attacker":
-                other = f"preset attack: {_pm(mean_ci95([r['preset_payoff'] for r in rs]))}"
-                worst = ""
-            else:
-                other = f"OBDD α: {_pm(mean_ci95([r['obdd_payoff'] for r in rs]))}"
-                worst = _pm(mean_ci95([r["worst_case"] for r in rs]))
-            out.append(f"| {k} | {side} | {cols[0]} | {cols[1]} | {score} | {other} | {worst} |")
-        mm = res.get("minimax")
-        obdd_worst = res["obdd_worst_case"]
-        line = f"OBDD α's worst case over all attacks: {obdd_worst:.6g}"
-        if mm is not None:
-            line += (
-                f"; minimax threshold (grid of {len(mm['grid'])} actions): τ = "
-                f"{mm['threshold']:.4g}, worst case {mm['value']:.6g}"
-            )
-        out += ["", line + "."]
-    return "\n".join(out)
-
-
-def _order(key: tuple[int, str]) -> tuple[int, int]:
-    return key[0], 0 if key[1] == "attacker" else 1
-
-
 def run_budget(budget: Budget, seed: int = 0) -> dict[str, Any]:
     """Every table's rows for ``budget`` (see the module docstring)."""
     start = time.perf_counter()
@@ -626,99 +509,10 @@ def run_budget(budget: Budget, seed: int = 0) -> dict[str, Any]:
     return res
 
 
-def _ratio_plot(
-    rows: list[dict[str, Any]],
-    ratio: Any,
-    label: Any,
-    reference: str,
-    ylabel: str,
-    title: str,
-    path: Path,
-    legend_size: int,
-) -> Path:
-    """Learning curves of ``ratio(row, point)`` (mean over seeds) with the reference at 1."""
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for r in rows:
-        steps = [c["timesteps"] for c in r["curves"][0]]
-        mean = np.mean([[ratio(r, c) for c in cur] for cur in r["curves"]], 0)
-        ax.plot(steps, mean, marker="o", ms=3, label=label(r))
-    ax.axhline(1.0, color="k", ls="--", label=reference)
-    ax.set(xlabel="environment steps", ylabel=ylabel, title=title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=legend_size, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def plot(res: dict[str, Any], out: Path) -> list[Path]:
-    """Learning curves (score against the exact reference line) and the threshold curve."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    paths.append(
-        _ratio_plot(
-            res["learned_attackers"],
-            lambda r, c: c["reward"] / r["br_value"],
-            lambda r: f"{_setting(r)} {r['detector']}",
-            "numerical best response = 1",
-            "reward / best response (mean over seeds)",
-            "Learned attacker (SAC) against fixed detectors, MSE",
-            out / "results_detection_learned_attacker.png",
-            legend_size=6,
-        )
-    )
-    paths.append(
-        _ratio_plot(
-            res["learned_defenders"],
-            lambda r, c: r["best_value"] / c["reward"],
-            lambda r: f"{_setting(r)} (OBDD: {r['obdd_score']:.1%})",
-            "τ*_MSE (exact optimum) = 1",
-            "optimal cost / learned cost (mean over seeds)",
-            "Learned defender (SAC) against the preset attack, MSE",
-            out / "results_detection_learned_defender.png",
-            legend_size=7,
-        )
-    )
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for r in res["defender_refs"]:
-        if (r["scenario"], r["power"]) != GAME_SETTING:
-            continue
-        ax.plot(r["curve"]["action"], r["curve"]["value"], label=f"criterion {r['criterion']}")
-        color = ax.lines[-1].get_color()
-        ax.axvline(r["best_action"], ls=":", color=color, label=f"best τ ({r['criterion']})")
-    for r in res["learned_defenders"]:
-        if (r["scenario"], r["power"]) == GAME_SETTING:
-            ax.plot(
-                r["actions"],
-                r["learned"][0] * np.ones(len(r["actions"])),
-                "kx",
-                label="learned defenders (MSE)",
-            )
-    ax.set(
-        xlabel="defender action a (τ = (1 + a) / (1 − a))",
-        ylabel="defender reward",
-        title=f"Threshold vs the preset attack, {GAME_SETTING[0]} a²={GAME_SETTING[1]:g}",
-    )
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    paths.append(out / "results_detection_learned_threshold.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
-    return paths
-
-
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     """The ``detection_learned`` tables (Markdown); ``quick``: :data:`QUICK`."""
+    from agents.results.detection_learned_report import format_tables, plot
+
     res = run_budget(QUICK if quick else Budget(), seed=seed)
     if out is not None:
         rows = [
