@@ -252,8 +252,16 @@ def format_general(rows: list[dict[str, Any]], n: int, n_sub: int) -> str:
     return "\n".join(lines)
 
 
-def plot(out: Path, curves: dict[str, list[dict]], scores: dict[str, np.ndarray]) -> None:
-    """Learning curves (validation score) and sorted held-out scores, optimum as a line."""
+def plot(
+    out: Path,
+    curves: dict[str, list[dict]],
+    scores: dict[str, np.ndarray],
+    prefix: str = "results_general",
+) -> None:
+    """Learning curves (validation score) and sorted held-out scores, optimum as a line.
+
+    The files are ``<prefix>_curve.png`` and ``<prefix>_scores.png`` in ``out``.
+    """
     from agents.plots import _save, plt
 
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -270,7 +278,7 @@ def plot(out: Path, curves: dict[str, list[dict]], scores: dict[str, np.ndarray]
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     fig.tight_layout()
-    _save(fig, out / "results_general_curve.png")
+    _save(fig, out / f"{prefix}_curve.png")
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for name, s in scores.items():
@@ -282,7 +290,7 @@ def plot(out: Path, curves: dict[str, list[dict]], scores: dict[str, np.ndarray]
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left")
     fig.tight_layout()
-    _save(fig, out / "results_general_scores.png")
+    _save(fig, out / f"{prefix}_scores.png")
 
 
 def general_table(
