@@ -27,8 +27,10 @@ FAMILY = GridFamily(
 )
 """The grid family of both runs (the full and the quick one differ in training only)."""
 
-FULL = Settings(FAMILY, 40_000, 8_000, 100, 10_000)
-QUICK = Settings(FAMILY, 4_096, 1_024, 100, 4_096)
+PPO = {"n_steps": 64, "batch_size": 256}
+"""Shorter rollouts than the tracking table's (episodes here are c + N = 5 decisions)."""
+FULL = Settings(FAMILY, 100_000, 10_000, 100, 10_000, PPO)
+QUICK = Settings(FAMILY, 8_192, 2_048, 100, 8_192, PPO)
 
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
