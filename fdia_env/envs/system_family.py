@@ -2,7 +2,8 @@
 
 :class:`SystemFamilyEnv` is a Gymnasium env that, at every reset, draws a new system from a
 family (:class:`TrackingFamily`: random tracking systems as in the ``ch4-random`` preset,
-MATH.md §6) and plays one episode of ``sparse_attack_v0`` (perfect detection, expected
+MATH.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
+estimation with random loads and meter noise, 34 meters, ``action="sequential"`` only) and plays one episode of ``sparse_attack_v0`` (perfect detection, expected
 dynamics, terminal reward) on it. Its observation is the sparse env's observation followed by a
 fixed-size *description* of the current system, so one policy can attack every system of the
 family; the action mask is kept (MaskablePPO).
@@ -278,11 +279,13 @@ class SystemFamilyEnv(gym.Env):
     """``sparse_attack_v0`` on a new system of ``family`` at every reset (module docstring).
 
     Args:
-        family: The system distribution (a :class:`TrackingFamily`).
+        family: The system distribution (a :class:`TrackingFamily` or a
+            :class:`~fdia_env.envs.grid_family.GridFamily`).
         system_seeds: The system seeds drawn from at reset (a non-empty ``range`` of integers
             >= 0); keep training and held-out ranges disjoint.
         max_sensors: Sensor slots of the description and bits of the action (default the
-            family's ``num_sensors``; at most 16).
+            family's ``num_sensors``; at most 16 with ``action="bitmask"``, at most
+            :data:`MAX_SEQUENTIAL_SENSORS` with ``"sequential"``).
         objective: Φ, ``"trace"`` or ``"logdet"``.
         normalize_reward: Divide the terminal reward by ``s = tr P̄`` (trace) or subtract
             ``log det P̄`` (log det).
