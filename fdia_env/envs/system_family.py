@@ -3,8 +3,9 @@
 :class:`SystemFamilyEnv` is a Gymnasium env that, at every reset, draws a new system from a
 family (:class:`TrackingFamily`: random tracking systems as in the ``ch4-random`` preset,
 MATH.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
-estimation with random loads and meter noise, 34 meters, ``action="sequential"`` only) and plays one episode of ``sparse_attack_v0`` (perfect detection, expected
-dynamics, terminal reward) on it. Its observation is the sparse env's observation followed by a
+estimation with random loads and meter noise, 34 meters, ``action="sequential"`` only) and
+plays one episode of ``sparse_attack_v0`` (perfect detection, expected dynamics, terminal
+reward) on it. Its observation is the sparse env's observation followed by a
 fixed-size *description* of the current system, so one policy can attack every system of the
 family; the action mask is kept (MaskablePPO).
 
