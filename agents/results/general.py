@@ -253,9 +253,11 @@ def format_general(rows: list[dict[str, Any]], n: int, n_sub: int) -> str:
         "|---|---|---|---|---|",
     ]
     for r in rows:
+        sub = r["sfs_suboptimal_mean"]
+        on_sub = "none" if sub != sub else f"{sub:.1%} ± {r['sfs_suboptimal_ci95']:.1%}"
         lines.append(
             f"| {r['policy']} | {r['mean']:.1%} ± {r['ci95']:.1%} | {r['at_least_99']:.0%} "
-            f"| {r['min']:.1%} | {r['sfs_suboptimal_mean']:.1%} ± {r['sfs_suboptimal_ci95']:.1%} |"
+            f"| {r['min']:.1%} | {on_sub} |"
         )
     return "\n".join(lines)
 
