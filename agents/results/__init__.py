@@ -13,6 +13,8 @@ test suite runs each). A table module exposes ``run(quick, seed, out) -> str`` (
   and torch PPO against SFS, SBS, SFS-SS, DP and the certified optimum (or bound).
 - ``general`` (:mod:`agents.results.general`): one sparse attacker for many systems, on held-out
   systems against each one's optimum and SFS.
+- ``general_grid`` (:mod:`agents.results.general_grid`): the same over random IEEE 14-bus grids
+  (random loads and meter noise).
 - ``game`` (:mod:`agents.results.game`): PSRO with learned best responses on the sensor game at
   M = 10 and on grid-ieee14 against the exact (double-oracle and LP) equilibrium.
 """

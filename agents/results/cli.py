@@ -12,6 +12,7 @@ from pathlib import Path
 TABLES: dict[str, str] = {
     "sparse_grid": "agents.results.sparse_grid",
     "general": "agents.results.general",
+    "general_grid": "agents.results.general_grid",
     "game": "agents.results.game",
     "detection": "agents.results.detection",
     "detection_learned": "agents.results.detection_learned",

@@ -27,6 +27,7 @@ from agents.evaluate import RandomPolicy
 from agents.results.common import mean_ci95, write_rows
 from baselines.sparse import branch_and_bound, sfs
 from fdia_env._validation import check_int
+from fdia_env.envs.grid_family import GridFamily
 from fdia_env.envs.system_family import SystemFamilyEnv, TrackingFamily
 
 TRAIN_SEEDS = range(0, 1_000_000)
@@ -78,13 +79,17 @@ SORT_SENSORS = True  # slots ordered by attack effect (SystemFamilyEnv sort_sens
 
 @dataclass(frozen=True)
 class Settings:
-    """One run of the table: the family, training steps and held-out count."""
+    """One run of the table: the family, training steps and held-out count.
 
-    family: TrackingFamily
+    ``ppo`` overrides entries of :data:`PPO_KWARGS` for this run (``None``: none).
+    """
+
+    family: TrackingFamily | GridFamily
     timesteps: int
     single_timesteps: int
     n_heldout: int
     curve_every: int
+    ppo: dict[str, Any] | None = None
 
 
 FULL = Settings(FULL_FAMILY, 250_000, 30_000, 200, 25_000)
@@ -190,6 +195,7 @@ def train_policy(
     system_seeds: range = TRAIN_SEEDS,
     describe: bool = True,
     curve: tuple[np.ndarray, int] | None = None,
+    ppo: dict[str, Any] | None = None,
 ) -> tuple[MaskablePPO, list[dict[str, Any]]]:
     """MaskablePPO on the family env; returns the model and its learning curve (if asked).
 
@@ -200,6 +206,7 @@ def train_policy(
         system_seeds: Systems trained on (one seed: the single-system policy).
         describe: Observe the system description.
         curve: ``(optima of VALIDATION_SEEDS, every)`` to record a learning curve.
+        ppo: Entries replacing those of :data:`PPO_KWARGS` (``None``: none).
     """
     check_int("timesteps", timesteps, minimum=1)
     vec = DummyVecEnv(
@@ -215,7 +222,8 @@ def train_policy(
             for _ in range(N_ENVS)
         ]
     )
-    model = MaskablePPO("MlpPolicy", vec, seed=seed, device="cpu", verbose=0, **PPO_KWARGS)
+    kwargs = {**PPO_KWARGS, **(ppo or {})}
+    model = MaskablePPO("MlpPolicy", vec, seed=seed, device="cpu", verbose=0, **kwargs)
     callback = None if curve is None else _Curve(family, curve[0], describe, curve[1])
     model.learn(total_timesteps=timesteps, callback=callback)
     return model, ([] if callback is None else callback.history)
@@ -245,15 +253,25 @@ def format_general(rows: list[dict[str, Any]], n: int, n_sub: int) -> str:
         "|---|---|---|---|---|",
     ]
     for r in rows:
+        sub = r["sfs_suboptimal_mean"]
+        on_sub = "none" if sub != sub else f"{sub:.1%} ± {r['sfs_suboptimal_ci95']:.1%}"
         lines.append(
             f"| {r['policy']} | {r['mean']:.1%} ± {r['ci95']:.1%} | {r['at_least_99']:.0%} "
-            f"| {r['min']:.1%} | {r['sfs_suboptimal_mean']:.1%} ± {r['sfs_suboptimal_ci95']:.1%} |"
+            f"| {r['min']:.1%} | {on_sub} |"
         )
     return "\n".join(lines)
 
 
-def plot(out: Path, curves: dict[str, list[dict]], scores: dict[str, np.ndarray]) -> None:
-    """Learning curves (validation score) and sorted held-out scores, optimum as a line."""
+def plot(
+    out: Path,
+    curves: dict[str, list[dict]],
+    scores: dict[str, np.ndarray],
+    prefix: str = "results_general",
+) -> None:
+    """Learning curves (validation score) and sorted held-out scores, optimum as a line.
+
+    The files are ``<prefix>_curve.png`` and ``<prefix>_scores.png`` in ``out``.
+    """
     from agents.plots import _save, plt
 
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -270,7 +288,7 @@ def plot(out: Path, curves: dict[str, list[dict]], scores: dict[str, np.ndarray]
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     fig.tight_layout()
-    _save(fig, out / "results_general_curve.png")
+    _save(fig, out / f"{prefix}_curve.png")
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for name, s in scores.items():
@@ -282,7 +300,7 @@ def plot(out: Path, curves: dict[str, list[dict]], scores: dict[str, np.ndarray]
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left")
     fig.tight_layout()
-    _save(fig, out / "results_general_scores.png")
+    _save(fig, out / f"{prefix}_scores.png")
 
 
 def general_table(
@@ -299,14 +317,17 @@ def general_table(
     curve = (val_optima, settings.curve_every)
     timings = {}
     t0 = time.perf_counter()
-    model, hist = train_policy(family, settings.timesteps, seed, curve=curve)
+    ppo = settings.ppo
+    model, hist = train_policy(family, settings.timesteps, seed, curve=curve, ppo=ppo)
     timings["family"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    blind, hist_blind = train_policy(family, settings.timesteps, seed, describe=False, curve=curve)
+    blind, hist_blind = train_policy(
+        family, settings.timesteps, seed, describe=False, curve=curve, ppo=ppo
+    )
     timings["no description"] = time.perf_counter() - t0
     one = range(SINGLE_SYSTEM_SEED, SINGLE_SYSTEM_SEED + 1)
     t0 = time.perf_counter()
-    single, _ = train_policy(family, settings.single_timesteps, seed, one, describe=False)
+    single, _ = train_policy(family, settings.single_timesteps, seed, one, describe=False, ppo=ppo)
     timings["single system"] = time.perf_counter() - t0
     random_policy = RandomPolicy(SystemFamilyEnv(family, action=ACTION).action_space, seed=seed)
     values = [

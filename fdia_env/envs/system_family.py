@@ -2,8 +2,10 @@
 
 :class:`SystemFamilyEnv` is a Gymnasium env that, at every reset, draws a new system from a
 family (:class:`TrackingFamily`: random tracking systems as in the ``ch4-random`` preset,
-MATH.md §6) and plays one episode of ``sparse_attack_v0`` (perfect detection, expected
-dynamics, terminal reward) on it. Its observation is the sparse env's observation followed by a
+MATH.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
+estimation with random loads and meter noise, 34 meters, ``action="sequential"`` only) and
+plays one episode of ``sparse_attack_v0`` (perfect detection, expected dynamics, terminal
+reward) on it. Its observation is the sparse env's observation followed by a
 fixed-size *description* of the current system, so one policy can attack every system of the
 family; the action mask is kept (MaskablePPO).
 
@@ -100,6 +102,7 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import MAX_SENSORS
+from fdia_env.envs.grid_family import GridFamily
 from fdia_env.envs.single_agent import SingleAgentEnv
 from fdia_env.kalman import information_update, objective, steady_state
 from fdia_env.scenarios import Scenario
@@ -110,6 +113,8 @@ ACTIONS = ("bitmask", "sequential")
 CLIP = 10.0
 LOGDET_EFFECT_MAX = 30.0
 SIGMA_W_FLOOR = 1e-6  # as ch4-random: U(0, 1) can return exactly 0; a sensor needs R > 0
+MAX_SEQUENTIAL_SENSORS = 128
+"""Largest ``max_sensors`` of ``action="sequential"`` (the bitmask action stops at 16)."""
 
 
 def _check_range(name: str, value: Any, lower: float, allow_zero: bool) -> tuple[float, float]:
@@ -211,7 +216,7 @@ def describe_system(
     """
     if not isinstance(system, LinearSystem):
         raise ValueError(f"system must be a LinearSystem, got {type(system).__name__}")
-    check_int("max_sensors", max_sensors, minimum=1, maximum=MAX_SENSORS)
+    check_int("max_sensors", max_sensors, minimum=1, maximum=MAX_SEQUENTIAL_SENSORS)
     check_choice("objective", objective_name, OBJECTIVES)
     if system.M > max_sensors:
         raise ValueError(f"system has {system.M} sensors, above max_sensors = {max_sensors}")
@@ -275,11 +280,13 @@ class SystemFamilyEnv(gym.Env):
     """``sparse_attack_v0`` on a new system of ``family`` at every reset (module docstring).
 
     Args:
-        family: The system distribution (a :class:`TrackingFamily`).
+        family: The system distribution (a :class:`TrackingFamily` or a
+            :class:`~fdia_env.envs.grid_family.GridFamily`).
         system_seeds: The system seeds drawn from at reset (a non-empty ``range`` of integers
             >= 0); keep training and held-out ranges disjoint.
         max_sensors: Sensor slots of the description and bits of the action (default the
-            family's ``num_sensors``; at most 16).
+            family's ``num_sensors``; at most 16 with ``action="bitmask"``, at most
+            :data:`MAX_SEQUENTIAL_SENSORS` with ``"sequential"``).
         objective: Φ, ``"trace"`` or ``"logdet"``.
         normalize_reward: Divide the terminal reward by ``s = tr P̄`` (trace) or subtract
             ``log det P̄`` (log det).
@@ -304,7 +311,7 @@ class SystemFamilyEnv(gym.Env):
 
     def __init__(
         self,
-        family: TrackingFamily,
+        family: TrackingFamily | GridFamily,
         system_seeds: range = range(0, 1_000_000),
         max_sensors: int | None = None,
         objective: str = "trace",
@@ -315,8 +322,10 @@ class SystemFamilyEnv(gym.Env):
         spend_budget: bool = True,
         sort_sensors: bool = False,
     ) -> None:
-        if not isinstance(family, TrackingFamily):
-            raise ValueError(f"family must be a TrackingFamily, got {type(family).__name__}")
+        if not isinstance(family, (TrackingFamily, GridFamily)):
+            raise ValueError(
+                f"family must be a TrackingFamily or a GridFamily, got {type(family).__name__}"
+            )
         if not isinstance(system_seeds, range) or len(system_seeds) == 0:
             raise ValueError(
                 f"system_seeds must be a non-empty range of integers >= 0, got {system_seeds!r}"
@@ -325,9 +334,10 @@ class SystemFamilyEnv(gym.Env):
             raise ValueError(f"system_seeds must hold integers >= 0, got {system_seeds!r}")
         if max_sensors is None:
             max_sensors = family.num_sensors
-        check_int("max_sensors", max_sensors, minimum=family.num_sensors, maximum=MAX_SENSORS)
-        check_choice("objective", objective, OBJECTIVES)
         check_choice("action", action, ACTIONS)
+        cap = MAX_SEQUENTIAL_SENSORS if action == "sequential" else MAX_SENSORS
+        check_int("max_sensors", max_sensors, minimum=family.num_sensors, maximum=cap)
+        check_choice("objective", objective, OBJECTIVES)
         flags = (
             ("normalize_reward", normalize_reward),
             ("describe", describe),
@@ -389,7 +399,7 @@ class SystemFamilyEnv(gym.Env):
         self._mask = np.zeros(self.action_space.n, dtype=np.int8)
         parts = [self._sparse_obs]
         if self.sequential:
-            chosen = (self._chosen >> np.arange(self.max_sensors)) & 1
+            chosen = np.array([(self._chosen >> j) & 1 for j in range(self.max_sensors)])
             if bin(self._chosen).count("1") < self._left:
                 self._mask[1 : 1 + self.system.M] = 1 - chosen[: self.system.M]
             last = self._commits == self.family.horizon - 1
@@ -449,7 +459,7 @@ class SystemFamilyEnv(gym.Env):
             self._scale = float(ref)
         self._chosen, self._left, self._commits = 0, self.family.budget, 0
         obs, info = self._inner.reset(seed=int(self.np_random.integers(2**31)))
-        out = self._observation(obs, info["action_mask"])
+        out = self._observation(obs, info.get("action_mask"))
         extra = {"system_seed": k, "slot_sensors": self.order.tolist()}
         return out, {**info, "action_mask": self._mask.copy(), **extra}
 
@@ -476,11 +486,13 @@ class SystemFamilyEnv(gym.Env):
             self._commits += 1
         a &= (1 << self.system.M) - 1
         a = sum(1 << int(self.order[j]) for j in range(self.system.M) if a >> j & 1)
+        if self.system.M > MAX_SENSORS:  # the sparse env's MultiBinary action (M > 16)
+            a = np.array([(a >> j) & 1 for j in range(self.system.M)], dtype=np.int8)
         obs, reward, term, trunc, info = self._inner.step(a)
         scaled = self.normalize_reward or self.reward_reference is not None
         if scaled and term:  # the terminal reward is the only one
             reward = reward / self._scale if self.objective == "trace" else reward - self._scale
-        out = self._observation(obs, info["action_mask"])
+        out = self._observation(obs, info.get("action_mask"))
         info = {**info, "action_mask": self._mask.copy(), "system_seed": self.system_seed}
         return out, float(reward), term, trunc, info
 
