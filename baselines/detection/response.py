@@ -42,7 +42,7 @@ from baselines.detection.detectors import Detector
 from baselines.detection.evaluate import bayes_cost, expected_mse
 from baselines.detection.problem import DetectionProblem, check_probability
 from fdia_env.attacks.covariance import CovarianceMap
-from fdia_env.defenses.detector import CRITERIA, ThresholdDetector
+from fdia_env.defenses.detector import CRITERIA, ThresholdDetector, threshold_to_action
 from fdia_env.detection_game_v0 import _prior
 
 GRID = 201  # default grid of defender actions in [-1, 1]
@@ -128,13 +128,7 @@ class DetectionGame:
 
     def threshold_action(self, threshold: float) -> np.ndarray:
         """The defender's (1,) float32 action of ``threshold`` (negative ones: a = -1)."""
-        t = float(threshold)
-        if math.isnan(t):
-            raise ValueError("threshold must not be NaN")
-        if t == math.inf:
-            return np.ones(1, dtype=np.float32)
-        t = max(t, 0.0)
-        return np.array([(t - self.scale) / (t + self.scale)], dtype=np.float32)
+        return threshold_to_action(threshold, self.scale)
 
     def attack(self, action: Any) -> tuple[float, np.ndarray]:
         """``(p, Σ)`` of an attacker action (``(1 + d,)`` in [-1, 1])."""

@@ -19,6 +19,23 @@ ON_DETECT = ("discard", "incorporate")
 CRITERIA = ("mse", "bayes_cost")
 
 
+def threshold_to_action(threshold: float, scale: float) -> np.ndarray:
+    """The (1,) float32 defender action of ``threshold`` under ``τ = s (1 + a) / (1 − a)``.
+
+    Negative thresholds map to a = -1 (declare every measurement an attack), ``inf`` to 1.
+
+    Raises:
+        ValueError: For a NaN threshold.
+    """
+    t = float(threshold)
+    if np.isnan(t):
+        raise ValueError("threshold must not be NaN")
+    if t == np.inf:
+        return np.ones(1, dtype=np.float32)
+    t = max(t, 0.0)
+    return np.array([(t - scale) / (t + scale)], dtype=np.float32)
+
+
 class ThresholdDetector(DefenseModel):
     """Decide "attacked" when the statistic of the innovation exceeds the chosen threshold τ.
 
@@ -91,13 +108,7 @@ class ThresholdDetector(DefenseModel):
 
     def threshold_to_action(self, threshold: float) -> np.ndarray:
         """The action whose threshold is ``threshold`` (negative thresholds map to a = -1)."""
-        t = float(threshold)
-        if np.isnan(t):
-            raise ValueError("threshold must not be NaN")
-        if t == np.inf:
-            return np.ones(1, dtype=np.float32)
-        t = max(t, 0.0)
-        return np.array([(t - self.scale) / (t + self.scale)], dtype=np.float32)
+        return threshold_to_action(threshold, self.scale)
 
     def info_defaults(self, sampled: bool) -> dict[str, Any]:
         """The detector's info keys (zeros before the first step).
