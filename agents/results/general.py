@@ -353,22 +353,38 @@ def general_table(
     return summary, per_system, extras
 
 
-def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
-    """The ``general`` table (Markdown); ``quick``: M = 6, c = 6, N = 4, short training."""
+def report(settings: Settings, seed: int, out: Path | None, name: str, family: str) -> str:
+    """Run :func:`general_table` and return it as Markdown (rows and plots to ``out``).
+
+    Args:
+        settings: The family and the training budgets.
+        seed: Base seed.
+        out: Folder for ``<name>.json`` and the ``results_<name>_*.png`` plots (None: none).
+        name: The table's name.
+        family: One line describing the family, printed under the table.
+    """
     torch.set_num_threads(1)
-    settings = QUICK if quick else FULL
     start = time.perf_counter()
     summary, per_system, extras = general_table(settings, seed)
     if out is not None:
-        write_rows(out / "general.json", summary + per_system)
-        plot(out, extras["curves"], extras["scores"])
-    fam = settings.family
+        write_rows(out / f"{name}.json", summary + per_system)
+        plot(out, extras["curves"], extras["scores"], prefix=f"results_{name}")
     timings = ", ".join(f"{k} {v:.0f} s" for k, v in extras["timings"].items())
     return (
         format_general(summary, settings.n_heldout, extras["n_sub"])
-        + f"\n\nFamily: M = {fam.num_sensors} position sensors, σ_w ~ U{fam.sigma_w}, σ_v "
-        f"log-uniform on {fam.sigma_v}, c = {fam.budget}, N = {fam.horizon}; training "
+        + f"\n\nFamily: {family}; training "
         f"{settings.timesteps:,} steps (single system {settings.single_timesteps:,}), seed "
         f"{seed}; every optimum proved: {extras['all_proved']}. Training time: {timings}; "
         f"total {time.perf_counter() - start:.0f} s."
     )
+
+
+def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
+    """The ``general`` table (Markdown); ``quick``: M = 6, c = 6, N = 4, short training."""
+    settings = QUICK if quick else FULL
+    fam = settings.family
+    family = (
+        f"M = {fam.num_sensors} position sensors, σ_w ~ U{fam.sigma_w}, σ_v log-uniform on "
+        f"{fam.sigma_v}, c = {fam.budget}, N = {fam.horizon}"
+    )
+    return report(settings, seed, out, "general", family)

@@ -13,13 +13,9 @@ module calls with another :class:`~agents.results.general.Settings`.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
-import torch
-
-from agents.results.common import write_rows
-from agents.results.general import Settings, format_general, general_table, plot
+from agents.results.general import Settings, report
 from fdia_env.envs.grid_family import GridFamily
 
 FAMILY = GridFamily(
@@ -35,21 +31,11 @@ QUICK = Settings(FAMILY, 8_192, 2_048, 100, 8_192, PPO)
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     """The ``general_grid`` table (Markdown); ``quick``: short training."""
-    torch.set_num_threads(1)
     settings = QUICK if quick else FULL
-    start = time.perf_counter()
-    summary, per_system, extras = general_table(settings, seed)
-    if out is not None:
-        write_rows(out / "general_grid.json", summary + per_system)
-        plot(out, extras["curves"], extras["scores"], prefix="results_general_grid")
     fam = settings.family
-    timings = ", ".join(f"{k} {v:.0f} s" for k, v in extras["timings"].items())
-    return (
-        format_general(summary, settings.n_heldout, extras["n_sub"])
-        + f"\n\nFamily: pandapower {fam.case}, M = {fam.num_sensors} meters, n = "
-        f"{fam.state_size} angles, loads × U{fam.load_scale}, meter σ × log-uniform on "
-        f"{fam.noise_scale}, c = {fam.budget}, N = {fam.horizon}; training "
-        f"{settings.timesteps:,} steps (single system {settings.single_timesteps:,}), seed "
-        f"{seed}; every optimum proved: {extras['all_proved']}. Training time: {timings}; "
-        f"total {time.perf_counter() - start:.0f} s."
+    family = (
+        f"pandapower {fam.case}, M = {fam.num_sensors} meters, n = {fam.state_size} angles, "
+        f"loads × U{fam.load_scale}, meter σ × log-uniform on {fam.noise_scale}, "
+        f"c = {fam.budget}, N = {fam.horizon}"
     )
+    return report(settings, seed, out, "general_grid", family)
