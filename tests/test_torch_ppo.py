@@ -262,6 +262,12 @@ def test_config_rejects_bad_values(kwargs, message):
         TorchPPOConfig(**kwargs)
 
 
+def test_training_rejects_a_negative_checkpoint_freq():
+    env = make_torch_env(SPARSE.gym_id, 4, "cpu", **SPARSE.env_kwargs("ch4-position"))
+    with pytest.raises(ValueError, match="checkpoint_freq must be >= 0"):
+        train_torch_ppo(env, TorchPPOConfig(num_envs=4), checkpoint_freq=-1)
+
+
 def test_training_rejects_a_numpy_env():
     env = gym.make_vec(SPARSE.gym_id, num_envs=4, vectorization_mode="vector_entry_point")
     with pytest.raises(ValueError, match="torch vector env"):
