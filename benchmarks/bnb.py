@@ -31,10 +31,10 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from baselines.reproduce import machine
-from baselines.reproduce.common import timed
 from baselines.sparse import branch_and_bound, exhaustive
 from baselines.sparse.testbeds import dc_grid14, mixed_tracking
+from experiments.reproduce import machine
+from experiments.reproduce.common import timed
 from fdia_env import scenarios
 
 GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57")

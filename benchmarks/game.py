@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np
 
 from baselines.game import payoff_matrix, solve_double_oracle, solve_zero_sum, to_nashpy
-from baselines.reproduce import machine
+from experiments.reproduce import machine
 from fdia_env.systems import tracking_system
 
 TARGETS_S = {10: 1.0, 16: 60.0}

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np
 
-from baselines.reproduce import machine
+from experiments.reproduce import machine
 from fdia_env import sensor_game_v0
 
 ENV = "sensor_game_v0"

@@ -18,12 +18,13 @@ import sys
 import tracemalloc
 from pathlib import Path
 
-# Single-threaded BLAS for tiny LAPACK calls (see baselines/reproduce.py); set before numpy loads.
+# Single-threaded BLAS for tiny LAPACK calls (see experiments/reproduce/__init__.py); set before
+# numpy loads.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from baselines.reproduce import CH4_LITERATURE_TIMES, SOLVER_LABELS, machine
-from baselines.reproduce.common import timed
 from baselines.sparse import SOLVERS, exhaustive
+from experiments.reproduce import CH4_LITERATURE_TIMES, SOLVER_LABELS, machine
+from experiments.reproduce.common import timed
 from fdia_env import scenarios
 
 SIZES = (6, 10, 20)  # horizons N; M = 3 gives sizes 18 / 30 / 60

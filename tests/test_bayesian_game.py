@@ -29,7 +29,7 @@ from baselines.game import (
     payoff_matrix,
     solve_zero_sum,
 )
-from baselines.reproduce.ch5 import CH5_PRIORS
+from experiments.reproduce.ch5 import CH5_PRIORS
 from fdia_env import sensor_game_v0
 
 TYPES = ("independent", "dependent")
@@ -247,7 +247,7 @@ def test_env_reference_is_the_reproductions_incomplete_information_strategy(
     model, label, literature_x, literature_value
 ):
     # the spec prints no incomplete-information table; the reproduction's section
-    # (python -m baselines.reproduce ch5, docs/reproduction.md) is the reference, printed to
+    # (python -m experiments reproduce ch5, docs/reproduction.md) is the reference, printed to
     # 4 decimals for x (tolerance 5e-5) and 6 for the value (5e-7)
     kwargs = {"types": TYPES, "priors": CH5_PRIORS, "attacker_model": model}
     defender = get("sensor_game_v0", "defender")

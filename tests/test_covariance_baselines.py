@@ -681,7 +681,7 @@ def test_bad_input_raises(case):
 
 
 def test_reproduce_ch2_quick_matches_the_literature_and_writes_figures(tmp_path, capsys):
-    from baselines import reproduce
+    from experiments import reproduce
 
     output = tmp_path / "reproduction.md"
     output.write_text("# Title\n\n## Chapter 4: sparse attacks\n\nkept\n")

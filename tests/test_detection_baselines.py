@@ -499,7 +499,7 @@ def test_other_bad_parameters_name_themselves():
 
 
 def test_reproduce_ch3_quick_writes_its_section(tmp_path, capsys):
-    from baselines import reproduce
+    from experiments import reproduce
 
     output = tmp_path / "reproduction.md"
     assert reproduce.main(["ch3", "--quick", "--output", str(output)]) == 0

@@ -425,7 +425,7 @@ def test_game_model_builds_every_subset_once():
 
 
 def test_reproduce_ch5_quick_writes_its_section(tmp_path, capsys):
-    from baselines import reproduce
+    from experiments import reproduce
 
     output = tmp_path / "reproduction.md"
     assert reproduce.main(["ch5", "--quick", "--output", str(output)]) == 0

@@ -1,13 +1,13 @@
-"""agents.results: the re-runnable result tables of the learned-vs-analytic comparison."""
+"""experiments.results: the re-runnable result tables of the learned-vs-analytic comparison."""
 
 import json
 import math
 
 import pytest
 
-from agents import results
-from agents.results import detection
-from agents.results.common import mean_ci95
+from experiments import results
+from experiments.results import detection
+from experiments.results.common import mean_ci95
 
 
 def test_detection_quick_table_separates_only_at_high_power(capsys, tmp_path):

@@ -6,8 +6,6 @@ import json
 import numpy as np
 import pytest
 
-from agents import results
-from agents.results import detection_learned as dl
 from baselines.detection import (
     bayes_cost,
     detection_probabilities,
@@ -22,6 +20,8 @@ from baselines.detection.response import (
     best_threshold,
     minimax_threshold,
 )
+from experiments import results
+from experiments.results import detection_learned as dl
 from fdia_env import detection_game_v0
 
 CSD_TAU = 5.991464547107979  # χ²₂ at 95 %

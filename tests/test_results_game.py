@@ -1,12 +1,12 @@
-"""agents.results.game: PSRO with learned best responses against the exact M = 10 sensor game."""
+"""experiments.results.game: PSRO, learned best responses, against the exact M = 10 sensor game."""
 
 import json
 
 import numpy as np
 import pytest
 
-from agents.results import game, run_table
 from baselines.game import payoff_matrix, solve_double_oracle, solve_zero_sum
+from experiments.results import game, run_table
 from fdia_env import scenarios
 from fdia_env.attacks.subsets import subsets
 from fdia_env.kalman import steady_state

@@ -10,8 +10,8 @@ import pytest
 import scipy.linalg
 from gymnasium.utils.env_checker import check_env
 
-from agents.results import general
 from baselines.sparse import branch_and_bound, exhaustive, make_problem, sfs
+from experiments.results import general
 from fdia_env import scenarios
 from fdia_env.envs.system_family import (
     SystemFamilyEnv,

@@ -10,8 +10,8 @@ from gymnasium.utils.env_checker import check_env
 
 pytest.importorskip("pandapower")
 
-from agents.results import general, general_grid
 from baselines.sparse import branch_and_bound, exhaustive, sfs
+from experiments.results import general, general_grid
 from fdia_env.envs.grid_family import GridFamily
 from fdia_env.envs.system_family import SystemFamilyEnv, description_size
 from fdia_env.systems import grid_system

@@ -8,10 +8,10 @@ import math
 import pytest
 
 from agents.evaluate import evaluate
-from agents.results import sparse_grid
-from agents.results.sparse_grid import Budget, Instance, ratio
-from agents.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
 from baselines.sparse import exhaustive, sfs
+from experiments.results import sparse_grid
+from experiments.results.sparse_grid import Budget, Instance, ratio
+from experiments.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
 
 
 @pytest.fixture(scope="module")

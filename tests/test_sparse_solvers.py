@@ -266,7 +266,7 @@ def test_generic_path_handles_a_three_state_system():
 
 
 def test_reproduce_ch4_quick_writes_its_section(tmp_path, capsys):
-    from baselines import reproduce
+    from experiments import reproduce
 
     output = tmp_path / "reproduction.md"
     output.write_text("# Title\n\n## Chapter 5: games\n\nkept\n")

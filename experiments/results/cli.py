@@ -1,4 +1,4 @@
-"""``python -m agents.results``: run one result table, or all of them."""
+"""``python -m experiments results``: run one result table, or all of them."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ from pathlib import Path
 
 # table name -> module with ``run(quick, seed, out) -> str`` (imported when the table runs)
 TABLES: dict[str, str] = {
-    "sparse_grid": "agents.results.sparse_grid",
-    "general": "agents.results.general",
-    "general_grid": "agents.results.general_grid",
-    "game": "agents.results.game",
-    "detection": "agents.results.detection",
-    "detection_learned": "agents.results.detection_learned",
+    "sparse_grid": "experiments.results.sparse_grid",
+    "general": "experiments.results.general",
+    "general_grid": "experiments.results.general_grid",
+    "game": "experiments.results.game",
+    "detection": "experiments.results.detection",
+    "detection_learned": "experiments.results.detection_learned",
 }
 
 
@@ -40,8 +40,8 @@ def run_table(name: str, quick: bool = False, seed: int = 0, out: Path | None = 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse the command line, print the table(s) with their wall time."""
     parser = argparse.ArgumentParser(
-        prog="python -m agents.results",
-        description="Learned-vs-analytic result tables (issue 16).",
+        prog="python -m experiments results",
+        description="Learned-vs-analytic result tables.",
     )
     parser.add_argument("table", choices=[*TABLES, "all"], help="which result table")
     parser.add_argument("--quick", action="store_true", help="reduced run")

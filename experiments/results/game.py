@@ -25,9 +25,9 @@ import numpy as np
 
 from agents.config import GameConfig, Hyperparameters, RunSettings
 from agents.plots import exploitability_curve
-from agents.results.common import write_rows
 from agents.selfplay import run_selfplay
 from baselines.game import exploitability, payoff_matrix, solve_double_oracle, solve_zero_sum
+from experiments.results.common import write_rows
 from fdia_env._validation import check_int
 
 GAMES = ("game-m10", "grid-ieee14")

@@ -8,7 +8,7 @@ learners trained on the identical instance, 3 seeds each: sb3-contrib's Maskable
 project's SB3 model, :func:`agents.algos.build_model` with the defaults of
 :data:`agents.config.ALGO_DEFAULTS`; SB3's ``VecNormalize`` scales its rewards, as torch-ppo
 scales its own) and the torch PPO (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's
-defaults). Both play the plan format of :mod:`agents.results.sparse_grid_plan` (``c`` masked
+defaults). Both play the plan format of :mod:`experiments.results.sparse_grid_plan` (``c`` masked
 picks of sensor-time pairs, then the plan is played in ``sparse_attack_v0``), since the
 env's own actions are ``Discrete(2**M)`` (too large for these learners at M = 14) or, above 16
 sensors, an unmasked ``MultiBinary(M)``.
@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.results.common import mean_ci95, write_rows
-from agents.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
+from experiments.results.common import mean_ci95, write_rows
+from experiments.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
 from fdia_env.systems import LinearSystem
 
 OBJECTIVES = ("trace", "logdet")

@@ -1,15 +1,15 @@
-"""Helpers shared by the result tables: confidence intervals and the JSON record of a table."""
+"""Helpers shared by the result tables: the mean with its interval, and the JSON record."""
 
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
+
+from agents.evaluate import t_interval
 
 
 def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
@@ -29,10 +29,8 @@ def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
         raise ValueError(f"values must be a non-empty 1-d sequence, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
         raise ValueError(f"values must be finite, got {x.tolist()}")
-    if x.size == 1:
-        return float(x[0]), math.nan
-    half = stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size)
-    return float(x.mean()), float(half)
+    # the library's interval (the one that evaluate() reports), so tables and runs agree
+    return float(x.mean()), t_interval(x, confidence=0.95)
 
 
 def write_rows(path: Path, rows: list[dict[str, Any]]) -> None:

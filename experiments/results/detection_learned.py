@@ -34,7 +34,6 @@ import numpy as np
 
 from agents.evaluate import evaluate
 from agents.registry import Reference
-from agents.results.common import mean_ci95, write_rows
 from baselines.detection import DETECTORS, DetectionProblem, static_problem, tracking_problem
 from baselines.detection.response import (
     DetectionGame,
@@ -42,6 +41,7 @@ from baselines.detection.response import (
     best_threshold,
     minimax_threshold,
 )
+from experiments.results.common import mean_ci95, write_rows
 from fdia_env.detection_game_v0 import FixedAction
 from fdia_env.envs.single_agent import make_single_agent
 
@@ -511,7 +511,7 @@ def run_budget(budget: Budget, seed: int = 0) -> dict[str, Any]:
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     """The ``detection_learned`` tables (Markdown); ``quick``: :data:`QUICK`."""
-    from agents.results.detection_learned_report import format_tables, plot
+    from experiments.results.detection_learned_report import format_tables, plot
 
     res = run_budget(QUICK if quick else Budget(), seed=seed)
     if out is not None:

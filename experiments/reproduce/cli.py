@@ -11,12 +11,12 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from baselines.reproduce.certified import certified
-from baselines.reproduce.ch2 import chapter2
-from baselines.reproduce.ch3 import chapter3
-from baselines.reproduce.ch4 import chapter4
-from baselines.reproduce.ch5 import chapter5
-from baselines.reproduce.common import DEFAULT_OUTPUT, DOC_INTRO, DOC_TITLE, Section, machine
+from experiments.reproduce.certified import certified
+from experiments.reproduce.ch2 import chapter2
+from experiments.reproduce.ch3 import chapter3
+from experiments.reproduce.ch4 import chapter4
+from experiments.reproduce.ch5 import chapter5
+from experiments.reproduce.common import DEFAULT_OUTPUT, DOC_INTRO, DOC_TITLE, Section, machine
 
 CHAPTERS: dict[str, tuple[Callable[[argparse.Namespace], Section], str]] = {
     "ch2": (chapter2, "attack covariances: literature strategies, pv optima, ellipses, errata"),
@@ -67,7 +67,7 @@ def replace_section(document: str, title: str, body: str) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv``, run the chapter, print it, and write the document section and figures."""
-    parser = argparse.ArgumentParser(prog="python -m baselines.reproduce", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m experiments reproduce", description=__doc__)
     sub = parser.add_subparsers(dest="chapter", required=True)
     for name, (_, help_text) in CHAPTERS.items():
         p = sub.add_parser(name, help=help_text)
@@ -81,7 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     args = parser.parse_args(argv)
     run, _ = CHAPTERS[args.chapter]
-    command = "python -m baselines.reproduce " + shlex.join(
+    command = "python -m experiments reproduce " + shlex.join(
         list(sys.argv[1:] if argv is None else argv)
     )
     t0 = time.perf_counter()

@@ -1,21 +1,21 @@
 """``general_grid``: one sparse attacker for many power grids, scored on held-out systems.
 
-The grid counterpart of :mod:`agents.results.general`: the family is
+The grid counterpart of :mod:`experiments.results.general`: the family is
 :class:`fdia_env.envs.grid_family.GridFamily` (the pandapower IEEE 14-bus DC state estimation of
 the ``grid-ieee14`` preset, n = 13 angles, M = 34 meters, with every load scaled by ``U(0.5,
 1.5)`` and every meter's σ by a log-uniform factor on [0.5, 2]), the attack c = 3 sensor-time
 pairs over N = 2 steps. The same training (MaskablePPO, sequential picks over effect-sorted
 slots, the description of the system in the observation), the same held-out scoring against
 each system's own optimum (branch and bound, proved) and against SFS, the same comparison rows
-(:data:`agents.results.general.POLICY_NAMES`), as :mod:`agents.results.general`, which this
-module calls with another :class:`~agents.results.general.Settings`.
+(:data:`experiments.results.general.POLICY_NAMES`), as :mod:`experiments.results.general`,
+which this module calls with another :class:`~experiments.results.general.Settings`.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from agents.results.general import Settings, report
+from experiments.results.general import Settings, report
 from fdia_env.envs.grid_family import GridFamily
 
 FAMILY = GridFamily(

@@ -1,4 +1,4 @@
-"""Tables and plots of :mod:`agents.results.detection_learned` (Markdown and PNG)."""
+"""Tables and plots of :mod:`experiments.results.detection_learned` (Markdown and PNG)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.results.common import mean_ci95
-from agents.results.detection_learned import GAME_SETTING
+from experiments.results.common import mean_ci95
+from experiments.results.detection_learned import GAME_SETTING
 
 
 def _pm(pair: tuple[float, float], fmt: str = ".4g") -> str:

@@ -1,4 +1,4 @@
-"""Chapter 5: the sensor-selection game (``python -m baselines.reproduce ch5``)."""
+"""Chapter 5: the sensor-selection game (``python -m experiments reproduce ch5``)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from baselines.game import (
     solve_zero_sum,
     strategy_bounds,
 )
-from baselines.reproduce.common import Section, table
+from experiments.reproduce.common import Section, table
 from fdia_env.attacks.subsets import subset_name, subsets
 
 # --- chapter 5 ------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Chapter 4: sparse attacks under perfect detection (``python -m baselines.reproduce ch4``)."""
+"""Chapter 4: sparse attacks under perfect detection (``python -m experiments reproduce ch4``)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.reproduce.common import Section, grid_table, pairs_text, table, timed
 from baselines.sparse import SOLVERS, dp, sfs
+from experiments.reproduce.common import Section, grid_table, pairs_text, table, timed
 from fdia_env import scenarios
 
 # --- chapter 4 ------------------------------------------------------------------------------

@@ -1,4 +1,7 @@
-"""Chapter 3: detection with minimum mean squared error (``python -m baselines.reproduce ch3``)."""
+"""Chapter 3: detection with minimum mean squared error.
+
+Run as ``python -m experiments reproduce ch3``.
+"""
 
 from __future__ import annotations
 
@@ -28,7 +31,7 @@ from baselines.detection import (
     static_problem,
     tracking_problem,
 )
-from baselines.reproduce.common import Section, table
+from experiments.reproduce.common import Section, table
 from fdia_env import scenarios
 from fdia_env.kalman import steady_state
 

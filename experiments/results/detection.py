@@ -16,7 +16,7 @@ import gymnasium as gym
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
 from agents.evaluate import evaluate
-from agents.results.common import write_rows
+from experiments.results.common import write_rows
 
 SCENARIOS = ("ch3-static", "ch3-tracking")
 POWERS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)

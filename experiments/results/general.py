@@ -24,8 +24,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.evaluate import RandomPolicy
-from agents.results.common import mean_ci95, write_rows
 from baselines.sparse import branch_and_bound, sfs
+from experiments.results.common import mean_ci95, write_rows
 from fdia_env._validation import check_int
 from fdia_env.envs.grid_family import GridFamily
 from fdia_env.envs.system_family import SystemFamilyEnv, TrackingFamily

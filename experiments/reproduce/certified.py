@@ -1,4 +1,4 @@
-"""Certified optima by branch and bound (``python -m baselines.reproduce certified``).
+"""Certified optima by branch and bound (``python -m experiments reproduce certified``).
 
 The heuristics of MATH.md §4 (SFS, SBS, SFS-SS, DP) against the optimum that
 :func:`baselines.sparse.branch_and_bound` proves (or, under its time limit, against its
@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import argparse
 
-from baselines.reproduce.common import Section, table
 from baselines.sparse import branch_and_bound, dp, sbs, sfs, sfs_ss
 from baselines.sparse.testbeds import dc_grid14, mixed_tracking
+from experiments.reproduce.common import Section, table
 from fdia_env import scenarios
 
 HEURISTICS = {"SFS": sfs, "SBS": sbs, "SFS-SS": sfs_ss, "DP": dp}

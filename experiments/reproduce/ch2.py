@@ -22,7 +22,7 @@ from baselines.covariance import (
     recursion_objective,
     trace_optimal,
 )
-from baselines.reproduce.common import Section, table
+from experiments.reproduce.common import Section, table
 from fdia_env import scenarios
 from fdia_env.kalman import psd_sqrt, steady_state
 from fdia_env.systems import power_weight

@@ -1,5 +1,0 @@
-"""``python -m baselines.reproduce CHAPTER``."""
-
-from baselines.reproduce.cli import main
-
-raise SystemExit(main())
