@@ -30,6 +30,7 @@ API_PACKAGES = [
     ("fdia_env.envs", "The simulation engine, the PettingZoo env and its Gymnasium view"),
     ("fdia_env.vector", "Native vector environments"),
     ("fdia_env.wrappers", "Wrappers for client libraries"),
+    ("fdia_env.stealth", "Static state estimation under bad-data detection"),
     ("baselines.sparse", "Sparse attacks: EXS, SFS, SBS, SFS-SS, DP"),
     ("baselines.covariance", "Attack covariances: trace and determinant optima"),
     ("baselines.game", "The sensor-selection game: LP, Bayesian, double oracle"),
