@@ -15,9 +15,7 @@ from baselines.game import payoff_matrix, solve_double_oracle, solve_zero_sum
 from baselines.sparse import dp, exhaustive, lowrank, sbs, sfs, sfs_ss
 from baselines.sparse.problem import make_problem
 from fdia_env import (
-    covariance_attack_v0,
     detection_game_v0,
-    fdia_v0,
     scenarios,
     sensor_game_v0,
     sparse_attack_v0,
@@ -26,7 +24,7 @@ from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits, mask_to_bits
 from fdia_env.attacks.subsets import game_subsets, subsets
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.kalman import steady_state, steady_state_iterate
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 from fdia_env.systems import grid_system
 from fdia_env.systems.grid import dc_network, grid_model
 
@@ -35,7 +33,7 @@ pn = pytest.importorskip("pandapower.networks")
 
 CASES = {"ieee14": "case14", "ieee30": "case30", "ieee57": "case57", "ieee118": "case118"}
 CASES_300 = {**CASES, "ieee300": "case300"}
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 
 
 # --- the measurement model against pandapower's own DC power flow ---------------------------
