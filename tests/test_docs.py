@@ -195,3 +195,16 @@ def test_the_math_and_literature_pages_keep_the_cited_section_numbers():
 
 def _read(name: str) -> str:
     return (DOCS / name).read_text(encoding="utf-8")
+
+
+def test_no_user_facing_text_names_a_tracker_entry():
+    """A user has no access to the project's tracker: help texts, docstrings, benchmarks and
+    pages state a target and its reason, never "issue 13's target" or "Targets (issue 8)"."""
+    tracker = re.compile(r"\bissues?\s*#?\d+|\(issues?\)|\bthe issue\b|\bissue's", re.IGNORECASE)
+    found = []
+    for file in _tracked_text_files():
+        text = file.read_text(encoding="utf-8", errors="replace")
+        for number, line in enumerate(text.splitlines(), 1):
+            if tracker.search(line) and file.name != "test_docs.py":
+                found.append(f"{file.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not found, "\n".join(found)
