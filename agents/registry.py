@@ -232,7 +232,7 @@ def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Referen
 def detection_reference(env: FdiaParallelEnv, agent: str = "defender") -> Reference | None:
     """OBDD's threshold α (OBDI's when the defender incorporates) under the Bayes-cost criterion.
 
-    The detectors of MATH.md §3 minimise the Bayes cost built from the fixed costs c1..c4, so
+    The detectors of docs/math.md §3 minimise the Bayes cost built from the fixed costs c1..c4, so
     with ``criterion="bayes_cost"``, the quadratic statistic, one attack step and the defender's
     model equal to the attacker's (the env's defaults) the best fixed threshold is α. The
     attacker's side, and the true-MSE criterion, have no closed-form reference here.

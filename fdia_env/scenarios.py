@@ -1,4 +1,4 @@
-"""Named parameter sets from the literature (MATH.md §6) and power-grid presets (MATH.md §7).
+"""Named parameter sets of the literature (docs/math.md §6) and power-grid presets (§7 there).
 
 >>> from fdia_env import scenarios
 >>> sc = scenarios.get("ch4-position")
@@ -31,7 +31,7 @@ the four best), so the double oracle needs several iterations.
 
 Why these values: with σ and q as above the steady-state ``tr P`` is 0.27 (ieee14) to 0.34
 (ieee118) of the static estimator's ``tr (H' R⁻¹ H)⁻¹``, so prediction and measurements both
-matter (MATH.md §7); a² = 0.01 pu² (a 10 MW bias standard deviation) makes the single-meter
+matter (docs/math.md §7); a² = 0.01 pu² (a 10 MW bias standard deviation) makes the single-meter
 attack term ``a² |W e_i|²`` 1 to 3 times ``tr P``; c and N leave the sparse problems far beyond
 exhaustive search (C(204, 6) ≈ 1e11 sets for ieee14) while SFS, SBS, SFS-SS and DP run in
 seconds. ``k`` is the sensor game's ``max_subset_size``: the attacker picks at most k meters,
@@ -236,7 +236,8 @@ def _grid(name: str) -> Callable[[], Scenario]:
         return Scenario(
             name,
             sys,
-            f"{case}: DC dynamic state estimation, {sys.M} meters, {sys.n} angles (MATH.md §7)",
+            f"{case}: DC dynamic state estimation, {sys.M} meters, {sys.n} angles "
+            "(docs/math.md §7)",
             budget=budget,
             horizon=horizon,
             power=GRID_POWER,

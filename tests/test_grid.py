@@ -1,4 +1,4 @@
-"""Power-grid systems (MATH.md §7): the DC measurement model against pandapower, the presets,
+"""Power-grid systems (docs/math.md §7): the DC measurement model against pandapower, the presets,
 every env and baseline on them, and the large-M action and strategy-set options."""
 
 import dataclasses
@@ -175,7 +175,7 @@ def test_steady_state_dare_equals_fixed_point_iteration(name):
     it_pred, it_post, _ = steady_state_iterate(system)
     np.testing.assert_allclose(P_post, it_post, rtol=0, atol=1e-9 * np.abs(P_post).max())
     np.testing.assert_allclose(P_pred, it_pred, rtol=0, atol=1e-9 * np.abs(P_pred).max())
-    # nontrivial: prediction and measurements both matter (MATH.md §7)
+    # nontrivial: prediction and measurements both matter (docs/math.md §7)
     static = np.trace(np.linalg.inv(system.H.T @ np.linalg.solve(system.R, system.H)))
     assert 0.2 < np.trace(P_post) / static < 0.5
 

@@ -1,12 +1,12 @@
 """Sparse-attack instances beyond the literature's, for branch and bound and its benchmarks.
 
-:func:`mixed_tracking` is the literature's 1-D target-tracking model (MATH.md §1) with many
+:func:`mixed_tracking` is the literature's 1-D target-tracking model (docs/math.md §1) with many
 sensors of two kinds, alternating: position+velocity sensors (``H = I₂``, random standard
 deviations in [0.2, 1] and correlation in [−0.8, 0.8]) and position sensors (σ in [0.1, 1]).
 Their information matrices are not proportional, so neither DP nor the allocation bound is exact
 and branch and bound has to search.
 
-:func:`dc_grid14` is a DC power-flow model of the IEEE 14-bus network (MATH.md §7) built
+:func:`dc_grid14` is a DC power-flow model of the IEEE 14-bus network (docs/math.md §7) built
 without pandapower: the 20 branch reactances of the standard case (per unit on 100 MVA; lines
 and transformers alike, as in the DC power flow), ``IEEE14_BRANCHES`` of the table of grid
 cases (:mod:`fdia_env.systems.grid.cases`). The state is the 13 voltage angles of buses

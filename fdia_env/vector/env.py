@@ -57,7 +57,7 @@ from fdia_env.vector.simulation import BatchedSimulation
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
 # sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
 MAX_NUM_ENVS = 2**20
-# on torch (a GPU's memory) the batch may be larger: issue 13 benchmarks up to B = 2**24
+# on torch (a GPU's memory) the batch may be larger: benchmarks/gpu.py measures up to B = 2**24
 MAX_NUM_ENVS_TORCH = 2**24
 
 

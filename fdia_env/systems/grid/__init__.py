@@ -1,4 +1,4 @@
-"""Power-grid DC dynamic state estimation (MATH.md §7); needs the ``[grid]`` extra (pandapower)."""
+"""Power-grid DC dynamic state estimation (docs/math.md §7); needs the ``[grid]`` extra."""
 
 from fdia_env.systems.grid.cases import GRID_CASES, GridCase, GridPreset
 from fdia_env.systems.grid.measurements import (
