@@ -1,4 +1,4 @@
-"""Optimal Bayesian detectors with minimum mean squared error (MATH.md §3), and their evaluation.
+"""Optimal Bayesian detectors with minimum MSE (docs/math.md §3), and their evaluation.
 
 The static problem (:class:`DetectionProblem`: prior ``N(x̄, Pxx)``, ``z = H x + w (+ b)``,
 attack probability p1) comes from a static scenario (:func:`static_problem`, ch3-static) or a

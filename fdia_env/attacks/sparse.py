@@ -1,4 +1,4 @@
-"""Sparse attack: the attacker picks sensor-time pairs within a budget c (MATH.md §4)."""
+"""Sparse attack: the attacker picks sensor-time pairs within a budget c (docs/math.md §4)."""
 
 from __future__ import annotations
 

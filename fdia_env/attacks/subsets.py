@@ -1,6 +1,6 @@
 """Non-empty sensor subsets in the literature's order: by size, then lexicographically.
 
-For M = 3 the order is z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3 (MATH.md §5). Index ``j`` of a
+For M = 3 the order is z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3 (docs/math.md §5). Index ``j`` of a
 ``Discrete(2**M − 1)`` action is the j-th subset in this order.
 
 >>> subsets(3)

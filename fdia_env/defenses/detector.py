@@ -45,14 +45,14 @@ class ThresholdDetector(DefenseModel):
     :meth:`threshold_to_action` inverts the map.
 
     Args:
-        statistic: ``"chi2"`` or ``"quadratic"`` (the optimal-Bayesian statistic of MATH.md §3).
+        statistic: ``"chi2"`` or ``"quadratic"`` (the optimal Bayesian one of docs/math.md §3).
         on_detect: ``"discard"`` or ``"incorporate"``.
         assumed_sigma: The defender's model of the bias covariance (nz, nz), PSD; used by the
             quadratic statistic and by ``"incorporate"``.
         fresh_prior: Start every step from the system's prior (static estimation).
         threshold_scale: s (> 0).
         criterion: ``"mse"`` pays the squared estimation error; ``"bayes_cost"`` the fixed cost
-            of the (hypothesis, decision) case, ``tr`` of its error covariance (MATH.md §3).
+            of the (hypothesis, decision) case, ``tr`` of its error covariance (docs/math.md §3).
     """
 
     name = "threshold_detector"

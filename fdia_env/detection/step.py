@@ -1,4 +1,4 @@
-"""One filter step with a detector on the innovation (the detection game, MATH.md §3)."""
+"""One filter step with a detector on the innovation (the detection game, docs/math.md §3)."""
 
 from __future__ import annotations
 
