@@ -325,7 +325,7 @@ def test_sparse_action_formats_and_trimming_rule():
     assert obs["attacker"]["action_mask"].tolist() == [1] + [0] * 34  # budget spent
     _, _, _, _, infos = single.step({"attacker": 3})
     assert np.flatnonzero(infos["attacker"]["attacked"]).tolist() == []
-    with pytest.raises(ValueError, match=r"0/1 integer array of shape \(34,\)"):
+    with pytest.raises(ValueError, match=r"0/1 array of shape \(34,\)"):
         env.reset(seed=0)
         env.step({"attacker": np.full(34, 2)})
     with pytest.raises(ValueError, match="at most 16 sensors"):
