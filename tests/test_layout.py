@@ -170,3 +170,25 @@ def test_a_name_or_gym_id_already_taken_is_refused():
     assert "other_v0" not in ENV_NAMES and "fdia_v1" not in ENV_NAMES
     register_env(ENVS["sparse_attack_v0"])  # the same entry again: nothing changes
     assert list(ENV_NAMES)[:2] == ["sparse_attack_v0", "covariance_attack_v0"]
+
+
+def test_every_consumer_of_detector_statistics_reads_one_table():
+    from baselines.detection import STATISTICS as BASELINE_NAMES
+    from baselines.detection import Detector, static_problem
+    from fdia_env import scenarios
+    from fdia_env.defenses.detector import ThresholdDetector
+    from fdia_env.detection.statistics import STATISTICS
+
+    names = list(STATISTICS)
+    assert list(BASELINE_NAMES) == names
+    with pytest.raises(ValueError, match=rf"statistic must be one of \{names}".replace("'", ".")):
+        ThresholdDetector(np.eye(2), statistic="likelihood")
+    problem = static_problem(scenarios.get("ch3-static"), power=240.0)
+    for name, entry in STATISTICS.items():
+        detector = Detector("d", problem, name, 1.0, "discard")
+        expected = entry.matrix(problem.Pzz0_inv, problem.Pzz1_inv)
+        np.testing.assert_array_equal(detector.matrix, expected)
+    # chi2's threshold scale is its mean under H0: E[y' Pzz0⁻¹ y] = tr(Pzz0⁻¹ Pzz0) = nz
+    mean_h0 = np.trace(STATISTICS["chi2"].matrix(problem.Pzz0_inv, None) @ problem.Pzz0)
+    assert mean_h0 == pytest.approx(STATISTICS["chi2"].scale(problem.nz), rel=1e-12)
+    assert problem.nz == 2
