@@ -115,3 +115,96 @@ def test_every_tutorial_script_has_a_page():
         assert f"{script.stem}.py" in page.read_text(encoding="utf-8")
         assert script.stem in (DOCS / "tutorials" / "index.md").read_text(encoding="utf-8")
     assert inspect.isfunction(generate_pages.env_page)
+
+
+# A citation is a path-like token naming a Markdown document; URLs and format strings (a "{" or
+# "/" just before the name) are not citations. (Source paths are left out: the guides name files
+# a user is to create, such as a new env module.)
+_CITED = re.compile(r"(?<![\w/.{}:-])((?:\.\./)*[\w][\w./-]*\.md)(?![\w-])")
+_TEXT_SUFFIXES = {".py", ".md", ".toml", ".txt", ".cfg", ".ini", ".yml", ".yaml", ".rst", ".sh"}
+
+
+def _tracked() -> list[str]:
+    try:
+        return subprocess.run(
+            ["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True
+        ).stdout.split()
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout: the tracked files are unknown")
+
+
+def _tracked_text_files() -> list[Path]:
+    return [
+        ROOT / name
+        for name in _tracked()
+        if (ROOT / name).suffix in _TEXT_SUFFIXES or name == "Makefile"
+    ]
+
+
+def _generated_at_build(path: str) -> bool:
+    """Pages that docs/_ext/generate_pages.py writes during the build (not tracked)."""
+    name = Path(path).name
+    if path.startswith(("docs/api/", "api/")):
+        return True
+    env_pages = {f"{module}.md" for module in generate_pages.ENV_MODULES}
+    return "environments" in path and name in env_pages
+
+
+def test_no_tracked_file_cites_a_file_the_repository_does_not_contain():
+    """Every Markdown file or project path named in code, tests and docs is in the repository.
+
+    The formulas and literature values are cited as docs/math.md and docs/references.md; a
+    citation of a document that is not shipped (a private specification, a renamed page) fails.
+    """
+    files = _tracked_text_files()
+    assert len(files) > 100
+    # a name may be given relative to the citing file, to the root, or to a folder that holds it
+    # (``DOCS / "reproduction.md"``, "guide/clients.md" from the docs' index)
+    tails = {"/".join(Path(n).parts[i:]) for n in _tracked() for i in range(len(Path(n).parts))}
+    missing = []
+    for file in files:
+        text = file.read_text(encoding="utf-8", errors="replace")
+        for number, line in enumerate(text.splitlines(), 1):
+            for cited in _CITED.findall(line):
+                cited = cited.rstrip(".")
+                if _generated_at_build(cited):
+                    continue
+                if (file.parent / cited).exists() or cited.lstrip("./") in tails:
+                    continue
+                missing.append(f"{file.relative_to(ROOT)}:{number}: {cited}")
+    assert not missing, "citations of files the repository does not contain:\n" + "\n".join(missing)
+
+
+def test_the_math_and_literature_pages_keep_the_cited_section_numbers():
+    """Every "docs/math.md §x.y" / "docs/references.md §x" cited has its labelled section."""
+    labels = {
+        "math": set(re.findall(r"^\(math-([\d-]+)\)=$", _read("math.md"), re.M)),
+        "references": set(re.findall(r"^\(references-([\d-]+)\)=$", _read("references.md"), re.M)),
+    }
+    assert {"1", "2-1", "2-2", "2-3", "2-4", "3", "4", "5", "6", "7"} <= labels["math"]
+    assert {"2", "3", "4", "5"} <= labels["references"]
+    cited = re.compile(r"docs/(math|references)\.md §\s?([\d.]*\d)")
+    wrong = []
+    for file in _tracked_text_files():
+        text = file.read_text(encoding="utf-8", errors="replace")
+        for page, section in cited.findall(text):
+            if section.replace(".", "-") not in labels[page]:
+                wrong.append(f"{file.relative_to(ROOT)}: docs/{page}.md §{section}")
+    assert not wrong, wrong
+
+
+def _read(name: str) -> str:
+    return (DOCS / name).read_text(encoding="utf-8")
+
+
+def test_no_user_facing_text_names_a_tracker_entry():
+    """A user has no access to the project's tracker: help texts, docstrings, benchmarks and
+    pages state a target and its reason, never "issue 13's target" or "Targets (issue 8)"."""
+    tracker = re.compile(r"\bissues?\s*#?\d+|\(issues?\)|\bthe issue\b|\bissue's", re.IGNORECASE)
+    found = []
+    for file in _tracked_text_files():
+        text = file.read_text(encoding="utf-8", errors="replace")
+        for number, line in enumerate(text.splitlines(), 1):
+            if tracker.search(line) and file.name != "test_docs.py":
+                found.append(f"{file.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not found, "\n".join(found)

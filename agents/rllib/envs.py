@@ -18,7 +18,6 @@ every node of a cluster, as every other package the job uses.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -31,15 +30,9 @@ from ray.tune.registry import register_env
 from agents.rllib.module import register_default_module
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 
-MODULES = (
-    "fdia_v0",
-    "sparse_attack_v0",
-    "covariance_attack_v0",
-    "sensor_game_v0",
-    "detection_game_v0",
-)
+MODULES = ENV_NAMES  # the multi-agent env names: every entry of the table of environments
 OBS, MASK = "observations", "action_mask"  # RLlib's action-masking module reads these keys
 
 
@@ -160,8 +153,7 @@ def make_multi_agent(module: str, env_config: Mapping[str, Any] | None = None) -
     """
     if module not in MODULES:
         raise ValueError(f"module must be one of {', '.join(MODULES)}, got {module!r}")
-    mod = importlib.import_module(f"fdia_env.{module}")
-    return FdiaMultiAgentEnv(mod.parallel_env(**_config(env_config)))
+    return FdiaMultiAgentEnv(load(module).parallel_env(**_config(env_config)))
 
 
 def make_view(gym_id: str, env_config: Mapping[str, Any] | None = None) -> gym.Env:
@@ -215,8 +207,3 @@ def register_envs() -> list[str]:
     for name in names:
         register_env(name, _Creator(name))
     return names
-
-
-def is_multi_agent(name: str) -> bool:
-    """Whether the RLlib env ``name`` is a module (multi-agent) rather than a view."""
-    return name in MODULES

@@ -1,4 +1,4 @@
-"""Determinant-optimal bias covariance for a single injection: water-filling (MATH.md §2.3).
+"""Determinant-optimal bias covariance for a single injection: water-filling (docs/math.md §2.3).
 
 Maximise ``det(P + W Σ W')`` over ``Σ ⪰ 0`` with ``tr(Ω Σ) = a²``. Substituting
 ``Σ̃ = Ω^{1/2} Σ Ω^{1/2}``, ``W̃ = W Ω^{-1/2}`` (power ``tr Σ̃``):

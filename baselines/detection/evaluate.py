@@ -1,6 +1,7 @@
 """Average MSE of the detectors two ways: the Bayes cost and a Monte Carlo of the true error.
 
-**Bayes cost** (MATH.md §3): ``c = p1[P_d c1 + (1 − P_d) c2] + p0[P_fa c3 + (1 − P_fa) c4]`` with
+**Bayes cost** (docs/math.md §3):
+``c = p1[P_d c1 + (1 − P_d) c2] + p0[P_fa c3 + (1 − P_fa) c4]`` with
 the fixed costs c1..c4 and the detection probabilities ``P_fa = P(D1|H0)``, ``P_d = P(D1|H1)``
 of the threshold test, computed numerically (:mod:`.gchisq`: the statistic is a generalized
 chi-square under each hypothesis). The fixed costs are unconditional MSEs; the true MSE given a
@@ -32,11 +33,11 @@ from baselines.detection.detectors import (
     detect_gain,
     strategy_costs,
 )
-from baselines.detection.gchisq import quadratic_tails
 from baselines.detection.mmse import MMSEEstimator
 from baselines.detection.problem import DetectionProblem, check_problem
 from fdia_env._validation import check_int
 from fdia_env.detection.expected import expected_squared_error
+from fdia_env.detection.gchisq import quadratic_tails
 from fdia_env.kalman import psd_sqrt
 
 

@@ -1,4 +1,4 @@
-"""The static Bayesian detection problem of MATH.md §3 and its validated inputs.
+"""The static Bayesian detection problem of docs/math.md §3 and its validated inputs.
 
 Prior ``x ~ N(x̄, Pxx)``; under H0 (probability ``p0 = 1 − p1``) the measurement is
 ``z = H x + w``, under H1 (probability ``p1``) ``z = H x + w + b``, with ``w ~ N(0, Pww)`` and
@@ -12,7 +12,7 @@ Every estimator of this package is linear in the innovation given the decision,
     mse(K, Pzz_h) = tr[Pxx − K Pxz' − Pxz K' + K Pzz_h K']
 
 (b is independent of x, so ``Pxz`` is the same under both hypotheses). The costs c1..c4 of
-MATH.md §3 are this formula for the estimator used after each decision (:mod:`.detectors`).
+docs/math.md §3 are this formula for the estimator used after each decision (:mod:`.detectors`).
 
 In the tracking case the problem is applied at the attack time K with the predicted state as
 prior: ``x̄ = x̂[K|K−1]``, ``Pxx = P[K|K−1]`` (:func:`tracking_problem`).
@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from baselines.detection.attack import c2_optimal_pbb
 from fdia_env._validation import as_matrix, as_vector, check_psd
 from fdia_env._validation import check_power as _check_power
+from fdia_env.detection.attack import c2_optimal_pbb
 from fdia_env.kalman import information_update, logdet, predict_cov, spd_inv, steady_state
 from fdia_env.scenarios import Scenario, resolve
 
@@ -61,7 +61,7 @@ def check_power(value: Any) -> float:
 
 @dataclass(frozen=True, eq=False)
 class DetectionProblem:
-    """A validated static detection instance (MATH.md §3).
+    """A validated static detection instance (docs/math.md §3).
 
     Attributes:
         x_bar: (n,) prior mean x̄.
@@ -187,8 +187,8 @@ def static_problem(
         scenario: A preset name or :class:`~fdia_env.scenarios.Scenario` (default ch3-static).
         power: Attack power a² ``>= 0``; used when ``Pbb`` is not given.
         Pbb: (nz, nz) bias covariance; default the c2-maximising one of power a²
-            (:func:`~baselines.detection.attack.c2_optimal_pbb`), which for ch3-static is the
-            ``diag(a², 0)`` of MATH.md §6.
+            (:func:`~fdia_env.detection.attack.c2_optimal_pbb`), which for ch3-static is the
+            ``diag(a², 0)`` of docs/math.md §6.
         p1: Prior probability of an attack (default the scenario's, 0.85 for ch3).
 
     Example:
@@ -238,7 +238,7 @@ def tracking_problem(
     Args:
         scenario: A preset with an attack step (default ch3-tracking, K = 100).
         power: Attack power a² ``>= 0``, ``tr Pbb`` (T = 1 in ch3-tracking, so this is also the
-            weighted power ``σ_bp² + T² σ_bv²`` of MATH.md §2).
+            weighted power ``σ_bp² + T² σ_bv²`` of docs/math.md §2).
         Pbb: (nz, nz) bias covariance; default the c2-maximising one of power a².
         p1: Prior probability of an attack (default the scenario's).
         x_pred: (n,) ``x̂[K|K−1]``; default the prior mean propagated K steps

@@ -1,4 +1,4 @@
-"""Sparse attacks under perfect detection (MATH.md §4): solvers and their policies.
+"""Sparse attacks under perfect detection (docs/math.md §4): solvers and their policies.
 
 Every solver is ``f(system_or_scenario, budget, horizon, objective="trace") -> SparseResult``:
 

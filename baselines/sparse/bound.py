@@ -1,4 +1,4 @@
-"""Provable upper bounds on the sparse-attack optimum (MATH.md §4), for branch and bound.
+"""Provable upper bounds on the sparse-attack optimum (docs/math.md §4), for branch and bound.
 
 Two bounds, both valid for any instance; :func:`upper_bound` returns the smaller.
 

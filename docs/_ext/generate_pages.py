@@ -5,8 +5,8 @@ package of the API (from its ``__all__``).
 
 The env modules' docstrings follow Gymnasium's sections in Markdown, so the pages are those
 docstrings, not a second copy: the title comes from the first line, the ``>>>`` example becomes
-a code block, and the Gymnasium ids registered for the module are listed from
-``fdia_env.registration.GYM_IDS``.
+a code block, and the Gymnasium ids registered for the module are listed from its entry in
+the table of environments, ``fdia_env.registration.ENVS``.
 """
 
 from __future__ import annotations
@@ -17,13 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-ENV_MODULES = [
-    "sparse_attack_v0",
-    "covariance_attack_v0",
-    "sensor_game_v0",
-    "detection_game_v0",
-    "fdia_v0",
-]
+from fdia_env.registration import ENV_NAMES, get_env, load
+
+ENV_MODULES = list(ENV_NAMES)  # one page per entry of the table of environments
 API_PACKAGES = [
     ("fdia_env", "Top-level package: systems, episode spec, registration"),
     ("fdia_env.systems", "Linear systems, sensors, the tracking model, validation"),
@@ -39,6 +35,7 @@ API_PACKAGES = [
     ("baselines.covariance", "Attack covariances: trace and determinant optima"),
     ("baselines.game", "The sensor-selection game: LP, Bayesian, double oracle"),
     ("baselines.detection", "Detectors: OBDD, OBDI, CBD, CSD, MMSE"),
+    ("baselines.stealth", "Stealthy attacks: security index, budgeted attacks, protection"),
     ("agents.evaluate", "Scoring policies against the analytic references"),
     ("agents.registry", "What can be trained, with its reference"),
     ("agents.training", "stable-baselines3 training"),
@@ -63,9 +60,7 @@ def public_names(module) -> list[str]:
 
 def env_page(name: str, static: Path) -> str:
     """Markdown of the env module's page; writes its render image into ``static``."""
-    from fdia_env.registration import GYM_IDS
-
-    module = importlib.import_module(f"fdia_env.{name}")
+    module = load(name)
     doc = inspect.getdoc(module) or ""
     first, _, body = doc.partition("\n")
     summary = first.split(":", 1)[1].strip() if ":" in first else first
@@ -74,7 +69,7 @@ def env_page(name: str, static: Path) -> str:
     env.step({a: env.action_space(a).sample() for a in env.agents})
     image = env.render()
     _write_png(static / f"{name}.png", image)
-    ids = [i for i, (mod, _) in GYM_IDS.items() if mod == f"fdia_env.{name}"]
+    ids = list(get_env(name).views.values())
     lines = [f"# `{name}`", "", summary, ""]
     lines += [f"![{name} rendered after one random step](../_static/envs/{name}.png)", ""]
     lines += ["| | |", "|---|---|", f"| import | `from fdia_env import {name}` |"]

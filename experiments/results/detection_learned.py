@@ -163,7 +163,7 @@ def view(agent: str, opponent_action: np.ndarray, **kwargs: Any) -> gym.Env:
 
 
 def problem_of(scenario: str, power: float) -> DetectionProblem:
-    """The design problem of the analytic detectors (MATH.md §3)."""
+    """The design problem of the analytic detectors (docs/math.md §3)."""
     if scenario == "ch3-tracking":
         return tracking_problem(scenario, power=power)
     return static_problem(scenario, power=power)

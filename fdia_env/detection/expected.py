@@ -1,4 +1,4 @@
-"""Exact expected squared error of a threshold detector followed by an estimator (MATH.md §3).
+"""Exact expected squared error of a threshold detector followed by an estimator (docs/math.md §3).
 
 Setting: prior ``x ~ N(x̄, Pxx)``, ``z = H x + w (+ b)``, ``w ~ N(0, Pww)``, ``b ~ N(0, Σ)`` with
 probability ``p1``; the detector decides D1 when ``y' A y > τ`` for the innovation
@@ -105,12 +105,6 @@ def truncated_moments(
     return p, L @ V, m[0], m[1]
 
 
-def tail_second_moment(A: np.ndarray, C: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
-    """``(P(y'Ay > τ), E[y y' 1{y'Ay > τ}])`` for ``y ~ N(0, C)`` (see the module docstring)."""
-    p, T, _, m1 = truncated_moments(A, C, tau)
-    return float(p[1]), (T * m1) @ T.T
-
-
 def hypotheses(
     Pxx: np.ndarray, H: np.ndarray, Pww: np.ndarray, sigma: np.ndarray, p1: float
 ) -> Iterator[tuple[float, np.ndarray, np.ndarray]]:
@@ -164,7 +158,7 @@ def expected_squared_error(
 def case_covariance(Pxx: np.ndarray, Pxz: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Error covariance of ``x̂ = x̄ + K y`` when ``y ~ N(0, C)``: ``Pxx − K Pxz' − Pxz K' + K C K'``.
 
-    Its trace is one of the fixed costs c1..c4 of MATH.md §3 (K and C of the case).
+    Its trace is one of the fixed costs c1..c4 of docs/math.md §3 (K and C of the case).
     """
     cov = Pxx - K @ mT(Pxz) - Pxz @ mT(K) + K @ C @ mT(K)  # leading batch dimensions allowed
     return 0.5 * (cov + mT(cov))

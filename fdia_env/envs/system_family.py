@@ -2,7 +2,7 @@
 
 :class:`SystemFamilyEnv` is a Gymnasium env that, at every reset, draws a new system from a
 family (:class:`TrackingFamily`: random tracking systems as in the ``ch4-random`` preset,
-MATH.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
+docs/math.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
 estimation with random loads and meter noise, 34 meters, ``action="sequential"`` only) and
 plays one episode of ``sparse_attack_v0`` (perfect detection, expected dynamics, terminal
 reward) on it. Its observation is the sparse env's observation followed by a
@@ -133,7 +133,7 @@ def _check_range(name: str, value: Any, lower: float, allow_zero: bool) -> tuple
 
 @dataclass(frozen=True)
 class TrackingFamily:
-    """Random tracking systems as in the ``ch4-random`` preset (MATH.md §6).
+    """Random tracking systems as in the ``ch4-random`` preset (docs/math.md §6).
 
     A draw: ``num_sensors`` position sensors with ``σ_w ~ U(sigma_w)`` (floored at 1e-6), then
     the process noise ``σ_v`` log-uniform on ``sigma_v``; the model is

@@ -1,4 +1,4 @@
-"""Steady state of the Kalman filter for a fixed sensor subset (MATH.md §1).
+"""Steady state of the Kalman filter for a fixed sensor subset (docs/math.md §1).
 
 Checked, never silent: the subset must be detectable with F (PBH test, else ``ValueError``
 naming the subset and the eigenvalue: a single-sensor subset of the sensor game can fail where

@@ -1,4 +1,4 @@
-"""The 1-D target-tracking model used throughout the literature (MATH.md §1)."""
+"""The 1-D target-tracking model used throughout the literature (docs/math.md §1)."""
 
 from __future__ import annotations
 
@@ -107,7 +107,7 @@ def tracking_system(
 
 
 def power_weight(system: LinearSystem) -> np.ndarray:
-    """Ω of MATH.md §2: 1 on position rows, T² on velocity rows of position+velocity sensors.
+    """Ω of docs/math.md §2: 1 on position rows, T² on velocity rows of position+velocity sensors.
 
     For sensors that are neither position nor position+velocity, the weight is 1.
     """
