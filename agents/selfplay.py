@@ -63,6 +63,7 @@ from agents.interrupt import StopRequest, StopTrainingCallback, stop_on_signals
 from agents.plots import exploitability_curve
 from agents.registry import Reference, Trainable, game_names, get
 from agents.runs import (
+    check_not_shorter,
     check_resumable,
     config_dict,
     new_run_dir,
@@ -354,6 +355,10 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             saved = read_json(run_dir / "config.json", "run config")
             check_resumable(saved.get("config", {}), given, run_dir)
             state = _read_state(run_dir / STATE)
+            check_not_shorter(
+                "iterations", cfg.iterations, len(state["history"]), saved.get("config", {}),
+                run_dir, "iterations",
+            )  # fmt: skip
             names = policy_names(state)
             models = load_policies(
                 run_dir, names, entries, env_kwargs, algo, kwargs, cfg.run.device, trusted

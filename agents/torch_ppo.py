@@ -41,8 +41,7 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
-from agents.checkpoint import _sha256, inside, load_tensors, read_json, tensor_file
-from agents.runs import atomic_write, write_json
+from agents.checkpoint import inside, load_tensors, read_json, save_pair, tensor_file
 
 ALGO = "torch-ppo"
 FORMAT = "fdia_env-torch-ppo-v1"
@@ -745,7 +744,7 @@ def save_policy(
     config: TorchPPOConfig | None = None,
     num_timesteps: int = 0,
 ) -> Path:
-    """Write ``path.with_suffix(".pt")`` (tensors only) then its ``.json``, atomically.
+    """Write ``path.with_suffix(".pt")`` (tensors only) and its ``.json`` (``save_pair``).
 
     The ``.pt`` holds ``{"state_dicts": {"policy": ...}, "variables": {}}`` (what
     :func:`agents.checkpoint.load_tensors` accepts); the ``.json`` the format, the network's
@@ -755,7 +754,6 @@ def save_policy(
     path = Path(path)
     state = {k: v.detach().cpu().clone() for k, v in policy.model.state_dict().items()}
     payload = {"state_dicts": {"policy": state}, "variables": {}}
-    tensors = atomic_write(path.with_suffix(".pt"), lambda fh: torch.save(payload, fh))
     spec = asdict(policy.spec)
     meta = {
         "format": FORMAT,
@@ -763,10 +761,8 @@ def save_policy(
         "spec": {k: list(v) if isinstance(v, tuple) else v for k, v in spec.items()},
         "hyperparameters": None if config is None else _jsonable(asdict(config)),
         "num_timesteps": int(num_timesteps),
-        "tensors": tensors.name,
-        "sha256": _sha256(tensors),
     }
-    return write_json(path.with_suffix(".json"), meta)
+    return save_pair(path.with_suffix(".json"), path.with_suffix(".pt"), payload, meta)
 
 
 def load_policy(path: Path, root: Path, device: str = "cpu", seed: int = 0) -> TorchPolicy:
@@ -808,8 +804,13 @@ def save_training_state(state: TrainingState, path: Path) -> Path:
 
     The ``.pt`` holds the model's and Adam's state dicts and the generator and return
     statistics (what :func:`agents.checkpoint.load_tensors` accepts); the JSON the counters, the
-    per-iteration history and the ``.pt``'s SHA-256. Both are written atomically, the JSON last,
-    so a run stopped mid-write keeps its previous state. Returns the JSON path.
+    per-iteration history and the ``.pt``'s SHA-256. They are written by
+    :func:`agents.checkpoint.save_pair`, so a run killed at any moment of the write keeps a
+    state that ``--resume`` continues (the previous one, or the new one when only the last move
+    was missing). Returns the JSON path.
+
+    Raises:
+        OSError: When a file cannot be written (a full disk), naming it.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -817,17 +818,14 @@ def save_training_state(state: TrainingState, path: Path) -> Path:
         "state_dicts": {"policy": state.model, "optimizer": state.optimizer},
         "variables": {"generator": state.generator, "ret_stats": state.ret_stats},
     }
-    tensors = atomic_write(path.with_suffix(".pt"), lambda fh: torch.save(payload, fh))
     meta = {
         "format": STATE_FORMAT,
         "iteration": int(state.iteration),
         "timesteps": int(state.timesteps),
         "seconds": float(state.seconds),
         "history": state.history,
-        "tensors": tensors.name,
-        "sha256": _sha256(tensors),
     }
-    return write_json(path, meta)
+    return save_pair(path, path.with_suffix(".pt"), payload, meta)
 
 
 def load_training_state(path: Path, root: Path) -> TrainingState:

@@ -37,6 +37,7 @@ from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import stop_on_signals
 from agents.registry import get
 from agents.runs import (
+    check_not_shorter,
     check_resumable,
     config_dict,
     new_run_dir,
@@ -168,6 +169,10 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
             check_resumable(saved.get("config", {}), given, run_dir)
             remove_stale_temp_files(run_dir)
             resume = load_training_state(run_dir / CHECKPOINT, run_dir)
+            check_not_shorter(
+                "total_timesteps", cfg.total_timesteps, resume.timesteps,
+                saved.get("config", {}), run_dir,
+            )  # fmt: skip
         else:
             run_dir = new_run_dir(cfg.run.runs_root, cfg.run.run_dir, prefix)
         seed_everything(cfg.run.seed, cfg.run.torch_threads)

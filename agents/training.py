@@ -11,8 +11,8 @@
   :func:`agents.evaluate.evaluate` and logs its score against the reference;
 - :class:`CheckpointCallback` saves ``checkpoints/model_<steps>.pt`` / ``.json`` (and the replay
   buffer of off-policy algorithms as ``replay_buffer_<steps>.npz``) every ``checkpoint_freq``
-  steps in the format of :mod:`agents.checkpoint` (tensors and JSON, nothing unpickled), each
-  file through a temporary file and ``os.replace``, then points ``checkpoints/state.json`` at it;
+  steps in the format of :mod:`agents.checkpoint` (tensors and JSON, nothing unpickled; a kill
+  at any moment of a write leaves a loadable pair), then points ``checkpoints/state.json`` at it;
 - the best-scoring model of those evaluations is kept as ``best_model.pt`` / ``.json``
   (``best.json``) and gets its own row in the final table when it beats the final model;
 - ``resume`` rebuilds the model from the run's config, loads the checkpoint ``state.json``
@@ -45,6 +45,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.algos import ALGO_CLASSES, build_model
 from agents.checkpoint import (
+    STAGED,
     UntrustedCheckpointError,
     inside,
     load_model,
@@ -69,6 +70,7 @@ from agents.interrupt import StopTrainingCallback, stop_on_signals
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
 from agents.runs import (
+    check_not_shorter,
     check_resumable,
     config_dict,
     new_run_dir,
@@ -253,6 +255,9 @@ def save_checkpoint(
     for pattern in CHECKPOINT_FILES:
         old = sorted(folder.glob(pattern), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
         for p in old[:-KEEP_CHECKPOINTS]:
+            p.unlink(missing_ok=True)
+    for p in folder.glob(f"model_*.pt{STAGED}"):  # staged tensors of a pruned checkpoint
+        if not p.with_name(p.name.removesuffix(f".pt{STAGED}") + ".json").is_file():
             p.unlink(missing_ok=True)
     return path
 
@@ -523,6 +528,10 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
             saved = read_json(run_dir / "config.json", "run config")
             check_resumable(saved.get("config", {}), given, run_dir)
             checkpoint = read_checkpoint_state(run_dir / "checkpoints", run_dir, trusted)
+            check_not_shorter(
+                "total_timesteps", cfg.total_timesteps, checkpoint.timesteps,
+                saved.get("config", {}), run_dir,
+            )  # fmt: skip
             best_model_file(run_dir, trusted)  # refuse an unsafe one now, not after training
             for stale in remove_stale_temp_files(run_dir):
                 say(f"removed a temporary file left by an interrupted write: {stale}")

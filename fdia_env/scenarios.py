@@ -51,6 +51,7 @@ import numpy as np
 
 from fdia_env._validation import check_int, check_positive
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
+from fdia_env.systems.grid.cases import GRID_CASES
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,12 +194,17 @@ def _ch5_game() -> Scenario:
     )
 
 
-# name -> (case, budget c, horizon N, sensor-game max_subset_size k)
+# name -> (case, budget c, horizon N, sensor-game max_subset_size k): the cases of the table of
+# grid cases that have a preset
 GRID_PRESETS: dict[str, tuple[str, int, int, int]] = {
-    "grid-ieee14": ("ieee14", 6, 6, 2),
-    "grid-ieee30": ("ieee30", 6, 4, 1),
-    "grid-ieee57": ("ieee57", 6, 3, 1),
-    "grid-ieee118": ("ieee118", 6, 3, 1),
+    f"grid-{case.name}": (
+        case.name,
+        case.preset.budget,
+        case.preset.horizon,
+        case.preset.max_subset_size,
+    )
+    for case in GRID_CASES.values()
+    if case.preset is not None
 }
 GRID_POWER = 0.01
 

@@ -110,3 +110,110 @@ def test_aec_step_after_the_episode_or_before_reset_raises_runtime_error(name):
         env.step(env.action_space("attacker").sample())
     env.reset(seed=1)  # still usable
     assert env.agent_selection == "attacker"
+
+
+# --- silent coercions: actions and options are what Gymnasium's spaces accept ----------------
+
+
+def _single(env_id: str, **kwargs):
+    import gymnasium as gym
+
+    import fdia_env  # noqa: F401 - registers the ids
+
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=0)
+    return env
+
+
+def _vector(env_id: str, num_envs: int = 2, **kwargs):
+    import gymnasium as gym
+
+    import fdia_env  # noqa: F401 - registers the ids
+
+    venv = gym.make_vec(
+        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs
+    )
+    venv.reset(seed=0)
+    return venv
+
+
+@pytest.mark.parametrize("env_id", ["fdia_env/SparseAttack-v0", "fdia_env/SensorGameAttacker-v0"])
+@pytest.mark.parametrize("action", [np.array([1]), np.array([[1]]), np.array([1.0]), 1.0])
+def test_single_env_discrete_action_is_an_integer_not_a_shape_1_array_or_float(env_id, action):
+    env = _single(env_id)
+    assert not env.action_space.contains(action)  # Gymnasium's own rule
+    with pytest.raises(ValueError, match="attacker action must be an integer"):
+        env.step(action)
+    env.step(np.int64(1))  # still usable; numpy integers and 0-d integer arrays are fine
+    env.reset(seed=1)
+    env.step(np.array(0))
+
+
+@pytest.mark.parametrize("actions", [np.array([1.0, 0.0]), np.array([1.0, 0.0], np.float32)])
+def test_vector_env_refuses_float_discrete_actions_as_the_single_env_does(actions):
+    venv = _vector("fdia_env/SparseAttack-v0")
+    with pytest.raises(ValueError, match="attacker actions must be integers"):
+        venv.step(actions)
+    venv.step(actions.astype(np.int64))  # still usable
+
+
+@pytest.mark.parametrize("env_id", ["fdia_env/SparseAttack-v0", "fdia_env/CovarianceAttack-v0"])
+def test_one_player_envs_refuse_an_opponent_instead_of_ignoring_it(env_id):
+    import gymnasium as gym
+
+    from fdia_env.envs.opponents import FixedMix
+
+    for make in (gym.make, lambda i, **kw: gym.make_vec(i, num_envs=2, **kw)):
+        with pytest.raises(ValueError, match="opponent must be None: this env has a single"):
+            make(env_id, opponent=FixedMix.uniform(3))
+
+
+@pytest.mark.parametrize("k", [4, 99])
+def test_sensor_game_max_subset_size_above_m_is_refused(k):
+    from fdia_env import sensor_game_v0
+
+    with pytest.raises(ValueError, match=r"max_subset_size must be in \[1, M = 3\]"):
+        sensor_game_v0.parallel_env(max_subset_size=k)
+    full = sensor_game_v0.parallel_env(max_subset_size=3)  # k = M: every subset, as None
+    assert full.action_space("attacker") == sensor_game_v0.parallel_env().action_space("attacker")
+
+
+# --- MultiBinary accepts 0/1 of any numeric dtype, single and vector envs ----------------------
+
+MB_ACTIONS = [
+    np.array([1.0, 0.0, 1.0]),  # float64, as stable-baselines3's PPO and A2C emit
+    np.array([1.0, 0.0, 1.0], dtype=np.float32),
+    np.array([1, 0, 1], dtype=np.uint8),
+    np.array([True, False, True]),
+]
+
+
+@pytest.mark.parametrize("action", MB_ACTIONS, ids=lambda a: str(a.dtype))
+def test_multibinary_single_env_accepts_0_1_of_any_numeric_dtype(action):
+    env = _single("fdia_env/SparseAttack-v0", action="multibinary")
+    assert env.action_space.contains(action)
+    _, _, _, _, info = env.step(action)
+    assert info["attacked"].tolist() == [1, 0, 1]
+    with pytest.raises(ValueError, match="0/1 array"):
+        env.step(np.array([0.5, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("action", MB_ACTIONS, ids=lambda a: str(a.dtype))
+def test_multibinary_vector_env_accepts_0_1_of_any_numeric_dtype(action):
+    venv = _vector("fdia_env/SparseAttack-v0", action="multibinary")
+    batch = np.stack([action, np.zeros_like(action)])
+    _, _, _, _, info = venv.step(batch)
+    assert info["attacked"].tolist() == [[1, 0, 1], [0, 0, 0]]
+    with pytest.raises(ValueError, match="0/1"):
+        venv.step(np.full((2, 3), 0.5))
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64", "int64", "bool"])
+def test_multibinary_torch_vector_env_accepts_0_1_of_any_real_dtype(dtype):
+    torch = pytest.importorskip("torch")
+    venv = _vector("fdia_env/SparseAttack-v0", action="multibinary", backend="torch")
+    batch = torch.tensor([[1, 0, 1], [0, 1, 0]]).to(getattr(torch, dtype))
+    _, _, _, _, info = venv.step(batch)
+    assert info["attacked"].tolist() == [[1, 0, 1], [0, 1, 0]]
+    with pytest.raises(ValueError, match="must be 0/1"):
+        venv.step(torch.full((2, 3), 0.5))

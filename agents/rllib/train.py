@@ -35,6 +35,7 @@ from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
 from agents.rllib.state import STATE, load_module, save_module
 from agents.runs import (
+    check_not_shorter,
     check_resumable,
     config_dict,
     new_run_dir,
@@ -198,6 +199,7 @@ class Session:
         steps: Env steps sampled so far.
         seconds: Training seconds so far.
         extra: Loop state to save with the next checkpoint (:meth:`save`).
+        saved: A resumed run's saved options (config.json's ``config``).
     """
 
     run_dir: Path
@@ -207,6 +209,16 @@ class Session:
     steps: int = 0
     seconds: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
+    saved: dict[str, Any] = field(default_factory=dict)
+
+    def check_not_shorter(self, name: str, given: int, done: int, unit: str = "steps") -> None:
+        """A resume's ``--total-timesteps``/``--iterations`` is not below what was done.
+
+        Raises:
+            ValueError: As :func:`agents.runs.check_not_shorter`.
+        """
+        if self.resumed:
+            check_not_shorter(name, given, done, self.saved, self.run_dir, unit)
 
     @property
     def resumed(self) -> bool:
@@ -299,9 +311,15 @@ def open_run(
         f"resuming {run_dir} from its state after {done} iteration{'s' * (done != 1)}, "
         f"{meta['timesteps']} steps"
     )
-    return Session(
+    session = Session(
         run_dir, meta, payload, history, int(meta["timesteps"]), float(meta["train_seconds"])
     )
+    session.saved = saved.get("config", {})
+    if isinstance(cfg, TrainConfig):
+        session.check_not_shorter("total_timesteps", cfg.total_timesteps, session.steps)
+    elif cfg.method != "selfplay" and cfg.env not in CONTINUOUS_GAMES:  # one record each
+        session.check_not_shorter("iterations", cfg.iterations, done, "iterations")
+    return session
 
 
 def begin(session: Session, algo: Any, stack: ExitStack) -> None:
@@ -533,6 +551,9 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         init_ray(cfg.run)
         n_steps = hyperparameters["n_steps"]
         per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        run.check_not_shorter(
+            "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+        )
         config = _with_run(
             ppo_config(
                 cfg.env,
@@ -917,6 +938,9 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
         init_ray(cfg.run)
         n_steps = hyperparameters["n_steps"]
         per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        run.check_not_shorter(
+            "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+        )
         config = ppo_config(
             cfg.env,
             env_kwargs,

@@ -44,8 +44,9 @@ import scipy.stats
 
 from baselines.detection.problem import DetectionProblem, check_probability, check_problem
 from fdia_env._validation import check_choice
+from fdia_env.detection.statistics import STATISTICS as STATISTIC_TABLE
 
-STATISTICS = ("quadratic", "chi2")
+STATISTICS = tuple(STATISTIC_TABLE)  # the names of the table of detector statistics
 ON_DETECT = ("discard", "incorporate")
 
 
@@ -187,7 +188,8 @@ class Detector:
         object.__setattr__(self, "threshold", threshold)
         p = self.problem
         object.__setattr__(self, "costs", strategy_costs(p, self.on_detect, p))
-        object.__setattr__(self, "matrix", p.A if self.statistic == "quadratic" else p.Pzz0_inv)
+        matrix = STATISTIC_TABLE[self.statistic].matrix(p.Pzz0_inv, p.Pzz1_inv)
+        object.__setattr__(self, "matrix", matrix)
 
     def innovation(self, z: np.ndarray, x_bar: np.ndarray | None = None) -> np.ndarray:
         """``z − H x̄`` for (..., nz) measurements; ``x_bar`` (..., n) overrides the prior mean."""

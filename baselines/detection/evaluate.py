@@ -33,11 +33,11 @@ from baselines.detection.detectors import (
     detect_gain,
     strategy_costs,
 )
-from baselines.detection.gchisq import quadratic_tails
 from baselines.detection.mmse import MMSEEstimator
 from baselines.detection.problem import DetectionProblem, check_problem
 from fdia_env._validation import check_int
 from fdia_env.detection.expected import expected_squared_error
+from fdia_env.detection.gchisq import quadratic_tails
 from fdia_env.kalman import psd_sqrt
 
 

@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from baselines.detection.attack import c2_optimal_pbb
 from fdia_env._validation import as_matrix, as_vector, check_psd
 from fdia_env._validation import check_power as _check_power
+from fdia_env.detection.attack import c2_optimal_pbb
 from fdia_env.kalman import information_update, logdet, predict_cov, spd_inv, steady_state
 from fdia_env.scenarios import Scenario, resolve
 
@@ -187,7 +187,7 @@ def static_problem(
         scenario: A preset name or :class:`~fdia_env.scenarios.Scenario` (default ch3-static).
         power: Attack power a² ``>= 0``; used when ``Pbb`` is not given.
         Pbb: (nz, nz) bias covariance; default the c2-maximising one of power a²
-            (:func:`~baselines.detection.attack.c2_optimal_pbb`), which for ch3-static is the
+            (:func:`~fdia_env.detection.attack.c2_optimal_pbb`), which for ch3-static is the
             ``diag(a², 0)`` of docs/math.md §6.
         p1: Prior probability of an attack (default the scenario's, 0.85 for ch3).
 

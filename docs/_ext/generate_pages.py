@@ -36,6 +36,7 @@ API_PACKAGES = [
     ("baselines.covariance", "Attack covariances: trace and determinant optima"),
     ("baselines.game", "The sensor-selection game: LP, Bayesian, double oracle"),
     ("baselines.detection", "Detectors: OBDD, OBDI, CBD, CSD, MMSE"),
+    ("baselines.stealth", "Stealthy attacks: security index, budgeted attacks, protection"),
     ("agents.evaluate", "Scoring policies against the analytic references"),
     ("agents.registry", "What can be trained, with its reference"),
     ("agents.training", "stable-baselines3 training"),

@@ -435,7 +435,7 @@ def pbb_text(tracking: Sequence[float]) -> str:
             "### The attacker's Pbb (maximises c2 under tr Pbb = a²)",
             "c2 = tr[Pxx − Pxz Pzz0⁻¹ Pxz'] + tr(Pbb G), G = Pzz0⁻¹ Pxz' Pxz Pzz0⁻¹, is linear "
             "in Pbb, so the maximiser is rank one, a² u u' with u the top eigenvector of G "
-            "(`baselines/detection/attack.py`). **ch3-static**: G = diag((100/103)², "
+            "(`fdia_env/detection/attack.py`). **ch3-static**: G = diag((100/103)², "
             "(100/104)²), so the maximiser is diag(a², 0), the Pbb of {ref}`math §6 <math-6>` "
             "(max |Pbb/a² − "
             f"diag(1, 0)| = {diag:.1e}). **ch3-tracking** at K = {sc.attack_step}: the prior is "

@@ -105,12 +105,6 @@ def truncated_moments(
     return p, L @ V, m[0], m[1]
 
 
-def tail_second_moment(A: np.ndarray, C: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
-    """``(P(y'Ay > τ), E[y y' 1{y'Ay > τ}])`` for ``y ~ N(0, C)`` (see the module docstring)."""
-    p, T, _, m1 = truncated_moments(A, C, tau)
-    return float(p[1]), (T * m1) @ T.T
-
-
 def hypotheses(
     Pxx: np.ndarray, H: np.ndarray, Pww: np.ndarray, sigma: np.ndarray, p1: float
 ) -> Iterator[tuple[float, np.ndarray, np.ndarray]]:

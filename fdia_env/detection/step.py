@@ -13,6 +13,7 @@ from fdia_env.detection.expected import (
     case_covariance,
     expected_squared_error,
 )
+from fdia_env.detection.statistics import STATISTICS
 from fdia_env.kalman import predict_cov, psd_sqrt, sym
 from fdia_env.systems import LinearSystem
 
@@ -71,7 +72,7 @@ def detection_step(
     Pzz1 = sym(Pzz0 + rule.assumed_sigma)
     Pzz1_inv = np.linalg.inv(Pzz1)
     K0, K1 = Pxz @ Pzz0_inv, Pxz @ Pzz1_inv
-    A = Pzz0_inv if rule.statistic == "chi2" else sym(Pzz0_inv - Pzz1_inv)
+    A = STATISTICS[rule.statistic].matrix(Pzz0_inv, Pzz1_inv)
     incorporate = rule.on_detect == "incorporate"
     gain_d1 = K1 if incorporate else np.zeros_like(K0)
     P_d0 = sym(P_pred - K0 @ Pzz0 @ K0.T)

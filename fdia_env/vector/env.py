@@ -50,7 +50,7 @@ from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
-from fdia_env.envs.single_agent import Policy, check_agent, check_opponent
+from fdia_env.envs.single_agent import Policy, check_agent, check_no_opponent, check_opponent
 from fdia_env.registration import ENVS, torch_ids
 from fdia_env.vector.simulation import BatchedSimulation
 
@@ -119,6 +119,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             opponent = FixedMix.uniform(int(parallel.action_space(self.other).n))
         if self.other is not None:
             check_opponent(opponent, parallel.action_space(self.other))
+        else:
+            check_no_opponent(opponent, parallel.possible_agents)
         if xp is not NUMPY:
             _check_torch_support(parallel)
         self.backend, self.device = xp.name, xp.device

@@ -27,14 +27,11 @@ from typing import Any
 
 import numpy as np
 
-CASES: dict[str, str] = {
-    "ieee14": "case14",
-    "ieee30": "case30",
-    "ieee57": "case57",
-    "ieee118": "case118",
-    "ieee300": "case300",
-}
-"""Case names accepted by :func:`dc_network` -> the ``pandapower.networks`` function."""
+from fdia_env.systems.grid.cases import GRID_CASES
+
+CASES: dict[str, str] = {case.name: case.pandapower for case in GRID_CASES.values()}
+"""Case names accepted by :func:`dc_network` -> the ``pandapower.networks`` function (from
+the table of grid cases, :data:`fdia_env.systems.grid.cases.GRID_CASES`)."""
 
 EXTRA_HINT = 'pandapower is needed for the power-grid systems: pip install "fdia-env[grid]"'
 
