@@ -138,7 +138,9 @@ def test_a_toy_env_registered_through_the_public_path_reaches_every_consumer(tmp
 def test_every_consumer_lists_the_table():
     views = {env_id for e in ENVS.values() for env_id in e.views.values()}
     assert set(GYM_IDS) == views
-    assert torch_ids() == tuple(GYM_IDS)  # every env of the suite runs on torch
+    on_torch = [i for e in ENVS.values() if "torch" in e.backends for i in e.views.values()]
+    assert list(torch_ids()) == on_torch
+    assert {"fdia_env/SparseAttack-v0", "fdia_env/DetectionDefender-v0"} <= set(on_torch)
     for name, agent in agents.registry.REGISTRY:
         assert name in ENV_NAMES
         assert GYM_IDS[agents.registry.get(name, agent).gym_id] == (ENVS[name].module, agent)
@@ -171,6 +173,10 @@ def test_a_name_or_gym_id_already_taken_is_refused():
         register_env(("sparse_attack_v0", "fdia_env.sparse_attack_v0"))
     assert "other_v0" not in ENV_NAMES and "fdia_v1" not in ENV_NAMES
     register_env(ENVS["sparse_attack_v0"])  # the same entry again: nothing changes
+    copy = EnvEntry(
+        "sparse_attack_v0", "fdia_env.sparse_attack_v0", {"attacker": "fdia_env/SparseAttack-v0"}
+    )
+    assert copy == ENVS["sparse_attack_v0"] and len({copy, ENVS["sparse_attack_v0"]}) == 1
     assert list(ENV_NAMES)[:2] == ["sparse_attack_v0", "covariance_attack_v0"]
 
 

@@ -74,7 +74,8 @@ def env_page(name: str, static: Path) -> str:
     ids = list(views.values())
     lines = [f"# `{name}`", "", summary, ""]
     lines += [f"![{name} rendered after one random step](../_static/envs/{name}.png)", ""]
-    lines += ["| | |", "|---|---|", f"| import | `from fdia_env import {name}` |"]
+    package, _, leaf = get_env(name).module.rpartition(".")
+    lines += ["| | |", "|---|---|", f"| import | `from {package} import {leaf}` |"]
     lines += [f"| agents | {', '.join(f'`{a}`' for a in env.possible_agents)} |"]
     for agent in env.possible_agents:
         lines += [f"| `{agent}` action space | `{env.action_space(agent)}` |"]
