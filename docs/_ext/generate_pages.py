@@ -126,15 +126,16 @@ def usage_section(name: str) -> str:
     Every snippet is run by the test suite (``tests/test_docs.py``) for every env.
     """
     env = load(name).parallel_env()
+    package, _, leaf = get_env(name).module.rpartition(".")
     masked = any(_masked(env.observation_space(a)) for a in env.possible_agents)
     sample = "env.action_space(agent).sample({mask})"
     aec_mask = 'observation["action_mask"]' if masked else ""
     par_mask = 'observations[agent]["action_mask"]' if masked else ""
     out = ["## Usage", "", "### AEC (one agent at a time)", "", "```python"]
     out += [
-        f"from fdia_env import {name}",
+        f"from {package} import {leaf}",
         "",
-        f"env = {name}.env()",
+        f"env = {leaf}.env()",
         "env.reset(seed=42)",
         "for agent in env.agent_iter():",
         "    observation, reward, termination, truncation, info = env.last()",
@@ -150,9 +151,9 @@ def usage_section(name: str) -> str:
         "### Parallel (all agents at once)",
         "",
         "```python",
-        f"from fdia_env import {name}",
+        f"from {package} import {leaf}",
         "",
-        f"env = {name}.parallel_env()",
+        f"env = {leaf}.parallel_env()",
         "observations, infos = env.reset(seed=42)",
         "while env.agents:",
         "    # this is where you would insert your policy",
