@@ -7,7 +7,7 @@
 - :func:`basic_measurement_set`, :func:`undetectable_attack`: protecting n independent meters
   rules out every undetectable attack, and fewer do not.
 
-See docs/guide/stealth.md.
+Their ``.policy()`` plays them in ``stealth_attack_v0``. See docs/guide/stealth.md.
 """
 
 from baselines.stealth.attack import (
@@ -17,11 +17,13 @@ from baselines.stealth.attack import (
     minimum_meter_attack,
     undetectable_attack,
 )
+from baselines.stealth.policy import StealthPolicy
 from baselines.stealth.security_index import METHODS, SecurityIndex, security_index
 
 __all__ = [
     "METHODS",
     "SecurityIndex",
+    "StealthPolicy",
     "StealthyAttack",
     "basic_measurement_set",
     "budgeted_attack",
