@@ -27,6 +27,7 @@ from gymnasium import spaces
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
 from ray.tune.registry import register_env
 
+from agents.rllib.module import register_default_module
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.registration import ENV_NAMES, GYM_IDS, load
@@ -187,13 +188,21 @@ class _Creator:
         self.name = name
 
     def __call__(self, env_config: Mapping[str, Any] | None = None) -> Any:
+        # an env runner builds its env, then its RL module: the default module is masked there
+        register_default_module()
         if self.name in GYM_IDS:
             return make_view(self.name, env_config)
         return make_multi_agent(self.name, env_config)
 
 
 def register_envs() -> list[str]:
-    """Register every module and Gymnasium view with RLlib; returns the names registered."""
+    """Register every module and Gymnasium view with RLlib; returns the names registered.
+
+    Also makes RLlib's default PPO module the masked one
+    (:func:`agents.rllib.module.register_default_module`), so that a plain
+    ``PPOConfig().environment(name)`` runs on every env, masked players included.
+    """
+    register_default_module()
     names = [*MODULES, *GYM_IDS]
     for name in names:
         register_env(name, _Creator(name))

@@ -28,6 +28,42 @@ def spd_inv(a: np.ndarray) -> np.ndarray:
     return sym(namespace(a).inv(a))
 
 
+# Eigenvalues of a PSD matrix below ``size · eps`` of its largest carry no information in
+# float64 (they are rounding of the large ones): they are zero.
+_EPS = float(np.finfo(np.float64).eps)
+
+
+def spd_inv_sum(P: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(P + S)⁻¹`` and ``log det(P + S)`` for SPD ``P`` and PSD ``S`` of any relative scale.
+
+    Forming ``P + S`` loses ``P`` wherever ``S`` is rank deficient and ``‖S‖ ≫ ‖P‖`` (a rank-one
+    bias covariance of power 1e40 makes the sum exactly singular in float64). Instead, in the
+    eigenbasis ``S = U diag(w) U'`` (eigenvalues below ``size · eps · max w`` set to zero, as
+    they are rounding), ``U'(P + S)U = U'PU + diag(w)`` is scaled by its diagonal
+    ``d = diag(U'PU) + w`` to ``X = D^{-1/2} (U'PU + diag(w)) D^{-1/2}`` with unit diagonal,
+    which is as well conditioned as ``P`` whatever ``w`` is; then
+    ``(P + S)⁻¹ = U D^{-1/2} X⁻¹ D^{-1/2} U'`` and ``log det(P + S) = log det X + Σ log d``.
+
+    Args:
+        P: (..., m, m) symmetric positive definite.
+        S: (m, m) or (..., m, m) symmetric PSD (broadcast against ``P``).
+
+    Returns:
+        ``(inverse, logdet)``: (..., m, m) symmetric and (...,).
+    """
+    xp = namespace(P)
+    m = P.shape[-1]
+    w, U = xp.eigh(sym(xp.asarray(S)))
+    w = xp.where(w > m * _EPS * w[..., -1:], w, 0.0)  # ascending: the last is the largest
+    Pb = sym(mT(U) @ P @ U)
+    d = xp.diagonal(Pb) + w
+    r = 1.0 / xp.sqrt(d)
+    outer = r[..., :, None] * r[..., None, :]
+    X = sym((Pb + w[..., :, None] * xp.eye(m)) * outer)
+    inverse = sym(U @ (spd_inv(X) * outer) @ mT(U))
+    return inverse, logdet(X) + xp.sum(xp.log(d), -1)
+
+
 _COFACTOR_SIGNS = np.array([[1.0, -1.0], [-1.0, 1.0]])
 
 
