@@ -297,3 +297,21 @@ def test_link_check_reports_a_missing_anchor_and_a_missing_page(tmp_path, caplog
     assert any("b.html#gone (no such anchor)" in m for m in messages), messages
     assert any("c.html (no such file)" in m for m in messages), messages
     assert len(messages) == 2, messages
+
+
+def test_docstring_citations_become_links_except_in_literals_and_doctests():
+    import local_links
+
+    lines = [
+        "The payoff of docs/math.md §5, and docs/references.md §4's table.",
+        "``x = 1 (docs/math.md §2)`` is literal; after it, docs/math.md §2.1 is not.",
+        ">>> f()  # docs/math.md §3",
+    ]
+    local_links.link_citations(None, "function", "f", None, {}, lines)
+    assert lines == [
+        "The payoff of :ref:`docs/math.md §5 <math-5>`, and "
+        ":ref:`docs/references.md §4 <references-4>`'s table.",
+        "``x = 1 (docs/math.md §2)`` is literal; after it, "
+        ":ref:`docs/math.md §2.1 <math-2-1>` is not.",
+        ">>> f()  # docs/math.md §3",
+    ]

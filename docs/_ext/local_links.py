@@ -1,7 +1,8 @@
 """Internal links of the built site: viewcode's "[docs]" back-links fixed, every anchor checked.
 
-Two build steps:
+Three build steps:
 
+- :func:`link_citations` turns a docstring's "docs/math.md §4" into a link to that section.
 - ``sphinx.ext.viewcode`` links each highlighted source block back to the object's
   documentation, but it takes the page from the *last* document that showed the object and the
   anchor prefix from the *first*. An object re-exported by a second API page (documented there
@@ -108,9 +109,31 @@ def check_local_links(app, exception) -> None:
                     logger.warning(f"broken link in {where}: {href} (no such anchor)")
 
 
+_CITATION = re.compile(r"docs/(math|references)\.md §([0-9]+(?:\.[0-9]+)?)")
+
+
+def link_citations(app, what, name, obj, options, lines: list[str]) -> None:
+    """Make "docs/math.md §2.2" in a docstring a link to that section of the site's page.
+
+    Doctest lines and inline literals (an odd number of double backquotes before the citation)
+    are left as they are.
+    """
+    for i, line in enumerate(lines):
+        if not line.lstrip().startswith((">>>", "...")):
+            lines[i] = _CITATION.sub(lambda m, text=line: _citation_link(m, text), line)
+
+
+def _citation_link(match: re.Match, line: str) -> str:
+    if line[: match.start()].count("``") % 2:  # inside an inline literal
+        return match.group(0)
+    page, section = match.groups()
+    return f":ref:`docs/{page}.md §{section} <{page}-{section.replace('.', '-')}>`"
+
+
 def setup(app):
     """Sphinx extension entry point."""
     # after every document is read, before viewcode writes its source pages
     app.connect("env-updated", fix_viewcode_backlinks)
     app.connect("build-finished", check_local_links)
+    app.connect("autodoc-process-docstring", link_citations)
     return {"parallel_read_safe": True, "version": "1"}
