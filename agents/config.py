@@ -497,7 +497,8 @@ class GameConfig:
     env_kwargs: dict[str, str] = field(default_factory=dict)
     """Extra env options as name value pairs (JSON values), e.g. --env-kwargs power 50."""
     algo: str | None = None
-    """Best-response learner: PPO, A2C or DQN (default: PPO)."""
+    """Best-response oracle: PPO, A2C or DQN (default: PPO), torch-ppo (on --device), or exact
+    (the exact best response on the payoff matrix: nothing is learned)."""
     iterations: int = 8
     """Iterations; each trains one attacker and one defender best response."""
     steps_per_iteration: int = 3_000

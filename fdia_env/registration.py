@@ -91,6 +91,9 @@ class EnvEntry:
             raise ValueError("backends: the torch backend needs the numpy one (the reference)")
         object.__setattr__(self, "views", MappingProxyType(dict(self.views)))
 
+    def __hash__(self) -> int:
+        return hash((self.name, self.module, tuple(self.views.items()), self.backends))
+
 
 _ENVS: dict[str, EnvEntry] = {}
 ENVS: Mapping[str, EnvEntry] = MappingProxyType(_ENVS)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ast
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -136,7 +138,9 @@ def test_a_toy_env_registered_through_the_public_path_reaches_every_consumer(tmp
 def test_every_consumer_lists_the_table():
     views = {env_id for e in ENVS.values() for env_id in e.views.values()}
     assert set(GYM_IDS) == views
-    assert torch_ids() == tuple(GYM_IDS)  # every env of the suite runs on torch
+    on_torch = [i for e in ENVS.values() if "torch" in e.backends for i in e.views.values()]
+    assert list(torch_ids()) == on_torch
+    assert {"fdia_env/SparseAttack-v0", "fdia_env/DetectionDefender-v0"} <= set(on_torch)
     for name, agent in agents.registry.REGISTRY:
         assert name in ENV_NAMES
         assert GYM_IDS[agents.registry.get(name, agent).gym_id] == (ENVS[name].module, agent)
@@ -169,6 +173,10 @@ def test_a_name_or_gym_id_already_taken_is_refused():
         register_env(("sparse_attack_v0", "fdia_env.sparse_attack_v0"))
     assert "other_v0" not in ENV_NAMES and "fdia_v1" not in ENV_NAMES
     register_env(ENVS["sparse_attack_v0"])  # the same entry again: nothing changes
+    copy = EnvEntry(
+        "sparse_attack_v0", "fdia_env.sparse_attack_v0", {"attacker": "fdia_env/SparseAttack-v0"}
+    )
+    assert copy == ENVS["sparse_attack_v0"] and len({copy, ENVS["sparse_attack_v0"]}) == 1
     assert list(ENV_NAMES)[:2] == ["sparse_attack_v0", "covariance_attack_v0"]
 
 
@@ -192,3 +200,181 @@ def test_every_consumer_of_detector_statistics_reads_one_table():
     mean_h0 = np.trace(STATISTICS["chi2"].matrix(problem.Pzz0_inv, None) @ problem.Pzz0)
     assert mean_h0 == pytest.approx(STATISTICS["chi2"].scale(problem.nz), rel=1e-12)
     assert problem.nz == 2
+
+
+# --- layering ------------------------------------------------------------------------------
+# The library's layers, lowest first: a module may import from its own layer and the layers
+# below it, never from one above (docs/guide/layout.md draws the same map). Longest prefix wins.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("fdia_env._validation", "fdia_env.backend", "fdia_env.episode", "fdia_env.registration"),
+    ("fdia_env.systems", "fdia_env.kalman"),
+    ("fdia_env.scenarios",),
+    ("fdia_env.attacks", "fdia_env.defenses", "fdia_env.detection"),
+    ("fdia_env.envs", "fdia_env.vector", "fdia_env.stealth"),
+    tuple(entry.module for entry in ENVS.values()),  # the env modules, from the table
+    ("fdia_env.wrappers", "fdia_env.torchrl"),
+    ("fdia_env",),
+    ("baselines",),
+    ("agents",),
+    ("experiments", "benchmarks", "train"),
+)
+PACKAGES = ("fdia_env", "baselines", "agents", "experiments", "benchmarks")
+
+
+def _modules() -> dict[str, Path]:
+    mods = {"train": ROOT / "train.py"}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            mods[".".join(parts)] = path
+    return mods
+
+
+def _is_type_checking(node: ast.AST) -> bool:
+    test = getattr(node, "test", None)
+    name = getattr(test, "id", None) or getattr(test, "attr", None)
+    return isinstance(node, ast.If) and name == "TYPE_CHECKING"
+
+
+def _imports(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement run at some point (in functions too; not ``if TYPE_CHECKING``)."""
+    out, stack = [], [tree]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            out.append(node)
+        for child in ast.iter_child_nodes(node):
+            if not _is_type_checking(child):
+                stack.append(child)
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module → the project modules it imports (a package import is its ``__init__``)."""
+    mods = _modules()
+
+    def resolve(name: str) -> str | None:
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {}
+    for module, path in mods.items():
+        targets = set()
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for node in _imports(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                targets |= {resolve(alias.name) for alias in node.names}
+                continue
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*parts, base] if base else parts)
+            for alias in node.names:
+                sub = f"{base}.{alias.name}"
+                targets.add(sub if sub in mods else resolve(base))
+        graph[module] = targets - {None, module}
+    return graph
+
+
+def layer_of(module: str) -> int:
+    best = max(
+        ((len(prefix), i) for i, names in enumerate(LAYERS) for prefix in names
+         if module == prefix or module.startswith(prefix + ".")),
+        default=None,
+    )  # fmt: skip
+    assert best is not None, f"{module} is in no layer: add it to LAYERS"
+    return best[1]
+
+
+def test_no_two_modules_import_each_other():
+    graph = import_graph()
+    pairs = sorted({tuple(sorted((a, b))) for a in graph for b in graph[a] if a in graph[b]})
+    assert pairs == []
+
+
+def test_no_module_imports_from_a_higher_layer():
+    graph = import_graph()
+    upward = sorted(
+        f"{a} (layer {layer_of(a)}) imports {b} (layer {layer_of(b)})"
+        for a in graph
+        for b in graph[a]
+        if layer_of(b) > layer_of(a)
+    )
+    assert upward == []
+
+
+def test_the_import_graph_sees_a_mutual_import_and_an_upward_one():
+    """Negative control: the scan finds what it is meant to find."""
+    graph = import_graph()
+    assert "fdia_env.kalman" in graph["baselines.sparse.bound"]  # a plain downward import
+    assert "fdia_env.registration" in graph["fdia_env"]
+    assert "baselines.sparse.bound" in graph["baselines.sparse.split"]
+    # ``from package import module`` is that module, not the package's __init__
+    assert "baselines.sparse.lowrank" in graph["baselines.sparse.greedy"]
+    assert "baselines.sparse" not in graph["baselines.sparse.greedy"]
+    assert "fdia_env.backend.torch_backend" in graph["fdia_env.backend"]  # inside a function
+    assert layer_of("baselines.sparse.split") > layer_of("fdia_env")
+    assert layer_of("fdia_env.kalman.linalg") < layer_of("fdia_env.envs.parallel")
+    tree = ast.parse("if TYPE_CHECKING:\n    import a\ndef f():\n    import b\n")
+    assert [n.names[0].name for n in _imports(tree)] == ["b"]
+
+
+@pytest.mark.parametrize("objective", ["trace", "logdet"])
+def test_the_system_family_env_runs_sparse_attack_v0_on_each_drawn_system(objective):
+    """Its inner env, composed from the models, equals sparse_attack_v0's on the same system."""
+    from fdia_env import sparse_attack_v0
+    from fdia_env.envs.system_family import SystemFamilyEnv, TrackingFamily
+
+    family = TrackingFamily(num_sensors=4, budget=3, horizon=3)
+    env = SystemFamilyEnv(family, objective=objective)
+    env.reset(seed=0, options={"system_seed": 7})
+    inner = env._inner.parallel
+    direct = sparse_attack_v0.parallel_env(
+        scenario=env.system, budget=3, horizon=3, objective=objective
+    )
+    obs_a, _ = inner.reset(seed=1)
+    obs_b, _ = direct.reset(seed=1)
+    np.testing.assert_array_equal(
+        obs_a["attacker"]["observation"], obs_b["attacker"]["observation"]
+    )
+    for action in (5, 0, 3):
+        a = inner.step({"attacker": action})
+        b = direct.step({"attacker": action})
+        np.testing.assert_array_equal(
+            a[0]["attacker"]["observation"], b[0]["attacker"]["observation"]
+        )
+        assert a[1] == b[1]
+    assert a[1]["attacker"] != 0.0  # the terminal reward: Φ of the attacked window
+
+
+def test_no_library_module_is_a_re_export_shim():
+    """Every module of the installed packages defines something (a package's __init__ aside)."""
+    shims = []
+    for module, path in _modules().items():
+        if path.name == "__init__.py" or not module.startswith(("fdia_env", "baselines", "agents")):
+            continue
+        body = [n for n in ast.parse(path.read_text(encoding="utf-8")).body]
+        if all(isinstance(n, (ast.Import, ast.ImportFrom, ast.Expr)) for n in body):
+            shims.append(module)
+    assert shims == []
+
+
+def test_the_layout_page_draws_the_layers_and_names_files_that_exist():
+    page = (ROOT / "docs" / "guide" / "layout.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| (\d+) \| (.+) \|$", page, flags=re.MULTILINE)
+    drawn = []
+    for _, cells in rows:
+        names = re.findall(r"`([\w.*]+)`", cells)
+        names = [n.removesuffix(".py") for n in names]
+        if names == ["fdia_env.*_v0"]:
+            names = [m for m in LAYERS[len(drawn)] if m.endswith("_v0")]
+        drawn.append(tuple(names))
+    assert [int(i) for i, _ in rows] == list(range(len(LAYERS)))
+    assert drawn == [tuple(layer) for layer in LAYERS]
+    paths = set(re.findall(r"`((?:fdia_env|baselines|agents|tests)/[\w/]+\.py)`", page))
+    paths = {p for p in paths if "/my_" not in p}  # the page's example of a new env
+    assert len(paths) >= 10
+    assert [p for p in sorted(paths) if not (ROOT / p).is_file()] == []

@@ -101,8 +101,11 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
-from fdia_env.attacks.sparse import MAX_SENSORS
+from fdia_env.attacks.sparse import MAX_SENSORS, SparseAttack
+from fdia_env.defenses import PerfectDetection
+from fdia_env.envs.factory import episode_spec
 from fdia_env.envs.grid_family import GridFamily
+from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.single_agent import SingleAgentEnv
 from fdia_env.kalman import information_update, objective, steady_state
 from fdia_env.scenarios import Scenario
@@ -433,16 +436,13 @@ class SystemFamilyEnv(gym.Env):
             k = check_int("system_seed", options["system_seed"], minimum=0)
         else:
             k = int(self.system_seeds[int(self.np_random.integers(len(self.system_seeds)))])
-        from fdia_env import sparse_attack_v0  # here: it imports fdia_env.envs (a cycle)
-
         self.system_seed = k
         self.system = self.family.system(k)
-        parallel = sparse_attack_v0.parallel_env(
-            scenario=self.system,
-            budget=self.family.budget,
-            horizon=self.family.horizon,
-            objective=self.objective,
-        )
+        # sparse_attack_v0's env on this system, composed here from the models (the env modules
+        # are a layer above this package)
+        sc, spec = episode_spec(self.system, horizon=self.family.horizon, objective=self.objective)
+        attack = SparseAttack(self.family.budget)
+        parallel = FdiaParallelEnv(sc, attack, PerfectDetection(), spec, name="sparse_attack_v0")
         self._inner = SingleAgentEnv(parallel, agent="attacker")
         M = self.system.M
         self.order = effect_order(self.system, self.objective) if self.sort_sensors else None
