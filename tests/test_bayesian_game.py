@@ -416,7 +416,7 @@ def test_bayesian_game_bad_input():
 
 
 def test_psro_meta_payoff_is_exact_over_natures_draw():
-    from agents.selfplay import empirical_payoff
+    from agents.population import empirical_payoff
 
     kwargs = {"types": TYPES, "priors": [0.3, 0.7], "attacker_model": "uninformed"}
     entry = get("sensor_game_v0", "attacker")

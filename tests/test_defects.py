@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from baselines.covariance import det_optimal, kkt_residuals, water_filling
+from fdia_env.systems import position_sensor, pv_sensor, tracking_system
 
 # --- water-filling at tiny powers and with negative gains -------------------------------------
 
@@ -217,3 +218,139 @@ def test_multibinary_torch_vector_env_accepts_0_1_of_any_real_dtype(dtype):
     assert info["attacked"].tolist() == [[1, 0, 1], [0, 1, 0]]
     with pytest.raises(ValueError, match="must be 0/1"):
         venv.step(torch.full((2, 3), 0.5))
+
+
+# --- the detection game at every power up to 1e300, on the tracking scenario too ---------------
+
+STRONG = [10.0**e for e in (30, 32, 36, 40, 46, 58, 100, 150, 226, 294)]  # singular Pzz1 before
+
+
+@pytest.mark.parametrize("power", STRONG)
+def test_detection_game_tracking_steps_and_obdd_threshold_at_strong_power(power):
+    import math
+
+    from baselines.detection import obdd, tracking_problem
+    from fdia_env import detection_game_v0
+
+    env = detection_game_v0.parallel_env(scenario="ch3-tracking", power=power)
+    env.reset(seed=0)  # raised LinAlgError: Singular matrix
+    attack = detection_game_v0.default_opponent(env, "defender").predict(None)[0]  # rank one
+    _, rewards, *_ = env.step(
+        {"attacker": attack, "defender": env.action_space("defender").sample()}
+    )
+    assert math.isfinite(rewards["attacker"]) and rewards["attacker"] > 0.0
+    assert math.isfinite(obdd(tracking_problem("ch3-tracking", power=power)).threshold)  # was −inf
+
+
+@pytest.mark.parametrize(
+    ("statistic", "on_detect", "limit"),
+    [
+        ("chi2", "discard", 3.38159464),
+        ("quadratic", "discard", 3.53468809),
+        ("chi2", "incorporate", 3.34874956),
+        ("quadratic", "incorporate", 3.50118564),
+    ],
+)
+def test_tracking_exact_error_reaches_its_strong_attack_limit(statistic, on_detect, limit):
+    # against a rank-one attack the error tends to a limit as a² → ∞ (the attacked direction is
+    # detected and dropped or down-weighted); it was 3.7e31 (quadratic, discard) and 1.9e281
+    # (incorporate) at a² = 1e300, and LinAlgError between 1e30 and 1e41
+    from baselines.detection import Detector, expected_mse, tracking_problem
+
+    tau = 5.99 if statistic == "chi2" else 1.0
+    values = [
+        expected_mse(Detector("D", tracking_problem("ch3-tracking", a2), statistic, tau, on_detect))
+        for a2 in (1e30, 1e40, 1e100, 1e150, 1e300)
+    ]
+    np.testing.assert_allclose(values, limit, rtol=1e-8)
+
+
+def test_tracking_bayes_costs_are_right_at_strong_power():
+    # OBDI's cost was −9.8e16 at 1e36 and 7.7e20 at 1e40; CSD's miss probability ~ a⁻¹ times
+    # c2 ~ a² grows as a (it did not: 1.1e18, 9.0e8, 7.0e8 at 1e36, 1e40, 1e300)
+    from baselines.detection import bayes_cost, csd, obdi, tracking_problem
+
+    obdi_costs = [
+        bayes_cost(obdi(tracking_problem("ch3-tracking", a2))).value for a2 in (1e36, 1e40, 1e300)
+    ]
+    np.testing.assert_allclose(obdi_costs, obdi_costs[0], rtol=1e-9)
+    assert 0.0 < obdi_costs[0] < 10.0
+    csd_costs = [
+        bayes_cost(csd(tracking_problem("ch3-tracking", a2))).value for a2 in (1e36, 1e40, 1e300)
+    ]
+    assert csd_costs[1] / csd_costs[0] == pytest.approx(1e2, rel=1e-6)
+    assert csd_costs[2] / csd_costs[0] == pytest.approx(1e132, rel=1e-6)
+
+
+@pytest.mark.parametrize("power", [1e-20, 1.0, 1e40, 1e300])
+def test_spd_inv_sum_matches_a_high_precision_reference_for_a_rank_one_sum(power):
+    mp = pytest.importorskip("mpmath")
+    from fdia_env.kalman import spd_inv_sum
+
+    mp.mp.dps = 700
+    rng = np.random.default_rng(3)
+    M = rng.standard_normal((3, 3))
+    P = M @ M.T + np.eye(3)
+    v = rng.standard_normal(3)
+    S = power * np.outer(v, v) / (v @ v)
+    inverse, logdet = spd_inv_sum(P, S)
+    # reference: the exact rank-one matrix power · u u' with the float unit vector u
+    u = mp.matrix(list(v)) / mp.norm(mp.matrix(list(v)))
+    exact = mp.matrix(P.tolist()) + mp.mpf(power) * (u * u.T)
+    ref = exact**-1
+    ref_np = np.array(ref.tolist(), dtype=float)
+    assert np.linalg.norm(inverse - ref_np) <= 1e-12 * np.linalg.norm(ref_np)
+    assert logdet == pytest.approx(float(mp.log(mp.det(exact))), rel=1e-12, abs=1e-12)
+
+
+# --- extreme noise scales: clear errors instead of OverflowError, steady states at any scale ----
+
+
+@pytest.mark.parametrize(
+    ("make", "name"),
+    [
+        (
+            lambda: tracking_system(1e200, [3.0]),
+            "sigma_v",
+        ),
+        (
+            lambda: tracking_system(1.0, [1e200]),
+            "sigma_w",
+        ),
+        (
+            lambda: tracking_system(1e100, [3.0], T=1e60),
+            "sigma_v",
+        ),
+        (
+            lambda: tracking_system(1e-170, [3.0]),
+            "sigma_v",
+        ),
+        (lambda: pv_sensor(1e200, 1.0), "sigma_p"),
+        (lambda: position_sensor(1e-200), "sigma"),
+    ],
+)
+def test_noise_whose_variance_leaves_float64_is_refused_by_name(make, name):
+    # tracking_system(1e200, [3.0]) raised a bare OverflowError (sigma_v ** 2)
+    with pytest.raises(ValueError, match=rf"{name}.* outside float64's normal range"):
+        make()
+
+
+@pytest.mark.parametrize("c", [1e-150, 1e-100, 1e100, 1e150])
+def test_steady_state_scales_with_the_noise_at_any_absolute_scale(c):
+    # P(cσ) = c² P(σ), W(cσ) = W(σ): σ_v = σ_w = 1e-150 "diverged" before (the DARE solver's
+    # absolute tolerances, then a 2 × 2 determinant of 1e-600)
+    from fdia_env.kalman import steady_state
+
+    P_pred, P_post, W = steady_state(tracking_system(0.5 * c, [3.0 * c, 4.0 * c]))
+    ref_pred, ref_post, ref_W = steady_state(tracking_system(0.5, [3.0, 4.0]))
+    np.testing.assert_allclose(P_pred / c**2, ref_pred, rtol=1e-12)
+    np.testing.assert_allclose(P_post / c**2, ref_post, rtol=1e-12)
+    np.testing.assert_allclose(W, ref_W, rtol=1e-12)
+
+
+def test_inv2_of_tiny_and_huge_matrices_is_the_scaled_inverse():
+    from fdia_env.kalman import inv2
+
+    a = np.array([[2.0, 1.0], [1.0, 3.0]])
+    for c in (1e-200, 1e-160, 1e160, 1e200):
+        np.testing.assert_allclose(inv2(a * c) * c, np.linalg.inv(a), rtol=1e-14)

@@ -231,3 +231,18 @@ def test_the_length_check_accepts_a_finished_runs_own_length():
         check_not_shorter("iterations", 2, 3, saved, Path("r"), "iterations")
     with pytest.raises(ValueError, match="give --total-timesteps 64 or more"):
         check_not_shorter("total_timesteps", 10, 64, {"total_timesteps": 1000}, Path("r"))
+
+
+def test_a_game_resume_below_the_finished_iterations_is_refused(tmp_path, capsys):
+    game = ["game", "--method", "fsp", "--steps-per-iteration", "64", *TINY_PPO, *TINY[:3]]
+    assert status(tmp_path, capsys, *game, "--iterations", "2")[0] == 0
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    scores = (run_dir / "scores.json").read_bytes()
+    code, err = status(tmp_path, capsys, *game, "--iterations", "1", "--resume")
+    assert code == 2
+    assert err == [
+        f"train.py: error: --iterations 1 is below the 2 iterations {run_dir} has trained "
+        "already: a resume continues a run and cannot shorten it; give --iterations 2 or more, "
+        "or start a new run"
+    ]
+    assert (run_dir / "scores.json").read_bytes() == scores

@@ -30,7 +30,15 @@ import numpy as np
 from fdia_env._validation import as_matrix, as_vector, check_psd
 from fdia_env._validation import check_power as _check_power
 from fdia_env.detection.attack import c2_optimal_pbb
-from fdia_env.kalman import information_update, logdet, predict_cov, spd_inv, steady_state
+from fdia_env.detection.expected import Innovation
+from fdia_env.kalman import (
+    information_update,
+    logdet,
+    predict_cov,
+    spd_inv,
+    spd_inv_sum,
+    steady_state,
+)
 from fdia_env.scenarios import Scenario, resolve
 
 
@@ -119,7 +127,9 @@ class DetectionProblem:
         Pxz = Pxx @ H.T
         Pzz0 = _sym(H @ Pxz + Pww)
         Pzz1 = _sym(Pzz0 + Pbb)
-        Pzz0_inv, Pzz1_inv = spd_inv(Pzz0), spd_inv(Pzz1)
+        Pzz0_inv = spd_inv(Pzz0)
+        # from Pzz0 and Pbb, not from Pzz1: at a large power Pzz1 is singular in float64
+        Pzz1_inv, logdet1 = spd_inv_sum(Pzz0, Pbb)
         for name, value in (
             ("x_bar", x_bar),
             ("Pxx", Pxx),
@@ -137,7 +147,7 @@ class DetectionProblem:
             ("Pzz0_inv", Pzz0_inv),
             ("Pzz1_inv", Pzz1_inv),
             ("logdet0", float(logdet(Pzz0))),
-            ("logdet1", float(logdet(Pzz1))),
+            ("logdet1", float(logdet1)),
             ("K0", Pxz @ Pzz0_inv),
             ("K1", Pxz @ Pzz1_inv),
             ("A", _sym(Pzz0_inv - Pzz1_inv)),
@@ -157,9 +167,16 @@ class DetectionProblem:
             K: (n, nz) gain; zero for "discard the measurement".
             hypothesis: 0 (no attack) or 1 (attack).
         """
-        Pzz = self.Pzz1 if hypothesis == 1 else self.Pzz0
-        cross = np.sum(K * self.Pxz)  # tr(K Pxz') = tr(Pxz K')
-        return float(np.trace(self.Pxx) - 2.0 * cross + np.sum((K @ Pzz) * K))
+        # tr[Pxx − K* Pxz'] + ‖(K* − K) L‖²_F with K* = Pxz Pzz_h⁻¹ and L L' = Pzz_h, in the
+        # factor that keeps a strong attack's scale apart (Pzz1 itself is singular in float64
+        # at a power of 1e40); K1 under H1 is K* itself
+        factor = Innovation.of(self.Pzz0, self.Pbb if hypothesis == 1 else None)
+        KL = factor.optimal_gain_times_factor(self.Pxz)
+        if hypothesis == 1 and (K is self.K1 or np.array_equal(K, self.K1)):
+            E = np.zeros_like(KL)
+        else:
+            E = KL - factor.gain_times_factor(np.asarray(K, dtype=float))
+        return float(np.trace(self.Pxx) - np.sum(KL * KL) + np.sum(E * E))
 
 
 def _sym(a: np.ndarray) -> np.ndarray:

@@ -5,9 +5,11 @@
 - :func:`minimum_meter_attack`, :func:`budgeted_attack`: the sparsest undetectable attack and
   the most damaging one on a meter budget (exact MILPs);
 - :func:`basic_measurement_set`, :func:`undetectable_attack`: protecting n independent meters
-  rules out every undetectable attack, and fewer do not.
+  rules out every undetectable attack, and fewer do not;
+- :func:`mo_sinopoli`: whether a sensor set admits a stealthy attack that drives a Kalman
+  filter's error unbounded under a χ² innovation detector, and the attack.
 
-See docs/guide/stealth.md.
+Their ``.policy()`` plays them in ``stealth_attack_v0``. See docs/guide/stealth.md.
 """
 
 from baselines.stealth.attack import (
@@ -17,15 +19,21 @@ from baselines.stealth.attack import (
     minimum_meter_attack,
     undetectable_attack,
 )
+from baselines.stealth.dynamic import StealthyKalmanAttack, kalman_model, mo_sinopoli
+from baselines.stealth.policy import StealthPolicy
 from baselines.stealth.security_index import METHODS, SecurityIndex, security_index
 
 __all__ = [
     "METHODS",
     "SecurityIndex",
+    "StealthPolicy",
     "StealthyAttack",
+    "StealthyKalmanAttack",
     "basic_measurement_set",
     "budgeted_attack",
+    "kalman_model",
     "minimum_meter_attack",
+    "mo_sinopoli",
     "security_index",
     "undetectable_attack",
 ]

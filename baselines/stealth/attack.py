@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import linalg, optimize, sparse
@@ -33,6 +33,9 @@ from baselines.stealth.common import (
 )
 from baselines.stealth.security_index import security_index
 from fdia_env._validation import check_int
+
+if TYPE_CHECKING:
+    from baselines.stealth.policy import StealthPolicy
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +63,16 @@ class StealthyAttack:
     objective: str
     budget: int | None = None
     seconds: float = 0.0
+
+    def policy(self, a_max: float = 1.0) -> StealthPolicy:
+        """This attack for ``stealth_attack_v0`` with ``action="free"`` and that ``a_max``.
+
+        Raises:
+            ValueError: If some ``|a_i|`` exceeds ``a_max``.
+        """
+        from baselines.stealth.policy import StealthPolicy
+
+        return StealthPolicy(self.a / a_max, kind="free")
 
 
 def _attack(a: np.ndarray, c: np.ndarray, **kwargs: Any) -> StealthyAttack:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -25,38 +24,7 @@ def as_estimation(source: Any, param: str = "estimation") -> StaticEstimation:
 
 def meter_indices(est: StaticEstimation, meters: Any, param: str = "protected") -> np.ndarray:
     """Sorted unique meter positions from positions or names (``ValueError`` naming ``param``)."""
-    if meters is None:
-        return np.zeros(0, dtype=np.int64)
-    if isinstance(meters, (str, int, np.integer)):
-        meters = [meters]
-    where = {name: i for i, name in enumerate(est.meters)}
-    out = []
-    for item in _iterable(meters, param):
-        if isinstance(item, str):
-            if item not in where:
-                raise ValueError(
-                    f"{param} holds an unknown meter {item!r}; meters are {list(est.meters)[:6]}"
-                    f"... (names) or positions 0..{est.m - 1}"
-                )
-            out.append(where[item])
-        elif isinstance(item, (int, np.integer)) and not isinstance(item, bool):
-            if not 0 <= int(item) < est.m:
-                raise ValueError(
-                    f"{param} holds an unknown meter {item!r}: positions are 0..{est.m - 1}"
-                )
-            out.append(int(item))
-        else:
-            raise ValueError(
-                f"{param} must hold meter positions (0..{est.m - 1}) or names, got {item!r}"
-            )
-    return np.unique(np.array(out, dtype=np.int64))
-
-
-def _iterable(value: Any, param: str) -> Iterable[Any]:
-    try:
-        return list(value)
-    except TypeError as exc:
-        raise ValueError(f"{param} must be a collection of meters, got {value!r}") from exc
+    return est.meter_positions(meters, param)
 
 
 def state_index(est: StaticEstimation, state: Any, param: str = "state") -> int:

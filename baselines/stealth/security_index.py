@@ -33,7 +33,7 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import optimize, sparse
@@ -47,6 +47,9 @@ from baselines.stealth.common import (
     support,
 )
 from fdia_env._validation import check_positive
+
+if TYPE_CHECKING:
+    from baselines.stealth.policy import StealthPolicy
 
 METHODS = ("milp", "mincut", "binary", "brute")
 MAX_BRUTE = 20
@@ -78,6 +81,21 @@ class SecurityIndex:
     def meters_of(self, state: int) -> tuple[int, ...]:
         """Positions of the meters the attack on ``state`` corrupts."""
         return tuple(int(i) for i in support(self.attacks[state]))
+
+    def policy(self, state: int | None = None) -> StealthPolicy:
+        """The attack on ``state`` (default :attr:`weakest`) for ``stealth_attack_v0``.
+
+        A ``"shift"`` action: the states its c shifts (0/1 shifts, as the ``"mincut"`` and
+        ``"binary"`` methods find; the env's ``magnitude`` scales them).
+
+        Raises:
+            ValueError: When the attack's c is not 0/1 (use ``"mincut"``/``"binary"``, or play
+                ``a`` with a ``"free"`` action).
+        """
+        from baselines.stealth.policy import StealthPolicy
+
+        k = self.weakest if state is None else int(state)
+        return StealthPolicy(self.shifts[k], kind="shift")
 
     @property
     def weakest(self) -> int:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import re
 from pathlib import Path
 
 import numpy as np
@@ -69,7 +70,8 @@ def env_page(name: str, static: Path) -> str:
     env.step({a: env.action_space(a).sample() for a in env.agents})
     image = env.render()
     _write_png(static / f"{name}.png", image)
-    ids = list(get_env(name).views.values())
+    views = get_env(name).views
+    ids = list(views.values())
     lines = [f"# `{name}`", "", summary, ""]
     lines += [f"![{name} rendered after one random step](../_static/envs/{name}.png)", ""]
     package, _, leaf = get_env(name).module.rpartition(".")
@@ -77,9 +79,158 @@ def env_page(name: str, static: Path) -> str:
     lines += [f"| agents | {', '.join(f'`{a}`' for a in env.possible_agents)} |"]
     for agent in env.possible_agents:
         lines += [f"| `{agent}` action space | `{env.action_space(agent)}` |"]
-    lines += [f"| Gymnasium ids | {', '.join(f'`{i}`' for i in ids) or '–'} |", ""]
-    lines += [_examples_as_code(body)]
+        lines += [f"| `{agent}` observation space | {_space_cell(env.observation_space(agent))} |"]
+    lines += [f"| Gymnasium ids | {', '.join(f'`{i}`' for i in ids) or '–'} |"]
+    for gym_id in ids:
+        lines += [
+            f"| `{gym_id}` observation space | {_space_cell(_gym_env(gym_id).observation_space)} |"
+        ]
+    lines += ["", "(Default arguments; the shapes grow with the system's sensors and states.)", ""]
+    lines += [_myst_body(body), ""]
+    lines += [usage_section(name)]
     return "\n".join(lines) + "\n"
+
+
+def _gym_env(gym_id: str):
+    import gymnasium as gym
+
+    return gym.make(gym_id)
+
+
+def _space_cell(space) -> str:
+    """A space for the header table: shape, dtype and bounds; a Dict key by key."""
+    from gymnasium import spaces
+
+    if isinstance(space, spaces.Dict):
+        return "`Dict`: " + "; ".join(f"`{k}`: {_space_cell(v)}" for k, v in space.spaces.items())
+    if isinstance(space, spaces.Box):
+        low, high = np.unique(space.low), np.unique(space.high)
+        values = (
+            f"[{low[0]:g}, {high[0]:g}]"
+            if len(low) == len(high) == 1
+            else f"low {space.low.tolist()}, high {space.high.tolist()}"
+        )
+        return f"`Box` shape `{space.shape}`, `{space.dtype}`, values {values}"
+    return f"`{space}`"
+
+
+def _masked(space) -> bool:
+    from gymnasium import spaces
+
+    return isinstance(space, spaces.Dict) and "action_mask" in space.spaces
+
+
+def usage_section(name: str) -> str:
+    """Usage snippets: the AEC and parallel PettingZoo APIs and each Gymnasium view.
+
+    Every snippet is run by the test suite (``tests/test_docs.py``) for every env.
+    """
+    env = load(name).parallel_env()
+    package, _, leaf = get_env(name).module.rpartition(".")
+    masked = any(_masked(env.observation_space(a)) for a in env.possible_agents)
+    sample = "env.action_space(agent).sample({mask})"
+    aec_mask = 'observation["action_mask"]' if masked else ""
+    par_mask = 'observations[agent]["action_mask"]' if masked else ""
+    out = ["## Usage", "", "### AEC (one agent at a time)", "", "```python"]
+    out += [
+        f"from {package} import {leaf}",
+        "",
+        f"env = {leaf}.env()",
+        "env.reset(seed=42)",
+        "for agent in env.agent_iter():",
+        "    observation, reward, termination, truncation, info = env.last()",
+        "    if termination or truncation:",
+        "        action = None",
+        "    else:",
+        "        # this is where you would insert your policy",
+        f"        action = {sample.format(mask=aec_mask)}",
+        "    env.step(action)",
+        "env.close()",
+        "```",
+        "",
+        "### Parallel (all agents at once)",
+        "",
+        "```python",
+        f"from {package} import {leaf}",
+        "",
+        f"env = {leaf}.parallel_env()",
+        "observations, infos = env.reset(seed=42)",
+        "while env.agents:",
+        "    # this is where you would insert your policy",
+        "    actions = {",
+        f"        agent: {sample.format(mask=par_mask)}",
+        "        for agent in env.agents",
+        "    }",
+        "    observations, rewards, terminations, truncations, infos = env.step(actions)",
+        "env.close()",
+        "```",
+        "",
+    ]
+    views = get_env(name).views
+    if masked:
+        out += [
+            "A masked agent's PettingZoo observation is a `Dict` of the features (`observation`)",
+            "and the legal actions (`action_mask`, 1 = legal).",
+            "",
+        ]
+    if not views:
+        out += ["This module has no Gymnasium view: use the PettingZoo APIs above.", ""]
+        return "\n".join(out)
+    out += ["### Gymnasium view (single agent)", ""]
+    out += [
+        "Each id below is one agent's view as a Gymnasium env (in a two-player game the other "
+        "player is fixed to the module's default opponent; `opponent=` changes it). The "
+        "observation is the plain `Box` of features"
+        + (
+            '; the action mask moves to `info["action_mask"]` and `env.action_masks()` '
+            "(what sb3-contrib's MaskablePPO reads; through `gym.make`'s wrappers it is "
+            "`env.unwrapped.action_masks()`)."
+            if masked
+            else "."
+        ),
+        "",
+    ]
+    for agent, gym_id in views.items():
+        mask = 'info["action_mask"]' if _masked(env.observation_space(agent)) else ""
+        out += [
+            "```python",
+            "import gymnasium as gym",
+            "",
+            "import fdia_env  # registers the ids",
+            "",
+            f'env = gym.make("{gym_id}")  # the {agent}',
+            "observation, info = env.reset(seed=42)",
+            "terminated = truncated = False",
+            "while not (terminated or truncated):",
+            f"    action = env.action_space.sample({mask})  # your policy here",
+            "    observation, reward, terminated, truncated, info = env.step(action)",
+            "env.close()",
+            "```",
+            "",
+        ]
+    return "\n".join(out)
+
+
+_ROLE = re.compile(r":(class|func|meth|mod|attr|data|obj|exc):`([^`]+)`")
+_MATH_CITATION = re.compile(r"docs/math\.md §([0-9]+(?:\.[0-9]+)?)")
+
+
+def _myst_body(body: str) -> str:
+    """The module docstring as MyST.
+
+    Doctests become code blocks; reST roles (literal text in Markdown) and math citations become
+    MyST roles.
+    """
+    out = []
+    for line in _examples_as_code(body).split("\n"):
+        if not line.startswith((">>>", "...")):
+            line = _ROLE.sub(lambda m: f"{{py:{m.group(1)}}}`{m.group(2)}`", line)
+            line = _MATH_CITATION.sub(
+                lambda m: f"{{ref}}`math §{m.group(1)} <math-{m.group(1).replace('.', '-')}>`",
+                line,
+            )
+        out.append(line)
+    return "\n".join(out)
 
 
 def _examples_as_code(body: str) -> str:
@@ -107,9 +258,9 @@ def api_page(module_name: str, title: str) -> str:
     for name in public_names(module):
         obj = getattr(module, name)
         target = f"{module_name}.{name}"
-        home = getattr(obj, "__module__", "") or ""
-        # a re-export is shown here but indexed only on the page of the package it lives in
-        own = _home_page(home) == module_name
+        # a re-export is shown here but indexed only on the page of the package it lives in (or,
+        # for a module outside every API package, on the first API page that shows it)
+        own = _index_page(obj) == module_name
         extra = [] if own else ["   :no-index:"]
         if inspect.isclass(obj):
             lines += [f".. autoclass:: {target}", "   :members:", *extra, ""]
@@ -130,10 +281,22 @@ def api_page(module_name: str, title: str) -> str:
     return "\n".join(lines)
 
 
-def _home_page(home: str) -> str | None:
-    """The most specific API page whose package contains the module ``home``."""
-    pages = [m for m, _ in API_PACKAGES if home == m or home.startswith(m + ".")]
-    return max(pages, key=len) if pages else None
+def _index_page(obj) -> str | None:
+    """The one API page that indexes ``obj`` (its anchor for links and the source's back-link)."""
+    if not callable(obj):  # constants: shown on every page that exports them, indexed on none
+        return None
+    home = getattr(obj, "__module__", "") or ""
+    showing = [package for package, _ in API_PACKAGES if _exports(package, obj)]
+    # the most specific page whose package holds the defining module, else the first that shows it
+    homes = [p for p in showing if home == p or home.startswith(p + ".")]
+    if homes:
+        return max(homes, key=len)
+    return showing[0] if showing else None
+
+
+def _exports(package: str, obj) -> bool:
+    module = importlib.import_module(package)
+    return any(getattr(module, name, None) is obj for name in public_names(module))
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

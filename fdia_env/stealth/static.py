@@ -143,6 +143,42 @@ class StaticEstimation:
         """Number of states."""
         return self.H.shape[1]
 
+    def meter_positions(self, meters: Any, param: str = "protected") -> np.ndarray:
+        """Sorted unique positions of ``meters`` (positions 0..m−1 or names), ``None`` = none.
+
+        Raises:
+            ValueError: Naming ``param``, for an unknown name or position or another type.
+        """
+        if meters is None:
+            return np.zeros(0, dtype=np.int64)
+        if isinstance(meters, (str, int, np.integer)):
+            meters = [meters]
+        try:
+            items = list(meters)
+        except TypeError as exc:
+            raise ValueError(f"{param} must be a collection of meters, got {meters!r}") from exc
+        where = {name: i for i, name in enumerate(self.meters)}
+        out = []
+        for item in items:
+            if isinstance(item, str) and item in where:
+                out.append(where[item])
+            elif (
+                isinstance(item, (int, np.integer))
+                and not isinstance(item, bool)
+                and 0 <= int(item) < self.m
+            ):
+                out.append(int(item))
+            elif isinstance(item, (str, int, np.integer)) and not isinstance(item, bool):
+                raise ValueError(
+                    f"{param} holds an unknown meter {item!r}: meters are positions "
+                    f"0..{self.m - 1} or names such as {list(self.meters)[:4]}"
+                )
+            else:
+                raise ValueError(
+                    f"{param} must hold meter positions (0..{self.m - 1}) or names, got {item!r}"
+                )
+        return np.unique(np.array(out, dtype=np.int64))
+
     def _z(self, name: str, z: Any) -> np.ndarray:
         arr = np.asarray(z, dtype=np.float64)
         if arr.ndim == 0 or arr.shape[-1] != self.m:
