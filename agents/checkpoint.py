@@ -10,6 +10,12 @@ A saved model is a pair of files side by side:
   counters training continues from (``_n_updates``, ``_episode_num``, DQN's ``_n_calls`` and
   ``exploration_rate``), the ``.pt`` file's name and its SHA-256. No random-generator state.
 
+A pair is written so that a kill at any moment leaves a loadable one (:func:`save_pair`): the
+new tensors go to ``<name>.pt.next``, then the ``.json`` naming ``<name>.pt`` with the new
+SHA-256 replaces the old one, then ``<name>.pt.next`` replaces ``<name>.pt``. Before the
+``.json`` is replaced, the old pair is intact; after it, the staged tensors are the ones it
+describes (:func:`tensor_file` reads them, and the next write finishes the move).
+
 Loading rebuilds the model from its algorithm and hyperparameters on an env (for the spaces) and
 loads the state dicts into it. A replay buffer is an ``.npz`` of its filled rows, read with
 ``np.load(allow_pickle=False)``.
@@ -22,8 +28,10 @@ path a checkpoint names is resolved inside its run folder; one outside it (an ab
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
+import os
 import pickle
 from pathlib import Path
 from typing import Any
@@ -107,25 +115,104 @@ def _sha256(path: Path) -> str:
 # ---------------------------------------------------------------------------- models
 
 
+STAGED = ".next"  # suffix of the tensors save_pair writes before its description
+
+
+def staged(tensors: Path) -> Path:
+    """Where :func:`save_pair` writes the new tensors of ``tensors`` before its description."""
+    return Path(tensors).with_name(Path(tensors).name + STAGED)
+
+
 def tensor_file(meta: dict[str, Any], path: Path, root: Path) -> Path:
     """The tensor file a JSON description at ``path`` names, checked before anything loads it.
+
+    When a write was stopped after the description was replaced and before its staged tensors
+    were moved into place (:func:`save_pair`), the staged file is the one that matches; it is
+    returned (and nothing is moved: a reader may not hold the run's lock).
 
     Raises:
         ValueError: For a file outside ``root``, a missing one or one whose SHA-256 is not the
             description's ``sha256``.
     """
     tensors = inside(path.parent, meta.get("tensors", ""), root, "tensor file")
+    pending = inside(path.parent, staged(tensors).name, root, "tensor file")
+    if tensors.is_file() and _sha256(tensors) == meta.get("sha256"):
+        return tensors
+    if pending.is_file() and _sha256(pending) == meta.get("sha256"):
+        return pending
     if not tensors.is_file():
         raise ValueError(f"tensor file {tensors} named by {path} does not exist")
-    if _sha256(tensors) != meta.get("sha256"):
-        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
-    return tensors
+    raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+
+
+def write_tensors(path: Path, payload: Any) -> Path:
+    """``torch.save(payload)`` to ``path`` atomically; a failed write is an :class:`OSError`.
+
+    torch reports a write that fails part-way (a full disk) as a ``RuntimeError`` from its zip
+    writer; it is raised as an ``OSError`` naming the file, as every other failed write is.
+    """
+    path = Path(path)
+    try:
+        return atomic_write(path, lambda fh: torch.save(payload, fh))
+    except RuntimeError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise OSError(errno.EIO, f"could not write {path} (is the disk full?): {first}") from None
+
+
+def settle_pair(description: Path, tensors: Path) -> None:
+    """Finish or discard a :func:`save_pair` that a kill stopped part-way.
+
+    A staged ``<tensors>.next`` that the description names (by its SHA-256) replaces
+    ``tensors``; one it does not name (the kill came before the description) is removed. Call
+    it only while holding the run's lock.
+    """
+    pending = staged(tensors)
+    if not pending.is_file():
+        return
+    try:
+        meta = json.loads(Path(description).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        meta = None
+    wanted = meta.get("sha256") if isinstance(meta, dict) else None
+    if wanted is not None and _sha256(pending) == wanted:
+        if not (Path(tensors).is_file() and _sha256(tensors) == wanted):
+            os.replace(pending, tensors)
+            return
+    pending.unlink(missing_ok=True)
+
+
+def save_pair(description: Path, tensors: Path, payload: Any, meta: dict[str, Any]) -> Path:
+    """Write ``payload`` to ``tensors`` and ``meta`` to ``description`` so a kill loses nothing.
+
+    The order (:func:`settle_pair` of an earlier stopped write, the tensors staged as
+    ``<tensors>.next``, the description naming ``tensors`` with their SHA-256, the staged file
+    moved into place) keeps a loadable pair on disk at every moment: the previous one until the
+    description is replaced, the new one (read from the staged file) after.
+
+    Args:
+        description: The JSON file.
+        tensors: The tensor file, in the same folder.
+        payload: What ``torch.save`` writes (tensors and plain containers).
+        meta: The description, without ``tensors`` and ``sha256`` (added here).
+
+    Returns:
+        ``description``.
+
+    Raises:
+        OSError: When a file cannot be written (naming it); the previous pair stays loadable.
+    """
+    description, tensors = Path(description), Path(tensors)
+    settle_pair(description, tensors)
+    pending = write_tensors(staged(tensors), payload)
+    write_json(description, {**meta, "tensors": tensors.name, "sha256": _sha256(pending)})
+    os.replace(pending, tensors)
+    return description
 
 
 def save_model(
     model: BaseAlgorithm, path: Path, algo: str, hyperparameters: dict[str, Any]
 ) -> Path:
-    """Write ``path.with_suffix(".pt")`` and then ``path.with_suffix(".json")``, atomically.
+    """Write ``path.with_suffix(".pt")`` and ``path.with_suffix(".json")`` (:func:`save_pair`).
 
     Args:
         model: The model to save.
@@ -145,7 +232,6 @@ def save_model(
             name: recursive_getattr(model, name).detach().cpu().clone() for name in variable_names
         },
     }
-    tensors = atomic_write(path.with_suffix(".pt"), lambda fh: torch.save(payload, fh))
     counters = {k: getattr(model, k) for k in COUNTERS if hasattr(model, k)}
     meta = {
         "format": FORMAT,
@@ -153,10 +239,8 @@ def save_model(
         "hyperparameters": hyperparameters,
         "num_timesteps": int(model.num_timesteps),
         "counters": {k: v if isinstance(v, float) else int(v) for k, v in counters.items()},
-        "tensors": tensors.name,
-        "sha256": _sha256(tensors),
     }
-    return write_json(path.with_suffix(".json"), meta)
+    return save_pair(path.with_suffix(".json"), path.with_suffix(".pt"), payload, meta)
 
 
 def load_model(

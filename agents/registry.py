@@ -26,6 +26,7 @@ import numpy as np
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
 from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.registration import get_env
 
 AGENTS = ("attacker", "defender")
 
@@ -231,7 +232,7 @@ def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Referen
 def detection_reference(env: FdiaParallelEnv, agent: str = "defender") -> Reference | None:
     """OBDD's threshold α (OBDI's when the defender incorporates) under the Bayes-cost criterion.
 
-    The detectors of MATH.md §3 minimise the Bayes cost built from the fixed costs c1..c4, so
+    The detectors of docs/math.md §3 minimise the Bayes cost built from the fixed costs c1..c4, so
     with ``criterion="bayes_cost"``, the quadratic statistic, one attack step and the defender's
     model equal to the attacker's (the env's defaults) the best fixed threshold is α. The
     attacker's side, and the true-MSE criterion, have no closed-form reference here.
@@ -270,10 +271,12 @@ def detection_reference(env: FdiaParallelEnv, agent: str = "defender") -> Refere
 class Trainable:
     """One learning agent of one env.
 
+    The Gymnasium id of the agent's single-agent view, :attr:`gym_id`, is the env's entry in
+    the table of environments (:data:`fdia_env.registration.ENVS`).
+
     Attributes:
         env: Registry name (the PettingZoo module name, e.g. ``"sparse_attack_v0"``).
         agent: ``"attacker"`` or ``"defender"``.
-        gym_id: Gymnasium id of the agent's single-agent view.
         scenarios: Scenario preset → its default env kwargs (the first preset is the default).
         algorithms: stable-baselines3 algorithms that fit the action space (first = default).
         reference: Analytic reference of a built env, ``f(parallel_env)`` or, for games,
@@ -284,12 +287,16 @@ class Trainable:
 
     env: str
     agent: str
-    gym_id: str
     scenarios: Mapping[str, Mapping[str, Any]]
     algorithms: tuple[str, ...]
     reference: Callable[..., Reference | None]
     game: bool = False
     masked: bool = False
+
+    @property
+    def gym_id(self) -> str:
+        """Gymnasium id of the agent's single-agent view (from the table of environments)."""
+        return get_env(self.env).views[self.agent]
 
     @property
     def default_scenario(self) -> str:
@@ -344,10 +351,9 @@ class Trainable:
         ``gymnasium.make`` copies its kwargs and warns when it cannot.
         """
         from fdia_env.envs.single_agent import make_single_agent
-        from fdia_env.registration import GYM_IDS
 
-        module, agent = GYM_IDS[self.gym_id]
-        return make_single_agent(module, agent=agent, opponent=opponent, **env_kwargs)
+        module = get_env(self.env).module
+        return make_single_agent(module, agent=self.agent, opponent=opponent, **env_kwargs)
 
     def reference_of(self, env: gym.Env) -> Reference | None:
         """The analytic reference of a built view (None where none applies)."""
@@ -368,6 +374,12 @@ def register(entry: Trainable) -> Trainable:
         raise ValueError(f"algorithms must be a non-empty subset of {ALGORITHMS}, got {unknown}")
     if not entry.scenarios:
         raise ValueError(f"{entry.env} needs at least one scenario")
+    views = get_env(entry.env).views  # an env not in the table fails here, naming the envs
+    if entry.agent not in views:
+        raise ValueError(
+            f"{entry.env} has no single-agent view for the {entry.agent}; its views: "
+            f"{', '.join(views) or 'none'}"
+        )
     REGISTRY[entry.env, entry.agent] = entry
     return entry
 
@@ -431,7 +443,6 @@ register(
     Trainable(
         "sparse_attack_v0",
         "attacker",
-        "fdia_env/SparseAttack-v0",
         _SPARSE_SCENARIOS,
         MASKED_ALGORITHMS,
         sparse_reference,
@@ -442,21 +453,16 @@ register(
     Trainable(
         "covariance_attack_v0",
         "attacker",
-        "fdia_env/CovarianceAttack-v0",
         _COVARIANCE_SCENARIOS,
         BOX_ALGORITHMS,
         covariance_reference,
     )
 )
-for _agent, _gym_id in (
-    ("attacker", "fdia_env/SensorGameAttacker-v0"),
-    ("defender", "fdia_env/SensorGameDefender-v0"),
-):
+for _agent in ("attacker", "defender"):
     register(
         Trainable(
             "sensor_game_v0",
             _agent,
-            _gym_id,
             _GAME_SCENARIOS,
             DISCRETE_ALGORITHMS,
             game_reference,
@@ -472,7 +478,6 @@ register(
     Trainable(
         "detection_game_v0",
         "defender",
-        "fdia_env/DetectionDefender-v0",
         _DETECTION_SCENARIOS,
         BOX_ALGORITHMS,
         detection_reference,

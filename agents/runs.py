@@ -69,10 +69,17 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], Any]) -> Path:
     A reader (or a resume after a crash) sees either the old file or the complete new one. The
     file gets the mode a plain ``open`` would give it (``0o666`` less the umask); a temporary
     file left by a kill is removed by :func:`remove_stale_temp_files` on the next start.
+
+    Raises:
+        OSError: When it cannot be written (a full disk, no permission), naming ``path``; the
+            old file is left as it was.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise _naming(exc, path) from None
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
@@ -80,10 +87,21 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], Any]) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise _naming(exc, path) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _naming(exc: OSError, path: Path) -> OSError:
+    """``exc`` as a one-line OSError that names ``path`` (the file being written)."""
+    if str(path) in str(exc):
+        return exc
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    return OSError(exc.errno, f"could not write {path}: {reason}")
 
 
 def write_json(path: Path, data: Any) -> Path:
@@ -150,6 +168,38 @@ def check_resumable(saved: dict[str, Any], given: dict[str, Any], run_dir: Path)
             f"cannot resume {run_dir}: options differ from its config.json ("
             + "; ".join(diff)
             + "); give the same options, or start a new run"
+        )
+
+
+def check_not_shorter(
+    name: str, given: int, done: int, saved: dict[str, Any], run_dir: Path, unit: str = "steps"
+) -> None:
+    """Raise when a resume asks for less training than the run has done already.
+
+    A resume continues a run up to ``given`` (``--total-timesteps`` or ``--iterations``) in
+    all; below what it has done there is nothing to train and its scores and model would be
+    rewritten. The run's own length (``saved[name]``) is accepted even when the last rollout
+    went past it (resuming a finished run re-scores it).
+
+    Args:
+        name: The option's field name (``total_timesteps``, ``iterations``).
+        given: Its value for this resume.
+        done: What the saved state has done, in the same unit.
+        saved: The run's saved options (config.json's ``config``).
+        run_dir: The run folder (for the message).
+        unit: What ``done`` counts, for the message.
+
+    Raises:
+        ValueError: Naming the option, the value given and what the run has done.
+    """
+    own = saved.get(name)
+    floor = done if not isinstance(own, int) or isinstance(own, bool) else min(done, own)
+    if given < floor:
+        option = f"--{name.replace('_', '-')}"
+        raise ValueError(
+            f"{option} {given} is below the {done} {unit} {run_dir} has trained already: a "
+            f"resume continues a run and cannot shorten it; give {option} {floor} or more, "
+            "or start a new run"
         )
 
 

@@ -1,42 +1,33 @@
-"""Equilibrium finding with learned best responses on a one-shot two-player game.
+"""Equilibrium finding with learned best responses on a one-shot two-player game (SB3).
 
-Each iteration trains a fresh SB3 learner (PPO, A2C or DQN) for each side on its Gymnasium view
-against the other side's current mixed strategy (a :class:`~fdia_env.envs.opponents.FixedMix`),
-then updates the mixes:
+The loop is :func:`agents.population.run_population` (IBR, FSP, PSRO: see there) with
+:class:`SB3Oracle`: each iteration trains a fresh SB3 learner (PPO, A2C or DQN) for each side
+on its Gymnasium view against the other side's current mixed strategy (a
+:class:`~fdia_env.envs.opponents.FixedMix`). After every iteration the exploitability of the
+current pair is measured exactly on ``baselines.game.payoff_matrix``
+(:func:`baselines.game.exploitability`). In the typed sensor game (``--env-kwargs types
+'["independent","dependent"]' priors '[0.5,0.5]' attacker_model uninformed``) the matrix is the
+Bayesian game's ``L̄ = Σ_s p_s L_s`` and the meta-game's payoffs are exact averages over
+nature's draw; the informed-attacker game is not a matrix game over the attacker's actions and
+is refused.
 
-- ``ibr`` (iterated best response): each side's mix is its latest best response;
-- ``fsp`` (fictitious self-play): the uniform average of all its best responses so far;
-- ``psro`` (policy-space response oracles, Lanctot et al., NeurIPS 2017): the learned policies
-  form two populations; their payoff against each other is measured by playing them in the env
-  (the empirical meta-game), and ``baselines.game.solve_zero_sum`` (the LP) gives the meta mix
-  over each population.
-
-In the one-shot game a policy acts once, on the constant initial observation, so a learned
-deterministic policy is a pure strategy (its action there) and a mix over policies is a mixed
-strategy over actions. After every iteration the exploitability of the current pair is measured
-exactly on ``baselines.game.payoff_matrix`` (:func:`baselines.game.exploitability`). In the
-typed sensor game (``--env-kwargs types '["independent","dependent"]' priors '[0.5,0.5]'
-attacker_model uninformed``) the matrix is the Bayesian game's ``L̄ = Σ_s p_s L_s`` and the
-meta-game's payoffs are exact averages over nature's draw; the informed-attacker game is not a
-matrix game over the attacker's actions and is refused.
-
-The learned policies are saved as ``policies/<side>_<k>.pt`` / ``.json`` in the format of
-:mod:`agents.checkpoint` (tensors and JSON; loading unpickles nothing) and ``state.json`` holds
-the iterations done, so ``--resume`` continues after the last finished iteration. Older runs'
-``policies/*.zip`` load only with ``--trust-checkpoint``. SIGINT/SIGTERM stop after the best
-response being trained (the unfinished iteration is dropped) and the scores of the finished
-iterations are written.
+The run folder's lifecycle (lock, option check, resume, signals, scores) is
+:mod:`agents.lifecycle`'s. The learned policies are saved as ``policies/<side>_<k>.pt`` /
+``.json`` in the format of :mod:`agents.checkpoint` (tensors and JSON; loading unpickles
+nothing) and ``state.json`` holds the iterations done, so ``--resume`` continues after the last
+finished iteration. Older runs' ``policies/*.zip`` load only with ``--trust-checkpoint``.
+SIGINT/SIGTERM stop after the best response being trained (the unfinished iteration is dropped)
+and the scores of the finished iterations are written.
 """
 
 from __future__ import annotations
 
-import shutil
-import time
+import dataclasses
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -52,35 +43,44 @@ from agents.checkpoint import (
     save_model,
 )
 from agents.config import (
+    TORCH_PPO,
     GameConfig,
     algo_kwargs,
     check_device_available,
+    is_torch_ppo,
     parse_env_kwargs,
     resolved_hyperparameters,
 )
 from agents.evaluate import Evaluation, evaluate
-from agents.interrupt import StopRequest, StopTrainingCallback, stop_on_signals
+from agents.interrupt import StopRequest, StopTrainingCallback
+from agents.lifecycle import open_run, tensorboard
 from agents.plots import exploitability_curve
-from agents.registry import Reference, Trainable, game_names, get
-from agents.runs import (
-    check_resumable,
-    config_dict,
-    new_run_dir,
-    remove_stale_temp_files,
-    removed_unless,
-    resume_dir,
-    run_lock,
-    run_prefix,
-    write_json,
+from agents.population import (
+    METHODS,
+    SIDES,
+    BestResponse,
+    ConstantPolicy,
+    ExactOracle,
+    MatrixGame,
+    Oracle,
+    PopulationState,
+    initial_action,
+    report_line,
+    run_population,
 )
+from agents.registry import Reference, Trainable, game_names, get
+from agents.runs import run_prefix, write_json
 from agents.seeding import derived_seed, seed_everything
-from agents.training import check_env_kwargs, env_thunk, make_env, make_logger
-from baselines.game import MixedStrategyPolicy, exploitability, solve_zero_sum
+from agents.training import check_env_kwargs, env_thunk, make_env
+from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
 
-METHODS = ("psro", "fsp", "ibr")
-SIDES = ("attacker", "defender")
+if TYPE_CHECKING:
+    from agents.torch_ppo import TorchPPOConfig
+
 STATE = "state.json"  # a game run folder that --resume can continue has it
+EXACT = "exact"  # --algo exact: the exact best response on the payoff matrix
+GAME_NUM_ENVS = 64  # torch-ppo best responses: members of the torch vector env
 
 
 @dataclass
@@ -112,51 +112,6 @@ class SelfPlayResult:
     interrupted: int | None = None
 
 
-def one_hot(action: int, n: int) -> np.ndarray:
-    """The pure strategy ``action`` as an (n,) probability vector."""
-    out = np.zeros(n)
-    out[action] = 1.0
-    return out
-
-
-def mix_of(population: list[int], weights: np.ndarray, n: int) -> np.ndarray:
-    """The mixed strategy over actions of a weighted population of pure strategies."""
-    out = np.zeros(n)
-    np.add.at(out, population, weights)
-    return out / out.sum()
-
-
-def current_mixes(
-    method: str, pops: dict[str, list[int]], n: dict[str, int], meta: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """The defender's and attacker's strategies after an iteration of ``method``.
-
-    ``"ibr"``: each side's last best response; ``"fsp"``: the uniform mix over each population;
-    ``"psro"``: the equilibrium of the meta-game ``meta`` (populations × populations) spread
-    over the actions.
-    """
-    if method == "ibr":
-        return one_hot(pops["defender"][-1], n["defender"]), one_hot(
-            pops["attacker"][-1], n["attacker"]
-        )
-    if method == "fsp":
-        weights = {side: np.ones(len(pops[side])) for side in ("defender", "attacker")}
-    else:
-        sx, sy, _ = solve_zero_sum(meta)
-        weights = {"defender": sx, "attacker": sy}
-    return (
-        mix_of(pops["defender"], weights["defender"], n["defender"]),
-        mix_of(pops["attacker"], weights["attacker"], n["attacker"]),
-    )
-
-
-def initial_action(model: BaseAlgorithm, entry: Trainable, env_kwargs: dict[str, Any]) -> int:
-    """The pure strategy of a learned policy: its deterministic action at the initial state."""
-    with entry.make(**env_kwargs) as env:
-        obs, _ = env.reset(seed=0)
-    return int(model.predict(obs, deterministic=True)[0])
-
-
 def learn_best_response(
     entry: Trainable,
     env_kwargs: dict[str, Any],
@@ -184,7 +139,7 @@ def learn_best_response(
     vec_env = DummyVecEnv([make])
     model = build_model(algo, vec_env, kwargs, seed, device)
     if tb_dir is not None:  # a resumed iteration replaces the unfinished one's events
-        model.set_logger(make_logger(tb_dir, purge_from=0))
+        model.set_logger(tensorboard(tb_dir, purge_from=0))
     model.learn(steps, callback=callback)
     vec_env.close()
     if tb_dir is not None:
@@ -192,47 +147,22 @@ def learn_best_response(
     return model, initial_action(model, entry, env_kwargs)
 
 
-def empirical_payoff(
-    attacker: BaseAlgorithm,
-    defender: BaseAlgorithm,
-    entry: Trainable,
-    env_kwargs: dict[str, Any],
-    n_episodes: int,
-    seed: int,
-) -> float:
-    """The attacker's mean return when the two learned policies play each other in the env.
+def game_algo(cfg: GameConfig) -> str:
+    """The best-response oracle ``--algo`` names: ``exact``, ``torch-ppo`` or an SB3 algorithm.
 
-    In the typed sensor game (``types=``) the mean is exact over nature's draw: one episode per
-    type, forced with ``reset(options={"attacker_type": s})``, weighted by the priors (the
-    one-shot expected-dynamics payoff of two deterministic policies does not vary otherwise).
+    Raises:
+        ValueError: For an algorithm that does not apply (listing the valid ones).
     """
-    with entry.view(opponent=defender, **env_kwargs) as env:
-        priors = getattr(env.unwrapped.parallel.attack, "priors", None)
-        if priors is None:
-            return evaluate(attacker, env, n_episodes, seed, reference=None).mean
-        total = 0.0
-        for s, p in enumerate(priors):
-            obs, _ = env.reset(seed=seed, options={"attacker_type": s})
-            action, _ = attacker.predict(obs, deterministic=True)
-            _, reward, *_ = env.step(int(action))
-            total += float(p) * float(reward)
-        return total
-
-
-def _report_line(rec: dict[str, Any]) -> str:
-    return (
-        f"iter {rec['iteration']:3d}  steps {rec['timesteps']:8d}  "
-        f"BR attacker {rec['br_attacker']} (gap {rec['br_gap_attacker']:.3g})  "
-        f"BR defender {rec['br_defender']} (gap {rec['br_gap_defender']:.3g})  "
-        f"expl def {rec['defender']:.4f} att {rec['attacker']:.4f}  "
-        f"NashConv {rec['nash_conv']:.4f} ({rec['relative_nash_conv']:.2%} of value)"
-    )
+    if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT:
+        return EXACT
+    if is_torch_ppo(cfg.algo):
+        return TORCH_PPO
+    return get(cfg.env, "attacker").algorithm(cfg.algo)
 
 
 def game_prefix(cfg: GameConfig) -> str:
     """Run folder name without its time: ``<env>-<method>-<algo>-s<seed>``."""
-    algo = get(cfg.env, "attacker").algorithm(cfg.algo)
-    return run_prefix(f"{cfg.env}-{cfg.method}", algo, cfg.run.seed)
+    return run_prefix(f"{cfg.env}-{cfg.method}", game_algo(cfg), cfg.run.seed)
 
 
 def policy_names(state: dict[str, Any]) -> dict[str, list[str]]:
@@ -330,76 +260,76 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(game_names())}")
     check_device_available(cfg.run.device)
     entries = {side: get(cfg.env, side) for side in SIDES}
-    algo = entries["attacker"].algorithm(cfg.algo)
-    kwargs = algo_kwargs(algo, cfg.hp)
-    hyperparameters = resolved_hyperparameters(algo, cfg.hp)
+    algo = game_algo(cfg)
+    kwargs, hyperparameters, torch_config = _learner_options(cfg, algo)
     env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
     env = make_env(lambda: entries["attacker"].make(**env_kwargs), entries["attacker"].gym_id)
     with env:
         reference = entries["attacker"].reference_of(env)
         n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
-        build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)  # SB3 checks the options
+        if algo not in (EXACT, TORCH_PPO):  # SB3 checks the options when it builds a model
+            build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     L, value = reference.matrix_game(), reference.value  # the uninformed Bayesian game: L̄
-    given = config_dict(cfg)
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
         state: dict[str, Any] = {"populations": {"attacker": [], "defender": []}, "history": []}
-        if cfg.run.resume:
-            run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, game_prefix(cfg), STATE)
-            stack.enter_context(run_lock(run_dir))
-            saved = read_json(run_dir / "config.json", "run config")
-            check_resumable(saved.get("config", {}), given, run_dir)
+        run = open_run(cfg, stack, game_prefix(cfg), STATE, report)
+        run_dir = run.path
+        if run.resumed:
             state = _read_state(run_dir / STATE)
+            run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")
             names = policy_names(state)
-            models = load_policies(
-                run_dir, names, entries, env_kwargs, algo, kwargs, cfg.run.device, trusted
-            )
-            for stale in remove_stale_temp_files(run_dir):
-                say(f"removed a temporary file left by an interrupted write: {stale}")
+            if algo == EXACT:
+                models = {s: [ConstantPolicy(a) for a in state["populations"][s]] for s in SIDES}
+            elif algo == TORCH_PPO:
+                models = _load_torch_policies(run_dir, names, cfg.run.device)
+            else:
+                models = load_policies(
+                    run_dir, names, entries, env_kwargs, algo, kwargs, cfg.run.device, trusted
+                )
             say(f"resuming {run_dir} after iteration {len(state['history'])}")
         else:
-            run_dir = new_run_dir(cfg.run.runs_root, cfg.run.run_dir, game_prefix(cfg))
-            run_dir.mkdir(parents=True)
-            stack.enter_context(removed_unless(run_dir, STATE))
-            stack.enter_context(run_lock(run_dir))
+            run.begin()
             names = {side: [] for side in SIDES}
             models = {side: [] for side in SIDES}
-        write_json(
-            run_dir / "config.json",
+        run.write_config(
+            "game",
+            cfg,
             {
-                "command": "game",
-                "config": given,
-                "resolved": {
-                    "algo": algo,
-                    "env_kwargs": env_kwargs,
-                    "hyperparameters": hyperparameters,
-                    "reference": {"name": reference.name, "value": value},
-                },
+                "algo": algo,
+                "env_kwargs": env_kwargs,
+                "hyperparameters": hyperparameters,
+                "reference": {"name": reference.name, "value": value},
             },
         )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        stop = stack.enter_context(stop_on_signals())
-        history = _iterate(
-            cfg, run_dir, state, names, models, entries, env_kwargs, algo, kwargs,
-            hyperparameters, L, value, n, stop, report,
-        )  # fmt: skip
+        stop = run.watch_signals()
+        game = MatrixGame(entries, env_kwargs, L, value)
+        oracle: Oracle
+        if algo == EXACT:
+            oracle = ExactOracle(L)
+        elif algo == TORCH_PPO:
+            oracle = TorchPPOOracle(cfg, run_dir, entries, env_kwargs, torch_config, stop)
+        else:
+            oracle = SB3Oracle(
+                cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop
+            )
+        loop = _population_state(state, names, models, n)
+        history = _iterate(cfg, run_dir, loop, oracle, game, stop, report)
         if not history:  # stopped before the first iteration finished
-            if not cfg.run.resume:
-                stack.close()  # release the lock before removing the folder
-                shutil.rmtree(run_dir, ignore_errors=True)
+            run.discard()  # a new run's folder (the lock released first)
             return SelfPlayResult(
                 run_dir, cfg.method, np.zeros(0), np.zeros(0), value, [], interrupted=stop.signum
             )
         x, y = np.array(history[-1]["x"]), np.array(history[-1]["y"])
-        pops = state["populations"]
+        pops = loop.actions
         train_seconds = history[-1]["train_seconds"]
         evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
-        write_json(
-            run_dir / "scores.json",
+        run.write_scores(
             {
                 "method": cfg.method,
                 "value": value,
@@ -410,9 +340,8 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                 "iterations": len(history),
                 "timesteps": history[-1]["timesteps"],
                 "train_seconds": train_seconds,
-                "interrupted": stop.signum,
-                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
+            evaluations,
         )
         exploitability_curve(
             run_dir / "learning_curve.png",
@@ -434,20 +363,190 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         )
 
 
-def _iterate(
-    cfg: GameConfig,
-    run_dir: Path,
+def _learner_options(
+    cfg: GameConfig, algo: str
+) -> tuple[dict[str, Any], dict[str, Any], TorchPPOConfig | None]:
+    """The SB3 kwargs, the resolved hyperparameters and torch-ppo's config of ``algo``.
+
+    Raises:
+        ValueError: For a hyperparameter given with ``--algo exact`` (nothing learns), or one
+            that does not apply to the learner.
+    """
+    if algo == EXACT:
+        given = [f.name for f in dataclasses.fields(cfg.hp) if getattr(cfg.hp, f.name) is not None]
+        if given:
+            raise ValueError(
+                f"--algo exact answers with the exact best response on the payoff matrix: "
+                f"{', '.join('--' + g.replace('_', '-') for g in given)} do(es) not apply"
+            )
+        return {}, {}, None
+    if algo == TORCH_PPO:
+        from agents.torch_ppo import TorchPPOConfig
+
+        hyperparameters = resolved_hyperparameters(TORCH_PPO, cfg.hp)
+        num_envs = min(GAME_NUM_ENVS, cfg.steps_per_iteration)
+        try:
+            config = TorchPPOConfig.from_hyperparameters(
+                hyperparameters, cfg.steps_per_iteration, num_envs
+            )
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"--algo torch-ppo: {exc}") from None
+        return {}, hyperparameters, config
+    return algo_kwargs(algo, cfg.hp), resolved_hyperparameters(algo, cfg.hp), None
+
+
+def _load_torch_policies(
+    run_dir: Path, names: dict[str, list[str]], device: str
+) -> dict[str, list[Any]]:
+    """A torch-ppo game's saved policies (tensors and JSON, :func:`~agents.torch_ppo.load_policy`).
+
+    Raises:
+        ValueError: For a file outside the run folder, missing, corrupt or tampered with.
+    """
+    from agents.torch_ppo import load_policy
+
+    folder = Path(run_dir) / "policies"
+    return {
+        side: [
+            load_policy(inside(folder, name, run_dir, "policy file"), run_dir, device)
+            for name in names[side]
+        ]
+        for side in SIDES
+    }
+
+
+class TorchPPOOracle:
+    """Best responses learned by torch-ppo on the device (the ``torch-ppo`` oracle).
+
+    Each answer trains a fresh :func:`~agents.torch_ppo.train_torch_ppo` policy for
+    ``--steps-per-iteration`` env steps on the side's torch vector env (B = min(64, steps)
+    members), the other side's mix drawn per member as its fixed opponent; it is saved as
+    ``policies/<side>_<k>.json`` / ``.pt`` (tensors only). A stop request ends training after
+    the current PPO iteration and drops the answer.
+    """
+
+    def __init__(
+        self,
+        cfg: GameConfig,
+        run_dir: Path,
+        entries: dict[str, Trainable],
+        env_kwargs: dict[str, Any],
+        config: TorchPPOConfig,
+        stop: StopRequest,
+    ) -> None:
+        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
+        self.config, self.stop = config, stop
+        self.device = _torch_device(cfg.run.device)
+
+    def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
+        """A fresh torch-ppo policy's answer to ``opponent``, or None if a stop cut it short."""
+        from agents.torch_ppo import make_torch_env, train_torch_ppo
+
+        entry = self.entries[side]
+        seed = derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
+        mix = FixedMix(opponent, seed=derived_seed(seed, 1))
+        venv = make_torch_env(
+            entry.gym_id, self.config.num_envs, self.device, opponent=mix, **self.env_kwargs
+        )
+        try:
+            result = train_torch_ppo(venv, self.config, seed, stop=lambda: self.stop.requested)
+        finally:
+            venv.close()
+        if self.stop.requested:
+            return None
+        return BestResponse(result.policy, initial_action(result.policy, entry, self.env_kwargs))
+
+    def save(self, side: str, index: int, response: BestResponse) -> str:
+        """Save the policy as ``policies/<side>_<index>.json``; returns the file's name."""
+        from agents.torch_ppo import save_policy
+
+        path = self.run_dir / "policies" / f"{side}_{index}.json"
+        return save_policy(response.policy, path, self.config).name
+
+
+def _torch_device(name: str) -> str:
+    """``--device``, with ``auto`` resolved to cuda when present, else cpu."""
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
+
+
+class SB3Oracle:
+    """Best responses learned by a fresh stable-baselines3 learner each (the ``sb3`` oracle).
+
+    Each answer trains ``algo`` for ``steps`` env steps on the side's Gymnasium view against
+    the other side's mix (seed derived from the run's, the iteration and the side), logs to
+    ``tb/<side>_br_<iteration>``, and is saved as ``policies/<side>_<k>.json`` / ``.pt``.
+    A stop request ends the learner at its next step and drops the answer.
+    """
+
+    def __init__(
+        self,
+        cfg: GameConfig,
+        run_dir: Path,
+        entries: dict[str, Trainable],
+        env_kwargs: dict[str, Any],
+        algo: str,
+        kwargs: dict[str, Any],
+        hyperparameters: dict[str, Any],
+        stop: StopRequest,
+    ) -> None:
+        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
+        self.algo, self.kwargs, self.hyperparameters = algo, kwargs, hyperparameters
+        self.stop = stop
+        self.callback = StopTrainingCallback(stop)
+
+    def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
+        """A fresh learner's answer to ``opponent``, or None if a stop request cut it short."""
+        model, action = learn_best_response(
+            self.entries[side],
+            self.env_kwargs,
+            opponent,
+            self.algo,
+            self.kwargs,
+            self.cfg.steps_per_iteration,
+            derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side)),
+            self.cfg.run.device,
+            self.run_dir / "tb" / f"{side}_br_{iteration:03d}",
+            self.callback,
+        )
+        return None if self.stop.requested else BestResponse(model, action)
+
+    def save(self, side: str, index: int, response: BestResponse) -> str:
+        """Save the model as ``policies/<side>_<index>.json``; returns the file's name."""
+        path = self.run_dir / "policies" / f"{side}_{index}.json"
+        return save_model(response.policy, path, self.algo, self.hyperparameters).name
+
+
+def _population_state(
     state: dict[str, Any],
     names: dict[str, list[str]],
     models: dict[str, list[BaseAlgorithm]],
-    entries: dict[str, Trainable],
-    env_kwargs: dict[str, Any],
-    algo: str,
-    kwargs: dict[str, Any],
-    hyperparameters: dict[str, Any],
-    L: np.ndarray,
-    value: float,
     n: dict[str, int],
+) -> PopulationState:
+    """The loop state of a new run (empty) or of a resumed run's ``state.json``."""
+    pops = state["populations"]
+    meta = np.array(state.get("meta_payoff", np.zeros((0, 0))), dtype=np.float64)
+    return PopulationState(
+        pops,
+        models,
+        names,
+        meta.reshape(len(pops["defender"]), len(pops["attacker"])),
+        np.array(state.get("x", np.full(n["defender"], 1.0 / n["defender"]))),
+        np.array(state.get("y", np.full(n["attacker"], 1.0 / n["attacker"]))),
+        state["history"],
+        float(state.get("train_seconds", 0.0)),
+    )
+
+
+def _iterate(
+    cfg: GameConfig,
+    run_dir: Path,
+    loop: PopulationState,
+    oracle: Oracle,
+    game: MatrixGame,
     stop: StopRequest,
     report: Callable[[str], None] | None,
 ) -> list[dict[str, Any]]:
@@ -456,121 +555,33 @@ def _iterate(
     After each finished iteration its policies are saved and ``state.json`` is rewritten
     (atomically, last). Returns the history of all finished iterations.
     """
-    policies_dir = run_dir / "policies"
-    pops: dict[str, list[int]] = state["populations"]
-    meta = np.array(state.get("meta_payoff", np.zeros((0, 0))), dtype=np.float64)
-    meta = meta.reshape(len(pops["defender"]), len(pops["attacker"]))
-    history: list[dict[str, Any]] = state["history"]
-    x = np.array(state.get("x", np.full(n["defender"], 1.0 / n["defender"])))
-    y = np.array(state.get("y", np.full(n["attacker"], 1.0 / n["attacker"])))
-    seconds0 = float(state.get("train_seconds", 0.0))
-    start = time.perf_counter()
-    tb = make_logger(run_dir / "tb", purge_from=len(history) + 1 if history else None)
-    callback = StopTrainingCallback(stop)
+    tb = tensorboard(run_dir / "tb", purge_from=len(loop.history) + 1 if loop.history else None)
 
-    iterations = range(len(history) + 1, cfg.iterations + 1)
+    def on_iteration(rec: dict[str, Any], state: PopulationState) -> None:
+        for key in ("defender", "attacker", "nash_conv", "relative_nash_conv"):
+            tb.record(f"selfplay/{key}", rec[key])
+        tb.dump(rec["iteration"])
+        write_json(
+            run_dir / STATE,
+            {**state.saved(), "history": state.history, "train_seconds": rec["train_seconds"]},
+        )
+        if report is not None:
+            report(report_line(rec))
+
+    progress = None
     if cfg.run.progress_bar:
         from tqdm.auto import tqdm
 
-        iterations = tqdm(iterations, desc=f"{cfg.method} on {cfg.env}", unit="iter")
-    for it in iterations:
-        if stop.requested:
-            break
-        opponents = {"attacker": x, "defender": y}  # each side answers the other's mix
-        new: dict[str, tuple[BaseAlgorithm, int]] = {}
-        for s, side in enumerate(SIDES):
-            new[side] = learn_best_response(
-                entries[side],
-                env_kwargs,
-                opponents[side],
-                algo,
-                kwargs,
-                cfg.steps_per_iteration,
-                derived_seed(cfg.run.seed, 1000 * it + s),
-                cfg.run.device,
-                run_dir / "tb" / f"{side}_br_{it:03d}",
-                callback,
-            )
-            if stop.requested:
-                break
-        if stop.requested:  # the unfinished iteration is dropped
-            break
-        for side in SIDES:
-            model, action = new[side]
-            path = policies_dir / f"{side}_{len(pops[side])}.json"
-            names[side].append(save_model(model, path, algo, hyperparameters).name)
-            models[side].append(model)
-            pops[side].append(action)
-        # how far each learned response is from an exact best response to the mix it answered
-        gap_att = float((x @ L).max() - (x @ L)[pops["attacker"][-1]])
-        gap_def = float((L @ y)[pops["defender"][-1]] - (L @ y).min())
+        def progress(steps: range) -> Any:
+            return tqdm(steps, desc=f"{cfg.method} on {cfg.env}", unit="iter")
 
-        if cfg.method == "psro":
-            meta = _grow_meta(meta, models, entries["attacker"], env_kwargs, cfg.run.seed)
-        x, y = current_mixes(cfg.method, pops, n, meta)
-
-        e = exploitability(L, x, y, value)
-        rec = {
-            "iteration": it,
-            "timesteps": 2 * it * cfg.steps_per_iteration,
-            "train_seconds": round(seconds0 + time.perf_counter() - start, 3),
-            "defender": e.defender,
-            "attacker": e.attacker,
-            "nash_conv": e.nash_conv,
-            "relative_nash_conv": e.nash_conv / abs(value),
-            "br_attacker": pops["attacker"][-1],
-            "br_defender": pops["defender"][-1],
-            "br_gap_attacker": gap_att,
-            "br_gap_defender": gap_def,
-            "x": x.tolist(),
-            "y": y.tolist(),
-        }
-        history.append(rec)
-        for key in ("defender", "attacker", "nash_conv", "relative_nash_conv"):
-            tb.record(f"selfplay/{key}", rec[key])
-        tb.dump(it)
-        write_json(
-            run_dir / STATE,
-            {
-                "populations": pops,
-                "policies": names,
-                "meta_payoff": meta.tolist(),
-                "history": history,
-                "x": x.tolist(),
-                "y": y.tolist(),
-                "train_seconds": rec["train_seconds"],
-            },
-        )
-        if report is not None:
-            report(_report_line(rec))
+    steps = 0 if isinstance(oracle, ExactOracle) else cfg.steps_per_iteration  # exact: none
+    history = run_population(
+        cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, steps,
+        lambda: stop.requested, on_iteration, progress,
+    )  # fmt: skip
     tb.close()
     return history
-
-
-def _grow_meta(
-    meta: np.ndarray,
-    models: dict[str, list[BaseAlgorithm]],
-    attacker_entry: Trainable,
-    env_kwargs: dict[str, Any],
-    seed: int,
-) -> np.ndarray:
-    """Extend the empirical meta-payoff (defender rows, attacker columns) to the new policies.
-
-    Only the new row and column are played (one episode per pair: the payoff of two
-    deterministic policies in the expected-dynamics game is exact; sampled dynamics would
-    need more).
-    """
-    m, k = len(models["defender"]), len(models["attacker"])
-    out = np.zeros((m, k))
-    out[: meta.shape[0], : meta.shape[1]] = meta
-    for i in range(m):
-        for j in range(k):
-            if i < meta.shape[0] and j < meta.shape[1]:
-                continue
-            out[i, j] = empirical_payoff(
-                models["attacker"][j], models["defender"][i], attacker_entry, env_kwargs, 1, seed
-            )
-    return out
 
 
 def _final_evaluations(

@@ -16,6 +16,7 @@ mix is drawn on the device: the uniform one).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +24,6 @@ from typing import Any
 
 import gymnasium as gym
 
-from agents.checkpoint import read_json
 from agents.config import (
     TORCH_PPO,
     TORCH_PPO_NUM_ENVS,
@@ -34,21 +34,9 @@ from agents.config import (
     resolved_hyperparameters,
 )
 from agents.evaluate import Evaluation, evaluate
-from agents.interrupt import stop_on_signals
+from agents.lifecycle import open_run
 from agents.registry import get
-from agents.runs import (
-    check_resumable,
-    config_dict,
-    new_run_dir,
-    read_jsonl,
-    remove_stale_temp_files,
-    removed_unless,
-    resume_dir,
-    run_lock,
-    run_prefix,
-    write_json,
-    write_jsonl,
-)
+from agents.runs import read_jsonl, run_prefix, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 from agents.torch_ppo import (
     TorchPolicy,
@@ -118,12 +106,15 @@ def _device(name: str) -> str:
     return name
 
 
-def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
+def train_torch_ppo_run(
+    cfg: TrainConfig, report: Callable[[str], None] | None = print
+) -> TorchPPORun:
     """Train ``cfg.agent`` of ``cfg.env`` with torch-ppo, score it and write the run folder.
 
     Every option is checked and the env built before the run folder is created; a run that
     fails before its model is saved leaves no folder. SIGINT/SIGTERM end training after the
-    current iteration; the model and scores are still written.
+    current iteration; the model and scores are still written. The run folder's lifecycle is
+    :mod:`agents.lifecycle`'s (``report`` gets its lines; None: silent).
 
     Raises:
         ValueError: For an unknown env or scenario, ``--resume``, ``--opponent equilibrium``, a
@@ -143,7 +134,13 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
     entry = get(cfg.env, cfg.agent)
     config, hyperparameters = torch_ppo_config(cfg)
     env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
-    from agents.training import check_env_kwargs, write_scores
+    from agents.training import (
+        check_env_kwargs,
+        final_evaluations,
+        history_record,
+        reference_record,
+        write_scores,
+    )
 
     check_env_kwargs(entry.gym_id, env_kwargs)
     name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
@@ -158,43 +155,28 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
         stack.callback(eval_env.close)
         stack.callback(venv.close)
         reference = entry.reference_of(eval_env)
-        prefix = run_prefix(name, TORCH_PPO, cfg.run.seed)
-        given = config_dict(cfg)
+        run = open_run(cfg, stack, run_prefix(name, TORCH_PPO, cfg.run.seed), CHECKPOINT, report)
         resume: TrainingState | None = None
-        if cfg.run.resume:
-            run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix, CHECKPOINT)
-            stack.enter_context(run_lock(run_dir))
-            saved = read_json(run_dir / "config.json", "run config")
-            check_resumable(saved.get("config", {}), given, run_dir)
-            remove_stale_temp_files(run_dir)
-            resume = load_training_state(run_dir / CHECKPOINT, run_dir)
-        else:
-            run_dir = new_run_dir(cfg.run.runs_root, cfg.run.run_dir, prefix)
+        if run.resumed:
+            resume = load_training_state(run.path / CHECKPOINT, run.path)
+            run.check_not_shorter("total_timesteps", cfg.total_timesteps, resume.timesteps)
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        if resume is None:
-            run_dir.mkdir(parents=True)
-            stack.enter_context(removed_unless(run_dir, CHECKPOINT))
-            stack.enter_context(run_lock(run_dir))
-        write_json(
-            run_dir / "config.json",
+        run_dir = run.begin()
+        run.write_config(
+            cfg.agent,
+            cfg,
             {
-                "command": cfg.agent,
-                "config": given,
-                "resolved": {
-                    "gym_id": entry.gym_id,
-                    "algo": TORCH_PPO,
-                    "backend": "torch",
-                    "device": device,
-                    "num_envs": config.num_envs,
-                    "env_kwargs": env_kwargs,
-                    "hyperparameters": hyperparameters,
-                    "reference": None
-                    if reference is None
-                    else {"name": reference.name, "value": reference.value},
-                },
+                "gym_id": entry.gym_id,
+                "algo": TORCH_PPO,
+                "backend": "torch",
+                "device": device,
+                "num_envs": config.num_envs,
+                "env_kwargs": env_kwargs,
+                "hyperparameters": hyperparameters,
+                "reference": reference_record(reference),
             },
         )
-        stop = stack.enter_context(stop_on_signals())
+        stop = run.watch_signals()
         history_path = run_dir / "evaluations.jsonl"
         history: list[dict[str, Any]] = []
         done = 0 if resume is None else resume.timesteps
@@ -209,14 +191,7 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
                 return
             state["next"] = (record["timesteps"] // cfg.eval_freq + 1) * cfg.eval_freq
             ev = evaluate(policy, eval_env, cfg.eval_episodes, eval_seed, reference)
-            summary = ev.to_dict()
-            history.append(
-                {
-                    "timesteps": int(record["timesteps"]),
-                    "train_seconds": round(record["seconds"], 3),
-                    **{k: summary[k] for k in ("mean", "ci95", "reference", "score", "score_name")},
-                }
-            )
+            history.append(history_record(ev, record["timesteps"], record["seconds"]))
             write_jsonl(history_path, history)
 
         result = train_torch_ppo(
@@ -232,31 +207,15 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
         save_policy(result.policy, run_dir / "model.json", config, result.timesteps)
 
         final_seed = derived_seed(cfg.run.seed, 20_000)
-        rows = {
-            f"learned ({TORCH_PPO})": evaluate(
-                result.policy, eval_env, cfg.final_eval_episodes, final_seed, reference
-            )
-        }
-        if reference is not None and reference.policy is not None:
-            rows[reference.name] = evaluate(
-                reference.policy, eval_env, cfg.final_eval_episodes, final_seed, reference
-            )
-        rows["random"] = evaluate(
-            "random", eval_env, cfg.final_eval_episodes, final_seed, reference
+        rows = final_evaluations(
+            result.policy, TORCH_PPO, eval_env, reference, cfg.final_eval_episodes, final_seed
         )
         learned = rows[f"learned ({TORCH_PPO})"]
         if not history or history[-1]["timesteps"] != result.timesteps:
-            summary = learned.to_dict()
-            history.append(
-                {
-                    "timesteps": result.timesteps,
-                    "train_seconds": round(result.train_seconds, 3),
-                    **{k: summary[k] for k in ("mean", "ci95", "reference", "score", "score_name")},
-                }
-            )
+            history.append(history_record(learned, result.timesteps, result.train_seconds))
             write_jsonl(history_path, history)
         write_scores(
-            run_dir,
+            run,
             history,
             reference,
             f"torch-ppo {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), "
@@ -267,7 +226,6 @@ def train_torch_ppo_run(cfg: TrainConfig) -> TorchPPORun:
             steps_per_second=result.steps_per_second,
             device=device,
             num_envs=config.num_envs,
-            interrupted=stop.signum,
         )
         return TorchPPORun(
             run_dir,

@@ -11,8 +11,8 @@
   :func:`agents.evaluate.evaluate` and logs its score against the reference;
 - :class:`CheckpointCallback` saves ``checkpoints/model_<steps>.pt`` / ``.json`` (and the replay
   buffer of off-policy algorithms as ``replay_buffer_<steps>.npz``) every ``checkpoint_freq``
-  steps in the format of :mod:`agents.checkpoint` (tensors and JSON, nothing unpickled), each
-  file through a temporary file and ``os.replace``, then points ``checkpoints/state.json`` at it;
+  steps in the format of :mod:`agents.checkpoint` (tensors and JSON, nothing unpickled; a kill
+  at any moment of a write leaves a loadable pair), then points ``checkpoints/state.json`` at it;
 - the best-scoring model of those evaluations is kept as ``best_model.pt`` / ``.json``
   (``best.json``) and gets its own row in the final table when it beats the final model;
 - ``resume`` rebuilds the model from the run's config, loads the checkpoint ``state.json``
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import importlib
 import inspect
-import sys
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -38,13 +37,13 @@ from typing import Any
 import gymnasium as gym
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import HumanOutputFormat, Logger, TensorBoardOutputFormat
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.algos import ALGO_CLASSES, build_model
 from agents.checkpoint import (
+    STAGED,
     UntrustedCheckpointError,
     inside,
     load_model,
@@ -65,22 +64,11 @@ from agents.config import (
     resolved_hyperparameters,
 )
 from agents.evaluate import Evaluation, evaluate
-from agents.interrupt import StopTrainingCallback, stop_on_signals
+from agents.interrupt import StopTrainingCallback
+from agents.lifecycle import RunFolder, open_run, tensorboard
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
-from agents.runs import (
-    check_resumable,
-    config_dict,
-    new_run_dir,
-    read_jsonl,
-    remove_stale_temp_files,
-    removed_unless,
-    resume_dir,
-    run_lock,
-    run_prefix,
-    write_json,
-    write_jsonl,
-)
+from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 
 __all__ = [  # ALGO_CLASSES and build_model live in agents.algos; kept here for importers
@@ -180,29 +168,6 @@ def make_env(thunk: Callable[[], gym.Env], gym_id: str) -> gym.Env:
         raise ValueError(f"{flag('env_kwargs')}: {gym_id} rejected its options: {exc}") from None
 
 
-def make_logger(folder: Path, purge_from: int | None = None, stdout: bool = False) -> Logger:
-    """SB3 logger writing TensorBoard events to ``folder`` (and a table to stdout).
-
-    Args:
-        folder: TensorBoard folder.
-        purge_from: On resume, the first step after the checkpoint: the new event file starts
-            with a ``SessionLog.START`` there, and TensorBoard hides the earlier sessions'
-            events from that step on (the resumed session logs them again), so the step
-            ranges shown do not overlap.
-        stdout: Also print SB3's statistics table.
-    """
-    from torch.utils.tensorboard import SummaryWriter
-
-    class _TensorBoard(TensorBoardOutputFormat):
-        def __init__(self) -> None:  # SB3's __init__ takes no purge_step
-            self.writer = SummaryWriter(log_dir=str(folder), purge_step=purge_from)
-            self._is_closed = False
-
-    Path(folder).mkdir(parents=True, exist_ok=True)
-    formats = [_TensorBoard()] + ([HumanOutputFormat(sys.stdout)] if stdout else [])
-    return Logger(folder=str(folder), output_formats=formats)
-
-
 # ---------------------------------------------------------------------------- checkpoints
 
 
@@ -253,6 +218,9 @@ def save_checkpoint(
     for pattern in CHECKPOINT_FILES:
         old = sorted(folder.glob(pattern), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
         for p in old[:-KEEP_CHECKPOINTS]:
+            p.unlink(missing_ok=True)
+    for p in folder.glob(f"model_*.pt{STAGED}"):  # staged tensors of a pruned checkpoint
+        if not p.with_name(p.name.removesuffix(f".pt{STAGED}") + ".json").is_file():
             p.unlink(missing_ok=True)
     return path
 
@@ -508,74 +476,57 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     check_env_kwargs(entry.gym_id, env_kwargs)
     opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
     trusted = cfg.run.trust_checkpoint
-    given = config_dict(cfg)
 
     with ExitStack() as stack:
         eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent), entry.gym_id)
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
+        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say)
         checkpoint: CheckpointState | None = None
-        if cfg.run.resume:
-            run_dir = resume_dir(
-                cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg), CHECKPOINT_STATE
-            )
-            stack.enter_context(run_lock(run_dir))
-            saved = read_json(run_dir / "config.json", "run config")
-            check_resumable(saved.get("config", {}), given, run_dir)
-            checkpoint = read_checkpoint_state(run_dir / "checkpoints", run_dir, trusted)
-            best_model_file(run_dir, trusted)  # refuse an unsafe one now, not after training
-            for stale in remove_stale_temp_files(run_dir):
-                say(f"removed a temporary file left by an interrupted write: {stale}")
-        else:
-            run_dir = new_run_dir(cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg))
+        if run.resumed:
+            checkpoint = read_checkpoint_state(run.path / "checkpoints", run.path, trusted)
+            run.check_not_shorter("total_timesteps", cfg.total_timesteps, checkpoint.timesteps)
+            best_model_file(run.path, trusted)  # refuse an unsafe one now, not after training
 
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         vec_env = DummyVecEnv([env_thunk(entry.gym_id, env_kwargs, opponent, monitor=True)])
         stack.callback(vec_env.close)
         if checkpoint is not None:
             model = load_checkpoint(
-                checkpoint, algo, vec_env, kwargs, run_dir, cfg.run.device, trusted
+                checkpoint, algo, vec_env, kwargs, run.path, cfg.run.device, trusted
             )
             model.verbose = cfg.run.verbose
-            # fresh draws after resume
-            model.set_random_seed(derived_seed(cfg.run.seed, model.num_timesteps))
+            model.set_random_seed(run.resume_seed(cfg.run.seed, model.num_timesteps))
             offset = checkpoint.train_seconds
-            say(f"resuming {run_dir} from its checkpoint at {model.num_timesteps} steps")
+            say(f"resuming {run.path} from its checkpoint at {model.num_timesteps} steps")
         else:
             model = build_model(
                 algo, vec_env, kwargs, cfg.run.seed, cfg.run.device, cfg.run.verbose
             )
             offset = 0.0
-            run_dir.mkdir(parents=True)  # only now: every option has been checked
-            stack.enter_context(removed_unless(run_dir, CHECKPOINT_STATE))
-            stack.enter_context(run_lock(run_dir))
-        write_json(
-            run_dir / "config.json",
+            run.begin()  # only now: every option has been checked
+        run.write_config(
+            cfg.agent,
+            cfg,
             {
-                "command": cfg.agent,
-                "config": given,
-                "resolved": {
-                    "gym_id": entry.gym_id,
-                    "algo": algo,
-                    "env_kwargs": env_kwargs,
-                    "hyperparameters": hyperparameters,
-                    "reference": None
-                    if reference is None
-                    else {"name": reference.name, "value": reference.value},
-                },
+                "gym_id": entry.gym_id,
+                "algo": algo,
+                "env_kwargs": env_kwargs,
+                "hyperparameters": hyperparameters,
+                "reference": reference_record(reference),
             },
         )
         model.set_logger(
-            make_logger(
-                run_dir / "tb",
+            tensorboard(
+                run.path / "tb",
                 model.num_timesteps + 1 if checkpoint else None,
                 cfg.run.verbose > 0,
             )
         )
-        stop = stack.enter_context(stop_on_signals())
+        run.watch_signals()
         return _train_and_score(
-            cfg, model, algo, kwargs, hyperparameters, run_dir, eval_env, reference, offset,
-            checkpoint is not None, stop, env_kwargs, entry,
+            cfg, model, algo, kwargs, hyperparameters, run, eval_env, reference, offset,
+            env_kwargs, entry,
         )  # fmt: skip
 
 
@@ -585,16 +536,15 @@ def _train_and_score(
     algo: str,
     kwargs: dict[str, Any],
     hyperparameters: dict[str, Any],
-    run_dir: Path,
+    run: RunFolder,
     eval_env: gym.Env,
     reference: Reference | None,
     offset: float,
-    resumed: bool,
-    stop: Any,
     env_kwargs: dict[str, Any],
     entry: Trainable,
 ) -> TrainResult:
     """Learn (until done or stopped), write the final checkpoint, model and scores."""
+    run_dir, resumed, stop = run.path, run.resumed, run.stop
     ckpt_dir = run_dir / "checkpoints"
     history_path = run_dir / "evaluations.jsonl"
     history = [h for h in read_jsonl(history_path) if h["timesteps"] <= model.num_timesteps]
@@ -669,14 +619,13 @@ def _train_and_score(
         history.append(history_record(learned, model.num_timesteps, train_seconds))
         write_jsonl(history_path, history)
     write_scores(
-        run_dir,
+        run,
         history,
         reference,
         f"{algo} {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), seed {cfg.run.seed}",
         evaluations,
         num_timesteps=model.num_timesteps,
         train_seconds=train_seconds,
-        interrupted=stop.signum,
     )
     model.logger.close()
     return TrainResult(
@@ -684,19 +633,23 @@ def _train_and_score(
     )
 
 
+def reference_record(reference: Reference | None) -> dict[str, Any] | None:
+    """The analytic reference as config.json records it (its name and value)."""
+    return None if reference is None else {"name": reference.name, "value": reference.value}
+
+
 def write_scores(
-    run_dir: Path,
+    run: RunFolder,
     history: list[dict[str, Any]],
     reference: Reference | None,
     title: str,
     evaluations: dict[str, Evaluation],
     **fields: Any,
 ) -> None:
-    """A finished run's ``scores.json`` (``fields``, then the evaluations) and learning curve."""
-    evals = {k: v.to_dict() for k, v in evaluations.items()}
-    write_json(run_dir / "scores.json", {**fields, "evaluations": evals})
+    """A finished run's ``scores.json`` (:meth:`RunFolder.write_scores`) and learning curve."""
+    run.write_scores(fields, evaluations)
     learning_curve(
-        run_dir / "learning_curve.png",
+        run.path / "learning_curve.png",
         history,
         None if reference is None else reference.value,
         None if reference is None else reference.name,

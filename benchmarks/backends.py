@@ -5,7 +5,7 @@ Run: ``python benchmarks/backends.py [--device cpu|cuda] [--threads N] [--quick]
 and ``backend="torch"`` in alternating short bursts in one process (medians over rounds; the
 ratio is the median of the per-round ratios), for ch4-position (expected and sampled dynamics)
 and the 13-state IEEE 14-bus grid. On a GPU, ``--device cuda`` synchronises after each burst.
-No targets: the GPU targets of issue 13 belong to ``benchmarks/gpu.py``.
+No targets: the GPU targets (and why they were chosen) are in ``benchmarks/gpu.py``.
 """
 
 from __future__ import annotations

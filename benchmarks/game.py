@@ -1,7 +1,7 @@
 """Time to the exact equilibrium of the sensor-selection game, M = 3 … 16 sensors.
 
 Run: ``python benchmarks/game.py [--max-m 16] [--lp-max-m 11] [--nashpy-max-m 10]
-[--repeats 3]``. The game (MATH.md §5) is built on tracking systems with M position sensors,
+[--repeats 3]``. The game (docs/math.md §5) is built on tracking systems with M position sensors,
 σ_w evenly spread over [1, 5], σ_v = 0.5, power 100, for both allocation rules. For each M it
 prints the wall time of
 

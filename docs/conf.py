@@ -21,6 +21,7 @@ extensions = [
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
     "generate_pages",  # env pages, render images and API pages, written at build time
+    "local_links",  # viewcode's back-links fixed; every internal link and anchor checked
 ]
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 exclude_patterns = ["_build", "README.md"]

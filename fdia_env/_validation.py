@@ -11,7 +11,7 @@ _SYM_RTOL = 1e-9
 
 # Largest admissible attack power a² (a covariance trace). Beyond it sums such as Pzz0 + Σ and
 # the symmetrisation (A + A')/2 can overflow; the detection numerics are validated up to it
-# (tests/test_numerics.py). Physically every error limit is reached long before (MATH.md §3).
+# (tests/test_numerics.py). Physically every error limit is reached long before (docs/math.md §3).
 MAX_POWER = 1e300
 
 

@@ -3,12 +3,12 @@
 ## Description
 
 A Kalman filter in steady state at time K keeps its nominal gains while the attacker adds zero-
-mean Gaussian biases ``b ~ N(0, Σ)`` to the measurements (MATH.md §2). The attacker chooses Σ
+mean Gaussian biases ``b ~ N(0, Σ)`` to the measurements (docs/math.md §2). The attacker chooses Σ
 over every sensor's measurement components under the power constraint ``tr(Ω Σ) = a²`` (Ω weights
 velocity components by T²) and wants the filter's *actual* error covariance
 ``M = P + A`` as large as possible. The defender is passive (the unaware filter): the env has the
 single agent ``"attacker"``. With the default ``horizon=1`` this is the single injection of
-MATH.md §2.2, whose optimum is ``baselines.covariance.trace_optimal`` / ``det_optimal``.
+docs/math.md §2.2, whose optimum is ``baselines.covariance.trace_optimal`` / ``det_optimal``.
 
 ## Action Space
 

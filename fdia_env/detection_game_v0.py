@@ -7,7 +7,7 @@ The filter's measurement at the attack time is biased with probability ``p`` by 
 statistic ``"chi2"`` (``y' Pzz0⁻¹ y``) or ``"quadratic"`` (``y'(Pzz0⁻¹ − Pzz1⁻¹) y``, the optimal
 Bayesian statistic, built from the defender's model ``assumed_sigma`` of Σ) and declares an attack
 when it exceeds its threshold; on detection it discards the measurement or incorporates it with
-the attack model (MATH.md §3). Two settings, by scenario: ``"ch3-static"`` (a static parameter
+the attack model (docs/math.md §3). Two settings, by scenario: ``"ch3-static"`` (a static parameter
 with prior N(x̄, Pxx), estimated afresh every round) and ``"ch3-tracking"`` (the tracking filter
 attacked at step K = 100, after K − 1 clean steps).
 
@@ -44,7 +44,7 @@ the prior every round, so any horizon works.
 ``scenario`` (``"ch3-static"`` default, ``"ch3-tracking"`` or a system), ``power`` (a², default
 100), ``statistic``, ``on_detect``, ``criterion`` (``"mse"`` | ``"bayes_cost"``),
 ``assumed_sigma`` (default: the c2-maximising Σ of the power,
-MATH.md §3), ``horizon``, ``warmup``, ``objective``, ``reward_mode``, ``dynamics``,
+docs/math.md §3), ``horizon``, ``warmup``, ``objective``, ``reward_mode``, ``dynamics``,
 ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``. The Gymnasium
 views ``fdia_env/DetectionDefender-v0`` (the attacker fixed to p1 of the preset and the
 c2-maximising Σ) and ``fdia_env/DetectionAttacker-v0`` (the defender fixed to the threshold

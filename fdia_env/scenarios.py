@@ -1,4 +1,4 @@
-"""Named parameter sets from the literature (MATH.md §6) and power-grid presets (MATH.md §7).
+"""Named parameter sets of the literature (docs/math.md §6) and power-grid presets (§7 there).
 
 >>> from fdia_env import scenarios
 >>> sc = scenarios.get("ch4-position")
@@ -31,7 +31,7 @@ the four best), so the double oracle needs several iterations.
 
 Why these values: with σ and q as above the steady-state ``tr P`` is 0.27 (ieee14) to 0.34
 (ieee118) of the static estimator's ``tr (H' R⁻¹ H)⁻¹``, so prediction and measurements both
-matter (MATH.md §7); a² = 0.01 pu² (a 10 MW bias standard deviation) makes the single-meter
+matter (docs/math.md §7); a² = 0.01 pu² (a 10 MW bias standard deviation) makes the single-meter
 attack term ``a² |W e_i|²`` 1 to 3 times ``tr P``; c and N leave the sparse problems far beyond
 exhaustive search (C(204, 6) ≈ 1e11 sets for ieee14) while SFS, SBS, SFS-SS and DP run in
 seconds. ``k`` is the sensor game's ``max_subset_size``: the attacker picks at most k meters,
@@ -51,6 +51,7 @@ import numpy as np
 
 from fdia_env._validation import check_int, check_positive
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
+from fdia_env.systems.grid.cases import GRID_CASES
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,12 +194,17 @@ def _ch5_game() -> Scenario:
     )
 
 
-# name -> (case, budget c, horizon N, sensor-game max_subset_size k)
+# name -> (case, budget c, horizon N, sensor-game max_subset_size k): the cases of the table of
+# grid cases that have a preset
 GRID_PRESETS: dict[str, tuple[str, int, int, int]] = {
-    "grid-ieee14": ("ieee14", 6, 6, 2),
-    "grid-ieee30": ("ieee30", 6, 4, 1),
-    "grid-ieee57": ("ieee57", 6, 3, 1),
-    "grid-ieee118": ("ieee118", 6, 3, 1),
+    f"grid-{case.name}": (
+        case.name,
+        case.preset.budget,
+        case.preset.horizon,
+        case.preset.max_subset_size,
+    )
+    for case in GRID_CASES.values()
+    if case.preset is not None
 }
 GRID_POWER = 0.01
 
@@ -230,7 +236,8 @@ def _grid(name: str) -> Callable[[], Scenario]:
         return Scenario(
             name,
             sys,
-            f"{case}: DC dynamic state estimation, {sys.M} meters, {sys.n} angles (MATH.md §7)",
+            f"{case}: DC dynamic state estimation, {sys.M} meters, {sys.n} angles "
+            "(docs/math.md §7)",
             budget=budget,
             horizon=horizon,
             power=GRID_POWER,

@@ -1,4 +1,4 @@
-"""``sensor_game_v0``: the zero-sum sensor-selection game of MATH.md §5.
+"""``sensor_game_v0``: the zero-sum sensor-selection game of docs/math.md §5.
 
 ## Description
 
@@ -14,7 +14,7 @@ equilibrium of ``baselines.game``.
 ### Incomplete information (``types=``)
 
 ``types=("independent", "dependent")`` with ``priors=(p_1, p_2)`` (default uniform) is the
-Bayesian game of MATH.md §5: at every reset nature draws the attacker's type (its allocation
+Bayesian game of docs/math.md §5: at every reset nature draws the attacker's type (its allocation
 rule) from the env's seeded generator; the defender never observes it (neither in its
 observation nor in its infos). With ``attacker_model="informed"`` (default) the attacker
 observes its type and may condition on it; with ``"uninformed"`` it does not (the literature's

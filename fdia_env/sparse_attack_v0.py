@@ -4,7 +4,7 @@
 
 A Kalman filter tracks a system observed by M sensors and has reached steady state at time
 K. Over the window K+1..K+N the attacker corrupts measurements; the defender detects every
-corrupted measurement and drops it (perfect detection, MATH.md §4), so the filter runs on the
+corrupted measurement and drops it (perfect detection, docs/math.md §4), so the filter runs on the
 remaining sensors. The attacker may corrupt at most ``budget`` (c) sensor-time pairs in total
 and wants the filter's error covariance at K+N as large as possible. The defender is passive:
 the env has the single agent ``"attacker"``.
@@ -42,7 +42,7 @@ over-budget rule applies to every format (see :class:`fdia_env.attacks.SparseAtt
 
 Φ = tr or log det of the actual error covariance (``dynamics="expected"``) or the squared
 estimation error (``"sampled"``). ``reward_mode="terminal"`` pays Φ(P[K+N|K+N]) at the last
-step, so the episode return is the objective of MATH.md §4; ``"shaped"`` pays increments;
+step, so the episode return is the objective of docs/math.md §4; ``"shaped"`` pays increments;
 ``"per_step"`` pays Φ every step.
 
 ## Starting State

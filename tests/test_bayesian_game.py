@@ -238,7 +238,7 @@ def reproduction_mix(label):
 @pytest.mark.parametrize(
     "model, label, literature_x, literature_value",
     [
-        # MATH.md §5's formulation (the defender's LP on Σ_s p_s L_s), the literature's game
+        # docs/math.md §5's formulation (the defender's LP on Σ_s p_s L_s), the literature's game
         ("uninformed", "Uninformed", [0, 0, 0, 0, 0, 0.4543, 0.5457], 9.445039),
         ("informed", "Informed", [0, 0, 0, 0, 0, 0.4003, 0.5997], 9.727244),
     ],
@@ -416,7 +416,7 @@ def test_bayesian_game_bad_input():
 
 
 def test_psro_meta_payoff_is_exact_over_natures_draw():
-    from agents.selfplay import empirical_payoff
+    from agents.population import empirical_payoff
 
     kwargs = {"types": TYPES, "priors": [0.3, 0.7], "attacker_model": "uninformed"}
     entry = get("sensor_game_v0", "attacker")

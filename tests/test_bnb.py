@@ -227,7 +227,7 @@ def test_split_bound_equals_exhaustive_on_a_42_pair_meter_grid(objective):
 
 
 def test_split_bound_proves_the_300_pair_meter_level_grid_instance_at_the_root():
-    # The target: 50 meters of the DC IEEE 14-bus model over N = 6 (300 pairs, c = 5,
+    # The target: prove 50 meters of the DC IEEE 14-bus model over N = 6 (300 pairs, c = 5,
     # C(300, 5) ≈ 2·10¹⁰ sets). SFS-SS stops 1.5 % short; the split bound proves the optimum.
     system = dc_grid14(50)
     result = branch_and_bound(system, 5, 6, time_limit=120)

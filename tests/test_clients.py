@@ -2,7 +2,10 @@
 
 import contextlib
 import io
+import logging
+import re
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -11,17 +14,60 @@ from pettingzoo.test import max_cycles_test, performance_benchmark, render_test
 
 import fdia_env
 from fdia_env import (
-    covariance_attack_v0,
     detection_game_v0,
-    fdia_v0,
     sensor_game_v0,
     sparse_attack_v0,
 )
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 from fdia_env.wrappers import flatten_observation_v0, shared_policy_v0
 
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+CLIENTS_PAGE = Path(__file__).resolve().parent.parent / "docs" / "guide" / "clients.md"
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 pytestmark = pytest.mark.filterwarnings("ignore")
+
+
+# --- the clients page: every snippet prints the output shown under it -------------------------
+def page_snippets() -> list[tuple[str, str]]:
+    """(code, shown output) of each snippet of docs/guide/clients.md, in page order."""
+    text = CLIENTS_PAGE.read_text(encoding="utf-8")
+    fence = r"```(?:python|\{code-block\} python)\n(.*?)```\n\n```(?:text)?\n(.*?)```"
+    return re.findall(fence, text, flags=re.S)
+
+
+def run_snippet(code: str, name: str) -> str:
+    """What ``code`` prints (TorchRL's INFO log lines, timestamped, are not shown on the page)."""
+    import torchrl  # noqa: F401  (its import sets the level of its logger)
+
+    out = io.StringIO()
+    log = logging.getLogger("torchrl")
+    level = log.level
+    log.setLevel(logging.WARNING)
+    try:
+        with contextlib.redirect_stdout(out), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            exec(compile(code, name, "exec"), {"__name__": "__main__"})
+    finally:
+        log.setLevel(level)
+    return out.getvalue()
+
+
+def test_the_clients_page_opens_with_the_spawned_worker_id_form():
+    snippets = page_snippets()
+    assert len(snippets) == 6
+    text = CLIENTS_PAGE.read_text(encoding="utf-8")
+    first_section = text.split("\n## ", 2)[1]
+    assert first_section.startswith("Workers in other processes")
+    assert 'GymEnv("fdia_env:fdia_env/' in snippets[0][0]
+    # every family is in a TorchRL, a Tianshou and an SB3 snippet
+    families = ("sparse", "covariance", "sensor", "detection")
+    for code in (snippets[1][0], snippets[2][0] + snippets[3][0], snippets[4][0]):
+        assert all(family in code.lower() for family in families)  # TorchRL, Tianshou, SB3
+
+
+@pytest.mark.parametrize("index", range(len(page_snippets())), ids=lambda i: f"snippet{i + 1}")
+def test_clients_page_snippet_prints_what_the_page_shows(index):
+    code, shown = page_snippets()[index]
+    assert run_snippet(code, f"docs/guide/clients.md, snippet {index + 1}") == shown
 
 
 # --- PettingZoo's own test set (the API and seed tests are in test_envs_api.py) ------------
@@ -87,6 +133,135 @@ def test_torchrl_gym_wrapper_on_the_native_vector_env(env_id):
     rollout = env.rollout(10, break_when_any_done=False)
     assert tuple(rollout.batch_size) == (4, 10)
     assert "phi" in rollout.keys()  # the stable infos become specs
+
+
+# --- TorchRL's native face of the native vector env (fdia_env.torchrl) -------------------------
+TORCHRL_CASES = [(env_id, b) for env_id in sorted(GYM_IDS) for b in ("torch", "numpy")]
+
+
+@pytest.mark.parametrize(("env_id", "backend"), TORCHRL_CASES)
+def test_fdia_torchrl_env_passes_check_env_specs_on_every_id_and_backend(env_id, backend):
+    import torch
+    from torchrl.envs.utils import check_env_specs
+
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    # no autoreset_mode to pass: the face builds the native vector env with SAME_STEP itself
+    env = FdiaTorchRLEnv(env_id, num_envs=3, backend=backend)
+    assert env.batch_size == torch.Size([3]) and env.batch_locked
+    check_env_specs(env, seed=0)
+    rollout = env.rollout(8, break_when_any_done=False)
+    assert tuple(rollout.batch_size) == (3, 8)
+    assert rollout["next", "reward"].dtype == torch.float32
+    assert rollout["observation"].dtype == torch.float32
+    assert torch_finite(rollout["next", "phi"])
+    horizon = env.venv.spec_episode.horizon
+    assert int(rollout["next", "done"].sum()) == 3 * (8 // horizon)  # every member, every end
+
+
+def test_fdia_torchrl_env_replays_gymwrapper_on_the_same_step_numpy_env():
+    """The face's last observation of an episode and its restart match TorchRL's GymWrapper."""
+    import torch
+    from torchrl.envs.libs.gym import GymWrapper
+
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    env_id, kwargs = "fdia_env/SparseAttack-v0", {"dynamics": "expected"}  # seed-free draws
+
+    def policy(td):
+        td["action"] = (td["observation"][..., 1] > 0).long() * 5 + 1  # legal, state-dependent
+        return td
+
+    ours = FdiaTorchRLEnv(env_id, num_envs=2, backend="numpy", **kwargs)
+    venv = gym.make_vec(
+        env_id,
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+        **kwargs,
+    )
+    theirs = GymWrapper(venv, categorical_action_encoding=True)
+    a = ours.rollout(14, policy, break_when_any_done=False)
+    b = theirs.rollout(14, policy, break_when_any_done=False)
+    assert int(a["next", "done"].sum()) == 4  # two episodes of 6 steps end in each member
+    for key in ["observation", ("next", "observation"), ("next", "done")]:
+        assert torch.equal(a[key], b[key]), key
+    assert torch.allclose(a["next", "reward"], b["next", "reward"].float())
+    # the step that ends an episode returns its last observation, not the restarted one
+    end = a["next", "done"].squeeze(-1)
+    assert not torch.equal(a["next", "observation"][end], a["observation"][:, 1:][end[:, :-1]])
+
+
+def test_fdia_torchrl_env_refuses_bad_input_by_name():
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    with pytest.raises(ValueError, match="env must be one of"):
+        FdiaTorchRLEnv("CartPole-v1")
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        FdiaTorchRLEnv("fdia_env/SparseAttack-v0", autoreset_mode="NextStep")
+    venv = gym.make_vec("fdia_env/SparseAttack-v0", num_envs=2)
+    with pytest.raises(ValueError, match="SAME_STEP"):
+        FdiaTorchRLEnv(venv)
+    env = FdiaTorchRLEnv("fdia_env:fdia_env/SparseAttack-v0", num_envs=2)
+    td = env.reset()
+    td["_reset"] = td["done"].clone().fill_(False)
+    td["_reset"][1] = True
+    with pytest.raises(ValueError, match=r"members \[1\] whose episode is still running"):
+        env.reset(td)
+
+
+def test_torchrl_collector_and_clip_ppo_loss_on_the_torch_backend():
+    """TorchRL's own training pieces on the torch backend: masked policy, GAE, PPO steps."""
+    import torch
+    from tensordict.nn import TensorDictModule
+    from torch import nn
+    from torchrl.collectors import Collector
+    from torchrl.modules import MaskedCategorical, ProbabilisticActor, ValueOperator
+    from torchrl.objectives import ClipPPOLoss
+
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    torch.manual_seed(0)
+    # an illegal action would raise in the env: the mask reaches the policy's distribution
+    env = FdiaTorchRLEnv(
+        "fdia_env/SparseAttack-v0", num_envs=8, backend="torch", illegal_action="error"
+    )
+    env.set_seed(0)
+    d, n = env.observation_spec["observation"].shape[-1], env.action_spec.n
+    net = nn.Sequential(nn.Linear(d, 32), nn.Tanh(), nn.Linear(32, n))
+    actor = ProbabilisticActor(
+        TensorDictModule(net, in_keys=["observation"], out_keys=["logits"]),
+        in_keys={"logits": "logits", "mask": "action_mask"},
+        out_keys=["action"],
+        distribution_class=MaskedCategorical,
+        return_log_prob=True,
+        spec=env.action_spec,
+    )
+    critic = ValueOperator(
+        nn.Sequential(nn.Linear(d, 32), nn.Tanh(), nn.Linear(32, 1)), in_keys=["observation"]
+    )
+    loss = ClipPPOLoss(actor, critic, entropy_coeff=0.01)
+    loss.make_value_estimator(gamma=1.0, lmbda=0.95)
+    optim = torch.optim.Adam(loss.parameters(), lr=1e-2)
+    collector = Collector(env, actor, frames_per_batch=96, total_frames=288)
+    batches = 0
+    for batch in collector:
+        assert tuple(batch.batch_size) == (8, 12)
+        legal = batch["action_mask"].gather(-1, batch["action"].unsqueeze(-1))
+        assert bool(legal.all())
+        with torch.no_grad():
+            loss.value_estimator(batch, params=loss.critic_network_params, target_params=None)
+        losses = loss(batch.reshape(-1))
+        total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+        assert torch_finite(total)
+        optim.zero_grad()
+        total.backward()
+        optim.step()
+        collector.update_policy_weights_()
+        batches += 1
+    collector.shutdown()
+    assert batches == 3
+    assert int(batch["next", "done"].sum()) == 16  # 12 steps: two 6-step episodes per member
 
 
 # --- Tianshou ------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Closed-form attack covariances (MATH.md §2): literature values, numerical optima, special cases.
+"""Closed-form attack covariances (docs/math.md §2): literature values, optima, special cases.
 
 The numerical oracle maximises over every admissible Σ with the exact power: a square factor L,
 ``Σ̃ = a² L L' / ‖L‖_F²`` (PSD with trace a², every such matrix reachable) and
@@ -136,7 +136,7 @@ def weight_inv_half(system: LinearSystem, weight, structure: str) -> np.ndarray:
     return scipy.linalg.block_diag(*blocks)
 
 
-# --- literature values (REFERENCE.md, Chapter 2) ---------------------------------------------
+# --- literature values (docs/references.md §2) -------------------------------------------
 
 # ch2-position (σ_w² = 3, 4, σ_v² = 0.25, a² = 3000): full precision, cross-checked below by a
 # plain Riccati iteration written out in this file.

@@ -8,7 +8,7 @@ from fdia_env import covariance_attack_v0, fdia_v0, scenarios
 from fdia_env.kalman import steady_state
 from fdia_env.systems import power_weight
 
-# REFERENCE.md chapter 2 (ch2-position, a² = 3000), as the literature prints them
+# docs/references.md §2 (ch2-position, a² = 3000), as the literature prints them
 CH2 = {
     "sensor 1": (np.diag([3000.0, 0.0]), 390.8),
     "sensor 2": (np.diag([0.0, 3000.0]), 220.5),

@@ -1,4 +1,4 @@
-"""Optimal Bayesian detectors with minimum MSE (MATH.md §3): orderings, rules, probabilities.
+"""Optimal Bayesian detectors with minimum MSE (docs/math.md §3): orderings, rules, probabilities.
 
 Monte-Carlo tolerances: estimates are compared within 4 standard errors (two-sided, a false
 failure once in ~16,000 comparisons; every draw is seeded, so the outcome is deterministic).
@@ -65,7 +65,7 @@ def all_estimators(problem: DetectionProblem) -> dict:
     + [(tracking_problem, a2) for a2 in (7.5, 30.0, 120.0)],
 )
 def test_mmse_obdi_obdd_ordering_in_monte_carlo_mse(build, power):
-    """REFERENCE.md ch. 3: MMSE ≤ OBDI ≤ OBDD at every a² (10⁵ draws, common random numbers).
+    """docs/references.md §3: MMSE ≤ OBDI ≤ OBDD at every a² (10⁵ draws, common random numbers).
 
     Each difference is the mean of per-draw paired differences and must exceed 3 of its
     standard errors (the smallest margin on ch3-static is ~5 SE, OBDI − MMSE at a² = 10).
@@ -78,7 +78,7 @@ def test_mmse_obdi_obdd_ordering_in_monte_carlo_mse(build, power):
 
 
 def test_chi_square_beats_cbd_and_obdd_at_high_power_in_true_mse():
-    """REFERENCE.md ch. 3: under the true MSE CSD beats CBD and OBDD at high power (a² = 400),
+    """docs/references.md §3: under the true MSE CSD beats CBD and OBDD at high power (a² = 400),
     while by the Bayes cost (which they minimise) OBDD and CBD both beat it."""
     problem = static_problem(power=400.0)
     est = all_estimators(problem)
@@ -125,7 +125,7 @@ def test_obdd_switches_from_always_d0_once_c2_exceeds_c1():
 
 
 def _direct_bayes_decision(problem: DetectionProblem, costs, z: np.ndarray) -> np.ndarray:
-    """D1 where p1 (c1 − c2) N(z; z̄, Pzz1) + p0 (c3 − c4) N(z; z̄, Pzz0) < 0 (MATH.md §3)."""
+    """D1 where p1 (c1 − c2) N(z; z̄, Pzz1) + p0 (c3 − c4) N(z; z̄, Pzz0) < 0 (docs/math.md §3)."""
     n1 = scipy.stats.multivariate_normal(problem.z_bar, problem.Pzz1).pdf(z)
     n0 = scipy.stats.multivariate_normal(problem.z_bar, problem.Pzz0).pdf(z)
     return problem.p1 * (costs.c1 - costs.c2) * n1 + problem.p0 * (costs.c3 - costs.c4) * n0 < 0
@@ -160,7 +160,7 @@ def test_threshold_tests_equal_the_likelihood_rules(build, power, p1, genuine):
 
 
 def test_costs_equal_the_closed_forms_of_math_md():
-    """c1..c4 from mse(K, Pzz_h) against MATH.md §3's printed formulas (rel 1e-12)."""
+    """c1..c4 from mse(K, Pzz_h) against docs/math.md §3's printed formulas (rel 1e-12)."""
     p = tracking_problem(power=30.0)
     Pxx, Pxz, S0, S1 = p.Pxx, p.Pxz, p.Pzz0, p.Pzz1
     S0i, S1i = np.linalg.inv(S0), np.linalg.inv(S1)

@@ -11,7 +11,6 @@ from sb3_contrib.common.maskable.utils import get_action_masks
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from fdia_env import (
-    covariance_attack_v0,
     detection_game_v0,
     fdia_v0,
     sensor_game_v0,
@@ -19,8 +18,9 @@ from fdia_env import (
 )
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.single_agent import SingleAgentEnv
+from fdia_env.registration import ENV_NAMES, load
 
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 
 
 def signature(info):

@@ -9,15 +9,11 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import fdia_env
 from fdia_env import (
-    covariance_attack_v0,
-    detection_game_v0,
-    fdia_v0,
-    sensor_game_v0,
     sparse_attack_v0,
 )
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 DYNAMICS = ["expected", "sampled"]
 
 

@@ -1,4 +1,4 @@
-"""Sensor-selection game baselines (MATH.md §5, REFERENCE.md "Chapter 5")."""
+"""Sensor-selection game baselines (docs/math.md §5, docs/references.md §5)."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from fdia_env.attacks.subsets import subsets
 from fdia_env.kalman import steady_state
 from fdia_env.systems import pv_sensor, tracking_system
 
-# REFERENCE.md, Chapter 5: the literature's independent payoff (1-decimal print, with the 3.748
+# docs/references.md §5: the literature's independent payoff (1-decimal print, with the 3.748
 # erratum: row z1z3, columns z2 and z2z3 print as 3.8 in the source).
 LITERATURE_L = np.array(
     [

@@ -1,4 +1,4 @@
-"""Power-grid systems (MATH.md §7): the DC measurement model against pandapower, the presets,
+"""Power-grid systems (docs/math.md §7): the DC measurement model against pandapower, the presets,
 every env and baseline on them, and the large-M action and strategy-set options."""
 
 import dataclasses
@@ -15,9 +15,7 @@ from baselines.game import payoff_matrix, solve_double_oracle, solve_zero_sum
 from baselines.sparse import dp, exhaustive, lowrank, sbs, sfs, sfs_ss
 from baselines.sparse.problem import make_problem
 from fdia_env import (
-    covariance_attack_v0,
     detection_game_v0,
-    fdia_v0,
     scenarios,
     sensor_game_v0,
     sparse_attack_v0,
@@ -26,16 +24,16 @@ from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits, mask_to_bits
 from fdia_env.attacks.subsets import game_subsets, subsets
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.kalman import steady_state, steady_state_iterate
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 from fdia_env.systems import grid_system
-from fdia_env.systems.grid import dc_network, grid_model
+from fdia_env.systems.grid import GRID_CASES, dc_network, grid_model
+from fdia_env.systems.grid.cases import IEEE14_BRANCHES
 
 pp = pytest.importorskip("pandapower")
 pn = pytest.importorskip("pandapower.networks")
 
-CASES = {"ieee14": "case14", "ieee30": "case30", "ieee57": "case57", "ieee118": "case118"}
-CASES_300 = {**CASES, "ieee300": "case300"}
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+CASES_300 = {case.name: case.pandapower for case in GRID_CASES.values()}  # the table of cases
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 
 
 # --- the measurement model against pandapower's own DC power flow ---------------------------
@@ -84,6 +82,30 @@ def test_measurements_equal_pandapower_dc_flows_and_injections(case):
     ref = reference_measurements(net, model)
     np.testing.assert_allclose(model.system.H @ x, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
     np.testing.assert_allclose(model.system.x0, x, rtol=0, atol=1e-12)  # prior mean: DC angles
+
+
+@pytest.mark.parametrize("case", sorted(CASES_300))
+def test_the_table_of_grid_cases_counts_what_pandapower_builds(case):
+    """Buses, branches, meters and states of each case as the table states them."""
+    entry = GRID_CASES[case]
+    network = dc_network(case)
+    assert (network.n_buses, len(network.branches)) == (entry.buses, entry.branches)
+    if case != "ieee300":  # its 711-meter LinearSystem is slow to build
+        system = grid_model(case).system
+        assert (system.M, system.n) == (entry.meters, entry.states)
+
+
+def test_the_pandapower_free_ieee14_branches_are_pandapowers_case14():
+    """IEEE14_BRANCHES (dc_grid14's data): case14's branches, reactances to 1e-4 relative."""
+    network = dc_network("ieee14")
+    bus = {int(b): i + 1 for i, b in enumerate(network.buses)}  # pandapower index -> 1-based
+    got = {
+        (bus[int(network.buses[f])], bus[int(network.buses[t])]): x
+        for f, t, x in zip(network.from_bus, network.to_bus, network.x, strict=True)
+    }
+    table = {(i, j): x for i, j, x in IEEE14_BRANCHES}
+    assert set(table) == set(got)
+    np.testing.assert_allclose([got[k] for k in table], list(table.values()), rtol=1e-4)
 
 
 def test_a_wrong_reactance_fails_the_comparison():
@@ -153,7 +175,7 @@ def test_steady_state_dare_equals_fixed_point_iteration(name):
     it_pred, it_post, _ = steady_state_iterate(system)
     np.testing.assert_allclose(P_post, it_post, rtol=0, atol=1e-9 * np.abs(P_post).max())
     np.testing.assert_allclose(P_pred, it_pred, rtol=0, atol=1e-9 * np.abs(P_pred).max())
-    # nontrivial: prediction and measurements both matter (MATH.md §7)
+    # nontrivial: prediction and measurements both matter (docs/math.md §7)
     static = np.trace(np.linalg.inv(system.H.T @ np.linalg.solve(system.R, system.H)))
     assert 0.2 < np.trace(P_post) / static < 0.5
 
@@ -303,7 +325,7 @@ def test_sparse_action_formats_and_trimming_rule():
     assert obs["attacker"]["action_mask"].tolist() == [1] + [0] * 34  # budget spent
     _, _, _, _, infos = single.step({"attacker": 3})
     assert np.flatnonzero(infos["attacker"]["attacked"]).tolist() == []
-    with pytest.raises(ValueError, match=r"0/1 integer array of shape \(34,\)"):
+    with pytest.raises(ValueError, match=r"0/1 array of shape \(34,\)"):
         env.reset(seed=0)
         env.step({"attacker": np.full(34, 2)})
     with pytest.raises(ValueError, match="at most 16 sensors"):

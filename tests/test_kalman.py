@@ -1,4 +1,4 @@
-"""Cross-checks of the Kalman core (MATH.md §1) against filterpy, against itself and against χ²."""
+"""Cross-checks of the Kalman core (docs/math.md §1) against filterpy, itself and χ²."""
 
 from __future__ import annotations
 
@@ -183,7 +183,7 @@ def test_steady_state_dare_equals_iteration_and_is_a_fixed_point(name, monkeypat
 
 
 def test_steady_state_trace_for_ch2_position_matches_reference():
-    """tr P[K|K] = 1.455 for ch2-position with both sensors (REFERENCE.md ch. 2); pinned value."""
+    """tr P[K|K] = 1.455 for ch2-position with both sensors (docs/references.md §2), pinned."""
     system = scenarios.get("ch2-position").system
     _, P_post, _ = steady_state(system)
     assert abs(np.trace(P_post) - 1.455) < 5e-4

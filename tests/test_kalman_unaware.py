@@ -1,4 +1,4 @@
-"""The actual error of a filter unaware of injected biases (MATH.md §2.1)."""
+"""The actual error of a filter unaware of injected biases (docs/math.md §2.1)."""
 
 from __future__ import annotations
 

@@ -33,7 +33,7 @@ def test_game_m10_preset_is_ten_position_sensors_in_the_ch5_setting():
 
 
 def test_game_m10_payoff_entries_match_per_subset_riccati_solutions():
-    """L[D, A] = tr P_D + a² |W_D e_i|² with i the smallest-σ sensor of A, if i ∈ D (MATH.md §5).
+    """L[D, A] = tr P_D + a² |W_D e_i|², i the smallest-σ sensor of A, if i ∈ D (docs/math.md §5).
 
     The matrix comes from one batched fixed-point iteration over the 1,023 subsets; here each
     entry is rebuilt from its own DARE solve.

@@ -116,6 +116,145 @@ def test_masked_ppo_iteration_with_remote_env_runner_samples_only_legal_actions(
         algo.stop()
 
 
+# --- plain RLlib: PPOConfig().environment(name), no rl_module, on every env ------------------
+def test_rllibs_own_default_module_refuses_the_masked_observation_the_default_now_reads():
+    import gymnasium as gym
+    import torch
+    from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import (
+        DefaultPPOTorchRLModule,
+    )
+    from ray.rllib.core.columns import Columns
+
+    from agents.rllib.envs import make_multi_agent
+    from agents.rllib.module import MaskedPPOTorchRLModule
+
+    space = make_multi_agent("sparse_attack_v0").observation_spaces["attacker"]
+    action = gym.spaces.Discrete(8)
+    with pytest.raises(ValueError, match="No default encoder config for obs space=Dict"):
+        DefaultPPOTorchRLModule(observation_space=space, action_space=action, model_config={})
+    torch.manual_seed(0)
+    module = MaskedPPOTorchRLModule(observation_space=space, action_space=action, model_config={})
+    assert module.observation_space == space
+    obs = {
+        "observations": torch.zeros(2, 5),
+        "action_mask": torch.tensor([[1.0, 0, 0, 1, 0, 0, 0, 0], [1.0] * 8]),
+    }
+    logits = module.forward_inference({Columns.OBS: obs})[Columns.ACTION_DIST_INPUTS]
+    p = torch.softmax(logits.double(), dim=-1)
+    assert torch.all(p[0, [1, 2, 4, 5, 6, 7]] == 0.0) and float(p[0, [0, 3]].sum()) == 1.0
+    assert torch.all(p[1] > 0.0)
+    values = module.compute_values({Columns.OBS: obs})
+    assert tuple(values.shape) == (2,)
+    # on a Box it is RLlib's default module: the same networks, parameter for parameter
+    box = space["observations"]
+    ours = MaskedPPOTorchRLModule(observation_space=box, action_space=action, model_config={})
+    theirs = DefaultPPOTorchRLModule(observation_space=box, action_space=action, model_config={})
+    shapes = {k: tuple(v.shape) for k, v in theirs.state_dict().items()}
+    assert {k: tuple(v.shape) for k, v in ours.state_dict().items()} == shapes
+
+
+def plain_names():
+    from agents.rllib.envs import MODULES
+    from fdia_env.registration import GYM_IDS
+
+    return [*MODULES, *sorted(GYM_IDS)]
+
+
+@pytest.mark.parametrize("name", plain_names())
+def test_plain_ppo_config_trains_one_iteration_on_every_env(local_ray, name):
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    from agents.rllib.envs import MODULES, make_multi_agent, register_envs
+
+    register_envs()  # the env names, and the masked default module
+    # an illegal action raises in the env: the masked players' logits must be masked
+    env_config = {"illegal_action": "error"} if "parse" in name else {}
+    config = (
+        PPOConfig()
+        .environment(name, env_config=env_config)
+        .env_runners(num_env_runners=0)
+        .training(train_batch_size_per_learner=48, minibatch_size=48, num_epochs=1)
+    )
+    if name in MODULES:  # RLlib's multi-agent idiom: one module per player
+        players = make_multi_agent(name).possible_agents
+        config = config.multi_agent(
+            policies=set(players), policy_mapping_fn=lambda agent_id, *args, **kwargs: agent_id
+        )
+    algo = config.build_algo()
+    try:
+        result = algo.train()
+        assert result["env_runners"]["num_env_steps_sampled"] >= 48
+        assert math.isfinite(result["learners"]["__all_modules__"]["num_env_steps_trained"])
+    finally:
+        algo.stop()
+
+
+def test_plain_ppo_config_on_rllibs_own_pettingzoo_wrapper_masks_the_int8_mask(local_ray):
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+    from ray.tune.registry import register_env
+
+    from agents.rllib.module import MaskedPPOTorchRLModule, register_default_module
+    from fdia_env import sparse_attack_v0
+
+    register_default_module()
+
+    def creator(env_config):
+        return ParallelPettingZooEnv(sparse_attack_v0.parallel_env(illegal_action="error"))
+
+    register_env("pettingzoo_sparse_attack", creator)
+    config = (
+        PPOConfig()
+        .environment("pettingzoo_sparse_attack")
+        .env_runners(num_env_runners=0)
+        .multi_agent(policies={"attacker"}, policy_mapping_fn=lambda agent_id, *a, **k: agent_id)
+        .training(train_batch_size_per_learner=48, minibatch_size=48, num_epochs=1)
+    )
+    algo = config.build_algo()
+    try:  # PettingZoo's {"observation", "action_mask" (int8)}: an illegal action would raise
+        result = algo.train()
+        assert result["env_runners"]["num_env_steps_sampled"] >= 48
+        assert isinstance(algo.get_module("attacker"), MaskedPPOTorchRLModule)
+    finally:
+        algo.stop()
+
+
+def test_plain_ppo_config_with_a_remote_env_runner_masks_there_too(local_ray):
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    from agents.rllib.envs import register_envs
+
+    register_envs()
+    config = (
+        PPOConfig()
+        .environment("fdia_env/SparseAttack-v0", env_config={"illegal_action": "error"})
+        .env_runners(num_env_runners=1)
+        .training(train_batch_size_per_learner=96, minibatch_size=96, num_epochs=1)
+    )
+    algo = config.build_algo()
+    try:  # the env runner builds the module in its own process: an illegal action would raise
+        result = algo.train()
+        assert result["env_runners"]["num_env_steps_sampled"] >= 96
+    finally:
+        algo.stop()
+
+
+def test_the_rllib_page_leads_with_ppo_config_and_prints_what_it_shows(local_ray):
+    import contextlib
+    import io
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parent.parent / "docs/guide/rllib.md").read_text("utf-8")
+    first = re.search(r"```\{code-block\} python\n(.*?)```\n\n```text\n(.*?)```", page, re.S)
+    assert page.index("ppo_config") < page.index("```bash")  # the page opens with it
+    code, shown = first.group(1), first.group(2)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "docs/guide/rllib.md", "exec"), {})
+    assert out.getvalue() == shown
+
+
 def test_selfplay_iteration_reports_both_players_and_exact_exploitability(local_ray, tmp_path):
     import train
     from baselines.game import exploitability, payoff_matrix, solve_zero_sum

@@ -10,7 +10,7 @@ from fdia_env.attacks.subsets import subset_name, subsets
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.kalman import steady_state
 
-# REFERENCE.md chapter 5: rows = defender subset, columns = attacked subset (1 decimal)
+# docs/references.md §5: rows = defender subset, columns = attacked subset (1 decimal)
 CH5_INDEPENDENT = np.array([
     [25.4, 4.7, 4.7, 25.4, 25.4, 4.7, 25.4],
     [7.2, 23.5, 7.2, 7.2, 7.2, 23.5, 7.2],

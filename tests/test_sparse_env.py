@@ -9,7 +9,7 @@ from fdia_env.attacks import trim_to_budget
 from fdia_env.envs.simulation import Simulation
 from fdia_env.kalman import information_update, predict_cov, steady_state
 
-# REFERENCE.md ch. 4: sensor 1 at K+3..K+6 and sensor 2 at K+6, ch4-position, N = 6
+# docs/references.md §4: sensor 1 at K+3..K+6 and sensor 2 at K+6, ch4-position, N = 6
 LITERATURE_PLAN = [0b000, 0b000, 0b001, 0b001, 0b001, 0b011]
 TR_P_REFERENCE = 0.03278559152906327  # full precision; the literature prints 0.0328
 

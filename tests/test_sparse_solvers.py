@@ -1,4 +1,4 @@
-"""Sparse-attack solvers (MATH.md §4) against the literature values and each other."""
+"""Sparse-attack solvers (docs/math.md §4) against the literature values and each other."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from baselines.sparse import SOLVERS, dp, exhaustive, make_problem, sfs, sfs_ss
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
 
-# tr P[K+N|K+N] of the optimal ch4-position attack (REFERENCE.md prints 0.0328 / 0.03279),
+# tr P[K+N|K+N] of the optimal ch4-position attack (docs/references.md §4 prints 0.0328 / 0.03279),
 # cross-checked against an independent recursion (test_reference_value_from_first_principles).
 CH4_VALUE = 0.03278559152906327
 CH4_RTOL = 1e-12

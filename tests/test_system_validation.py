@@ -110,6 +110,19 @@ def test_huge_warmup_is_rejected_at_once_with_the_bound():
         EpisodeSpec(horizon=3, warmup="stead")
 
 
+def test_the_systems_guide_states_the_warmup_bound_the_code_enforces():
+    """The guide said MAX_WARMUP = 100 000 while the code refuses anything above 10 000."""
+    import re
+    from pathlib import Path
+
+    guide = (Path(__file__).resolve().parent.parent / "docs/guide/systems.md").read_text()
+    stated = re.findall(r"MAX_WARMUP = ([\d\s,_]+\d)", guide)
+    assert stated, "docs/guide/systems.md no longer states MAX_WARMUP"
+    assert [int(re.sub(r"[\s,_]", "", v)) for v in stated] == [MAX_WARMUP] * len(stated)
+    with pytest.raises(ValueError, match=f"warmup must be <= {MAX_WARMUP}"):
+        EpisodeSpec(horizon=3, warmup=MAX_WARMUP + 1)
+
+
 # --- defect 3: clear errors ---------------------------------------------------------------------
 
 

@@ -123,7 +123,7 @@ def test_pv_sensor_rejects_correlation_outside_open_interval(rho):
 
 
 def test_tracking_system_matrices_follow_the_white_noise_acceleration_model():
-    """F = [[1, T], [0, 1]], Q = σ_v² ΓΓ' with Γ = [T²/2, T]' (MATH.md §1), for T = 0.5."""
+    """F = [[1, T], [0, 1]], Q = σ_v² ΓΓ' with Γ = [T²/2, T]' (docs/math.md §1), for T = 0.5."""
     system = tracking_system(2.0, [3.0], T=0.5)
     np.testing.assert_array_equal(system.F, [[1.0, 0.5], [0.0, 1.0]])
     np.testing.assert_allclose(system.Q, 4.0 * np.array([[1 / 64, 1 / 16], [1 / 16, 1 / 4]]))
@@ -145,7 +145,7 @@ def test_every_preset_builds_with_finite_valid_matrices(name):
 
 
 def test_scenario_names_cover_the_literature_table():
-    """The eleven parameter sets of MATH.md §6, in order (then game-m10 and the §7 grid presets)."""
+    """The eleven parameter sets of docs/math.md §6, in order, then game-m10 and the grids."""
     literature = [n for n in scenarios.names() if not n.startswith(("grid-", "game-"))]
     assert [n for n in scenarios.names() if n not in literature] == [
         "game-m10",

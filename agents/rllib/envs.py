@@ -18,7 +18,6 @@ every node of a cluster, as every other package the job uses.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -28,17 +27,12 @@ from gymnasium import spaces
 from ray.rllib.env.multi_agent_env import MultiAgentEnv
 from ray.tune.registry import register_env
 
+from agents.rllib.module import register_default_module
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 
-MODULES = (
-    "fdia_v0",
-    "sparse_attack_v0",
-    "covariance_attack_v0",
-    "sensor_game_v0",
-    "detection_game_v0",
-)
+MODULES = ENV_NAMES  # the multi-agent env names: every entry of the table of environments
 OBS, MASK = "observations", "action_mask"  # RLlib's action-masking module reads these keys
 
 
@@ -159,8 +153,7 @@ def make_multi_agent(module: str, env_config: Mapping[str, Any] | None = None) -
     """
     if module not in MODULES:
         raise ValueError(f"module must be one of {', '.join(MODULES)}, got {module!r}")
-    mod = importlib.import_module(f"fdia_env.{module}")
-    return FdiaMultiAgentEnv(mod.parallel_env(**_config(env_config)))
+    return FdiaMultiAgentEnv(load(module).parallel_env(**_config(env_config)))
 
 
 def make_view(gym_id: str, env_config: Mapping[str, Any] | None = None) -> gym.Env:
@@ -195,19 +188,22 @@ class _Creator:
         self.name = name
 
     def __call__(self, env_config: Mapping[str, Any] | None = None) -> Any:
+        # an env runner builds its env, then its RL module: the default module is masked there
+        register_default_module()
         if self.name in GYM_IDS:
             return make_view(self.name, env_config)
         return make_multi_agent(self.name, env_config)
 
 
 def register_envs() -> list[str]:
-    """Register every module and Gymnasium view with RLlib; returns the names registered."""
+    """Register every module and Gymnasium view with RLlib; returns the names registered.
+
+    Also makes RLlib's default PPO module the masked one
+    (:func:`agents.rllib.module.register_default_module`), so that a plain
+    ``PPOConfig().environment(name)`` runs on every env, masked players included.
+    """
+    register_default_module()
     names = [*MODULES, *GYM_IDS]
     for name in names:
         register_env(name, _Creator(name))
     return names
-
-
-def is_multi_agent(name: str) -> bool:
-    """Whether the RLlib env ``name`` is a module (multi-agent) rather than a view."""
-    return name in MODULES

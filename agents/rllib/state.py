@@ -27,8 +27,6 @@ from typing import Any
 
 import numpy as np
 
-from agents.runs import atomic_write, write_json
-
 FORMAT = "fdia_env-rllib-state-v1"
 STATE = "rllib_state.json"  # a run folder that --resume can continue holds it
 TENSORS = "rllib_state.pt"
@@ -81,7 +79,9 @@ def _plain(value: Any) -> Any:
 
 
 def save_state(algo: Any, run_dir: Path, extra: dict[str, Any] | None = None) -> Path:
-    """Write ``rllib_state.pt`` and then ``rllib_state.json`` in ``run_dir``, atomically.
+    """Write ``rllib_state.pt`` and ``rllib_state.json`` in ``run_dir`` (a kill loses nothing).
+
+    :func:`agents.checkpoint.save_pair` keeps a readable pair on disk at every moment.
 
     Args:
         algo: A built RLlib algorithm (local learner).
@@ -91,9 +91,7 @@ def save_state(algo: Any, run_dir: Path, extra: dict[str, Any] | None = None) ->
     Returns:
         The ``.json`` path.
     """
-    import torch
-
-    from agents.checkpoint import _sha256
+    from agents.checkpoint import save_pair
 
     learner = _learner(algo)
     state = algo.learner_group.get_state(components=["learner/rl_module", "learner/optimizer"])
@@ -106,18 +104,15 @@ def save_state(algo: Any, run_dir: Path, extra: dict[str, Any] | None = None) ->
     variables = {f"kl_coeff/{m}": _to_tensors(kl[m]).reshape(()) for m in modules if m in kl}
     payload = {"state_dicts": state_dicts, "variables": variables}
     path = Path(run_dir)
-    tensors = atomic_write(path / TENSORS, lambda fh: torch.save(payload, fh))
     meta = {
         "format": FORMAT,
         "iteration": int(algo.iteration),
         "modules": sorted(modules),
         "optimizers": {name: str(opt["module_id"]) for name, opt in optimizers.items()},
         "lifetime_stats": lifetime_stats(algo),
-        "tensors": tensors.name,
-        "sha256": _sha256(tensors),
         **(extra or {}),
     }
-    return write_json(path / STATE, meta)
+    return save_pair(path / STATE, path / TENSORS, payload, meta)
 
 
 def read_state(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -129,7 +124,7 @@ def read_state(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
             anything but tensors and plain containers (a pickle that could run code is refused
             before anything in it runs).
     """
-    from agents.checkpoint import _sha256, inside, load_tensors, read_json
+    from agents.checkpoint import inside, load_tensors, read_json, tensor_file
 
     root = Path(run_dir)
     path = inside(root, STATE, root, "RLlib state file")
@@ -139,11 +134,7 @@ def read_state(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     for key, kind in (("iteration", int), ("modules", list), ("optimizers", dict)):
         if not isinstance(meta.get(key), kind) or isinstance(meta.get(key), bool):
             raise ValueError(f"RLlib state {path} is corrupt: {key!r} is not a {kind.__name__}")
-    tensors = inside(root, meta.get("tensors", ""), root, "tensor file")
-    if not tensors.is_file():
-        raise ValueError(f"tensor file {tensors} named by {path} does not exist")
-    if _sha256(tensors) != meta.get("sha256"):
-        raise ValueError(f"tensor file {tensors} does not match the SHA-256 recorded in {path}")
+    tensors = tensor_file(meta, path, root)
     payload = load_tensors(tensors)
     expected = {f"rl_module/{m}" for m in meta["modules"]} | {
         f"optimizer/{name}" for name in meta["optimizers"]
@@ -251,13 +242,11 @@ def save_module(module: Any, path: Path) -> dict[str, Any]:
         Its record for a state file: the file's name relative to the state's folder, its
         SHA-256, and whether the module is RLlib's inference-only form.
     """
-    import torch
-
-    from agents.checkpoint import _sha256
+    from agents.checkpoint import _sha256, write_tensors
 
     weights = _to_tensors(dict(module.state_dict()))
     payload = {"state_dicts": {"rl_module": weights}, "variables": {}}
-    path = atomic_write(Path(path), lambda fh: torch.save(payload, fh))
+    path = write_tensors(Path(path), payload)
     return {
         "file": path.name,
         "sha256": _sha256(path),

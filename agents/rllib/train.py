@@ -31,25 +31,15 @@ import numpy as np
 
 from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
 from agents.evaluate import Evaluation
+from agents.lifecycle import RunFolder
+from agents.lifecycle import open_run as open_folder
 from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
 from agents.rllib.state import STATE, load_module, save_module
-from agents.runs import (
-    check_resumable,
-    config_dict,
-    new_run_dir,
-    read_jsonl,
-    remove_stale_temp_files,
-    removed_unless,
-    resume_dir,
-    run_lock,
-    run_prefix,
-    write_json,
-)
+from agents.runs import read_jsonl, run_prefix, write_json
 from agents.seeding import derived_seed, seed_everything
 
 ALGO = "PPO"
-SCORES = "scores.json"
 # two-player zero-sum games with continuous actions: self-play without an exact matrix game; each
 # side that has an analytic reference (agents.registry) is scored in its view at the end
 CONTINUOUS_GAMES = ("detection_game_v0",)
@@ -188,10 +178,10 @@ def _iterate(
 
 @dataclass
 class Session:
-    """A run folder being trained in: a new one, or a resumed one with its saved state.
+    """An RLlib run's folder (:class:`agents.lifecycle.RunFolder`) and its saved state.
 
     Attributes:
-        run_dir: The run folder.
+        folder: The run folder and its lifecycle.
         meta: The resumed state's description (``rllib_state.json``), or None for a new run.
         payload: The resumed state's tensors, or None.
         history: The progress records up to the saved state (``progress.jsonl``).
@@ -200,7 +190,7 @@ class Session:
         extra: Loop state to save with the next checkpoint (:meth:`save`).
     """
 
-    run_dir: Path
+    folder: RunFolder
     meta: dict[str, Any] | None = None
     payload: dict[str, Any] | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
@@ -209,13 +199,18 @@ class Session:
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def run_dir(self) -> Path:
+        """The run folder."""
+        return self.folder.path
+
+    @property
     def resumed(self) -> bool:
         """Whether the run continues a saved state."""
-        return self.meta is not None
+        return self.folder.resumed
 
     def seed(self, seed: int) -> int:
         """RLlib's seed: the run's, or a fresh one derived from it after a resume."""
-        return derived_seed(seed, self.steps) if self.resumed else seed
+        return self.folder.resume_seed(seed, self.steps)
 
     def save(self, algo: Any, steps: int, seconds: float) -> None:
         """Write the resumable state (:func:`agents.rllib.state.save_state`)."""
@@ -263,19 +258,11 @@ def open_run(
             corrupt, foreign or pickled state file.
         FileExistsError: When a new run's folder exists.
     """
-    from agents.checkpoint import read_json
-
     say = report or (lambda line: None)
-    if not cfg.run.resume:
-        return Session(new_run_dir(cfg.run.runs_root, cfg.run.run_dir, rllib_prefix(cfg)))
-    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, rllib_prefix(cfg), STATE)
-    stack.enter_context(run_lock(run_dir))
-    saved = read_json(run_dir / "config.json", "run config")
-    if (saved.get("resolved") or {}).get("backend") != "rllib":
-        raise ValueError(f"cannot resume {run_dir} with --backend rllib: it is not an RLlib run")
-    check_resumable(saved.get("config", {}), config_dict(cfg), run_dir)
-    for stale in remove_stale_temp_files(run_dir):
-        say(f"removed a temporary file left by an interrupted write: {stale}")
+    folder = open_folder(cfg, stack, rllib_prefix(cfg), STATE, report, backend="rllib")
+    if not folder.resumed:
+        return Session(folder)
+    run_dir = folder.path
     if with_algorithm:
         from agents.rllib.state import read_state
 
@@ -299,26 +286,27 @@ def open_run(
         f"resuming {run_dir} from its state after {done} iteration{'s' * (done != 1)}, "
         f"{meta['timesteps']} steps"
     )
-    return Session(
-        run_dir, meta, payload, history, int(meta["timesteps"]), float(meta["train_seconds"])
+    session = Session(
+        folder, meta, payload, history, int(meta["timesteps"]), float(meta["train_seconds"])
     )
+    if isinstance(cfg, TrainConfig):
+        folder.check_not_shorter("total_timesteps", cfg.total_timesteps, session.steps)
+    elif cfg.method != "selfplay" and cfg.env not in CONTINUOUS_GAMES:  # one record each
+        folder.check_not_shorter("iterations", cfg.iterations, done, "iterations")
+    return session
 
 
-def begin(session: Session, algo: Any, stack: ExitStack) -> None:
+def begin(session: Session, algo: Any) -> None:
     """Start training in ``session``'s folder.
 
     A new run: create and lock its folder (removed if it fails before its first state); a
     resumed one: load its saved state into ``algo`` (None: a loop without an algorithm).
     """
-    if session.resumed:
-        if algo is not None:
-            from agents.rllib.state import restore_state
+    if session.resumed and algo is not None:
+        from agents.rllib.state import restore_state
 
-            restore_state(algo, session.meta, session.payload, session.run_dir / STATE)
-        return
-    session.run_dir.mkdir(parents=True)
-    stack.enter_context(removed_unless(session.run_dir, STATE))
-    stack.enter_context(run_lock(session.run_dir))
+        restore_state(algo, session.meta, session.payload, session.run_dir / STATE)
+    session.folder.begin()
 
 
 def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Any:
@@ -338,7 +326,6 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         FileExistsError: When a new run's folder exists.
         agents.rllib.ZeroStepsSampled: When an iteration sampled nothing.
     """
-    from agents.interrupt import stop_on_signals
     from agents.rllib.config import ppo_config, rllib_hyperparameters
     from agents.rllib.envs import is_masked
     from agents.rllib.policy import policy_of
@@ -372,9 +359,9 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         )
         algo = config.build_algo()
         stack.callback(algo.stop)
-        begin(run, algo, stack)
-        _write_config(run_dir, cfg.agent, cfg, entry.gym_id, env_kwargs, hyperparameters, reference)
-        stop = stack.enter_context(stop_on_signals())
+        begin(run, algo)
+        _write_config(run, cfg.agent, cfg, entry.gym_id, env_kwargs, hyperparameters, reference)
+        stop = run.folder.watch_signals()
         history, steps, seconds = _iterate(
             algo,
             cfg.total_timesteps,
@@ -390,17 +377,15 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         rows = final_evaluations(policy, ALGO, eval_env, reference, cfg.final_eval_episodes, seed)
         evaluations = {f"learned (RLlib {ALGO})": rows.pop(f"learned ({ALGO})"), **rows}
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
-        write_json(
-            run_dir / SCORES,
+        run.folder.write_scores(
             {
                 "timesteps": steps,
                 "train_seconds": seconds,
                 "iterations": len(history),
                 "agent_returns": history[-1]["agent_returns"] if history else {},
-                "interrupted": stop.signum,
                 "resumed": run.resumed,
-                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
+            evaluations,
         )
         return RLlibTrainResult(
             run_dir, policy, evaluations, history, steps, seconds, run.resumed, stop.signum
@@ -422,7 +407,7 @@ def _with_run(config: Any, run: RunSettings) -> Any:
 
 
 def _write_config(
-    run_dir: Path,
+    run: Session,
     command: str,
     cfg: TrainConfig | GameConfig,
     env: str,
@@ -430,21 +415,18 @@ def _write_config(
     hyperparameters: dict[str, Any],
     reference: Any,
 ) -> None:
-    write_json(
-        run_dir / "config.json",
+    from agents.training import reference_record
+
+    run.folder.write_config(
+        command,
+        cfg,
         {
-            "command": command,
-            "config": config_dict(cfg),
-            "resolved": {
-                "backend": "rllib",
-                "env": env,
-                "algo": ALGO,
-                "env_kwargs": env_kwargs,
-                "hyperparameters": hyperparameters,
-                "reference": None
-                if reference is None
-                else {"name": reference.name, "value": reference.value},
-            },
+            "backend": "rllib",
+            "env": env,
+            "algo": ALGO,
+            "env_kwargs": env_kwargs,
+            "hyperparameters": hyperparameters,
+            "reference": reference_record(reference),
         },
     )
 
@@ -472,7 +454,7 @@ def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, 
         ValueError: For an unknown game, algorithm or env option, or an env that is not a
             one-shot matrix game.
     """
-    from agents.selfplay import SIDES
+    from agents.population import SIDES
     from agents.training import check_env_kwargs
 
     if cfg.env not in game_names():
@@ -510,11 +492,11 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
             resume whose options differ, or a corrupt or pickled state file.
         FileExistsError: When a new run's folder exists.
     """
-    from agents.interrupt import stop_on_signals
+    from agents.population import SIDES
     from agents.rllib.config import ppo_config, rllib_hyperparameters
     from agents.rllib.envs import make_multi_agent
     from agents.rllib.policy import policy_of
-    from agents.selfplay import SIDES, SelfPlayResult, _final_evaluations
+    from agents.selfplay import SelfPlayResult, _final_evaluations
     from baselines.game import exploitability
 
     if cfg.method != "selfplay":
@@ -533,6 +515,9 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         init_ray(cfg.run)
         n_steps = hyperparameters["n_steps"]
         per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        run.folder.check_not_shorter(
+            "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+        )
         config = _with_run(
             ppo_config(
                 cfg.env,
@@ -548,9 +533,9 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         )
         algo = config.build_algo()
         stack.callback(algo.stop)
-        begin(run, algo, stack)
-        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
-        stop = stack.enter_context(stop_on_signals())
+        begin(run, algo)
+        _write_config(run, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
+        stop = run.folder.watch_signals()
         policies = {
             side: policy_of(algo, side, parallel.action_space(side), False) for side in SIDES
         }
@@ -596,8 +581,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         x, y = np.array(history[-1]["x"]), np.array(history[-1]["y"])
         evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
-        write_json(
-            run_dir / SCORES,
+        run.folder.write_scores(
             {
                 "method": "selfplay",
                 "backend": "rllib",
@@ -611,10 +595,9 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
                 "iterations": len(history),
                 "timesteps": steps,
                 "train_seconds": seconds,
-                "interrupted": stop.signum,
                 "resumed": run.resumed,
-                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
+            evaluations,
         )
         return SelfPlayResult(
             run_dir,
@@ -672,9 +655,9 @@ def learn_best_response_rllib(
     Returns the learned policy, its pure strategy (the deterministic action at the initial
     state) and its last per-agent returns.
     """
+    from agents.population import initial_action
     from agents.rllib.config import ppo_config
     from agents.rllib.policy import policy_of
-    from agents.selfplay import initial_action
 
     env_config = {**env_kwargs, "opponent": [float(p) for p in opponent], "opponent_seed": seed}
     config = _with_run(
@@ -708,6 +691,33 @@ def learn_best_response_rllib(
         algo.stop()
 
 
+class RLlibOracle:
+    """Best responses learned by a fresh RLlib PPO learner each (the ``rllib`` oracle).
+
+    Each answer is :func:`learn_best_response_rllib` (seed derived from the run's, the
+    iteration and the side); it is saved as ``policies/<side>_<k>.pt`` (weights only).
+    """
+
+    def __init__(
+        self, cfg: GameConfig, run_dir: Path, entries: dict[str, Any], env_kwargs: dict[str, Any]
+    ) -> None:
+        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
+
+    def learn(self, side: str, opponent: np.ndarray, iteration: int) -> Any:
+        """A fresh RLlib learner's answer to ``opponent`` (it runs to the end)."""
+        from agents.population import SIDES, BestResponse
+
+        seed = derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
+        policy, action, returns = learn_best_response_rllib(
+            self.entries[side], self.env_kwargs, opponent, self.cfg, seed
+        )
+        return BestResponse(policy, action, returns)
+
+    def save(self, side: str, index: int, response: Any) -> dict[str, Any]:
+        """Save the RL module's weights as ``policies/<side>_<index>.pt``; returns its record."""
+        return save_module(response.policy.module, self.run_dir / "policies" / f"{side}_{index}.pt")
+
+
 def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
     """PSRO, FSP or IBR (``cfg.method``) with RLlib PPO best responses, scored exactly.
 
@@ -724,19 +734,10 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         ValueError: As :func:`selfplay_rllib`.
         FileExistsError: When a new run's folder exists.
     """
-    from agents.interrupt import stop_on_signals
+    from agents.population import METHODS, MatrixGame, PopulationState, report_line, run_population
     from agents.rllib.config import rllib_hyperparameters
     from agents.runs import write_jsonl
-    from agents.selfplay import (
-        METHODS,
-        SIDES,
-        SelfPlayResult,
-        _final_evaluations,
-        _grow_meta,
-        _report_line,
-        current_mixes,
-    )
-    from baselines.game import exploitability
+    from agents.selfplay import SelfPlayResult, _final_evaluations
 
     if cfg.method not in METHODS:
         raise ValueError(f"unknown method {cfg.method!r}; valid methods: {', '.join(METHODS)}")
@@ -752,65 +753,30 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         loop = _psro_loop_state(cfg, run, entries, env_kwargs, n)
         init_ray(cfg.run)
-        begin(run, None, stack)
-        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
-        stop = stack.enter_context(stop_on_signals())
-        pops, models, records, meta, x, y = loop
-        history = run.history
-        start = time.perf_counter() - run.seconds
-        for it in range(len(history) + 1, cfg.iterations + 1):
-            if stop.requested:
-                break
-            opponents = {"attacker": x, "defender": y}
-            returns = {}
-            for s, side in enumerate(SIDES):
-                policy, action, returns[side] = learn_best_response_rllib(
-                    entries[side], env_kwargs, opponents[side], cfg,
-                    derived_seed(cfg.run.seed, 1000 * it + s),
-                )  # fmt: skip
-                models[side].append(policy)
-                pops[side].append(action)
-                records[side].append(
-                    save_module(policy.module, run_dir / "policies" / f"{side}_{it - 1}.pt")
-                )
-            gap_att = float((x @ L).max() - (x @ L)[pops["attacker"][-1]])
-            gap_def = float((L @ y)[pops["defender"][-1]] - (L @ y).min())
-            if cfg.method == "psro":
-                meta = _grow_meta(meta, models, entries["attacker"], env_kwargs, cfg.run.seed)
-            x, y = current_mixes(cfg.method, pops, n, meta)
-            e = exploitability(L, x, y, value)
-            rec = {
-                "iteration": it,
-                "timesteps": 2 * it * cfg.steps_per_iteration,
-                "train_seconds": round(time.perf_counter() - start, 3),
-                "defender": e.defender,
-                "attacker": e.attacker,
-                "nash_conv": e.nash_conv,
-                "relative_nash_conv": e.nash_conv / abs(value),
-                "br_attacker": pops["attacker"][-1],
-                "br_defender": pops["defender"][-1],
-                "br_gap_attacker": gap_att,
-                "br_gap_defender": gap_def,
-                "agent_returns": {side: returns[side].get(side, math.nan) for side in SIDES},
-                "x": x.tolist(),
-                "y": y.tolist(),
-            }
-            history.append(rec)
-            write_jsonl(run_dir / "progress.jsonl", history)
-            run.extra = {
-                "populations": pops, "policies": records, "meta_payoff": meta.tolist(),
-                "x": x.tolist(), "y": y.tolist(),
-            }  # fmt: skip
+        begin(run, None)
+        _write_config(run, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
+        stop = run.folder.watch_signals()
+        oracle = RLlibOracle(cfg, run_dir, entries, env_kwargs)
+
+        def on_iteration(rec: dict[str, Any], state: PopulationState) -> None:
+            write_jsonl(run_dir / "progress.jsonl", state.history)
+            run.extra = state.saved()
             run.save(None, rec["timesteps"], rec["train_seconds"])
-            say(_report_line(rec))
+            say(report_line(rec))
+
+        game = MatrixGame(entries, env_kwargs, L, value)
+        history = run_population(
+            cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, cfg.steps_per_iteration,
+            lambda: stop.requested, on_iteration,
+        )  # fmt: skip
+        pops, meta, x, y = loop.actions, loop.meta, loop.x, loop.y
         if not history:
             return SelfPlayResult(
                 run_dir, cfg.method, np.zeros(0), np.zeros(0), value, [], interrupted=stop.signum
             )
         seconds = history[-1]["train_seconds"]
         evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
-        write_json(
-            run_dir / SCORES,
+        run.folder.write_scores(
             {
                 "method": cfg.method,
                 "backend": "rllib",
@@ -824,10 +790,9 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
                 "iterations": len(history),
                 "timesteps": history[-1]["timesteps"],
                 "train_seconds": seconds,
-                "interrupted": stop.signum,
                 "resumed": run.resumed,
-                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
+            evaluations,
         )
         return SelfPlayResult(
             run_dir, cfg.method, x, y, value, history, evaluations, pops, seconds,
@@ -841,7 +806,7 @@ def _psro_loop_state(
     entries: dict[str, Trainable],
     env_kwargs: dict[str, Any],
     n: dict[str, int],
-) -> tuple[dict, dict, dict, np.ndarray, np.ndarray, np.ndarray]:
+) -> Any:
     """PSRO/FSP/IBR's populations, policies, policy records, meta-game and mixes to continue.
 
     A new run's are empty (uniform mixes); a resumed run's are read from its state and checked
@@ -850,12 +815,12 @@ def _psro_loop_state(
     Raises:
         ValueError: For a state that is corrupt or does not fit the game.
     """
-    from agents.selfplay import SIDES
+    from agents.population import SIDES, PopulationState
 
     if not run.resumed:
-        x, y = (np.full(n[side], 1 / n[side]) for side in ("defender", "attacker"))
-        return {s: [] for s in SIDES}, {s: [] for s in SIDES}, {s: [] for s in SIDES}, \
-            np.zeros((0, 0)), x, y  # fmt: skip
+        state = PopulationState.new(n)
+        state.history = run.history
+        return state
     state, done, where = run.meta, len(run.history), run.run_dir / STATE
     pops, records = state.get("populations"), state.get("policies")
     ok = isinstance(pops, dict) and isinstance(records, dict)
@@ -885,7 +850,7 @@ def _psro_loop_state(
                 for record in records[side]:
                     module = load_module(config, env, record, run.run_dir / "policies", run.run_dir)
                     models[side].append(RLlibPolicy(module, env.action_space, False))
-    return pops, models, records, meta, x, y
+    return PopulationState(pops, models, records, meta, x, y, run.history, run.seconds)
 
 
 def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
@@ -896,11 +861,11 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     view against the view's fixed opponent, scored by :func:`agents.evaluate.evaluate`.
     """
     from agents.evaluate import evaluate
-    from agents.interrupt import stop_on_signals
+    from agents.population import SIDES
     from agents.registry import REGISTRY
     from agents.rllib.config import ppo_config, rllib_hyperparameters
     from agents.rllib.policy import policy_of
-    from agents.selfplay import SIDES, SelfPlayResult
+    from agents.selfplay import SelfPlayResult
     from agents.training import check_env_kwargs
 
     check_algo(cfg.algo)
@@ -917,6 +882,9 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
         init_ray(cfg.run)
         n_steps = hyperparameters["n_steps"]
         per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+        run.folder.check_not_shorter(
+            "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+        )
         config = ppo_config(
             cfg.env,
             env_kwargs,
@@ -929,9 +897,9 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
         )
         algo = _with_run(config, cfg.run).build_algo()
         stack.callback(algo.stop)
-        begin(run, algo, stack)
-        _write_config(run_dir, "game", cfg, cfg.env, env_kwargs, hyperparameters, None)
-        stop = stack.enter_context(stop_on_signals())
+        begin(run, algo)
+        _write_config(run, "game", cfg, cfg.env, env_kwargs, hyperparameters, None)
+        stop = run.folder.watch_signals()
 
         def on_iteration(rec: dict[str, Any]) -> None:
             if rec["timesteps"] % per_iteration == 0:
@@ -956,8 +924,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
                         reference.policy, env, cfg.final_eval_episodes, seed, reference
                     )
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
-        write_json(
-            run_dir / SCORES,
+        run.folder.write_scores(
             {
                 "method": "selfplay",
                 "backend": "rllib",
@@ -965,10 +932,9 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
                 "iterations": len(history),
                 "timesteps": steps,
                 "train_seconds": seconds,
-                "interrupted": stop.signum,
                 "resumed": run.resumed,
-                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
+            evaluations,
         )
         return SelfPlayResult(
             run_dir, "selfplay", np.zeros(0), np.zeros(0), math.nan, history, evaluations, {},

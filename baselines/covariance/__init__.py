@@ -1,4 +1,4 @@
-"""Closed-form bias covariances against an unaware Kalman filter (MATH.md §2), and their policies.
+"""Closed-form bias covariances against an unaware filter (docs/math.md §2), and their policies.
 
 Single injection at the steady-state attack time K, power ``tr(Ω Σ) = a²``:
 
@@ -10,7 +10,7 @@ Single injection at the steady-state attack time K, power ``tr(Ω Σ) = a²``:
   :func:`dependent_position_rule` and :func:`pv_single_sensor_rule`.
 
 Over a window: :func:`multi_shot` (the C_j rule), cross-checked by :func:`recursion_objective`.
-:func:`equivalent_sensor` reduces M sensors to one (MATH.md §2.4). ``result.policy(env)`` plays
+:func:`equivalent_sensor` reduces M sensors to one (docs/math.md §2.4). ``result.policy(env)`` plays
 an answer in ``covariance_attack_v0``.
 
 >>> from baselines.covariance import trace_optimal

@@ -1,4 +1,4 @@
-"""Determinant-optimal bias covariance for a single injection: water-filling (MATH.md §2.3).
+"""Determinant-optimal bias covariance for a single injection: water-filling (docs/math.md §2.3).
 
 Maximise ``det(P + W Σ W')`` over ``Σ ⪰ 0`` with ``tr(Ω Σ) = a²``. Substituting
 ``Σ̃ = Ω^{1/2} Σ Ω^{1/2}``, ``W̃ = W Ω^{-1/2}`` (power ``tr Σ̃``):
@@ -47,8 +47,8 @@ def water_filling(xi: np.ndarray, power: float) -> tuple[np.ndarray, float]:
         ``(s, level)``: (d,) powers in the order of ``xi`` and the water level ``1/λ``.
 
     Raises:
-        ValueError: For a power that is not a finite number > 0, or when no gain is positive
-            (then no allocation changes the determinant).
+        ValueError: For a power that is not a finite number > 0, a negative gain, or when no
+            gain is positive (then no allocation changes the determinant).
 
     Example:
         >>> s, level = water_filling(np.array([1.0, 0.25]), 2.0)
@@ -64,18 +64,26 @@ def water_filling(xi: np.ndarray, power: float) -> tuple[np.ndarray, float]:
         raise ValueError(f"xi must be a non-empty finite 1-D array of numbers, got {xi!r}") from exc
     if xi.ndim != 1 or xi.size == 0 or not np.all(np.isfinite(xi)):
         raise ValueError(f"xi must be a non-empty finite 1-D array, got {xi!r}")
+    if np.any(xi < 0.0):
+        raise ValueError(
+            f"xi must be non-negative (gains are eigenvalues of a PSD matrix), got {xi}"
+        )
     top = float(xi.max(initial=0.0))
     if top <= 0.0:
         raise ValueError(f"xi must have a positive entry (no power changes the objective): {xi}")
     positive = xi > _RANK_TOL * top
     order = np.argsort(-np.where(positive, xi, 0.0), kind="stable")[: int(positive.sum())]
-    inv = 1.0 / xi[order]  # 1/ξ in decreasing ξ order
-    k = np.arange(1, inv.size + 1)
-    levels = (power + np.cumsum(inv)) / k
-    active = int(np.flatnonzero(levels > inv)[-1]) + 1
-    level = float(levels[active - 1])
+    inv = 1.0 / xi[order]  # 1/ξ in decreasing ξ order (increasing inv)
+    # Direction k is active iff a² > Σ_{i≤k} (1/ξ_k − 1/ξ_i); the sum telescopes into
+    # Σ_{j<k} j (1/ξ_{j+1} − 1/ξ_j), which has no cancellation when a² ≪ 1/ξ (a level
+    # ``a² + 1/ξ_1`` would round to 1/ξ_1 and leave no direction active).
+    gaps = np.concatenate(([0.0], np.cumsum(np.arange(1, inv.size) * np.diff(inv))))
+    active = int(np.count_nonzero(gaps < power))  # ≥ 1: the first gap is 0 < a²
+    level = float((power + inv[:active].sum()) / active)
+    # s_i = level − 1/ξ_i = (a² − Σ_{j≤k} (1/ξ_i − 1/ξ_j)) / k, again free of cancellation
+    spread = (inv[:active, None] - inv[None, :active]).sum(axis=1)
     s = np.zeros_like(xi)
-    s[order[:active]] = level - inv[:active]
+    s[order[:active]] = np.maximum((power - spread) / active, 0.0)
     return s, level
 
 

@@ -1,4 +1,4 @@
-"""The equivalent sensor of M sensors (MATH.md §2.4).
+"""The equivalent sensor of M sensors (docs/math.md §2.4).
 
 M sensors with one common H are equivalent, for the Kalman filter, to one sensor
 
@@ -11,7 +11,7 @@ in general, when ``J = Σ_i H_i' R_i⁻¹ H_i`` is invertible (every step observ
 Both carry the same information ``H_e' R_e⁻¹ H_e = Σ_i H_i' R_i⁻¹ H_i``, so the filter's
 covariances are identical, and the combined gain satisfies ``W_e C = W`` where ``C`` maps the
 stacked measurement to ``z_e``: a bias ``b ~ N(0, Σ)`` on the sensors is a bias
-``C b ~ N(0, C Σ C')`` on the equivalent sensor, which is how MATH.md §2.2 reduces a
+``C b ~ N(0, C Σ C')`` on the equivalent sensor, which is how docs/math.md §2.2 reduces a
 multi-sensor attack to a one-sensor one.
 """
 
@@ -70,7 +70,7 @@ class EquivalentSensor:
 
 
 def equivalent_sensor(system_or_scenario: str | Scenario | LinearSystem) -> EquivalentSensor:
-    """The equivalent sensor of MATH.md §2.4.
+    """The equivalent sensor of docs/math.md §2.4.
 
     Uses the common-H rule when every sensor has the same H, else the general rule.
 

@@ -1,7 +1,7 @@
-"""Multi-shot (continuous) attack: bias covariances over a window (MATH.md §2.1–2.2).
+"""Multi-shot (continuous) attack: bias covariances over a window (docs/math.md §2.1–2.2).
 
 The filter is in steady state at K−1 with every sensor and keeps its steady gain W; biases
-``Σ[K+j]`` are injected at ``j = 0..N−1`` (``N = horizon`` steps; MATH.md's window K..K+N' has
+``Σ[K+j]`` are injected at ``j = 0..N−1`` (``N = horizon`` steps; docs/math.md's window K..K+N' has
 ``N' = N − 1``). With ``B = (I − W H) F`` and ``D_m = B^m W`` the extra MSE is
 ``A[K+m] = Σ_{j≤m} D_{m−j} Σ[K+j] D_{m−j}'``, so the objective with time weights α_m
 (``Σ α_m = 1``) is linear in the Σ's:
@@ -11,7 +11,7 @@ The filter is in steady state at K−1 with every sensor and keeps its steady ga
 With ``C̃_j = Ω^{-1/2} C_j Ω^{-1/2}``:
 
 - ``power_mode="budget"`` (``Σ_j tr(Ω Σ[K+j]) = a²``): all the power at the step and direction of
-  the largest eigenvalue over all ``C̃_j`` (MATH.md §2.2); with equal weights that is step 0,
+  the largest eigenvalue over all ``C̃_j`` (docs/math.md §2.2); with equal weights that is step 0,
   since ``C_0 ⪰ C_j``.
 - ``power_mode="per_step"`` (``tr(Ω Σ[K+j]) = a²`` every step): the problems separate; each step
   goes along the top eigenvector of its own ``C̃_j``.
@@ -92,7 +92,7 @@ def check_weights(weights: np.ndarray | None, horizon: int) -> np.ndarray:
     alpha = as_vector("weights", weights, horizon)
     if np.any(alpha < 0.0) or abs(float(alpha.sum()) - 1.0) > 1e-9:
         raise ValueError(
-            f"weights must be non-negative and sum to 1 (MATH.md §2.2), got {alpha.tolist()} "
+            f"weights must be non-negative and sum to 1 (docs/math.md §2.2), got {alpha.tolist()} "
             f"(sum {float(alpha.sum())!r})"
         )
     return alpha
@@ -126,7 +126,7 @@ def multi_shot(
     weight: np.ndarray | None = None,
     power_mode: str = "budget",
 ) -> MultiShotResult:
-    """Trace-optimal bias covariances over ``horizon`` steps (MATH.md §2.2, multi-shot).
+    """Trace-optimal bias covariances over ``horizon`` steps (docs/math.md §2.2, multi-shot).
 
     Args:
         system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.

@@ -1,8 +1,8 @@
-"""The single-injection attack-covariance problem of MATH.md §2.2–2.3 and its validated inputs.
+"""The single-injection attack-covariance problem of docs/math.md §2.2–2.3 and its validated inputs.
 
 The filter is in steady state with every sensor; at the attack time K it updates with the
 nominal gain W while the measurements carry a zero-mean bias ``b ~ N(0, Σ)``, so its actual
-error covariance is ``P[K|K] + W Σ W'`` (MATH.md §2.1, single injection). The attacker's power
+error covariance is ``P[K|K] + W Σ W'`` (docs/math.md §2.1, single injection). The attacker's power
 constraint is ``tr(Ω Σ) = a²``. Every solver works in the substituted variable
 
     Σ̃ = Ω^{1/2} Σ Ω^{1/2},   W̃ = W Ω^{-1/2},   so   W Σ W' = W̃ Σ̃ W̃',   tr(Ω Σ) = tr(Σ̃),

@@ -1,4 +1,4 @@
-"""Trace-optimal bias covariance for a single injection (MATH.md §2.2), and its special cases.
+"""Trace-optimal bias covariance for a single injection (docs/math.md §2.2), and its special cases.
 
 Maximise ``tr(P + W Σ W')`` over ``Σ ⪰ 0`` with ``tr(Ω Σ) = a²``. With ``Σ̃ = Ω^{1/2} Σ Ω^{1/2}``
 and ``W̃ = W Ω^{-1/2}`` the objective is ``tr P + tr(Σ̃ W̃' W̃)``, linear in ``Σ̃`` over the set
@@ -138,7 +138,7 @@ def independent_position_rule(
     """Independent biases, M position sensors: all power on the sensor with the smallest σ_w.
 
     The gain columns are ``W_i = P[K|K] H' / σ_{w,i}²``, so the largest gain column norm belongs
-    to the smallest σ_w (MATH.md §2.2).
+    to the smallest σ_w (docs/math.md §2.2).
 
     Raises:
         ValueError: If the sensors are not scalar sensors with one common H, or for a bad power.
@@ -163,7 +163,7 @@ def dependent_position_rule(
     """Dependent biases, M position sensors: correlation 1, ``σ_{b,i} = c_i a / ‖c‖``.
 
     ``c_i = (1/σ_{w,i}²) / Σ_j (1/σ_{w,j}²)``: the gain columns are proportional to
-    ``1/σ_{w,i}²``, so this is the top eigenvector of ``W' W`` (MATH.md §2.2).
+    ``1/σ_{w,i}²``, so this is the top eigenvector of ``W' W`` (docs/math.md §2.2).
 
     Raises:
         ValueError: If the sensors are not scalar sensors with one common H, or for a bad power.
@@ -184,7 +184,7 @@ def dependent_position_rule(
 def pv_single_sensor_rule(
     system_or_scenario: str | Scenario | LinearSystem, power: float | None = None
 ) -> CovarianceResult:
-    """One position+velocity sensor: the literature's closed form (MATH.md §2.2).
+    """One position+velocity sensor: the literature's closed form (docs/math.md §2.2).
 
     With the steady-state gain ``W = [[w11, w12], [w21, w22]]`` and power ``σ_bp² + T² σ_bv² = a²``:
 

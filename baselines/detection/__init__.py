@@ -1,4 +1,4 @@
-"""Optimal Bayesian detectors with minimum mean squared error (MATH.md §3), and their evaluation.
+"""Optimal Bayesian detectors with minimum MSE (docs/math.md §3), and their evaluation.
 
 The static problem (:class:`DetectionProblem`: prior ``N(x̄, Pxx)``, ``z = H x + w (+ b)``,
 attack probability p1) comes from a static scenario (:func:`static_problem`, ch3-static) or a
@@ -28,7 +28,6 @@ numbers).
 0.05
 """
 
-from baselines.detection.attack import c2_gain_matrix, c2_optimal_pbb
 from baselines.detection.detectors import (
     DETECTORS,
     ON_DETECT,
@@ -53,13 +52,6 @@ from baselines.detection.evaluate import (
     expected_mse,
     monte_carlo,
 )
-from baselines.detection.gchisq import (
-    gchisq_cdf,
-    gchisq_sf,
-    gchisq_sf_mc,
-    gchisq_tails,
-    quadratic_form_weights,
-)
 from baselines.detection.mmse import MMSEEstimator, MMSEResult, mmse
 from baselines.detection.policy import as_policy
 from baselines.detection.problem import (
@@ -69,6 +61,14 @@ from baselines.detection.problem import (
     tracking_problem,
 )
 from baselines.detection.tracking import simulate_prediction
+from fdia_env.detection.attack import c2_gain_matrix, c2_optimal_pbb
+from fdia_env.detection.gchisq import (
+    gchisq_cdf,
+    gchisq_sf,
+    gchisq_sf_mc,
+    gchisq_tails,
+    quadratic_form_weights,
+)
 
 __all__ = [
     "DETECTORS",

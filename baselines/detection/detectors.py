@@ -1,4 +1,4 @@
-"""The detectors of MATH.md §3: OBDD, OBDI, CBD and CSD, each a threshold test on a statistic.
+"""The detectors of docs/math.md §3: OBDD, OBDI, CBD and CSD, each a threshold test on a statistic.
 
 After the decision every detector estimates linearly (``x̂ = x̄ + K (z − z̄)``):
 
@@ -12,7 +12,7 @@ conditioned on the decision (:meth:`DetectionProblem.mse`):
     c1 = mse(K_D1, H1)  detected attack      c2 = mse(K0, H1)  missed attack
     c3 = mse(K_D1, H0)  false alarm          c4 = mse(K0, H0)  correct rejection
 
-which reproduces MATH.md §3's closed forms (discard: ``c1 = c3 = tr Pxx``; incorporate:
+which reproduces docs/math.md §3's closed forms (discard: ``c1 = c3 = tr Pxx``; incorporate:
 ``c1 = tr[Pxx − Pxz Pzz1⁻¹ Pxz']``, ``c3 = tr[Pxx + Pxz Pzz1⁻¹ Pzz0 Pzz1⁻¹ Pxz' −
 2 Pxz Pzz1⁻¹ Pxz']``). The Bayes test minimising ``c = p1[P(D1|H1) c1 + P(D0|H1) c2] +
 p0[P(D1|H0) c3 + P(D0|H0) c4]`` decides D1 where
@@ -44,14 +44,15 @@ import scipy.stats
 
 from baselines.detection.problem import DetectionProblem, check_probability, check_problem
 from fdia_env._validation import check_choice
+from fdia_env.detection.statistics import STATISTICS as STATISTIC_TABLE
 
-STATISTICS = ("quadratic", "chi2")
+STATISTICS = tuple(STATISTIC_TABLE)  # the names of the table of detector statistics
 ON_DETECT = ("discard", "incorporate")
 
 
 @dataclass(frozen=True)
 class Costs:
-    """Fixed costs (traces of MSE matrices) of a detect-then-estimate strategy (MATH.md §3).
+    """Fixed costs (traces of MSE matrices) of a detect-then-estimate strategy (docs/math.md §3).
 
     Attributes:
         c1: Attack declared under H1 (detected attack).
@@ -187,7 +188,8 @@ class Detector:
         object.__setattr__(self, "threshold", threshold)
         p = self.problem
         object.__setattr__(self, "costs", strategy_costs(p, self.on_detect, p))
-        object.__setattr__(self, "matrix", p.A if self.statistic == "quadratic" else p.Pzz0_inv)
+        matrix = STATISTIC_TABLE[self.statistic].matrix(p.Pzz0_inv, p.Pzz1_inv)
+        object.__setattr__(self, "matrix", matrix)
 
     def innovation(self, z: np.ndarray, x_bar: np.ndarray | None = None) -> np.ndarray:
         """``z − H x̄`` for (..., nz) measurements; ``x_bar`` (..., n) overrides the prior mean."""

@@ -1,6 +1,7 @@
 """Average MSE of the detectors two ways: the Bayes cost and a Monte Carlo of the true error.
 
-**Bayes cost** (MATH.md §3): ``c = p1[P_d c1 + (1 − P_d) c2] + p0[P_fa c3 + (1 − P_fa) c4]`` with
+**Bayes cost** (docs/math.md §3):
+``c = p1[P_d c1 + (1 − P_d) c2] + p0[P_fa c3 + (1 − P_fa) c4]`` with
 the fixed costs c1..c4 and the detection probabilities ``P_fa = P(D1|H0)``, ``P_d = P(D1|H1)``
 of the threshold test, computed numerically (:mod:`.gchisq`: the statistic is a generalized
 chi-square under each hypothesis). The fixed costs are unconditional MSEs; the true MSE given a
@@ -32,11 +33,11 @@ from baselines.detection.detectors import (
     detect_gain,
     strategy_costs,
 )
-from baselines.detection.gchisq import quadratic_tails
 from baselines.detection.mmse import MMSEEstimator
 from baselines.detection.problem import DetectionProblem, check_problem
 from fdia_env._validation import check_int
-from fdia_env.detection.expected import expected_squared_error
+from fdia_env.detection.expected import expected_squared_error, statistic_weights
+from fdia_env.detection.gchisq import gchisq_tails
 from fdia_env.kalman import psd_sqrt
 
 
@@ -76,8 +77,9 @@ def decision_probabilities(
     ``1 − P_d``.
     """
     t = _truth(detector, truth)
-    p_cr, p_fa = quadratic_tails(detector.threshold, detector.matrix, t.Pzz0)
-    p_miss, p_d = quadratic_tails(detector.threshold, detector.matrix, t.Pzz1)
+    tau, A = float(detector.threshold), detector.matrix
+    p_cr, p_fa = gchisq_tails(tau, statistic_weights(A, t.Pzz0, None))
+    p_miss, p_d = gchisq_tails(tau, statistic_weights(A, t.Pzz0, t.Pbb))  # Pzz1 never formed
     return p_cr, p_fa, p_miss, p_d
 
 
@@ -137,6 +139,7 @@ def expected_mse(detector: Detector, truth: DetectionProblem | None = None) -> f
         detector.threshold,
         detector.problem.K0,
         detect_gain(detector.problem, detector.on_detect),
+        assumed_sigma=detector.problem.Pbb if detector.on_detect == "incorporate" else None,
     )
     return out.mse
 

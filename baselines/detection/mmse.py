@@ -1,4 +1,4 @@
-"""The minimum mean squared error estimator of MATH.md §3 (no hard decision).
+"""The minimum mean squared error estimator of docs/math.md §3 (no hard decision).
 
 Given z the posterior is a two-component Gaussian mixture, so
 

@@ -1,4 +1,4 @@
-"""The static Bayesian detection problem of MATH.md §3 and its validated inputs.
+"""The static Bayesian detection problem of docs/math.md §3 and its validated inputs.
 
 Prior ``x ~ N(x̄, Pxx)``; under H0 (probability ``p0 = 1 − p1``) the measurement is
 ``z = H x + w``, under H1 (probability ``p1``) ``z = H x + w + b``, with ``w ~ N(0, Pww)`` and
@@ -12,7 +12,7 @@ Every estimator of this package is linear in the innovation given the decision,
     mse(K, Pzz_h) = tr[Pxx − K Pxz' − Pxz K' + K Pzz_h K']
 
 (b is independent of x, so ``Pxz`` is the same under both hypotheses). The costs c1..c4 of
-MATH.md §3 are this formula for the estimator used after each decision (:mod:`.detectors`).
+docs/math.md §3 are this formula for the estimator used after each decision (:mod:`.detectors`).
 
 In the tracking case the problem is applied at the attack time K with the predicted state as
 prior: ``x̄ = x̂[K|K−1]``, ``Pxx = P[K|K−1]`` (:func:`tracking_problem`).
@@ -27,10 +27,18 @@ from typing import Any
 
 import numpy as np
 
-from baselines.detection.attack import c2_optimal_pbb
 from fdia_env._validation import as_matrix, as_vector, check_psd
 from fdia_env._validation import check_power as _check_power
-from fdia_env.kalman import information_update, logdet, predict_cov, spd_inv, steady_state
+from fdia_env.detection.attack import c2_optimal_pbb
+from fdia_env.detection.expected import Innovation
+from fdia_env.kalman import (
+    information_update,
+    logdet,
+    predict_cov,
+    spd_inv,
+    spd_inv_sum,
+    steady_state,
+)
 from fdia_env.scenarios import Scenario, resolve
 
 
@@ -61,7 +69,7 @@ def check_power(value: Any) -> float:
 
 @dataclass(frozen=True, eq=False)
 class DetectionProblem:
-    """A validated static detection instance (MATH.md §3).
+    """A validated static detection instance (docs/math.md §3).
 
     Attributes:
         x_bar: (n,) prior mean x̄.
@@ -119,7 +127,9 @@ class DetectionProblem:
         Pxz = Pxx @ H.T
         Pzz0 = _sym(H @ Pxz + Pww)
         Pzz1 = _sym(Pzz0 + Pbb)
-        Pzz0_inv, Pzz1_inv = spd_inv(Pzz0), spd_inv(Pzz1)
+        Pzz0_inv = spd_inv(Pzz0)
+        # from Pzz0 and Pbb, not from Pzz1: at a large power Pzz1 is singular in float64
+        Pzz1_inv, logdet1 = spd_inv_sum(Pzz0, Pbb)
         for name, value in (
             ("x_bar", x_bar),
             ("Pxx", Pxx),
@@ -137,7 +147,7 @@ class DetectionProblem:
             ("Pzz0_inv", Pzz0_inv),
             ("Pzz1_inv", Pzz1_inv),
             ("logdet0", float(logdet(Pzz0))),
-            ("logdet1", float(logdet(Pzz1))),
+            ("logdet1", float(logdet1)),
             ("K0", Pxz @ Pzz0_inv),
             ("K1", Pxz @ Pzz1_inv),
             ("A", _sym(Pzz0_inv - Pzz1_inv)),
@@ -157,9 +167,16 @@ class DetectionProblem:
             K: (n, nz) gain; zero for "discard the measurement".
             hypothesis: 0 (no attack) or 1 (attack).
         """
-        Pzz = self.Pzz1 if hypothesis == 1 else self.Pzz0
-        cross = np.sum(K * self.Pxz)  # tr(K Pxz') = tr(Pxz K')
-        return float(np.trace(self.Pxx) - 2.0 * cross + np.sum((K @ Pzz) * K))
+        # tr[Pxx − K* Pxz'] + ‖(K* − K) L‖²_F with K* = Pxz Pzz_h⁻¹ and L L' = Pzz_h, in the
+        # factor that keeps a strong attack's scale apart (Pzz1 itself is singular in float64
+        # at a power of 1e40); K1 under H1 is K* itself
+        factor = Innovation.of(self.Pzz0, self.Pbb if hypothesis == 1 else None)
+        KL = factor.optimal_gain_times_factor(self.Pxz)
+        if hypothesis == 1 and (K is self.K1 or np.array_equal(K, self.K1)):
+            E = np.zeros_like(KL)
+        else:
+            E = KL - factor.gain_times_factor(np.asarray(K, dtype=float))
+        return float(np.trace(self.Pxx) - np.sum(KL * KL) + np.sum(E * E))
 
 
 def _sym(a: np.ndarray) -> np.ndarray:
@@ -187,8 +204,8 @@ def static_problem(
         scenario: A preset name or :class:`~fdia_env.scenarios.Scenario` (default ch3-static).
         power: Attack power a² ``>= 0``; used when ``Pbb`` is not given.
         Pbb: (nz, nz) bias covariance; default the c2-maximising one of power a²
-            (:func:`~baselines.detection.attack.c2_optimal_pbb`), which for ch3-static is the
-            ``diag(a², 0)`` of MATH.md §6.
+            (:func:`~fdia_env.detection.attack.c2_optimal_pbb`), which for ch3-static is the
+            ``diag(a², 0)`` of docs/math.md §6.
         p1: Prior probability of an attack (default the scenario's, 0.85 for ch3).
 
     Example:
@@ -238,7 +255,7 @@ def tracking_problem(
     Args:
         scenario: A preset with an attack step (default ch3-tracking, K = 100).
         power: Attack power a² ``>= 0``, ``tr Pbb`` (T = 1 in ch3-tracking, so this is also the
-            weighted power ``σ_bp² + T² σ_bv²`` of MATH.md §2).
+            weighted power ``σ_bp² + T² σ_bv²`` of docs/math.md §2).
         Pbb: (nz, nz) bias covariance; default the c2-maximising one of power a².
         p1: Prior probability of an attack (default the scenario's).
         x_pred: (n,) ``x̂[K|K−1]``; default the prior mean propagated K steps

@@ -1,4 +1,4 @@
-"""Best responses in the one-step detection game, from its exact expected reward (MATH.md §3).
+"""Best responses in the one-step detection game, from its exact expected reward (docs/math.md §3).
 
 In expected dynamics a ``detection_game_v0`` step pays the attacker the exact expected squared
 error (``criterion="mse"``) or the literature's Bayes cost (``"bayes_cost"``) of the defender's

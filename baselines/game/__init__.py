@@ -1,4 +1,4 @@
-"""The sensor-selection game (MATH.md §5): payoff, LP equilibria, double oracle, policies.
+"""The sensor-selection game (docs/math.md §5): payoff, LP equilibria, double oracle, policies.
 
 - :func:`payoff_matrix`, :func:`attack_covariance`: the factorised payoff
   ``L[D, A] = tr P_D + ⟨W_D' W_D, Σ_A⟩`` and the attacker's Prop-2 / Prop-3 bias covariance;

@@ -3,7 +3,7 @@
 Nature draws the attacker's type s (an allocation rule) with prior p_s; the defender never
 learns it. Two attacker models (:func:`~baselines.game.lp.solve_bayesian`):
 
-- ``"uninformed"`` (MATH.md §5, the literature's formulation): the attacker's strategy y cannot
+- ``"uninformed"`` (docs/math.md §5, the literature's formulation): the attacker's strategy y cannot
   depend on its type, so the game is the matrix game on ``L̄ = Σ_s p_s L_s``. Exploitability of
   the defender's x: ``max_j (L̄'x)_j − v``; of y: ``v − min_i (L̄ y)_i``.
 - ``"informed"`` (Harsanyi): type s plays its own y_s. A best-responding attacker answers x

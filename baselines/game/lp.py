@@ -1,4 +1,4 @@
-"""Mixed equilibria of the zero-sum sensor-selection game by linear programming (MATH.md §5).
+"""Mixed equilibria of the zero-sum sensor-selection game by linear programming (docs/math.md §5).
 
 The defender (row player) *minimises* the payoff ``L[D, A]``; the attacker (column player)
 maximises it. Every function here takes a plain payoff matrix, so it serves the ch5 game, the
@@ -134,7 +134,7 @@ def solve_zero_sum(L: Any) -> tuple[np.ndarray, np.ndarray, float]:
     """
     L = as_payoff(L)
     # Von Neumann's minimax LP and its dual (e.g. Shoham & Leyton-Brown, *Multiagent Systems*,
-    # 2009, §4.1; MATH.md §5):
+    # 2009, §4.1; docs/math.md §5):
     #
     #     defender (primal):  min_{x, b}  b   s.t.  L' x ≤ b 1,  1' x = 1,  x ≥ 0
     #     attacker (dual):    max_{y, v}  v   s.t.  L y  ≥ v 1,  1' y = 1,  y ≥ 0
@@ -242,7 +242,7 @@ def strategy_bounds(
 
 @dataclass(frozen=True)
 class Exploitability:
-    """How far a strategy pair is from equilibrium (MATH.md §5).
+    """How far a strategy pair is from equilibrium (docs/math.md §5).
 
     Attributes:
         defender: ``max_j (L' x)_j − v``: what a best-responding attacker gains against ``x``
@@ -300,7 +300,7 @@ ATTACKER_MODELS = ("uninformed", "informed")
 
 @dataclass(frozen=True)
 class BayesianSolution:
-    """Equilibrium of the incomplete-information game (MATH.md §5).
+    """Equilibrium of the incomplete-information game (docs/math.md §5).
 
     Attributes:
         x: (m,) defender mixed strategy.
@@ -327,7 +327,7 @@ def solve_bayesian(
 
     Two models of the attacker's side:
 
-    - ``"uninformed"`` (MATH.md §5, the literature's formulation): the attacker's pure strategy
+    - ``"uninformed"`` (docs/math.md §5, the literature's formulation): the attacker's pure strategy
       is a column index (e.g. the attacked subset) chosen without regard to its type, which
       nature then draws with ``priors``. The game is the zero-sum game on ``L̄ = Σ_s p_s L_s``;
       the defender's LP is :func:`solve_zero_sum`'s on L̄ and the attacker's strategy is its dual,

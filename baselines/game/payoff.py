@@ -1,4 +1,4 @@
-"""The sensor-selection game's payoff (MATH.md §5) in factorised form.
+"""The sensor-selection game's payoff (docs/math.md §5) in factorised form.
 
 Both players pick a non-empty sensor subset, in :func:`fdia_env.attacks.subsets.subsets` order.
 The defender's filter runs in steady state on its subset D (gain ``W_D``, zero columns for the
@@ -11,7 +11,7 @@ covariance is rank one, ``Σ_A = a² u_A u_A'``; only the biases on A ∩ D reac
 therefore one (m, nz²) × (nz², n) product, and the best responses the double oracle needs are
 linear in a mixed opponent's expected ``Σ`` or expected ``W' W``.
 
-Allocation rules (MATH.md §2.2), for scalar sensors with noise variance ``σ_i² = R_i``:
+Allocation rules (docs/math.md §2.2), for scalar sensors with noise variance ``σ_i² = R_i``:
 
 - ``"independent"`` (Prop. 2): all power on the smallest-σ sensor of A (ties: the lowest index),
   ``u_A = e_i``.

@@ -1,4 +1,4 @@
-"""Sparse attacks under perfect detection (MATH.md §4): solvers and their policies.
+"""Sparse attacks under perfect detection (docs/math.md §4): solvers and their policies.
 
 Every solver is ``f(system_or_scenario, budget, horizon, objective="trace") -> SparseResult``:
 
@@ -17,13 +17,13 @@ Every solver is ``f(system_or_scenario, budget, horizon, objective="trace") -> S
 """
 
 from baselines.sparse.bnb import branch_and_bound
-from baselines.sparse.bound import upper_bound
 from baselines.sparse.dp import dp
 from baselines.sparse.exhaustive import exhaustive
 from baselines.sparse.greedy import sbs, sfs, sfs_ss
 from baselines.sparse.policy import SparsePolicy
 from baselines.sparse.problem import SparseProblem, make_problem
 from baselines.sparse.result import SparseResult
+from baselines.sparse.split import upper_bound
 
 SOLVERS = {"exs": exhaustive, "sfs": sfs, "sbs": sbs, "sfs_ss": sfs_ss, "dp": dp}
 

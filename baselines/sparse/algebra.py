@@ -1,7 +1,7 @@
 """Batched covariance algebra for the exhaustive search: a 2×2 fast path and a generic one.
 
 The search needs three operations on a batch of ``R`` filter states, in the information form of
-MATH.md §4:
+docs/math.md §4:
 
 - :meth:`predicted_information`: ``Y = (F P F' + Q)⁻¹`` once per parent state;
 - :meth:`posterior`: ``P = (Y + J)⁻¹`` for a child that uses sensor information ``J``;

@@ -1,6 +1,7 @@
-"""Provable upper bounds on the sparse-attack optimum (MATH.md §4), for branch and bound.
+"""Provable upper bounds on the sparse-attack optimum (docs/math.md §4), for branch and bound.
 
-Two bounds, both valid for any instance; :func:`upper_bound` returns the smaller.
+Two bounds, both valid for any instance; :func:`baselines.sparse.split.upper_bound` returns the
+smallest of them and the split bound.
 
 **Smoother (downdate) bound.** The Kalman covariance ``P[K+N|K+N]`` is the marginal covariance
 of the final state given every measurement the filter used: filtering and batch (smoothing)
@@ -47,11 +48,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baselines.sparse.problem import Pair, SparseProblem, make_problem
+from baselines.sparse.problem import Pair, SparseProblem
 from fdia_env.kalman import information_update, objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
-from fdia_env.scenarios import Scenario
-from fdia_env.systems import LinearSystem
 
 # Upper bound on how many Gram entries (rows × T² × M²) one smoother call materialises.
 GRAM_ENTRIES = 1 << 22
@@ -356,52 +355,6 @@ def root_bound(problem: SparseProblem) -> float:
     first = np.zeros(1, dtype=int)
     bounds = child_bounds(problem, terms, first, problem.budget - 1, factors.shape[2])
     return float(bounds.max())
-
-
-def upper_bound(
-    system_or_scenario: str | Scenario | LinearSystem,
-    budget: int | None = None,
-    horizon: int | None = None,
-    objective: str = "trace",
-) -> float:
-    """A provable upper bound on ``max_{|A| = c} Φ(P[K+N|K+N])`` (the EXS optimum).
-
-    The smallest of three bounds: the *smoother bound* and the *allocation bound* (module
-    docstring) and the *split bound* (:mod:`baselines.sparse.split`: the last step enumerated
-    exactly, earlier drops through a tangent of the posterior map, which is concave in the
-    prior). Why they are valid, in short: dropping measurements never decreases the filter's
-    covariance in the Loewner order (so the optimum over sets of size c is bounded by any
-    relaxation that drops at least as much information, step by step, as every feasible set),
-    and the final covariance after dropping a set ``T`` is the *exact* covariance downdate
-    ``P + C_T'(I − G_T)⁻¹ C_T`` of the batch (smoothing) posterior, whose increase is bounded by
-    per-pair terms over ``1 − λ_max``, with ``λ_max`` bounded by Weyl's inequality and the
-    block Gershgorin theorem. Submodularity is not assumed (it does not hold). Exact (equal to
-    the optimum) when every sensor's information is proportional to one matrix (scalar position
-    sensors sharing H).
-
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
-        budget: Sparsity budget c (default: the preset's).
-        horizon: Window length N (default: the preset's).
-        objective: ``"trace"`` or ``"logdet"``.
-
-    Returns:
-        The bound on Φ (trace, or log-determinant).
-
-    Raises:
-        ValueError: For a bad budget, horizon, objective or scenario (naming the parameter).
-
-    Example:
-        >>> round(upper_bound("ch4-position", budget=5, horizon=6), 4)
-        0.0328
-    """
-    from baselines.sparse.split import split_bound  # it builds on this module's terms
-
-    problem = make_problem(system_or_scenario, budget, horizon, objective)
-    bounds = [allocation_bound(problem)[0], root_bound(problem)]
-    if problem.budget > 0:
-        bounds.append(split_bound(problem).bound)
-    return min(bounds)
 
 
 def brute_force_optimum(

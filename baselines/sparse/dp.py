@@ -1,4 +1,4 @@
-"""DP: dynamic programming over (budget spent, time step) (MATH.md §4).
+"""DP: dynamic programming over (budget spent, time step) (docs/math.md §4).
 
 For a count r of sensors attacked at one step, the sensors are taken without search: the r with
 the largest information ``tr(H_i' R_i⁻¹ H_i)`` (ties to the lower index). For scalar
@@ -14,7 +14,7 @@ The table keeps, for every budget spent ``s`` and step ``k``, the single state t
     Φ_DP(s, k) = max_r Φ(KF(P_DP(s − r, k − 1), r)),   C(s, k) = argmax_r
 
 and traces back from ``(c, N)``: at each step the budget left for the earlier steps is c minus
-*all* later attacks (REFERENCE.md). Memory O(N·c), time O(N·c·M) one-step updates.
+*all* later attacks (docs/references.md §4). Memory O(N·c), time O(N·c·M) one-step updates.
 
 Exact for a scalar state (n = 1): P is then a number, the Riccati map is increasing in it, so the
 largest state per (s, k) dominates every other continuation. For n > 1 the covariances are only

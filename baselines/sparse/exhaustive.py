@@ -1,4 +1,4 @@
-"""EXS: exhaustive search over every c-subset of the M·N sensor-time pairs (MATH.md §4).
+"""EXS: exhaustive search over every c-subset of the M·N sensor-time pairs (docs/math.md §4).
 
 The ``C(M·N, c)`` sets are not evaluated one recursion at a time. The search walks the window
 step by step over a *frontier* of distinct partial attack patterns, sharing every prefix:
@@ -18,7 +18,7 @@ processed in chunks, depth first (each level then holds at most ``chunk_rows`` s
 
 Attacking more never lowers Φ under perfect detection (dropping information makes P larger in
 the PSD order, and the Riccati map is monotone), so the best set of size exactly c is also the
-best of size at most c; the search still enumerates exactly-c sets, as MATH.md §4 specifies.
+best of size at most c; the search still enumerates exactly-c sets, as docs/math.md §4 specifies.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Greedy solvers of MATH.md §4: SFS, SBS and the simplex-improved SFS-SS.
+"""Greedy solvers of docs/math.md §4: SFS, SBS and the simplex-improved SFS-SS.
 
 Every greedy step scores all its candidate sets in one batched covariance recursion
 (:meth:`SparseProblem.evaluate_masks`). Candidates are scanned in the canonical pair order (by
@@ -142,7 +142,7 @@ def sfs_ss(
     horizon: int | None = None,
     objective: str = "trace",
 ) -> SparseResult:
-    """SFS improved by single swaps (the "simplex" step of MATH.md §4).
+    """SFS improved by single swaps (the "simplex" step of docs/math.md §4).
 
     Start from the SFS set in pick order, at the last pick (position ``c−1``, 0-based). At a
     position, try replacing its pair by each pair outside the set (one batch) and keep the best

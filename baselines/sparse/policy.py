@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.sparse.result import SparseResult
 from fdia_env._validation import check_int
 from fdia_env.attacks.sparse import MAX_SENSORS
+
+if TYPE_CHECKING:  # a result builds its policy (SparseResult.policy): the import goes that way
+    from baselines.sparse.result import SparseResult
 
 
 class SparsePolicy:

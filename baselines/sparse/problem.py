@@ -1,4 +1,4 @@
-"""The sparse-attack problem of MATH.md §4 and its reference evaluation.
+"""The sparse-attack problem of docs/math.md §4 and its reference evaluation.
 
 A filter in steady state at K (all sensors) runs the window K+1..K+N; the attacker removes
 ``budget`` (c) sensor-time pairs, the defender drops exactly those measurements, and the attacker

@@ -1,14 +1,15 @@
 """Sparse-attack instances beyond the literature's, for branch and bound and its benchmarks.
 
-:func:`mixed_tracking` is the literature's 1-D target-tracking model (MATH.md §1) with many
+:func:`mixed_tracking` is the literature's 1-D target-tracking model (docs/math.md §1) with many
 sensors of two kinds, alternating: position+velocity sensors (``H = I₂``, random standard
 deviations in [0.2, 1] and correlation in [−0.8, 0.8]) and position sensors (σ in [0.1, 1]).
 Their information matrices are not proportional, so neither DP nor the allocation bound is exact
 and branch and bound has to search.
 
-:func:`dc_grid14` is a DC power-flow model of the IEEE 14-bus network (MATH.md §7) built
+:func:`dc_grid14` is a DC power-flow model of the IEEE 14-bus network (docs/math.md §7) built
 without pandapower: the 20 branch reactances of the standard case (per unit on 100 MVA; lines
-and transformers alike, as in the DC power flow). The state is the 13 voltage angles of buses
+and transformers alike, as in the DC power flow), ``IEEE14_BRANCHES`` of the table of grid
+cases (:mod:`fdia_env.systems.grid.cases`). The state is the 13 voltage angles of buses
 2..14 (bus 1 is the reference), moving as a random walk ``θ[k+1] = θ[k] + v[k]``,
 ``v ~ N(0, q I)``. Meters (each one a sensor, one scalar measurement in per unit):
 
@@ -27,30 +28,7 @@ import numpy as np
 
 from fdia_env._validation import check_int, check_positive
 from fdia_env.systems import LinearSystem, Sensor, position_sensor, pv_sensor, tracking_system
-
-# (from bus, to bus, x in per unit), buses 1-based, IEEE 14-bus case.
-IEEE14_BRANCHES = (
-    (1, 2, 0.05917),
-    (1, 5, 0.22304),
-    (2, 3, 0.19797),
-    (2, 4, 0.17632),
-    (2, 5, 0.17388),
-    (3, 4, 0.17103),
-    (4, 5, 0.04211),
-    (4, 7, 0.20912),
-    (4, 9, 0.55618),
-    (5, 6, 0.25202),
-    (6, 11, 0.19890),
-    (6, 12, 0.25581),
-    (6, 13, 0.13027),
-    (7, 8, 0.17615),
-    (7, 9, 0.11001),
-    (9, 10, 0.08450),
-    (9, 14, 0.27038),
-    (10, 11, 0.19207),
-    (12, 13, 0.19988),
-    (13, 14, 0.34802),
-)
+from fdia_env.systems.grid.cases import IEEE14_BRANCHES
 
 
 def dc_grid14(meters: int = 14, q: float = 1e-4, sigma: float = 0.02) -> LinearSystem:

@@ -8,7 +8,7 @@ import numpy as np
 from baselines.sparse import dp, exhaustive, sfs
 from fdia_env import LinearSystem, Sensor, sparse_attack_v0
 
-# A 3-state system watched by three scalar sensors
+# 1. A 3-state system watched by three scalar sensors
 system = LinearSystem(
     F=np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 0.9]]),
     Q=0.01 * np.eye(3),
@@ -20,13 +20,13 @@ system = LinearSystem(
     name="three-state",
 )
 
-# Systems are checked when built: an undetectable one is a clear error
+# 2. Systems are checked when built: an undetectable one is a clear error
 try:
     LinearSystem(F=1e6 * np.eye(2), Q=np.eye(2), sensors=(Sensor(H=[[1.0, 0.0]], R=[[1.0]]),))
 except ValueError as err:
     print("rejected:", str(err)[:60], "...")
 
-# Every env and solver takes it in place of a preset name
+# 3. Every env and solver takes it in place of a preset name
 for solver in (exhaustive, sfs, dp):
     result = solver(system, budget=3, horizon=4)
     print(f"{solver.__name__:10s} tr P = {result.value:.6f}  attacks {result.attacks}")
@@ -41,7 +41,7 @@ while env.agents:
     total += rewards["attacker"]
 print(f"EXS plan played in the env: {total:.6f}")
 
-# A power grid from pandapower (the [grid] extra): DC state estimation of the IEEE 14-bus case
+# 4. A power grid from pandapower (the [grid] extra): DC state estimation of the IEEE 14-bus case
 from fdia_env.systems import grid_system  # noqa: E402
 
 grid = grid_system("ieee14", sensors="bus")  # one RTU (injection + flows) per bus

@@ -1,6 +1,6 @@
 """Certified optima by branch and bound (``python -m experiments reproduce certified``).
 
-The heuristics of MATH.md §4 (SFS, SBS, SFS-SS, DP) against the optimum that
+The heuristics of docs/math.md §4 (SFS, SBS, SFS-SS, DP) against the optimum that
 :func:`baselines.sparse.branch_and_bound` proves (or, under its time limit, against its
 certified upper bound): on ch4-random seeds (the literature's DP-vs-SFS experiment, c = 10,
 N = 6, far beyond enumeration at C(60, 10) ≈ 7.5·10¹⁰ sets), on the position+velocity cases,
@@ -115,7 +115,7 @@ def other_instances(time_limit: float, extra: list[str]) -> str:
         "sensors alternating position+velocity and position (baselines/sparse/testbeds.py); "
         "dc-ieee14-M: DC IEEE 14-bus model, 13 angle states, M meters (14: the injections; "
         "50: and the flows at both ends of every branch but four); grid-ieeeX: the pandapower "
-        "presets of fdia_env.scenarios (meter level, MATH.md §7).",
+        "presets of fdia_env.scenarios (meter level, {ref}`math §7 <math-7>`).",
         table(
             ["instance", "c / N / Φ", "best found", "upper bound", "proof", *HEURISTICS],
             rows,
@@ -132,7 +132,7 @@ def certified(args: argparse.Namespace) -> Section:
     body = "\n\n".join(
         [
             "Branch and bound (`baselines.sparse.branch_and_bound`) proves the optimum of the "
-            "sparse attack of MATH.md §4 or returns a certified gap; its bound is "
+            "sparse attack of {ref}`math §4 <math-4>` or returns a certified gap; its bound is "
             "`baselines.sparse.upper_bound`.",
             random_seeds(3 if quick else 20, (0.1,) if quick else (0.1, 1.0)),
             other_instances(2.0 if quick else 60.0, getattr(args, "scenario", None) or []),

@@ -30,7 +30,7 @@ from fdia_env.systems import power_weight
 # --- chapter 2 ------------------------------------------------------------------------------
 
 CH2_POWER = 3000.0
-# REFERENCE.md, Chapter 2: tr(P + W Σ W') for ch2-position, a² = 3000 (literature's digits).
+# docs/references.md §2: tr(P + W Σ W') for ch2-position, a² = 3000 (literature's digits).
 CH2_LITERATURE = {
     "no attack": 1.455,
     "independent, all on sensor 1": 390.8,
@@ -39,7 +39,7 @@ CH2_LITERATURE = {
     "dependent, correlation-1 rule": 609.9,
     "dependent, equal split (correlation 1)": 597.7,
 }
-# REFERENCE.md, "Known literature errors".
+# docs/references.md §2, errors in the dissertation.
 CH2_PRINTED_DET_RHO = 0.063
 CH2_PRINTED_PV2_ALLOCATION = (1826.0, 1023.0, 81.0, 68.0)
 
@@ -170,7 +170,7 @@ def ch2_pv_table() -> str:
             )
     rule, eig = pv_single_sensor_rule("ch2-pv-1", CH2_POWER), trace_optimal("ch2-pv-1", CH2_POWER)
     parts.append(
-        "Closed form of MATH.md §2.2 for one position+velocity sensor (ch2-pv-1): "
+        "Closed form of {ref}`math §2.2 <math-2-2>` for one position+velocity sensor (ch2-pv-1): "
         f"ρ = {rule.info['rho']:+.0f}, φ = {rule.info['phi']:.10f} rad, "
         f"θ* = {rule.info['theta']:.10f} rad, σ_bp² = {rule.variances[0]:.6f}, "
         f"σ_bv² = {rule.variances[1]:.6f}, tr = {rule.value:.10f}; the eigenvector rule gives "
@@ -221,7 +221,7 @@ def ch2_multi_shot_and_equivalent() -> str:
         )
     return "\n\n".join(
         [
-            f"### Multi-shot attack over N = {N} steps (C_j rule of MATH.md §2.2)",
+            f"### Multi-shot attack over N = {N} steps (C_j rule of {{ref}}`math §2.2 <math-2-2>`)",
             "Objective Σ_m α_m tr(P + A[K+m]); `budget` puts all of a² at one step, `per_step` "
             "spends a² at every step. The closed form is checked against the covariance "
             "recursion M[k] = (I − WH)(F M F' + Q)(I − WH)' + W(R + Σ[k])W'.",
@@ -237,7 +237,7 @@ def ch2_multi_shot_and_equivalent() -> str:
                 ],
                 rows,
             ),
-            "### Equivalent sensor (MATH.md §2.4)",
+            "### Equivalent sensor ({ref}`math §2.4 <math-2-4>`)",
             table(["scenario", "rule", "R_e", "max rel. |P_e − P| (posterior)"], eq_rows),
         ]
     )
@@ -278,7 +278,7 @@ def best_over_correlations(
 def ch2_literature_errors(quick: bool) -> str:
     """The three known literature errors of chapter 2, checked numerically."""
     a2 = CH2_POWER
-    parts = ["### Known literature errors (REFERENCE.md), checked"]
+    parts = ["### Known literature errors ({ref}`references §2 <references-2>`), checked"]
     # 1. determinant-optimal single-sensor example: printed ρ = 0.063
     name = "ch2-pv-1"
     opt = det_optimal(name, a2)
@@ -335,7 +335,8 @@ def ch2_literature_errors(quick: bool) -> str:
     eig = np.linalg.eigvalsh(det2.correlation)
     parts.append(
         "3. **Determinant-optimal attack, two position+velocity sensors (ch2-pv-2).** "
-        "REFERENCE.md states that the printed correlations do not form a valid covariance "
+        "The literature values page ({ref}`references §2 <references-2>`) states that the "
+        "printed correlations do not form a valid covariance "
         "(a correlation matrix must be positive semidefinite); it does not quote them, so this "
         "command cannot recheck them. The optimum under the stated model, det(P + WΣW') = "
         f"{det2.det:.6f} (KKT residual {kkt_residuals(det2).worst:.1e}), has the correlation "
@@ -416,7 +417,8 @@ def chapter2(args: argparse.Namespace) -> Section:
     """Chapter 2: optimal bias covariances against an unaware filter."""
     body = "\n\n".join(
         [
-            "Attack covariances against a filter unaware of the attack (MATH.md §2; closed "
+            "Attack covariances against a filter unaware of the attack ({ref}`math §2 <math-2>`; "
+            "closed "
             "forms in `baselines/covariance`). The filter is in steady state with every sensor; "
             "a single injection at K gives the actual error covariance P[K|K] + W Σ W' under "
             "the power constraint tr(Ω Σ) = a² (Ω = 1 on position, T² on velocity components).",

@@ -219,7 +219,7 @@ def csd_wins(points: Sequence[Point], other: str) -> tuple[list[float], list[flo
 
 
 def literature_text(points: Sequence[Point]) -> str:
-    """REFERENCE.md's chapter-3 statements, checked on the ch3-static sweep."""
+    """The chapter-3 statements of docs/references.md §3, checked on the ch3-static sweep."""
     parts = []
     for other in ("CBD", "OBDD"):
         by_mc, by_bayes = csd_wins(points, other)
@@ -228,7 +228,8 @@ def literature_text(points: Sequence[Point]) -> str:
             f"a² = {spans(by_mc, points)}, a lower Bayes cost at a² = {spans(by_bayes, points)}"
         )
     return (
-        "**Against the literature (REFERENCE.md, Chapter 3).** The chi-square detector can beat "
+        "**Against the literature ({ref}`references §3 <references-3>`).** The chi-square "
+        "detector can beat "
         "CBD and even OBDD at high power under the true MSE: on ch3-static, "
         + "; ".join(parts)
         + "."
@@ -434,8 +435,9 @@ def pbb_text(tracking: Sequence[float]) -> str:
             "### The attacker's Pbb (maximises c2 under tr Pbb = a²)",
             "c2 = tr[Pxx − Pxz Pzz0⁻¹ Pxz'] + tr(Pbb G), G = Pzz0⁻¹ Pxz' Pxz Pzz0⁻¹, is linear "
             "in Pbb, so the maximiser is rank one, a² u u' with u the top eigenvector of G "
-            "(`baselines/detection/attack.py`). **ch3-static**: G = diag((100/103)², "
-            f"(100/104)²), so the maximiser is diag(a², 0), the Pbb of MATH.md §6 (max |Pbb/a² − "
+            "(`fdia_env/detection/attack.py`). **ch3-static**: G = diag((100/103)², "
+            "(100/104)²), so the maximiser is diag(a², 0), the Pbb of {ref}`math §6 <math-6>` "
+            "(max |Pbb/a² − "
             f"diag(1, 0)| = {diag:.1e}). **ch3-tracking** at K = {sc.attack_step}: the prior is "
             f"P[K|K−1] = {prior} after K − 1 "
             "clean updates from P0 (max |P[K|K−1] − DARE steady state| = "
@@ -553,7 +555,8 @@ def chapter3(args: argparse.Namespace) -> Section:
     dyn_static = [p for p in tracking_tab if p.power in dynamic_powers]
 
     intro = (
-        "Static Bayesian detection with minimum MSE (MATH.md §3; code in `baselines/detection`). "
+        "Static Bayesian detection with minimum MSE ({ref}`math §3 <math-3>`; code in "
+        "`baselines/detection`). "
         "Each detector decides D1 when its statistic exceeds α and then discards the measurement "
         "(OBDD, CBD, CSD) or incorporates it with the H1 model (OBDI); MMSE is the posterior "
         "mean, with no decision. Two averages of the squared error are reported for every "

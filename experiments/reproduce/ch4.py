@@ -14,7 +14,7 @@ from fdia_env import scenarios
 
 # --- chapter 4 ------------------------------------------------------------------------------
 
-# REFERENCE.md, Chapter 4: SFS pick order for ch4-position, N = 6 (rows sensors, columns K+1..).
+# docs/references.md §4: SFS pick order for ch4-position, N = 6 (rows sensors, columns K+1..).
 CH4_LITERATURE_GRID = np.array(
     [
         [0, 0, 5, 3, 2, 1],
@@ -171,7 +171,8 @@ def chapter4(args: argparse.Namespace) -> Section:
     dp_text, plot = ch4_dp_vs_sfs(sigmas, trials)
     body = "\n\n".join(
         [
-            "Sparse attacks under perfect detection (MATH.md §4; solvers in `baselines/sparse`). "
+            "Sparse attacks under perfect detection ({ref}`math §4 <math-4>`; solvers in "
+            "`baselines/sparse`). "
             "Pairs are written zi@K+k (sensor i attacked at time K+k).",
             ch4_table1(),
             ch4_table2(repeats=1 if quick else 5, warmup=not quick),

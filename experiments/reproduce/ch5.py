@@ -22,9 +22,9 @@ from fdia_env.attacks.subsets import subset_name, subsets
 
 # --- chapter 5 ------------------------------------------------------------------------------
 
-# REFERENCE.md, Chapter 5: the literature's independent-attack payoff as printed (rows defender
+# docs/references.md §5: the literature's independent-attack payoff as printed (rows defender
 # subset, columns attacked subset, order z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3). Row z1z3 prints
-# 3.8 in columns z2 and z2z3, where the value is 3.748 (REFERENCE.md's erratum).
+# 3.8 in columns z2 and z2z3, where the value is 3.748 (docs/references.md §5, erratum).
 CH5_LITERATURE_L = np.array(
     [
         [25.4, 4.7, 4.7, 25.4, 25.4, 4.7, 25.4],
@@ -83,14 +83,16 @@ def ch5_payoffs(matrices: dict[str, np.ndarray], names: Sequence[str]) -> str:
             ch5_matrix_table(CH5_LITERATURE_L, names, 1),
             f"Entries that differ at the literature's 1-decimal print: {len(differ)}"
             + (
-                f" ({diff_text}); REFERENCE.md's erratum: the value is 3.748."
+                f" ({diff_text}); erratum ({{ref}}`references §5 <references-5>`): the value is "
+                "3.748."
                 if len(differ)
                 else "."
             ),
             "**Dependent attack** (Prop. 3: correlation 1 over A, "
             "σ_b,i = c_i a / ||c||, c_i ∝ 1/σ_i²), this implementation:",
             ch5_matrix_table(matrices["dependent"], names, 3),
-            "The literature's printed dependent matrix is not reproduced: per REFERENCE.md it "
+            "The literature's printed dependent matrix is not reproduced: per {ref}`references "
+            "§5 <references-5>` it "
             "mixes this rule with an unnormalised one in its single-sensor rows. Columns z1, z2, "
             "z3 equal the independent matrix's (one attacked sensor takes all the power under "
             "either rule).",
@@ -195,7 +197,8 @@ def ch5_incomplete(matrices: dict[str, np.ndarray], solutions: dict, names: Sequ
         [
             f"### Incomplete information: attacker independent or dependent with priors "
             f"{CH5_PRIORS[0]} / {CH5_PRIORS[1]}",
-            "MATH.md §5: the defender's LP uses `L̄ = Σ_s p_s L_s` (`solve_bayesian(..., "
+            "{ref}`math §5 <math-5>`: the defender's LP uses `L̄ = Σ_s p_s L_s` "
+            "(`solve_bayesian(..., "
             'attacker="uninformed")`): the attacker picks its subset without regard to its '
             'type, which nature then draws. `attacker="informed"` is the Harsanyi game in '
             "which each type knows itself and best-responds on its own matrix "
@@ -337,7 +340,8 @@ def chapter5(args: argparse.Namespace) -> Section:
     eq_text, solutions = ch5_equilibria(matrices, names)
     body = "\n\n".join(
         [
-            "The sensor-selection game (MATH.md §5; solvers in `baselines/game`). Subsets are "
+            "The sensor-selection game ({ref}`math §5 <math-5>`; solvers in `baselines/game`). "
+            "Subsets are "
             "written z1z3 (sensors 1 and 3); both players have the 7 non-empty subsets of the 3 "
             "sensors, the defender minimises, the attacker maximises.",
             ch5_payoffs(matrices, names),

@@ -1,10 +1,10 @@
 """``detection``: where the detection game separates a good defender from a poor one.
 
 The detection game's defender at the Bayes-cost criterion, where OBDD's threshold α is the optimum
-(MATH.md §3), over attack powers a² and both chapter-3 scenarios: the score of random thresholds
-(the uniform policy over the defender's action box, evaluated by :func:`agents.evaluate.evaluate` in
-expected dynamics) against OBDD's optimal Bayes cost. Settings where random play scores at most 80 %
-separate policies; the literature's default setting does not.
+(docs/math.md §3), over attack powers a² and both chapter-3 scenarios: the score of random
+thresholds (the uniform policy over the defender's action box, evaluated by
+:func:`agents.evaluate.evaluate` in expected dynamics) against OBDD's optimal Bayes cost. Settings
+where random play scores at most 80 % separate policies; the literature's default setting does not.
 """
 
 from __future__ import annotations

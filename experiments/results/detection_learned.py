@@ -42,6 +42,7 @@ from baselines.detection.response import (
     minimax_threshold,
 )
 from experiments.results.common import mean_ci95, write_rows
+from experiments.results.detection_learned_report import GAME_SETTING, format_tables, plot
 from fdia_env.detection_game_v0 import FixedAction
 from fdia_env.envs.single_agent import make_single_agent
 
@@ -50,7 +51,6 @@ SETTINGS = (("ch3-static", 10.0), ("ch3-static", 1000.0), ("ch3-tracking", 100.0
 CRITERIA = ("bayes_cost", "mse")
 OPTIMAL = "τ*_MSE"  # the MSE-optimal threshold against the preset attack, as a fixed detector
 FIXED_DEFENDERS = (*DETECTORS, OPTIMAL)
-GAME_SETTING = ("ch3-static", 1000.0)  # learned against learned
 # SAC for a one-step bandit: few gradient steps per sample, entropy started low, decaying rate
 SAC_KWARGS: dict[str, Any] = {
     "learning_rate": 3e-3,
@@ -163,7 +163,7 @@ def view(agent: str, opponent_action: np.ndarray, **kwargs: Any) -> gym.Env:
 
 
 def problem_of(scenario: str, power: float) -> DetectionProblem:
-    """The design problem of the analytic detectors (MATH.md §3)."""
+    """The design problem of the analytic detectors (docs/math.md §3)."""
     if scenario == "ch3-tracking":
         return tracking_problem(scenario, power=power)
     return static_problem(scenario, power=power)
@@ -511,8 +511,6 @@ def run_budget(budget: Budget, seed: int = 0) -> dict[str, Any]:
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     """The ``detection_learned`` tables (Markdown); ``quick``: :data:`QUICK`."""
-    from experiments.results.detection_learned_report import format_tables, plot
-
     res = run_budget(QUICK if quick else Budget(), seed=seed)
     if out is not None:
         rows = [

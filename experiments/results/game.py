@@ -1,6 +1,6 @@
 """``game``: PSRO with learned best responses against the exact equilibrium of large sensor games.
 
-The sensor-selection game (MATH.md §5) at sizes where the strategies cannot be listed by hand:
+The sensor-selection game (docs/math.md §5) at sizes where the strategies cannot be listed by hand:
 ``game-m10`` (10 position sensors, 1,023 strategies per player) and ``grid-ieee14`` (34 meters,
 ``max_subset_size`` k = 2: 596 defender and 595 attacker strategies). The exact equilibrium comes
 from the double oracle (:func:`baselines.game.solve_double_oracle`, certified by its best-response
@@ -8,7 +8,7 @@ gap) and from the full LP on :func:`baselines.game.payoff_matrix` (:func:`~basel
 solve_zero_sum`); the two values must agree. PSRO (:func:`agents.selfplay.run_selfplay`, SB3 PPO
 best responses on the one-shot Gymnasium views) is scored after every iteration by its NashConv
 on the exact matrix, ``max_A L(x, A) − min_D L(D, y)`` (the sum of the two players'
-exploitabilities, MATH.md §5), relative to the game value; the target is at most 1 %.
+exploitabilities, docs/math.md §5), relative to the game value; the target is at most 1 %.
 """
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""Covariance attack: the attacker chooses the bias covariance Σ under a power budget (MATH.md §2).
+"""Covariance attack: the attacker picks the bias covariance Σ under a power budget.
+
+The formulas are those of docs/math.md §2.
 
 The action is a ``Box`` in [-1, 1] holding the lower-triangular entries of a factor ``L`` (row by
 row, per block); the map to Σ is

@@ -1,4 +1,4 @@
-"""Sparse attack: the attacker picks sensor-time pairs within a budget c (MATH.md §4)."""
+"""Sparse attack: the attacker picks sensor-time pairs within a budget c (docs/math.md §4)."""
 
 from __future__ import annotations
 
@@ -153,11 +153,11 @@ class SparseAttack(AttackModel):
         if (
             a is None
             or a.shape != (self.M,)
-            or a.dtype.kind not in "biu"
-            or (a.dtype != bool and (a.min() < 0 or a.max() > 1))
+            or a.dtype.kind not in "biuf"  # 0/1 of any real dtype, as MultiBinary.contains
+            or not np.isin(a, (0, 1)).all()
         ):
             raise ValueError(
-                f"attacker action must be a 0/1 integer array of shape ({self.M},) "
+                f"attacker action must be a 0/1 array of shape ({self.M},) (any real dtype) "
                 f"(MultiBinary: 1 = attack that sensor), got {action!r}"
             )
         return int.from_bytes(np.packbits(a != 0, bitorder="little").tobytes(), "little")
@@ -291,12 +291,12 @@ class SparseAttack(AttackModel):
                 a = np.asarray(actions)
                 if (
                     a.shape != (B, self.M)
-                    or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool)
+                    or a.dtype.kind not in "biuf"  # 0/1 of any real dtype
                     or not np.isin(a, (0, 1)).all()
                 ):
                     raise ValueError(
-                        f"attacker actions must be a 0/1 integer array of shape ({B}, {self.M}) "
-                        f"(MultiBinary), got {actions!r}"
+                        f"attacker actions must be a 0/1 array of shape ({B}, {self.M}) "
+                        f"(MultiBinary, any real dtype), got {actions!r}"
                     )
             chosen = xp.astype(a, xp.bool)
         over = xp.sum(chosen, 1) > self.b_remaining

@@ -1,7 +1,7 @@
 """Subset attack: the attacker picks a non-empty sensor subset and splits its power by a rule.
 
 The power a² is split over the attacked subset A by one of the literature's rules for scalar
-(position) sensors (MATH.md §2.2, §5):
+(position) sensors (docs/math.md §2.2, §5):
 
 - ``"independent"`` (Prop. 2): all power on the smallest-variance sensor of A;
 - ``"dependent"`` (Prop. 3): correlation 1 over A with ``σ_b,i = c_i a / ||c||``,
@@ -40,7 +40,7 @@ def sensor_sigmas(system: LinearSystem) -> np.ndarray:
                 "the game's allocation rules are defined for scalar sensors (one measurement "
                 f"each); system.sensors[{i}] ({s.name or 'unnamed'}) has {s.dim} components. "
                 "Use position sensors, or compute Σ with the trace-optimal rank-one attack "
-                "(MATH.md §2.2) yourself"
+                "(docs/math.md §2.2) yourself"
             )
     return np.sqrt(np.array([s.R[0, 0] for s in system.sensors]))
 

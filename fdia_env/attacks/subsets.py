@@ -1,6 +1,6 @@
 """Non-empty sensor subsets in the literature's order: by size, then lexicographically.
 
-For M = 3 the order is z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3 (MATH.md §5). Index ``j`` of a
+For M = 3 the order is z1, z2, z3, z1z2, z1z3, z2z3, z1z2z3 (docs/math.md §5). Index ``j`` of a
 ``Discrete(2**M − 1)`` action is the j-th subset in this order.
 
 >>> subsets(3)
@@ -78,16 +78,20 @@ def subset_bits(M: int, max_size: int | None = None, min_size: int = 1) -> list[
 def game_sizes(M: int, max_subset_size: int | None, player: str) -> tuple[int, int]:
     """``(min_size, max_size)`` of a sensor-game player's subsets.
 
-    ``max_subset_size=None``: every non-empty subset, ``(1, M)``. Otherwise ``k``: the
-    attacker's subsets have at most k sensors, ``(1, min(k, M))``; the defender's leave out at
-    most k, ``(max(1, M − k), M)``.
+    ``max_subset_size=None``: every non-empty subset, ``(1, M)``. Otherwise ``k`` in
+    ``[1, M]``: the attacker's subsets have at most k sensors, ``(1, k)``; the defender's leave
+    out at most k, ``(max(1, M − k), M)``. A k above M is an error, not k = M.
     """
     check_choice("player", player, PLAYERS)
     M = check_int("M", M, minimum=1)
     if max_subset_size is None:
         return 1, M
     k = check_int("max_subset_size", max_subset_size, minimum=1)
-    return (1, min(k, M)) if player == "attacker" else (max(1, M - k), M)
+    if k > M:
+        raise ValueError(
+            f"max_subset_size must be in [1, M = {M}] (the number of sensors), got {k}"
+        )
+    return (1, k) if player == "attacker" else (max(1, M - k), M)
 
 
 def game_subsets(M: int, max_subset_size: int | None, player: str) -> list[tuple[int, ...]]:

@@ -1,6 +1,6 @@
 """Typed subset attack: nature draws the attacker's allocation rule (its type) each episode.
 
-The incomplete-information sensor game of MATH.md §5: the attacker is one of S types, here
+The incomplete-information sensor game of docs/math.md §5: the attacker is one of S types, here
 allocation rules (``"independent"``, ``"dependent"``), drawn at every reset with ``priors``
 from the env's seeded generator. The defender never observes the type; the attacker does when
 ``attacker_model="informed"`` (a one-hot ``type`` block at the end of its features) and does

@@ -22,8 +22,6 @@ from fdia_env.backend.numpy_backend import NUMPY
 
 BACKENDS = ("numpy", "torch")
 
-_TORCH: dict[str, Backend] = {}
-
 
 def get_backend(name: str = "numpy", device: Any = None) -> Backend:
     """The backend ``name`` on ``device``.
@@ -46,13 +44,9 @@ def get_backend(name: str = "numpy", device: Any = None) -> Backend:
                 f"backend='torch' for another device), got {device!r}"
             )
         return NUMPY
-    from fdia_env.backend.torch_backend import TorchBackend, check_device
+    from fdia_env.backend.torch_backend import torch_backend
 
-    dev = check_device(device)
-    key = str(dev)
-    if key not in _TORCH:
-        _TORCH[key] = TorchBackend(dev)
-    return _TORCH[key]
+    return torch_backend(device)
 
 
 def is_torch(x: Any) -> bool:

@@ -95,10 +95,8 @@ class TorchBackend(Backend):
         self.device = device
 
     def __reduce__(self) -> tuple:
-        """Unpickled through :func:`~fdia_env.backend.get_backend` (one instance per device)."""
-        from fdia_env.backend import get_backend
-
-        return get_backend, ("torch", str(self.device))
+        """Unpickled through :func:`torch_backend` (one instance per device)."""
+        return torch_backend, (str(self.device),)
 
     def _dtype(self, dtype: Any, default: Any = torch.float64) -> Any:
         if dtype is None:
@@ -269,3 +267,15 @@ class TorchBackend(Backend):
     def searchsorted(self, sorted_values: Any, values: torch.Tensor) -> torch.Tensor:
         """Numpy's ``searchsorted(..., side="right")``."""
         return torch.searchsorted(self.asarray(sorted_values), values, right=True)
+
+
+_INSTANCES: dict[str, TorchBackend] = {}
+
+
+def torch_backend(device: Any = None) -> TorchBackend:
+    """The one :class:`TorchBackend` of ``device`` (checked by :func:`check_device`)."""
+    dev = check_device(device)
+    key = str(dev)
+    if key not in _INSTANCES:
+        _INSTANCES[key] = TorchBackend(dev)
+    return _INSTANCES[key]

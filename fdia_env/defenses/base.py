@@ -41,7 +41,7 @@ class FilterInput:
 
 @dataclass(frozen=True)
 class Detection:
-    """A detector on the innovation ``y = z − H x̂[k|k−1]`` (MATH.md §3).
+    """A detector on the innovation ``y = z − H x̂[k|k−1]`` (docs/math.md §3).
 
     Attributes:
         statistic: ``"chi2"`` (``y' Pzz0⁻¹ y``) or ``"quadratic"`` (``y'(Pzz0⁻¹ − Pzz1⁻¹)y``).
@@ -52,7 +52,7 @@ class Detection:
         fresh_prior: Every step starts from the system's prior (a static parameter estimated
             afresh each round) instead of continuing the filter.
         criterion: What a step costs: ``"mse"`` (the squared error) or ``"bayes_cost"`` (the
-            fixed cost c1..c4 of the case, MATH.md §3).
+            fixed cost c1..c4 of the case, docs/math.md §3).
     """
 
     statistic: str

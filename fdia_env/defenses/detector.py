@@ -11,10 +11,10 @@ from fdia_env._validation import as_matrix, check_choice, check_positive, check_
 from fdia_env.attacks.base import AttackEffect, bit_array
 from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import BatchDetection, DefenseModel, Detection, FilterInput
+from fdia_env.detection.statistics import STATISTICS
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
-STATISTICS = ("chi2", "quadratic")
 ON_DETECT = ("discard", "incorporate")
 CRITERIA = ("mse", "bayes_cost")
 
@@ -45,14 +45,15 @@ class ThresholdDetector(DefenseModel):
     :meth:`threshold_to_action` inverts the map.
 
     Args:
-        statistic: ``"chi2"`` or ``"quadratic"`` (the optimal-Bayesian statistic of MATH.md §3).
+        statistic: A name of :data:`fdia_env.detection.statistics.STATISTICS`: ``"chi2"`` or
+            ``"quadratic"`` (the optimal Bayesian one of docs/math.md §3).
         on_detect: ``"discard"`` or ``"incorporate"``.
         assumed_sigma: The defender's model of the bias covariance (nz, nz), PSD; used by the
             quadratic statistic and by ``"incorporate"``.
         fresh_prior: Start every step from the system's prior (static estimation).
         threshold_scale: s (> 0).
         criterion: ``"mse"`` pays the squared estimation error; ``"bayes_cost"`` the fixed cost
-            of the (hypothesis, decision) case, ``tr`` of its error covariance (MATH.md §3).
+            of the (hypothesis, decision) case, ``tr`` of its error covariance (docs/math.md §3).
     """
 
     name = "threshold_detector"
@@ -67,7 +68,7 @@ class ThresholdDetector(DefenseModel):
         threshold_scale: float | None = None,
         criterion: str = "mse",
     ) -> None:
-        self.statistic = check_choice("statistic", statistic, STATISTICS)
+        self.statistic = check_choice("statistic", statistic, tuple(STATISTICS))
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
         self._assumed = assumed_sigma
         self.fresh_prior = bool(fresh_prior)
@@ -86,7 +87,7 @@ class ThresholdDetector(DefenseModel):
             )
         check_psd("assumed_sigma", assumed)
         self.assumed_sigma = assumed
-        self.scale = self._scale or (float(system.nz) if self.statistic == "chi2" else 1.0)
+        self.scale = self._scale or STATISTICS[self.statistic].scale(system.nz)
         self._all = (1 << system.M) - 1
         self._M = system.M
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)

@@ -1,4 +1,4 @@
-"""Perfect detection: every attacked measurement is detected and dropped (MATH.md §4)."""
+"""Perfect detection: every attacked measurement is detected and dropped (docs/math.md §4)."""
 
 from __future__ import annotations
 

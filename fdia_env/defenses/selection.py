@@ -17,8 +17,8 @@ from fdia_env.systems import LinearSystem
 class SensorSelection(SubsetChoice, DefenseModel):
     """Choose the subset D the filter uses; biases reach it only through attacked sensors in D.
 
-    Each round is the one-shot game of MATH.md §5: the filter has been running on D and is in its
-    steady state when the attack comes, so the payoff is ``tr(P_D + W_D Σ_{A∩D} W_D')``.
+    Each round is the one-shot game of docs/math.md §5: the filter has been running on D and is
+    in its steady state when the attack comes, so the payoff is ``tr(P_D + W_D Σ_{A∩D} W_D')``.
 
     Action: ``Discrete(2**M − 1)`` (subsets by size then lexicographic); with
     ``max_subset_size=k`` only the subsets that leave out at most k sensors (sizes M − k..M), in

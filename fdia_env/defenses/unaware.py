@@ -12,7 +12,7 @@ from fdia_env.systems import LinearSystem
 
 
 class UnawareFilter(DefenseModel):
-    """Passive defender: uses every sensor with gains computed from R (MATH.md §2.1).
+    """Passive defender: uses every sensor with gains computed from R (docs/math.md §2.1).
 
     The injected bias covariance reaches the filter in full; the actual error covariance then
     follows the Joseph form ``M = (I − W H) M⁻ (I − W H)' + W (R + Σ) W'``.

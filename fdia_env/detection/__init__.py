@@ -1,1 +1,1 @@
-"""Detection numerics shared by the detection game and its baselines (MATH.md §3)."""
+"""Detection numerics shared by the detection game and its baselines (docs/math.md §3)."""

@@ -1,4 +1,4 @@
-"""The attacker's bias covariance that maximises the missed-attack cost c2 (MATH.md §3).
+"""The attacker's bias covariance that maximises the missed-attack cost c2 (docs/math.md §3).
 
 With ``K0 = Pxz Pzz0⁻¹`` the clean-model gain, the MSE of the unaware estimate under attack is
 
@@ -9,7 +9,7 @@ linear in Pbb. Over ``{Pbb ⪰ 0, tr Pbb = a²}`` a linear function ``tr(Pbb G)`
 Pzz0⁻¹ Pxz' Pxz Pzz0⁻¹ ⪰ 0) is maximised at ``a² λ_max(G)``, attained by the rank-one
 ``Pbb = a² u u'`` with u the top eigenvector of G: ``tr(Pbb G) = Σ_i μ_i u_i' G u_i`` for
 ``Pbb = Σ μ_i u_i u_i'`` with ``Σ μ_i = a²``, and each ``u_i' G u_i <= λ_max``. This is the same
-eigenvector rule as the trace-optimal attack on the unaware filter (MATH.md §2.2) with the gain
+eigenvector rule as the trace-optimal attack on the unaware filter (docs/math.md §2.2) with the gain
 ``K0`` in place of ``W``. A power weight Ω (``tr(Ω Pbb) = a²``) is handled by the substitution
 ``Pbb = Ω^{-1/2} P̃ Ω^{-1/2}``.
 """

@@ -1,4 +1,4 @@
-"""One filter step with a detector on the innovation (the detection game, MATH.md §3)."""
+"""One filter step with a detector on the innovation (the detection game, docs/math.md §3)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ from fdia_env.detection.expected import (
     case_covariance,
     expected_squared_error,
 )
-from fdia_env.kalman import predict_cov, psd_sqrt, sym
+from fdia_env.detection.statistics import STATISTICS
+from fdia_env.kalman import predict_cov, psd_sqrt, spd_inv_sum, sym
 from fdia_env.systems import LinearSystem
 
 
@@ -68,18 +69,29 @@ def detection_step(
     Pxz = P_pred @ sys.H.T
     Pzz0 = sym(sys.H @ Pxz + sys.R)
     Pzz0_inv = np.linalg.inv(Pzz0)
-    Pzz1 = sym(Pzz0 + rule.assumed_sigma)
-    Pzz1_inv = np.linalg.inv(Pzz1)
+    Pzz1_inv, _ = spd_inv_sum(Pzz0, rule.assumed_sigma)  # never forms Pzz0 + Σ (any power)
     K0, K1 = Pxz @ Pzz0_inv, Pxz @ Pzz1_inv
-    A = Pzz0_inv if rule.statistic == "chi2" else sym(Pzz0_inv - Pzz1_inv)
+    A = STATISTICS[rule.statistic].matrix(Pzz0_inv, Pzz1_inv)
     incorporate = rule.on_detect == "incorporate"
     gain_d1 = K1 if incorporate else np.zeros_like(K0)
     P_d0 = sym(P_pred - K0 @ Pzz0 @ K0.T)
-    P_d1 = sym(P_pred - K1 @ Pzz1 @ K1.T) if incorporate else P_pred
+    P_d1 = sym(P_pred - K1 @ Pxz.T) if incorporate else P_pred  # K1 Pzz1 K1' = K1 Pxz'
     true_sigma = np.zeros((nz, nz)) if sigma is None else sigma
     if not sampled:
         exact = expected_squared_error if rule.criterion == "mse" else bayes_cost_covariance
-        out = exact(P_pred, sys.H, sys.R, true_sigma, probability, A, rule.threshold, K0, gain_d1)
+        model = rule.assumed_sigma if incorporate else None  # K1 rebuilt in the attack's basis
+        out = exact(
+            P_pred,
+            sys.H,
+            sys.R,
+            true_sigma,
+            probability,
+            A,
+            rule.threshold,
+            K0,
+            gain_d1,
+            assumed_sigma=model,
+        )
         info = {
             "p_false_alarm": out.p_false_alarm,
             "p_detection": out.p_detection,

@@ -4,6 +4,12 @@ The models check what an action *means* (a bitmask within the budget, a threshol
 functions check first what it *is*, so that no model ever sees a string, a complex number, a
 bool, or a batch of the wrong length, and no state changes before every action of a step has
 passed. Each failure is a ``ValueError`` that names the player and the space.
+
+The rules are Gymnasium's ``Space.contains``, the same for one action and for a batch:
+``Discrete`` and ``MultiDiscrete`` take integers only (a Python or numpy integer, or a 0-d
+integer array for ``Discrete``; never a float, a bool or a shape-(1,) array), ``MultiBinary``
+takes 0/1 of any real dtype (float 0.0/1.0 as stable-baselines3's PPO and A2C emit them, bool
+too), ``Box`` takes finite reals within its bounds (up to float32 round-off).
 """
 
 from __future__ import annotations
@@ -60,8 +66,11 @@ def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str)
             f"of the {batch} members), got shape {arr.shape}"
         )
     if isinstance(space, spaces.Discrete):
-        if not (np.issubdtype(arr.dtype, np.integer) or _integral_floats(arr)):
-            raise ValueError(f"{who} actions must be integers for {space}, got dtype {arr.dtype}")
+        if not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(
+                f"{who} actions must be integers (an integer dtype, as for a single env) for "
+                f"{space}, got dtype {arr.dtype}"
+            )
         bad = (arr < space.start) | (arr >= space.start + space.n)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
@@ -74,14 +83,18 @@ def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str)
 
 
 def _integer(action: Any) -> int | None:
-    """An integer action (Python or numpy integer, 0-d or 1-element integer array), else None."""
+    """An integer action (Python or numpy integer, 0-d integer array), else None.
+
+    A shape-(1,) array is not an element of ``Discrete`` (Gymnasium's ``contains`` refuses it,
+    and the vector env refuses a (B, 1) batch): it is refused, not squeezed.
+    """
     if isinstance(action, bool | np.bool_):
         return None
     if isinstance(action, numbers.Integral):
         return int(action)
-    if isinstance(action, np.ndarray) and action.size == 1:
+    if isinstance(action, np.ndarray) and action.shape == ():
         if np.issubdtype(action.dtype, np.integer):
-            return int(action.reshape(()))
+            return int(action)
     return None
 
 
@@ -111,10 +124,6 @@ def _real_array(action: Any, who: str, space: spaces.Space, batch: int | None = 
     return arr
 
 
-def _integral_floats(arr: np.ndarray) -> bool:
-    return np.issubdtype(arr.dtype, np.floating) and bool(np.all(arr == np.round(arr)))
-
-
 def _check_values(space: spaces.Space, arr: np.ndarray, who: str) -> None:
     if isinstance(space, spaces.Box):
         values = arr.astype(np.float64)
@@ -129,12 +138,15 @@ def _check_values(space: spaces.Space, arr: np.ndarray, who: str) -> None:
     elif isinstance(space, spaces.MultiBinary):
         if not np.all((arr == 0) | (arr == 1)):
             raise ValueError(
-                f"{who} action must be a 0/1 integer array of shape {space.shape} ({space}), "
-                f"got {arr.tolist()}"
+                f"{who} action must be a 0/1 array of shape {space.shape} (any real dtype; "
+                f"{space}), got {arr.tolist()}"
             )
     elif isinstance(space, spaces.MultiDiscrete):
-        if not (np.issubdtype(arr.dtype, np.integer) or _integral_floats(arr)):
-            raise ValueError(f"{who} action must be integers for {space}, got {arr.tolist()}")
+        if not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(
+                f"{who} action must be integers (an integer dtype) for {space}, got dtype "
+                f"{arr.dtype}: {arr.tolist()}"
+            )
         if np.any(arr < space.start) or np.any(arr >= space.start + space.nvec):
             raise ValueError(f"{who} action must lie in {space}, got {arr.tolist()}")
 
@@ -147,8 +159,8 @@ def check_batch_tensor_actions(
     Args:
         space: The single env's action space.
         actions: (B, *space.shape) tensor on ``backend.device``: an integer dtype for
-            ``Discrete``/``MultiDiscrete``, integer or bool for ``MultiBinary``, float32 or
-            float64 for ``Box``.
+            ``Discrete``/``MultiDiscrete``, any real dtype or bool holding 0/1 for
+            ``MultiBinary``, float32 or float64 for ``Box``.
         batch: B.
         who: ``"attacker"`` or ``"defender"``, for the message.
         backend: The env's torch backend (:mod:`fdia_env.backend`).
@@ -183,7 +195,7 @@ def check_batch_tensor_actions(
             ),
         )
     elif isinstance(space, spaces.MultiBinary):
-        allowed, ok = "an integer dtype or torch.bool", integer
+        allowed, ok = "a real dtype or torch.bool", not actions.dtype.is_complex
     else:
         allowed, ok = "an integer dtype (torch.int64, ...)", integer and actions.dtype != torch.bool
     if not ok:

@@ -8,7 +8,7 @@ from typing import Any
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from fdia_env._validation import check_int
-from fdia_env.envs.aec import FdiaAECEnv
+from fdia_env.envs.aec import FdiaAECEnv, FdiaOrderEnforcingWrapper
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario, resolve
 from fdia_env.systems import LinearSystem
@@ -73,6 +73,6 @@ def aec_views(
 
     def env(**kwargs: Any) -> OrderEnforcingWrapper:
         """The AEC view with PettingZoo's order-enforcing wrapper."""
-        return OrderEnforcingWrapper(raw_env(**kwargs))
+        return FdiaOrderEnforcingWrapper(raw_env(**kwargs))
 
     return raw_env, env

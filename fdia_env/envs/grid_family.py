@@ -39,10 +39,11 @@ import numpy as np
 from fdia_env._validation import check_choice, check_int
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
+from fdia_env.systems.grid.cases import GRID_CASES
 from fdia_env.systems.system import Sensor
 
-GRID_CASES = ("ieee14", "ieee30")
-"""Cases a :class:`GridFamily` accepts (meter-level sensors: 34 and 71 of them)."""
+FAMILY_CASES = tuple(case.name for case in GRID_CASES.values() if case.family)
+"""Cases a :class:`GridFamily` accepts (``family=True`` in the table of grid cases)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,11 +107,11 @@ class GridFamily:
     horizon: int = 2
 
     def __post_init__(self) -> None:
-        check_choice("case", self.case, GRID_CASES)
+        check_choice("case", self.case, FAMILY_CASES)
         object.__setattr__(self, "load_scale", _check_range("load_scale", self.load_scale))
         object.__setattr__(self, "noise_scale", _check_range("noise_scale", self.noise_scale))
         check_int("horizon", self.horizon, minimum=1, maximum=10_000)
-        M = {"ieee14": 34, "ieee30": 71}[self.case]
+        M = GRID_CASES[self.case].meters  # known without building the case
         check_int("budget", self.budget, minimum=0, maximum=M * self.horizon)
 
     @property

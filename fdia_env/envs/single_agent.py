@@ -50,6 +50,8 @@ class SingleAgentEnv(gym.Env):
             raise ValueError(f"opponent is required: the env also has {others[0]!r}")
         if others:
             check_opponent(opponent, parallel.action_space(others[0]))
+        else:
+            check_no_opponent(opponent, parallel.possible_agents)
         self.parallel = parallel
         self.agent = agent
         self.other = others[0] if others else None
@@ -140,6 +142,19 @@ def check_opponent(opponent: Any, space: spaces.Space) -> None:
         )
 
 
+def check_no_opponent(opponent: Any, possible_agents: list[str]) -> None:
+    """Raise ``ValueError`` if an ``opponent`` is given to an env that has a single player.
+
+    A one-player env (the sparse and covariance attacks) has nobody for it to play, so it
+    would be ignored silently.
+    """
+    if opponent is not None:
+        raise ValueError(
+            f"opponent must be None: this env has a single player {possible_agents} and no "
+            f"other player for it to act as, got {type(opponent).__name__}"
+        )
+
+
 def make_single_agent(
     module: str, agent: str = "attacker", opponent: Policy | None = None, **kwargs: Any
 ) -> SingleAgentEnv:
@@ -165,6 +180,8 @@ def make_single_agent(
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
     others = [a for a in parallel.possible_agents if a != agent]
+    if not others:
+        check_no_opponent(opponent, parallel.possible_agents)
     if others and opponent is None and hasattr(mod, "default_opponent"):
         opponent = mod.default_opponent(parallel, agent)
     if others and opponent is None:

@@ -2,7 +2,7 @@
 
 :class:`SystemFamilyEnv` is a Gymnasium env that, at every reset, draws a new system from a
 family (:class:`TrackingFamily`: random tracking systems as in the ``ch4-random`` preset,
-MATH.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
+docs/math.md §6; or :class:`fdia_env.envs.grid_family.GridFamily`: the IEEE 14-bus DC state
 estimation with random loads and meter noise, 34 meters, ``action="sequential"`` only) and
 plays one episode of ``sparse_attack_v0`` (perfect detection, expected dynamics, terminal
 reward) on it. Its observation is the sparse env's observation followed by a
@@ -101,8 +101,11 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
-from fdia_env.attacks.sparse import MAX_SENSORS
+from fdia_env.attacks.sparse import MAX_SENSORS, SparseAttack
+from fdia_env.defenses import PerfectDetection
+from fdia_env.envs.factory import episode_spec
 from fdia_env.envs.grid_family import GridFamily
+from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.single_agent import SingleAgentEnv
 from fdia_env.kalman import information_update, objective, steady_state
 from fdia_env.scenarios import Scenario
@@ -133,7 +136,7 @@ def _check_range(name: str, value: Any, lower: float, allow_zero: bool) -> tuple
 
 @dataclass(frozen=True)
 class TrackingFamily:
-    """Random tracking systems as in the ``ch4-random`` preset (MATH.md §6).
+    """Random tracking systems as in the ``ch4-random`` preset (docs/math.md §6).
 
     A draw: ``num_sensors`` position sensors with ``σ_w ~ U(sigma_w)`` (floored at 1e-6), then
     the process noise ``σ_v`` log-uniform on ``sigma_v``; the model is
@@ -370,8 +373,10 @@ class SystemFamilyEnv(gym.Env):
         self.sort_sensors = sort_sensors
         self.order = np.zeros(0, dtype=np.int64)  # slot j -> sensor order[j]
         n = family.state_size
-        lo = [0.0, *([-30.0] * n), *([-1.0] * (n * (n - 1) // 2)), 0.0]
-        hi = [1.0, *([30.0] * n), *([1.0] * (n * (n - 1) // 2)), 1.0]
+        # the inner env's observation bounds (they depend on n only): read from one built on
+        # the family's first system
+        inner = SingleAgentEnv(self._sparse_env(family.system(0)), agent="attacker")
+        lo, hi = inner.observation_space.low.tolist(), inner.observation_space.high.tolist()
         self.sparse_size = len(lo)
         if self.sequential:
             lo, hi = lo + [0.0] * self.max_sensors, hi + [1.0] * self.max_sensors
@@ -393,6 +398,15 @@ class SystemFamilyEnv(gym.Env):
         self._chosen = 0  # sequential: bitmask picked for the current window step
         self._left = 0  # sequential: budget left after the committed steps
         self._commits = 0  # sequential: window steps played
+
+    def _sparse_env(self, system: LinearSystem) -> FdiaParallelEnv:
+        """``sparse_attack_v0``'s env on ``system``, composed from the models.
+
+        (The env modules are a layer above this package, so it is built here, not imported.)
+        """
+        sc, spec = episode_spec(system, horizon=self.family.horizon, objective=self.objective)
+        attack = SparseAttack(self.family.budget)
+        return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, name="sparse_attack_v0")
 
     def _observation(self, sparse_obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._sparse_obs = np.asarray(sparse_obs, dtype=np.float64)
@@ -433,17 +447,9 @@ class SystemFamilyEnv(gym.Env):
             k = check_int("system_seed", options["system_seed"], minimum=0)
         else:
             k = int(self.system_seeds[int(self.np_random.integers(len(self.system_seeds)))])
-        from fdia_env import sparse_attack_v0  # here: it imports fdia_env.envs (a cycle)
-
         self.system_seed = k
         self.system = self.family.system(k)
-        parallel = sparse_attack_v0.parallel_env(
-            scenario=self.system,
-            budget=self.family.budget,
-            horizon=self.family.horizon,
-            objective=self.objective,
-        )
-        self._inner = SingleAgentEnv(parallel, agent="attacker")
+        self._inner = SingleAgentEnv(self._sparse_env(self.system), agent="attacker")
         M = self.system.M
         self.order = effect_order(self.system, self.objective) if self.sort_sensors else None
         self.order = np.arange(M) if self.order is None else self.order

@@ -10,7 +10,16 @@ from fdia_env.kalman.filter import (
     subset_update,
     update_mean,
 )
-from fdia_env.kalman.linalg import inv2, logdet, objective, psd_sqrt, spd_inv, sym, trace
+from fdia_env.kalman.linalg import (
+    inv2,
+    logdet,
+    objective,
+    psd_sqrt,
+    spd_inv,
+    spd_inv_sum,
+    sym,
+    trace,
+)
 from fdia_env.kalman.sampled import draw, sampled_step
 from fdia_env.kalman.steady import steady_state, steady_state_iterate
 from fdia_env.kalman.unaware import actual_covariance_step, extra_mse, transition_matrices
@@ -31,6 +40,7 @@ __all__ = [
     "psd_sqrt",
     "sampled_step",
     "spd_inv",
+    "spd_inv_sum",
     "steady_state",
     "steady_state_iterate",
     "subset_update",

@@ -1,4 +1,4 @@
-"""Kalman filter steps as pure functions with leading batch dimensions (MATH.md §1).
+"""Kalman filter steps as pure functions with leading batch dimensions (docs/math.md §1).
 
 Shapes: ``P`` (..., n, n), ``x`` (..., n), ``F``/``Q`` (n, n), ``H`` (nz, n), ``R`` (nz, nz),
 sensor masks (..., M) booleans (True = the filter uses that sensor's measurement).

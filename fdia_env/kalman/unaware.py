@@ -1,4 +1,4 @@
-"""Actual error of a filter that is unaware of injected biases (MATH.md §2.1)."""
+"""Actual error of a filter that is unaware of injected biases (docs/math.md §2.1)."""
 
 from __future__ import annotations
 

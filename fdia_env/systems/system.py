@@ -1,4 +1,4 @@
-"""Linear Gaussian systems and their sensors (MATH.md §1).
+"""Linear Gaussian systems and their sensors (docs/math.md §1).
 
 Validation when a system is built (every preset passes):
 

@@ -22,7 +22,8 @@ from fdia_env.detection.expected import (
     case_covariance,
     expected_squared_error,
 )
-from fdia_env.kalman import predict_cov, psd_sqrt, sym
+from fdia_env.detection.statistics import STATISTICS
+from fdia_env.kalman import predict_cov, psd_sqrt, spd_inv_sum, sym
 from fdia_env.kalman.linalg import mT
 
 
@@ -47,14 +48,13 @@ def batched_detection_step(
     Pxz = P_pred @ H.T
     Pzz0 = sym(H @ Pxz + R)
     Pzz0_inv = xp.inv(Pzz0)
-    Pzz1 = sym(Pzz0 + xp.asarray(rule.assumed_sigma))
-    Pzz1_inv = xp.inv(Pzz1)
+    Pzz1_inv, _ = spd_inv_sum(Pzz0, xp.asarray(rule.assumed_sigma))  # any power
     K0, K1 = Pxz @ Pzz0_inv, Pxz @ Pzz1_inv
-    A = Pzz0_inv if rule.statistic == "chi2" else sym(Pzz0_inv - Pzz1_inv)
+    A = STATISTICS[rule.statistic].matrix(Pzz0_inv, Pzz1_inv)
     incorporate = rule.on_detect == "incorporate"
     gain_d1 = K1 if incorporate else xp.zeros(tuple(K0.shape))
     P_d0 = sym(P_pred - K0 @ Pzz0 @ mT(K0))
-    P_d1 = sym(P_pred - K1 @ Pzz1 @ mT(K1)) if incorporate else P_pred
+    P_d1 = sym(P_pred - K1 @ mT(Pxz)) if incorporate else P_pred  # K1 Pzz1 K1' = K1 Pxz'
     if not sim.sampled:
         cov, p_fa, p_d = _exact_on_host(sim, rule, P_pred, sigma, probability, A, K0, gain_d1)
         sim.detection_info = {"p_false_alarm": p_fa, "p_detection": p_d, "threshold": thresholds}
@@ -110,6 +110,7 @@ def _exact_on_host(sim, rule, P_pred, sigma, probability, A, K0, gain_d1) -> tup
     P_pred, sigma, probability, A, K0, gain_d1 = host
     thresholds = np.asarray(xp.to_numpy(xp.asarray(rule.thresholds)), dtype=np.float64)
     exact = expected_squared_error if rule.criterion == "mse" else bayes_cost_covariance
+    model = np.asarray(rule.assumed_sigma) if rule.on_detect == "incorporate" else None
     cov = np.empty((B, sys.n, sys.n))
     p_fa, p_d = np.zeros(B), np.zeros(B)
     cache: dict[bytes, object] = {}
@@ -133,6 +134,7 @@ def _exact_on_host(sim, rule, P_pred, sigma, probability, A, K0, gain_d1) -> tup
                 float(thresholds[i]),
                 K0[i],
                 gain_d1[i],
+                assumed_sigma=model,  # K1 rebuilt in the attack's basis (any power)
             )
         out = cache[key]
         cov[i], p_fa[i], p_d[i] = out.error_cov, out.p_false_alarm, out.p_detection

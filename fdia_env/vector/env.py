@@ -22,7 +22,8 @@ sensor game's views): it draws from one generator per member, seeded as the sing
 opponent (``seed + i + 1``), so member ``i`` replays the single env seeded ``seed + i``.
 
 ``backend="torch", device="cpu" | "cuda"`` runs the same engine and models on torch tensors
-(float64) of that device, for every registered id (:data:`TORCH_IDS`): actions must be tensors
+(float64) of that device, for every id the table of environments lists with the torch backend
+(:func:`fdia_env.registration.torch_ids`): actions must be tensors
 on the device; observations (float32), rewards (float64), terminations, truncations, infos and
 action masks are tensors there; ``reset(seed=s)`` seeds one ``torch.Generator`` on the device
 that every member draws from (sampled dynamics: equal to the numpy backend in distribution, not
@@ -49,24 +50,15 @@ from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
-from fdia_env.envs.single_agent import Policy, check_agent, check_opponent
+from fdia_env.envs.single_agent import Policy, check_agent, check_no_opponent, check_opponent
+from fdia_env.registration import ENVS, torch_ids
 from fdia_env.vector.simulation import BatchedSimulation
 
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
 # sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
 MAX_NUM_ENVS = 2**20
-# on torch (a GPU's memory) the batch may be larger: issue 13 benchmarks up to B = 2**24
+# on torch (a GPU's memory) the batch may be larger: benchmarks/gpu.py measures up to B = 2**24
 MAX_NUM_ENVS_TORCH = 2**24
-
-# the Gymnasium ids whose models run on torch (``backend="torch"``)
-TORCH_IDS = (
-    "fdia_env/SparseAttack-v0",
-    "fdia_env/CovarianceAttack-v0",
-    "fdia_env/SensorGameAttacker-v0",
-    "fdia_env/SensorGameDefender-v0",
-    "fdia_env/DetectionAttacker-v0",
-    "fdia_env/DetectionDefender-v0",
-)
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
@@ -127,6 +119,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             opponent = FixedMix.uniform(int(parallel.action_space(self.other).n))
         if self.other is not None:
             check_opponent(opponent, parallel.action_space(self.other))
+        else:
+            check_no_opponent(opponent, parallel.possible_agents)
         if xp is not NUMPY:
             _check_torch_support(parallel)
         self.backend, self.device = xp.name, xp.device
@@ -409,7 +403,7 @@ def _max_envs(xp) -> int:
 
 
 def _check_torch_support(parallel: FdiaParallelEnv) -> None:
-    """``ValueError`` unless this env's models run on torch (see :data:`TORCH_IDS`)."""
+    """``ValueError`` unless this env's models run on torch (see :func:`torch_ids`)."""
     missing = [
         type(m).__name__
         for m in (parallel.attack, parallel.defense)
@@ -419,7 +413,7 @@ def _check_torch_support(parallel: FdiaParallelEnv) -> None:
         raise ValueError(
             f"backend='torch' is not implemented for {parallel.metadata.get('name')} "
             f"({', '.join(missing)} has no torch batch implementation yet); "
-            f"backend='torch' supports {', '.join(TORCH_IDS)} (their options included); "
+            f"backend='torch' supports {', '.join(torch_ids())} (their options included); "
             "use backend='numpy' for the others"
         )
 
@@ -449,6 +443,12 @@ def make_vector(
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
     check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
+    entry = next((e for e in ENVS.values() if e.module == module), None)
+    if entry is not None and backend not in entry.backends:
+        raise ValueError(
+            f"backend={backend!r} is not one of {entry.name}'s backends {list(entry.backends)} "
+            "(its entry in fdia_env.registration.ENVS)"
+        )
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)

@@ -357,7 +357,7 @@ class BatchedSimulation:
         return P_post @ (self._HtRinv * rows[:, None, :])
 
     def _propagate(self, x: Any, x_hat: Any, W: Any, noise: Any, bias: Any) -> tuple:
-        """One step of the true system and of the filter (MATH.md §1), batched.
+        """One step of the true system and of the filter (docs/math.md §1), batched.
 
         ``x[k+1] = F x + G u + v``, ``z = H x[k+1] + w (+ b)``,
         ``x̂ = x̂[k+1|k] + W (z − H x̂[k+1|k])``, with ``v, w`` from the first n + nz columns of

@@ -1,5 +1,6 @@
-"""Power-grid DC dynamic state estimation (MATH.md §7); needs the ``[grid]`` extra (pandapower)."""
+"""Power-grid DC dynamic state estimation (docs/math.md §7); needs the ``[grid]`` extra."""
 
+from fdia_env.systems.grid.cases import GRID_CASES, GridCase, GridPreset
 from fdia_env.systems.grid.measurements import (
     DEFAULT_Q,
     DEFAULT_SIGMA_FLOW,
@@ -16,8 +17,11 @@ __all__ = [
     "DEFAULT_Q",
     "DEFAULT_SIGMA_FLOW",
     "DEFAULT_SIGMA_INJECTION",
+    "GRID_CASES",
     "DCNetwork",
+    "GridCase",
     "GridModel",
+    "GridPreset",
     "Meter",
     "dc_network",
     "grid_model",

@@ -1,4 +1,4 @@
-"""Power-grid DC dynamic state estimation as a :class:`LinearSystem` (MATH.md §7).
+"""Power-grid DC dynamic state estimation as a :class:`LinearSystem` (docs/math.md §7).
 
 State ``x = θ`` without the slack bus (radians, relative to the slack's angle); measurements, in
 per unit of the case's base power:

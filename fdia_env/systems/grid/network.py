@@ -1,4 +1,4 @@
-"""The DC model of a transmission network, read from pandapower (MATH.md §7).
+"""The DC model of a transmission network, read from pandapower (docs/math.md §7).
 
 pandapower is an optional dependency (``pip install fdia-env[grid]``): it is imported inside
 :func:`dc_network`, never at module import, so ``import fdia_env`` does not need it.
@@ -9,7 +9,7 @@ MATPOWER's ``makeBdc``): a branch from bus f to bus t with series reactance ``x`
 
     P_ft = b (θ_f − θ_t − φ),    b = 1 / (x τ)
 
-from f to t (−P_ft at the t end). Two things here go beyond MATH.md §7, which states the model
+from f to t (−P_ft at the t end). Two things here go beyond docs/math.md §7, which states the model
 with ``b = 1/x`` and no taps: pandapower's DC model divides by the tap ratio (the IEEE 14-, 57-,
 118- and 300-bus cases have off-nominal transformers, e.g. τ = 0.978, 0.969, 0.932 in case14),
 and a phase-shifting transformer adds the constant ``−b φ`` to the flow. Both are kept, so that
@@ -27,14 +27,11 @@ from typing import Any
 
 import numpy as np
 
-CASES: dict[str, str] = {
-    "ieee14": "case14",
-    "ieee30": "case30",
-    "ieee57": "case57",
-    "ieee118": "case118",
-    "ieee300": "case300",
-}
-"""Case names accepted by :func:`dc_network` -> the ``pandapower.networks`` function."""
+from fdia_env.systems.grid.cases import GRID_CASES
+
+CASES: dict[str, str] = {case.name: case.pandapower for case in GRID_CASES.values()}
+"""Case names accepted by :func:`dc_network` -> the ``pandapower.networks`` function (from
+the table of grid cases, :data:`fdia_env.systems.grid.cases.GRID_CASES`)."""
 
 EXTRA_HINT = 'pandapower is needed for the power-grid systems: pip install "fdia-env[grid]"'
 

@@ -1,0 +1,210 @@
+"""One training run's lifecycle, shared by every driver (SB3, torch PPO, self-play, RLlib).
+
+A driver checks its options and builds what it trains, then:
+
+1. :func:`open_run` finds the run folder: a new one's path (not created yet), or, with
+   ``--resume``, the folder to continue (``--run-dir``, or the latest of this prefix holding the
+   driver's checkpoint marker). A resumed folder is locked at once, its ``config.json`` must
+   agree with the given options (except the training length and how the run executes:
+   :data:`agents.runs.RESUMABLE`), and the temporary files a kill left are removed;
+2. :meth:`RunFolder.check_not_shorter` refuses a resume that would shorten the run;
+3. :meth:`RunFolder.begin` creates and locks a new folder (removed again if the launch fails
+   before its first checkpoint), once the model is built;
+4. :meth:`RunFolder.write_config` writes ``config.json`` (the options and what they resolved
+   to); :meth:`RunFolder.resume_seed` gives the fresh seed of a resumed run;
+5. :meth:`RunFolder.watch_signals` makes the first SIGINT/SIGTERM a stop request (training
+   ends after the current step or iteration, the final checkpoint and scores are written) and
+   a second one an :class:`~agents.interrupt.Aborted`;
+6. :meth:`RunFolder.write_scores` writes ``scores.json``; :func:`tensorboard` is the SB3
+   logger writing ``tb/`` (with the purge marker that keeps a resumed run's step ranges apart).
+
+Every cleanup (lock, signal handlers, removal of a failed new folder) is registered on the
+driver's :class:`~contextlib.ExitStack`.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from agents.checkpoint import read_json
+from agents.interrupt import StopRequest, stop_on_signals
+from agents.runs import (
+    check_not_shorter,
+    check_resumable,
+    config_dict,
+    new_run_dir,
+    remove_stale_temp_files,
+    removed_unless,
+    resume_dir,
+    run_lock,
+    write_json,
+)
+from agents.seeding import derived_seed
+
+SCORES = "scores.json"
+
+
+def _silent(line: str) -> None:
+    return None
+
+
+@dataclass
+class RunFolder:
+    """The folder a run trains in, new or resumed, and its lifecycle steps.
+
+    Attributes:
+        path: The run folder (a new run's does not exist until :meth:`begin`).
+        marker: The file (relative to ``path``) a resumable run holds: its checkpoint.
+        stack: The driver's exit stack, which releases the lock and signal handlers.
+        saved: A resumed run's saved options (``config.json``'s ``config``); None: a new run.
+        saved_resolved: A resumed run's ``config.json`` ``resolved`` entry.
+        stop: The stop request, once :meth:`watch_signals` was called.
+    """
+
+    path: Path
+    marker: str
+    stack: ExitStack
+    saved: dict[str, Any] | None = None
+    saved_resolved: dict[str, Any] = field(default_factory=dict)
+    stop: StopRequest = field(default_factory=StopRequest)
+
+    @property
+    def resumed(self) -> bool:
+        """Whether the run continues a saved one."""
+        return self.saved is not None
+
+    def check_not_shorter(self, name: str, given: int, done: int, unit: str = "steps") -> None:
+        """On a resume, refuse ``--<name> given`` below the ``done`` the run has trained.
+
+        Raises:
+            ValueError: As :func:`agents.runs.check_not_shorter`.
+        """
+        if self.saved is not None:
+            check_not_shorter(name, given, done, self.saved, self.path, unit)
+
+    def resume_seed(self, seed: int, done: int) -> int:
+        """The run's seed, or after a resume at ``done`` steps a fresh one derived from it."""
+        return derived_seed(seed, done) if self.resumed else seed
+
+    def begin(self) -> Path:
+        """Create and lock a new run's folder (nothing to do for a resumed one).
+
+        The folder is removed if the driver's block raises before :attr:`marker` exists.
+        """
+        if not self.resumed:
+            self.path.mkdir(parents=True)
+            self.stack.enter_context(removed_unless(self.path, self.marker))
+            self.stack.enter_context(run_lock(self.path))
+        return self.path
+
+    def discard(self) -> None:
+        """A new run stopped before it saved anything: release it and remove its folder."""
+        if not self.resumed:
+            self.stack.close()
+            shutil.rmtree(self.path, ignore_errors=True)
+
+    def write_config(self, command: str, cfg: Any, resolved: dict[str, Any]) -> Path:
+        """Write ``config.json``: the command, the options given and what they resolved to."""
+        return write_json(
+            self.path / "config.json",
+            {"command": command, "config": config_dict(cfg), "resolved": resolved},
+        )
+
+    def watch_signals(self) -> StopRequest:
+        """Handle SIGINT/SIGTERM until the driver's block ends (:mod:`agents.interrupt`)."""
+        self.stop = self.stack.enter_context(stop_on_signals())
+        return self.stop
+
+    def write_scores(self, fields: dict[str, Any], evaluations: dict[str, Any]) -> Path:
+        """Write ``scores.json``: ``fields``, the stop signal and the evaluations by row name.
+
+        ``interrupted`` is the signal that stopped training, or None.
+        """
+        return write_json(
+            self.path / SCORES,
+            {
+                **fields,
+                "interrupted": self.stop.signum,
+                "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
+            },
+        )
+
+
+def open_run(
+    cfg: Any,
+    stack: ExitStack,
+    prefix: str,
+    marker: str,
+    report: Callable[[str], None] | None = print,
+    backend: str | None = None,
+) -> RunFolder:
+    """The run folder of ``cfg``: a new one's path (not created), or the one ``--resume`` picks.
+
+    On resume the folder is locked (on ``stack``), its ``config.json`` checked against ``cfg``
+    and the temporary files of an interrupted write removed (each reported).
+
+    Args:
+        cfg: The command's options (a dataclass with a ``run`` of
+            :class:`~agents.config.RunSettings`).
+        stack: The driver's exit stack.
+        prefix: The run folder name without its time (``<env>-<algo>-s<seed>``).
+        marker: The checkpoint file a resumable folder holds (relative to it).
+        report: Called with one line per removed temporary file (None: silent).
+        backend: When given, a resumed folder must have been written by this backend.
+
+    Raises:
+        ValueError: Nothing to resume, a folder in use, a run of another backend, options
+            that differ from the saved ones, or a corrupt config.json.
+        FileExistsError: When a new run's folder exists.
+    """
+    say = report or _silent
+    if not cfg.run.resume:
+        return RunFolder(new_run_dir(cfg.run.runs_root, cfg.run.run_dir, prefix), marker, stack)
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix, marker)
+    stack.enter_context(run_lock(run_dir))
+    saved = read_json(run_dir / "config.json", "run config")
+    resolved = saved.get("resolved") or {}
+    if backend is not None and resolved.get("backend", "sb3") != backend:
+        raise ValueError(
+            f"cannot resume {run_dir} with --backend {backend}: it is not an "
+            f"{'RLlib' if backend == 'rllib' else backend} run"
+        )
+    options = saved.get("config", {})
+    check_resumable(options, config_dict(cfg), run_dir)
+    for stale in remove_stale_temp_files(run_dir):
+        say(f"removed a temporary file left by an interrupted write: {stale}")
+    return RunFolder(run_dir, marker, stack, options, resolved)
+
+
+def tensorboard(folder: Path, purge_from: int | None = None, stdout: bool = False) -> Any:
+    """SB3 logger writing TensorBoard events to ``folder`` (and a table to stdout).
+
+    Args:
+        folder: TensorBoard folder.
+        purge_from: On resume, the first step after the checkpoint: the new event file starts
+            with a ``SessionLog.START`` there, and TensorBoard hides the earlier sessions'
+            events from that step on (the resumed session logs them again), so the step
+            ranges shown do not overlap.
+        stdout: Also print SB3's statistics table.
+    """
+    from stable_baselines3.common.logger import (
+        HumanOutputFormat,
+        Logger,
+        TensorBoardOutputFormat,
+    )
+    from torch.utils.tensorboard import SummaryWriter
+
+    class _TensorBoard(TensorBoardOutputFormat):
+        def __init__(self) -> None:  # SB3's __init__ takes no purge_step
+            self.writer = SummaryWriter(log_dir=str(folder), purge_step=purge_from)
+            self._is_closed = False
+
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    formats = [_TensorBoard()] + ([HumanOutputFormat(sys.stdout)] if stdout else [])
+    return Logger(folder=str(folder), output_formats=formats)

@@ -1,0 +1,39 @@
+"""Stealthy attacks against bad-data detection: exact baselines.
+
+- :func:`security_index`: the fewest meters an undetectable attack on each state needs (MILP,
+  minimum cut, exhaustive checks);
+- :func:`minimum_meter_attack`, :func:`budgeted_attack`: the sparsest undetectable attack and
+  the most damaging one on a meter budget (exact MILPs);
+- :func:`basic_measurement_set`, :func:`undetectable_attack`: protecting n independent meters
+  rules out every undetectable attack, and fewer do not;
+- :func:`mo_sinopoli`: whether a sensor set admits a stealthy attack that drives a Kalman
+  filter's error unbounded under a χ² innovation detector, and the attack.
+
+Their ``.policy()`` plays them in ``stealth_attack_v0``. See docs/guide/stealth.md.
+"""
+
+from baselines.stealth.attack import (
+    StealthyAttack,
+    basic_measurement_set,
+    budgeted_attack,
+    minimum_meter_attack,
+    undetectable_attack,
+)
+from baselines.stealth.dynamic import StealthyKalmanAttack, kalman_model, mo_sinopoli
+from baselines.stealth.policy import StealthPolicy
+from baselines.stealth.security_index import METHODS, SecurityIndex, security_index
+
+__all__ = [
+    "METHODS",
+    "SecurityIndex",
+    "StealthPolicy",
+    "StealthyAttack",
+    "StealthyKalmanAttack",
+    "basic_measurement_set",
+    "budgeted_attack",
+    "kalman_model",
+    "minimum_meter_attack",
+    "mo_sinopoli",
+    "security_index",
+    "undetectable_attack",
+]

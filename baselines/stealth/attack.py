@@ -1,0 +1,292 @@
+"""Minimum-meter and budgeted stealthy attacks, and what protecting meters rules out.
+
+- :func:`minimum_meter_attack`: the undetectable attack with the fewest meters on a target state
+  (its security index) or on any state (Liu, Ning & Reiter 2009's k-meter attack at its
+  smallest k).
+- :func:`budgeted_attack`: with at most ``budget`` meters, each injected by at most ``a_max``,
+  the undetectable attack (``a = H c``) that moves a target state's estimate the most, by the
+  exact MILP ``max c_t`` s.t. ``|(H c)_i| ≤ a_max_i y_i``, ``Σ y ≤ budget``, ``y ∈ {0, 1}^m``
+  (the bound on a is a natural big-M, so the MILP is exact); over every state when no target
+  is given (the largest angle error any such attack achieves, ``max_t``).
+- :func:`basic_measurement_set`: n meters with linearly independent rows of H; protecting them
+  rules out every undetectable attack (Bobba et al. 2010: ``H_B c = 0`` forces ``c = 0``), and
+  no set of fewer than n meters can (their rows leave a non-zero c with ``H_P c = 0``).
+- :func:`undetectable_attack`: an undetectable attack that spares the protected meters, or
+  ``None`` when they rule every one out.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy import linalg, optimize, sparse
+
+from baselines.stealth.common import (
+    as_estimation,
+    meter_indices,
+    null_space,
+    state_index,
+    support,
+)
+from baselines.stealth.security_index import security_index
+from fdia_env._validation import check_int
+
+if TYPE_CHECKING:
+    from baselines.stealth.policy import StealthPolicy
+
+
+@dataclass(frozen=True, eq=False)
+class StealthyAttack:
+    """An undetectable injection ``a = H c`` and what it achieves.
+
+    Attributes:
+        a: (m,) the injection, per unit.
+        c: (n,) the estimate's shift it causes (radians on the grids).
+        meters: Positions of the meters it corrupts.
+        target: The state it was optimised for (``None``: the attack of
+            :func:`undetectable_attack`).
+        value: The objective: the number of meters (:func:`minimum_meter_attack`) or the
+            target's shift ``c_t`` (:func:`budgeted_attack`).
+        objective: ``"meters"``, ``"shift"`` or ``"exists"``.
+        budget: The meter budget (budgeted attacks), else ``None``.
+        seconds: Wall time of the solve.
+    """
+
+    a: np.ndarray
+    c: np.ndarray
+    meters: tuple[int, ...]
+    target: int | None
+    value: float
+    objective: str
+    budget: int | None = None
+    seconds: float = 0.0
+
+    def policy(self, a_max: float = 1.0) -> StealthPolicy:
+        """This attack for ``stealth_attack_v0`` with ``action="free"`` and that ``a_max``.
+
+        Raises:
+            ValueError: If some ``|a_i|`` exceeds ``a_max``.
+        """
+        from baselines.stealth.policy import StealthPolicy
+
+        return StealthPolicy(self.a / a_max, kind="free")
+
+
+def _attack(a: np.ndarray, c: np.ndarray, **kwargs: Any) -> StealthyAttack:
+    a = np.array(a, dtype=np.float64)
+    c = np.array(c, dtype=np.float64)
+    a.setflags(write=False)
+    c.setflags(write=False)
+    return StealthyAttack(a=a, c=c, meters=tuple(int(i) for i in support(a)), **kwargs)
+
+
+def minimum_meter_attack(
+    estimation: Any = "ieee14",
+    *,
+    target: int | None = None,
+    protected: Any = None,
+    method: str = "milp",
+) -> StealthyAttack | None:
+    """The undetectable attack with the fewest meters (on ``target``, or on any state).
+
+    Args:
+        estimation: A :class:`~fdia_env.stealth.StaticEstimation` or what
+            :func:`~fdia_env.stealth.static_estimation` accepts.
+        target: State position; ``None`` for the weakest state.
+        protected: Meters the attacker cannot touch.
+        method: A :func:`~baselines.stealth.security_index` method.
+
+    Returns:
+        The attack (``value`` = its number of meters, ``c`` scaled to ``c_target = 1``), or
+        ``None`` if the protected meters leave no undetectable attack.
+
+    Example:
+        >>> from baselines.stealth import minimum_meter_attack
+        >>> minimum_meter_attack("ieee14", method="mincut").value
+        3.0
+    """
+    est = as_estimation(estimation)
+    start = time.perf_counter()
+    states = None if target is None else [state_index(est, target, "target")]
+    result = security_index(est, method=method, states=states, protected=protected)
+    k = result.weakest if target is None else states[0]
+    if not np.isfinite(result.indices[k]):
+        return None
+    return _attack(
+        result.attacks[k],
+        result.shifts[k],
+        target=k,
+        value=float(result.indices[k]),
+        objective="meters",
+        seconds=time.perf_counter() - start,
+    )
+
+
+def _a_max(est: Any, a_max: Any) -> np.ndarray:
+    try:
+        arr = np.array(a_max, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"a_max must be a positive number or {est.m} of them") from exc
+    if arr.size == 1:
+        arr = np.full(est.m, arr[0])
+    if arr.size != est.m or not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
+        raise ValueError(
+            f"a_max must be one positive finite number or {est.m} of them, got "
+            f"{np.asarray(a_max).tolist()}"
+        )
+    return arr
+
+
+def check_budget(est: Any, budget: Any) -> int:
+    """``budget`` as an int in 1..m (``ValueError`` naming it)."""
+    return check_int("budget", budget, minimum=1, maximum=est.m)
+
+
+def budgeted_attack(
+    estimation: Any = "ieee14",
+    budget: int = 5,
+    *,
+    a_max: Any = 1.0,
+    target: int | None = None,
+    protected: Any = None,
+    time_limit: float | None = None,
+) -> StealthyAttack | None:
+    """The undetectable attack on at most ``budget`` meters that moves ``target`` the most.
+
+    Args:
+        estimation: A :class:`~fdia_env.stealth.StaticEstimation` or what
+            :func:`~fdia_env.stealth.static_estimation` accepts.
+        budget: Meters the attacker may corrupt, 1..m.
+        a_max: Largest injection per meter (per unit), one number or m of them.
+        target: State whose estimate to move; ``None``: every state, the best one kept.
+        protected: Meters the attacker cannot touch.
+        time_limit: HiGHS seconds per state.
+
+    Returns:
+        The attack (``value`` = ``c_target``, the shift of the target's estimate; 0 when the
+        budget allows no undetectable attack, then ``a = 0``).
+
+    Raises:
+        ValueError: Naming the parameter: a budget outside 1..m, a_max ≤ 0 or non-finite,
+            unknown meters or target.
+
+    Example:
+        >>> from baselines.stealth import budgeted_attack
+        >>> attack = budgeted_attack("ieee14", budget=3, a_max=0.5, target=6)
+        >>> attack.meters, round(attack.value, 4)
+        ((6, 7, 32), 0.0881)
+    """
+    est = as_estimation(estimation)
+    budget = check_budget(est, budget)
+    bound = _a_max(est, a_max)
+    prot = meter_indices(est, protected)
+    targets = range(est.n) if target is None else [state_index(est, target, "target")]
+    start = time.perf_counter()
+    best: tuple[float, int, np.ndarray] | None = None
+    for t in targets:
+        value, c = _budget_milp(est, t, budget, bound, prot, time_limit)
+        if best is None or value > best[0] + 1e-12:
+            best = (value, t, c)
+    value, t, c = best
+    a = est.H @ c
+    if value <= 0.0:
+        a, c, value = np.zeros(est.m), np.zeros(est.n), 0.0
+    return _attack(
+        a,
+        c,
+        target=t,
+        value=float(value),
+        objective="shift",
+        budget=budget,
+        seconds=time.perf_counter() - start,
+    )
+
+
+def _budget_milp(
+    est: Any,
+    t: int,
+    budget: int,
+    bound: np.ndarray,
+    prot: np.ndarray,
+    time_limit: float | None,
+) -> tuple[float, np.ndarray]:
+    m, n = est.m, est.n
+    scale = np.max(np.abs(est.H), axis=1)
+    scale[scale == 0.0] = 1.0  # a meter that sees no state: any a_i on it is detected
+    Hn = est.H / scale[:, None]
+    M = sparse.diags(bound / scale)
+    A = sparse.bmat(
+        [
+            [Hn, -M],
+            [-Hn, -M],
+            [None, sparse.csr_matrix(np.ones((1, m)))],
+        ],
+        format="csr",
+    )
+    upper = np.concatenate([np.zeros(2 * m), [budget]])
+    cost = np.zeros(n + m)
+    cost[t] = -1.0
+    lb = np.concatenate([np.full(n, -np.inf), np.zeros(m)])
+    ub = np.concatenate([np.full(n, np.inf), np.ones(m)])
+    ub[n + prot] = 0.0
+    options: dict[str, Any] = {"mip_rel_gap": 1e-9}
+    if time_limit is not None:
+        options["time_limit"] = float(time_limit)
+    res = optimize.milp(
+        cost,
+        constraints=optimize.LinearConstraint(A, -np.inf, upper),
+        integrality=np.concatenate([np.zeros(n), np.ones(m)]),
+        bounds=optimize.Bounds(lb, ub),
+        options=options,
+    )
+    if res.x is None:
+        raise RuntimeError(f"HiGHS found no budgeted attack on state {t}: {res.message}")
+    c = res.x[:n]
+    # exact clean-up: zero the meters the MILP left off, re-solve c on the chosen meters' zeros
+    used = np.flatnonzero(res.x[n:] > 0.5)
+    zero = np.setdiff1d(np.arange(m), used)
+    N = null_space(est.H[zero], n)
+    if N.shape[1] == 0 or abs(c[t]) <= 1e-12:
+        return 0.0, np.zeros(n)
+    c = N @ (N.T @ c)
+    a = est.H @ c
+    over = np.max(np.abs(a) / bound)
+    if over > 1.0:  # rounding of the projection: scale back inside the box
+        c = c / over
+    return float(c[t]), c
+
+
+def basic_measurement_set(estimation: Any = "ieee14") -> tuple[int, ...]:
+    """A basic measurement set: n meters whose rows of H are linearly independent.
+
+    Chosen by QR with column pivoting of ``H'`` (the best-conditioned greedy choice).
+    Protecting them rules out every undetectable attack; see the module docstring.
+
+    Example:
+        >>> from baselines.stealth import basic_measurement_set
+        >>> len(basic_measurement_set("ieee14"))
+        13
+    """
+    est = as_estimation(estimation)
+    _, _, piv = linalg.qr(est.H.T, pivoting=True, mode="economic")
+    return tuple(sorted(int(i) for i in piv[: est.n]))
+
+
+def undetectable_attack(estimation: Any = "ieee14", protected: Any = None) -> StealthyAttack | None:
+    """An undetectable attack ``a = H c ≠ 0`` with ``a = 0`` on the protected meters, or None.
+
+    ``c`` is a unit vector of the null space of the protected rows of H; ``None`` when those
+    rows have rank n (they contain a basic measurement set).
+    """
+    est = as_estimation(estimation)
+    prot = meter_indices(est, protected)
+    N = null_space(est.H[prot], est.n)
+    if N.shape[1] == 0:
+        return None
+    c = N[:, 0]
+    a = est.H @ c
+    a[prot] = 0.0
+    return _attack(a, c, target=None, value=float(np.max(np.abs(c))), objective="exists")

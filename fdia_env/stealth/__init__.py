@@ -1,0 +1,41 @@
+"""Stealthy false-data injection against bad-data detection on static DC state estimation.
+
+- :func:`static_estimation` / :class:`StaticEstimation`: WLS, the χ² and largest-normalised-
+  residual tests, the exact detection probability of an injection;
+- ``stealth_attack_v0`` (:mod:`fdia_env.stealth.stealth_attack_v0`): the attacker's
+  environment (PettingZoo parallel and AEC), with the Gymnasium view
+  ``"fdia_env/StealthAttack-v0"``, registered when this package is imported
+  (``gymnasium.make("fdia_env.stealth:fdia_env/StealthAttack-v0")`` imports it first).
+
+See docs/guide/stealth.md.
+"""
+
+import gymnasium
+
+from fdia_env.stealth.static import (
+    TESTS,
+    StaticEstimation,
+    check_alpha,
+    sidak_threshold,
+    static_estimation,
+)
+
+GYM_ID = "fdia_env/StealthAttack-v0"
+"""Gymnasium id of the attacker's single-agent view (no native vector env: ``make_vec`` steps
+copies in ``SyncVectorEnv``)."""
+
+if GYM_ID not in gymnasium.registry:
+    gymnasium.register(
+        id=GYM_ID,
+        entry_point="fdia_env.envs.single_agent:make_single_agent",
+        kwargs={"module": "fdia_env.stealth.stealth_attack_v0", "agent": "attacker"},
+    )
+
+__all__ = [
+    "GYM_ID",
+    "TESTS",
+    "StaticEstimation",
+    "check_alpha",
+    "sidak_threshold",
+    "static_estimation",
+]

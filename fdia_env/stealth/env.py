@@ -1,0 +1,297 @@
+"""The static stealthy-attack environment (PettingZoo parallel); see ``stealth_attack_v0``."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from fdia_env._validation import check_choice, check_int, check_positive
+from fdia_env.envs.actions import check_action
+from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+from fdia_env.stealth.static import StaticEstimation, static_estimation
+
+ACTIONS = ("shift", "free")
+DYNAMICS = ("expected", "sampled")
+ON_DETECT = ("zero", "penalty", "end")
+MAX_RATIO = 10.0
+"""Cap of the observed χ² statistic, in units of the threshold."""
+
+
+class _NoResetOptions:
+    """What the single-agent view asks of an env's attack model: the reset options it reads."""
+
+    reset_options: tuple[str, ...] = ()
+
+
+class StealthAttackEnv(ParallelEnv):
+    """One attacker against WLS state estimation with a bad-data test (see ``stealth_attack_v0``).
+
+    Args: as :func:`fdia_env.stealth.stealth_attack_v0.parallel_env`.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "stealth_attack_v0",
+        "render_modes": list(RENDER_MODES),
+        "render_fps": RENDER_FPS,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        scenario: Any = "grid-ieee14",
+        *,
+        budget: int = 6,
+        horizon: int | None = None,
+        action: str = "shift",
+        magnitude: float = 0.05,
+        a_max: float = 0.5,
+        dynamics: str = "sampled",
+        test: str = "chi2",
+        alpha: float = 0.05,
+        on_detect: str = "zero",
+        penalty: float = 1.0,
+        protected: Any = None,
+        render_mode: str | None = None,
+        max_cycles: int | None = None,
+    ) -> None:
+        if isinstance(scenario, StaticEstimation):
+            est = scenario
+            if alpha != est.alpha:
+                est = static_estimation(est.grid if est.grid is not None else est.H, alpha=alpha)
+        else:
+            est = static_estimation(scenario, alpha=alpha)
+        self.estimation = est
+        self.budget = check_int("budget", budget, minimum=1, maximum=est.m)
+        self.max_cycles = (
+            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
+        )
+        if horizon is None:  # PettingZoo's episode length when given, else one snapshot
+            horizon = 1 if self.max_cycles is None else self.max_cycles
+        self.horizon = check_int("horizon", horizon, minimum=1)
+        self.action_kind = check_choice("action", action, ACTIONS)
+        self.magnitude = check_positive("magnitude", magnitude)
+        self.a_max = check_positive("a_max", a_max)
+        self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
+        if test not in ("chi2", "lnr"):
+            raise ValueError(f"test must be one of ['chi2', 'lnr'], got {test!r}")
+        if test == "lnr" and self.dynamics == "expected":
+            raise ValueError(
+                "test='lnr' needs dynamics='sampled': the largest-normalised-residual test has "
+                "no closed-form detection probability"
+            )
+        self.test = test
+        self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
+        if isinstance(penalty, bool) or not isinstance(
+            penalty, (int, float, np.integer, np.floating)
+        ):
+            raise ValueError(f"penalty must be a number >= 0, got {penalty!r}")
+        if not (np.isfinite(penalty) and penalty >= 0.0):
+            raise ValueError(f"penalty must be a finite number >= 0, got {penalty}")
+        self.penalty = float(penalty)
+        self.protected = est.meter_positions(protected, "protected")
+        if render_mode is not None:
+            check_choice("render_mode", render_mode, RENDER_MODES)
+        self.render_mode = render_mode
+        self.attack = _NoResetOptions()
+        self.possible_agents = ["attacker"]
+        self.agents: list[str] = []
+        if self.action_kind == "shift":
+            act: spaces.Space = spaces.MultiBinary(est.n)
+        else:
+            act = spaces.Box(-1.0, 1.0, shape=(est.m,), dtype=np.float32)
+        self._action_space = act
+        low = np.zeros(3, dtype=np.float32)
+        high = np.array([1.0, 1.0, MAX_RATIO], dtype=np.float32)
+        self._observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.state_space = self._observation_space
+        self._L = np.linalg.cholesky(est.R)
+        self.np_random, self.np_random_seed = seeding.np_random(None)
+        self._reset_called = False
+        self._done = True
+        self._clear()
+
+    # --- spaces -------------------------------------------------------------------------
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent`` (the same object on every call)."""
+        self._check_agent(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The action space of ``agent`` (the same object on every call)."""
+        self._check_agent(agent)
+        return self._action_space
+
+    def _check_agent(self, agent: str) -> str:
+        if agent not in self.possible_agents:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
+        return agent
+
+    def action_masks(self, agent: str = "attacker") -> None:
+        """No action mask (every action is legal; the budget trims the injection)."""
+        self._check_agent(agent)
+        return None
+
+    # --- the model ----------------------------------------------------------------------
+    def injection(self, action: Any) -> np.ndarray:
+        """(m,) the injection an action makes: shift or free, protected meters zeroed, trimmed.
+
+        The attacker holds ``budget`` meters: when the action would corrupt more, only the
+        ``budget`` largest ``|a_i|`` (ties: the lower position) are written.
+        """
+        est = self.estimation
+        if self.action_kind == "shift":
+            a = est.H @ (self.magnitude * np.asarray(action, dtype=np.float64).reshape(est.n))
+        else:
+            a = self.a_max * np.clip(np.asarray(action, dtype=np.float64).reshape(est.m), -1, 1)
+        a[self.protected] = 0.0
+        scale = float(np.max(np.abs(a))) if a.size else 0.0
+        a[np.abs(a) <= 1e-12 * max(scale, 1e-300)] = 0.0
+        nonzero = np.flatnonzero(a)
+        if nonzero.size > self.budget:
+            order = np.argsort(-np.abs(a), kind="stable")
+            a[order[self.budget :]] = 0.0
+        return a
+
+    def damage(self, a: np.ndarray) -> float:
+        """The largest change the injection makes to any state's estimate, ``|K a|_∞``."""
+        return float(np.max(np.abs(self.estimation.estimate_shift(a))))
+
+    def _clear(self) -> None:
+        self._k = 0
+        self._last = {
+            "phi": 0.0,
+            "detected": False,
+            "detection_probability": 0.0,
+            "statistic": 0.0,
+            "meters_used": 0,
+            "attacked": np.zeros(self.estimation.m, dtype=np.int8),
+        }
+        self._last_a = np.zeros(self.estimation.m)
+
+    # --- PettingZoo API -----------------------------------------------------------------
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """Start an episode; ``seed`` makes every noise draw reproducible."""
+        check_reset_args(seed, options)
+        if seed is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(int(seed))
+        self.agents = list(self.possible_agents)
+        self._clear()
+        self._done = False
+        self._reset_called = True
+        return {"attacker": self._observe()}, {"attacker": self._info()}
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Inject, run the estimator and its bad-data test on one snapshot.
+
+        Raises:
+            RuntimeError: Before :meth:`reset` or after the episode ended.
+            ValueError: For a missing or unknown agent's action, or one outside its space.
+        """
+        if not self._reset_called:
+            raise RuntimeError("step() called before reset(): call reset() first")
+        if self._done:
+            raise RuntimeError(
+                "step() called after the episode ended: call reset() to start a new one"
+            )
+        if not isinstance(actions, dict):
+            raise TypeError(
+                f"actions must be a dict {{agent: action}} for agents {self.agents}, "
+                f"got {type(actions).__name__}"
+            )
+        if set(actions) != set(self.agents):
+            raise ValueError(
+                f"actions must have exactly one entry per live agent {self.agents}, got "
+                f"{sorted(map(str, actions))}"
+            )
+        check_action(self._action_space, actions["attacker"], "attacker")
+        est = self.estimation
+        a = self.injection(actions["attacker"])
+        damage = self.damage(a)
+        p = float(est.detection_probability(a)) if self.test == "chi2" else float("nan")
+        if self.dynamics == "sampled":
+            e = self._L @ self.np_random.standard_normal(est.m)
+            z = e + a  # the residual does not depend on the true state
+            detected = bool(est.alarm(z, self.test))
+            statistic = float(est.statistic(z))
+            reward = (-self.penalty if self.on_detect == "penalty" else 0.0) if detected else damage
+        else:
+            detected = False
+            statistic = float(est.noncentrality(a) + est.dof)  # E[J] under the injection
+            caught = -self.penalty if self.on_detect == "penalty" else 0.0
+            reward = (1.0 - p) * damage + p * caught
+        self._k += 1
+        self._last_a = a
+        self._last = {
+            "phi": damage,
+            "detected": detected,
+            "detection_probability": 0.0 if np.isnan(p) else p,
+            "statistic": statistic,
+            "meters_used": int(np.count_nonzero(a)),
+            "attacked": (a != 0.0).astype(np.int8),
+        }
+        done = self._k >= self.horizon or (detected and self.on_detect == "end")
+        truncated = not done and self.max_cycles is not None and self._k >= self.max_cycles
+        obs = {"attacker": self._observe()}
+        infos = {"attacker": self._info()}
+        if done or truncated:
+            self._done = True
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, {"attacker": reward}, {"attacker": done}, {"attacker": truncated}, infos
+
+    def _observe(self) -> np.ndarray:
+        ratio = min(self._last["statistic"] / self.estimation.threshold, MAX_RATIO)
+        return np.array(
+            [(self.horizon - self._k) / self.horizon, float(self._last["detected"]), ratio],
+            dtype=np.float32,
+        )
+
+    def _info(self) -> dict[str, Any]:
+        info = {"step": int(self._k), **self._last}
+        info["attacked"] = self._last["attacked"].copy()
+        return info
+
+    def state(self) -> np.ndarray:
+        """Global state: the attacker's observation (the only player)."""
+        return self._observe()
+
+    def render(self, mode: str | None = None) -> str | np.ndarray | None:
+        """``"ansi"``: a line for the last step; ``"rgb_array"``: the injection per meter."""
+        mode = self.render_mode if mode is None else check_choice("mode", mode, RENDER_MODES)
+        if mode is None:
+            return None
+        if mode == "rgb_array":
+            return self._render_rgb()
+        names = [self.estimation.meters[i] for i in np.flatnonzero(self._last_a)]
+        line = (
+            f"step {self._k}/{self.horizon}  meters: {', '.join(names) or 'none'}  "
+            f"shift = {self._last['phi']:.6g}  detected: {self._last['detected']}\n"
+        )
+        if mode == "human":
+            sys.stdout.write(line)
+            return None
+        return line
+
+    def _render_rgb(self) -> np.ndarray:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(8, 3.2), dpi=80)
+        canvas = FigureCanvasAgg(fig)
+        ax = fig.subplots()
+        ax.bar(np.arange(self.estimation.m), self._last_a)
+        ax.set_xlabel("meter")
+        ax.set_ylabel("injection (pu)")
+        ax.set_title(f"step {self._k}/{self.horizon}, detected: {self._last['detected']}")
+        fig.tight_layout()
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def close(self) -> None:
+        """Nothing to release."""

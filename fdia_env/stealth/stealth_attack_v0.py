@@ -1,0 +1,118 @@
+"""``stealth_attack_v0``: false data against static state estimation with bad-data detection.
+
+## Description
+
+A grid operator estimates the bus angles from its meters by weighted least squares and runs a
+bad-data test on the residual (the χ² test at false-alarm rate α, or the largest normalised
+residual), see docs/guide/stealth.md. The attacker holds ``budget`` meters and adds an
+injection ``a`` to their readings. It wants the estimate moved as far as possible without an
+alarm. Every ``a = H c`` is undetectable (the residual does not change and the estimate moves
+by c), but on a grid such an attack needs the right meters: the security index of a state is
+the fewest meters an undetectable attack on it corrupts. The defender is passive: the env has
+the single agent ``"attacker"``. Each step is a fresh measurement snapshot.
+
+## Action Space
+
+``action="shift"`` (default): ``MultiBinary(n)``; bit j shifts state j's estimate by
+``magnitude`` radians, i.e. ``a = H c`` with ``c = magnitude · bits`` (only ``a = H c``
+shapes). ``action="free"``: ``Box(-1, 1, (m,))``, ``a = a_max · action`` (a learner can discover
+that only ``a = H c`` is safe). Either way protected meters get no injection, and when ``a``
+would corrupt more than ``budget`` meters only the ``budget`` largest ``|a_i|`` are written.
+
+## Observation Space
+
+``Box(float32, (3,))``: steps left / N in [0, 1]; whether the last step raised the alarm
+(0/1); the last χ² statistic over its threshold, capped at 10 (0 before the first step).
+
+## Rewards
+
+The damage ``|K a|_∞`` (the largest change of any state's estimate, radians) when the test does
+not alarm. On an alarm (``on_detect``): 0 (``"zero"``), ``−penalty`` (``"penalty"``) or 0 and the
+episode ends (``"end"``). ``dynamics="sampled"`` draws the meter noise and runs the test;
+``dynamics="expected"`` pays the expectation with the exact χ² detection probability
+``p(a)``: ``(1 − p) · damage + p · (payoff on an alarm)`` (no early end), χ² test only.
+
+## Starting State
+
+Nothing injected yet; the estimator is static (no state carried between snapshots).
+
+## Episode End
+
+Terminates after ``horizon`` snapshots (default 1, or ``max_cycles`` when given), or at the
+first alarm with ``on_detect="end"`` (sampled). Truncates after ``max_cycles``.
+
+## Arguments
+
+``scenario`` (a grid case or preset, ``"grid-ieee14"`` default, a ``GridModel``, an (m, n) H or
+a :class:`~fdia_env.stealth.StaticEstimation`), ``budget`` (meters, default 6), ``horizon``,
+``action`` (``"shift"`` | ``"free"``), ``magnitude`` (rad, 0.05), ``a_max`` (pu, 0.5),
+``dynamics`` (``"sampled"`` | ``"expected"``), ``test`` (``"chi2"`` | ``"lnr"``), ``alpha``
+(0.05), ``on_detect`` (``"zero"`` | ``"penalty"`` | ``"end"``), ``penalty`` (1.0),
+``protected`` (meter positions or names), ``render_mode``, ``max_cycles``.
+
+Infos (the same keys at reset and every step): ``phi`` (the last damage), ``step``,
+``detected``, ``detection_probability`` (exact, χ² test), ``statistic`` (J; its mean under
+``"expected"``), ``meters_used``, ``attacked`` ((m,) int8).
+
+## Version History
+
+- v0: initial release.
+
+## Example
+
+>>> from fdia_env.stealth import stealth_attack_v0
+>>> env = stealth_attack_v0.parallel_env(scenario="grid-ieee14", budget=3, dynamics="expected")
+>>> obs, infos = env.reset(seed=0)
+>>> bits = [0] * 13
+>>> bits[6] = 1  # shift the radial bus 7: 3 meters, undetectable
+>>> obs, rewards, terms, truncs, infos = env.step({"attacker": bits})
+>>> round(rewards["attacker"], 4), infos["attacker"]["meters_used"]
+(0.0475, 3)
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fdia_env.envs.factory import aec_views
+from fdia_env.stealth.env import StealthAttackEnv
+
+NAME = "stealth_attack_v0"
+
+
+def parallel_env(
+    scenario: Any = "grid-ieee14",
+    budget: int = 6,
+    horizon: int | None = None,
+    action: str = "shift",
+    magnitude: float = 0.05,
+    a_max: float = 0.5,
+    dynamics: str = "sampled",
+    test: str = "chi2",
+    alpha: float = 0.05,
+    on_detect: str = "zero",
+    penalty: float = 1.0,
+    protected: Any = None,
+    render_mode: str | None = None,
+    max_cycles: int | None = None,
+) -> StealthAttackEnv:
+    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
+    return StealthAttackEnv(
+        scenario,
+        budget=budget,
+        horizon=horizon,
+        action=action,
+        magnitude=magnitude,
+        a_max=a_max,
+        dynamics=dynamics,
+        test=test,
+        alpha=alpha,
+        on_detect=on_detect,
+        penalty=penalty,
+        protected=protected,
+        render_mode=render_mode,
+        max_cycles=max_cycles,
+    )
+
+
+raw_env, env = aec_views(parallel_env)

@@ -1,0 +1,191 @@
+"""Exact stealthy-attack baselines (baselines.stealth): security index, attacks, protection."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy import optimize
+
+from baselines.stealth import (
+    basic_measurement_set,
+    budgeted_attack,
+    minimum_meter_attack,
+    security_index,
+    undetectable_attack,
+)
+from fdia_env.stealth import static_estimation
+
+
+@pytest.fixture(scope="module")
+def ieee14():
+    return static_estimation("ieee14")
+
+
+@pytest.fixture(scope="module")
+def ieee14_milp(ieee14):
+    return security_index(ieee14, method="milp")
+
+
+def _check_attacks(est, result):
+    for k in range(est.n):
+        if np.isinf(result.indices[k]):
+            assert not result.attacks[k].any()
+            continue
+        a, c = result.attacks[k], result.shifts[k]
+        assert c[k] == pytest.approx(1.0)
+        np.testing.assert_allclose(a, est.H @ c, atol=1e-9)
+        assert est.is_stealthy(a)
+        assert len(result.meters_of(k)) == result.indices[k]
+        assert not set(result.meters_of(k)) & set(result.protected)
+
+
+def test_security_index_of_ieee14_by_milp_mincut_and_exhaustive_search(ieee14, ieee14_milp):
+    cut = security_index(ieee14, method="mincut")
+    binary = security_index(ieee14, method="binary")  # every 0/1 shift of the 13 angles
+    assert ieee14_milp.indices.tolist() == cut.indices.tolist() == binary.indices.tolist()
+    # full measurement: the cut around the slack (its 2 lines, its and their 2 buses'
+    # injections) bounds every index by 5; bus 8's radial transformer gives 3
+    assert ieee14_milp.indices.tolist() == [5, 5, 5, 5, 5, 5, 3, 5, 5, 5, 5, 5, 5]
+    for result in (ieee14_milp, cut, binary):
+        _check_attacks(ieee14, result)
+    assert ieee14_milp.weakest == 6
+    assert [ieee14.meters[i] for i in ieee14_milp.meters_of(6)] == ["inj6", "inj7", "trafo3@6"]
+
+
+def _random_sparse_H(seed, m, n):
+    rng = np.random.default_rng(seed)
+    while True:
+        H = rng.choice([-1.0, 0.0, 0.0, 1.0, 2.0], size=(m, n))
+        if np.linalg.matrix_rank(H) == n:
+            return H
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_security_index_milp_equals_brute_force_on_random_small_H(seed):
+    est = static_estimation(_random_sparse_H(seed, 9, 4))
+    milp = security_index(est, method="milp")
+    brute = security_index(est, method="brute")
+    assert milp.indices.tolist() == brute.indices.tolist()
+    _check_attacks(est, milp)
+    _check_attacks(est, brute)
+
+
+def test_mincut_is_an_upper_bound_with_protected_meters(ieee14):
+    protected = [0, 1, 4, 14, 15]  # the slack's injection and lines, two injections
+    milp = security_index(ieee14, method="milp", protected=protected)
+    cut = security_index(ieee14, method="mincut", protected=protected)
+    assert np.all(milp.indices <= cut.indices)
+    assert np.all(milp.indices > 0)
+    # the protected flows of the slack's two lines pin the angles of their far ends (states
+    # 0 and 3): no undetectable attack moves them
+    assert np.flatnonzero(np.isinf(milp.indices)).tolist() == [0, 3]
+    # a protected injection is only spared by a 0/1 shift that leaves its bus and all its
+    # neighbours alone; a real shift can balance it (bus 2 against bus 3 around protected
+    # bus 1), so the cut is no longer exact: state 1 needs 12 meters, and no cut reaches it
+    assert milp.indices[1] == 12
+    assert np.isinf(cut.indices[1])
+    _check_attacks(ieee14, milp)
+    _check_attacks(ieee14, cut)
+
+
+def test_protecting_a_basic_measurement_set_rules_out_every_undetectable_attack(ieee14):
+    basic = basic_measurement_set(ieee14)
+    assert len(basic) == ieee14.n
+    assert np.linalg.matrix_rank(ieee14.H[list(basic)]) == ieee14.n
+    assert undetectable_attack(ieee14, protected=basic) is None
+    shielded = security_index(ieee14, method="milp", protected=basic)
+    assert np.all(np.isinf(shielded.indices))
+    # negative control: one meter fewer leaves an undetectable attack, sparing the others
+    for dropped in (basic[0], basic[-1]):
+        fewer = [i for i in basic if i != dropped]
+        attack = undetectable_attack(ieee14, protected=fewer)
+        assert attack is not None
+        assert np.all(attack.a[fewer] == 0.0)
+        assert np.abs(attack.c).max() > 0.1
+        assert ieee14.is_stealthy(attack.a)
+        index = security_index(ieee14, method="milp", protected=fewer)
+        assert np.isfinite(index.indices).any()
+
+
+def test_minimum_meter_attack(ieee14):
+    attack = minimum_meter_attack(ieee14, method="mincut")
+    assert (attack.value, attack.target) == (3.0, 6)
+    assert [ieee14.meters[i] for i in attack.meters] == ["inj6", "inj7", "trafo3@6"]
+    assert ieee14.is_stealthy(attack.a)
+    on_zero = minimum_meter_attack(ieee14, target=0)
+    assert on_zero.value == 5.0
+    assert minimum_meter_attack(ieee14, protected=basic_measurement_set(ieee14)) is None
+
+
+def test_budgeted_attack_on_the_radial_bus(ieee14):
+    # state 6 is bus 7 (pandapower index), reached only through transformer 3 (b = 5.677 pu):
+    # shifting it alone by c changes that flow and the two end injections by b c each
+    b = ieee14.grid.network.b[18]
+    assert ieee14.grid.network.branches[18] == ("trafo", 3)
+    attack = budgeted_attack(ieee14, budget=3, a_max=0.5, target=6)
+    assert attack.value == pytest.approx(0.5 / b, rel=1e-9)
+    assert attack.meters == (6, 7, 32)
+    assert ieee14.is_stealthy(attack.a)
+    assert np.abs(attack.a).max() <= 0.5 * (1 + 1e-9)
+    # two meters cannot hide any attack on it
+    assert budgeted_attack(ieee14, budget=2, a_max=0.5, target=6).value == 0.0
+
+
+def _budget_brute(est, budget, a_max, t):
+    best = 0.0
+    for size in range(1, budget + 1):
+        for chosen in itertools.combinations(range(est.m), size):
+            zero = np.setdiff1d(np.arange(est.m), chosen)
+            Hc = est.H[list(chosen)]
+            res = optimize.linprog(
+                -np.eye(est.n)[t],
+                A_ub=np.vstack([Hc, -Hc]),
+                b_ub=np.full(2 * size, a_max),
+                A_eq=est.H[zero] if zero.size else None,
+                b_eq=np.zeros(zero.size) if zero.size else None,
+                bounds=[(None, None)] * est.n,
+            )
+            if res.status == 0:
+                best = max(best, -res.fun)
+    return best
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_budgeted_attack_equals_brute_force_on_random_small_H(seed):
+    est = static_estimation(_random_sparse_H(10 + seed, 8, 3))
+    for budget in (3, 5):
+        want = _budget_brute(est, budget, 1.0, 0)
+        got = budgeted_attack(est, budget, a_max=1.0, target=0)
+        assert got.value == pytest.approx(want, rel=1e-7, abs=1e-9)
+        assert len(got.meters) <= budget
+        if got.value > 0:
+            assert est.is_stealthy(got.a)
+            assert np.abs(got.a).max() <= 1.0 + 1e-9
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda e: budgeted_attack(e, budget=35), "budget must be <= 34"),
+        (lambda e: budgeted_attack(e, budget=0), "budget must be >= 1"),
+        (lambda e: budgeted_attack(e, budget=2, a_max=0.0), "a_max must be one positive"),
+        (lambda e: budgeted_attack(e, budget=2, target=13), "target must be a state position"),
+        (lambda e: security_index(e, protected=["inj99"]), "protected holds an unknown meter"),
+        (lambda e: security_index(e, protected=[34]), "protected holds an unknown meter"),
+        (lambda e: security_index(e, protected=[1.5]), "protected must hold meter positions"),
+        (lambda e: security_index(e, method="lp"), "method must be one of"),
+        (lambda e: security_index(e, method="brute"), "method 'brute' enumerates meter sets"),
+        (lambda e: security_index(e, c_max=-1.0), "c_max must be a finite number > 0"),
+        (lambda e: security_index(e, states=[20]), "states must be a state position"),
+        (lambda e: security_index([[1.0], [2.0]], method="mincut"), "needs a grid model"),
+        (
+            lambda e: security_index([[1.0, 2.0], [2.0, 4.0], [3.0, 6.0]]),
+            "estimation: H must have full",
+        ),
+    ],
+)
+def test_bad_input_names_the_parameter(ieee14, call, match):
+    with pytest.raises(ValueError, match=match):
+        call(ieee14)

@@ -1,0 +1,167 @@
+"""``stealth_attack_v0``: the static stealthy attacker's environment and its Gymnasium view."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, seed_test
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from baselines.stealth import budgeted_attack, security_index
+from fdia_env.stealth import GYM_ID, static_estimation, stealth_attack_v0
+
+ALPHA = 0.05
+
+
+@pytest.fixture(scope="module")
+def est():
+    return static_estimation("ieee14")
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+@pytest.mark.parametrize("action", ["shift", "free"])
+def test_pettingzoo_api_and_seed(est, dynamics, action):
+    make = lambda: stealth_attack_v0.parallel_env(  # noqa: E731
+        scenario=est, dynamics=dynamics, action=action, horizon=3
+    )
+    parallel_api_test(make(), num_cycles=50)
+    parallel_seed_test(make)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_aec_api_and_seed(est):
+    api_test(stealth_attack_v0.env(scenario=est, horizon=3), num_cycles=30)
+    seed_test(lambda: stealth_attack_v0.env(scenario=est, horizon=3), num_cycles=20)
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+def test_gymnasium_and_sb3_checkers(dynamics):
+    gym_check_env(gym.make(GYM_ID, dynamics=dynamics).unwrapped, skip_render_check=False)
+    sb3_check_env(gym.make(GYM_ID, dynamics=dynamics), warn=True)
+
+
+def test_infos_keep_their_keys_and_shapes(est):
+    env = stealth_attack_v0.parallel_env(scenario=est, horizon=4, dynamics="sampled")
+    _, infos = env.reset(seed=0)
+    sig = {k: type(v).__name__ for k, v in infos["attacker"].items()}
+    assert {"phi", "step", "detected", "detection_probability"} <= set(sig)
+    env.action_space("attacker").seed(0)
+    while env.agents:
+        _, _, _, _, infos = env.step({"attacker": env.action_space("attacker").sample()})
+        assert {k: type(v).__name__ for k, v in infos["attacker"].items()} == sig
+        assert infos["attacker"]["attacked"].shape == (est.m,)
+
+
+def test_security_index_policy_scores_its_exact_value(est):
+    # the min-cut attack on the radial bus (3 meters) fits a budget of 3: undetectable, so the
+    # expected reward is the shift times the probability of no false alarm
+    policy = security_index(est, method="mincut").policy()
+    env = stealth_attack_v0.parallel_env(scenario=est, budget=3, dynamics="expected")
+    obs, _ = env.reset(seed=0)
+    _, rewards, terms, _, infos = env.step({"attacker": policy.predict(obs["attacker"])[0]})
+    assert rewards["attacker"] == pytest.approx((1 - ALPHA) * 0.05, rel=1e-12)
+    assert infos["attacker"]["meters_used"] == 3
+    assert infos["attacker"]["detection_probability"] == ALPHA
+    assert terms["attacker"]
+
+
+def test_over_budget_shift_is_trimmed_and_detected(est):
+    # state 0 needs 5 meters: with 3, two of its meters keep their true readings
+    bits = np.zeros(est.n, dtype=np.int8)
+    bits[0] = 1
+    env = stealth_attack_v0.parallel_env(scenario=est, budget=3, dynamics="expected")
+    env.reset(seed=0)
+    _, rewards, _, _, infos = env.step({"attacker": bits})
+    p = infos["attacker"]["detection_probability"]
+    assert infos["attacker"]["meters_used"] == 3
+    assert p > 0.99
+    assert rewards["attacker"] == pytest.approx((1 - p) * infos["attacker"]["phi"])
+
+
+def test_budgeted_attack_policy_reaches_the_milp_value(est):
+    best = budgeted_attack(est, budget=3, a_max=0.5, target=6)
+    env = stealth_attack_v0.parallel_env(
+        scenario=est, budget=3, action="free", a_max=0.5, dynamics="expected"
+    )
+    obs, _ = env.reset(seed=0)
+    action = best.policy(a_max=0.5).predict(obs["attacker"])[0]
+    _, rewards, _, _, infos = env.step({"attacker": action})
+    assert infos["attacker"]["phi"] == pytest.approx(best.value, rel=1e-6)
+    assert rewards["attacker"] == pytest.approx((1 - ALPHA) * best.value, rel=1e-6)
+
+
+def test_sampled_detection_matches_the_exact_probability(est):
+    # a single-meter injection: the sampled alarm rate over many snapshots is the exact p
+    a = np.zeros(est.m)
+    a[0] = 0.06
+    p = float(est.detection_probability(a))
+    env = stealth_attack_v0.parallel_env(
+        scenario=est, budget=1, action="free", a_max=0.06, horizon=4000, dynamics="sampled"
+    )
+    env.reset(seed=3)
+    action = (a / 0.06).astype(np.float32)
+    alarms = 0
+    while env.agents:
+        _, rewards, _, _, infos = env.step({"attacker": action})
+        alarms += infos["attacker"]["detected"]
+        assert rewards["attacker"] == (
+            0.0 if infos["attacker"]["detected"] else infos["attacker"]["phi"]
+        )
+    assert abs(alarms / 4000 - p) < 4 * np.sqrt(p * (1 - p) / 4000)
+
+
+def test_on_detect_end_and_penalty(est):
+    loud = np.ones(est.m, dtype=np.float32)
+    env = stealth_attack_v0.parallel_env(
+        scenario=est, budget=est.m, action="free", horizon=5, on_detect="end"
+    )
+    env.reset(seed=0)
+    _, rewards, terms, _, infos = env.step({"attacker": loud})
+    assert infos["attacker"]["detected"] and terms["attacker"] and rewards["attacker"] == 0.0
+    assert env.agents == []
+    env = stealth_attack_v0.parallel_env(
+        scenario=est, budget=est.m, action="free", on_detect="penalty", penalty=2.0
+    )
+    env.reset(seed=0)
+    _, rewards, _, _, _ = env.step({"attacker": loud})
+    assert rewards["attacker"] == -2.0
+
+
+def test_protected_meters_get_no_injection(est):
+    env = stealth_attack_v0.parallel_env(
+        scenario=est, budget=est.m, action="free", protected=["inj6", 7], dynamics="expected"
+    )
+    env.reset(seed=0)
+    _, _, _, _, infos = env.step({"attacker": np.ones(est.m, dtype=np.float32)})
+    attacked = infos["attacker"]["attacked"]
+    assert attacked[6] == attacked[7] == 0
+    assert attacked.sum() == est.m - 2
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"budget": 35}, "budget must be <= 34"),
+        ({"alpha": 1.5}, "alpha must be a false-alarm rate in"),
+        ({"protected": ["line99@0"]}, "protected holds an unknown meter"),
+        ({"action": "sparse"}, "action must be one of"),
+        ({"test": "lnr", "dynamics": "expected"}, "test='lnr' needs dynamics='sampled'"),
+        ({"on_detect": "stop"}, "on_detect must be one of"),
+        ({"penalty": -1.0}, "penalty must be a finite number >= 0"),
+        ({"scenario": [[1.0, 2.0], [2.0, 4.0], [3.0, 6.0]]}, "H must have full column rank"),
+    ],
+)
+def test_bad_options_name_the_parameter(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        stealth_attack_v0.parallel_env(**{"scenario": "grid-ieee14", **kwargs})
+
+
+def test_non_finite_action_is_refused(est):
+    env = stealth_attack_v0.parallel_env(scenario=est, action="free")
+    env.reset(seed=0)
+    bad = np.zeros(est.m, dtype=np.float32)
+    bad[0] = np.nan
+    with pytest.raises(ValueError, match="attacker"):
+        env.step({"attacker": bad})

@@ -1,0 +1,168 @@
+"""The one population loop (IBR, FSP, PSRO) with the exact best-response oracle."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py lives at the root
+
+import train
+from agents.population import (
+    SIDES,
+    ConstantPolicy,
+    ExactOracle,
+    MatrixGame,
+    PopulationState,
+    run_population,
+)
+from agents.registry import get
+from baselines.game import exploitability, payoff_matrix, solve_zero_sum
+
+
+@pytest.fixture(scope="module")
+def game():
+    """The sensor game (ch5-game, 7 x 7) with its exact payoff matrix and value."""
+    entries = {side: get("sensor_game_v0", side) for side in SIDES}
+    kwargs = entries["attacker"].env_kwargs(None)
+    with entries["attacker"].make(**kwargs) as env:
+        reference = entries["attacker"].reference_of(env)
+    return MatrixGame(entries, kwargs, reference.matrix_game(), reference.value)
+
+
+def run(game, method, iterations, state=None, oracle=None):
+    state = state or PopulationState.new(game.sizes)
+    oracle = oracle or ExactOracle(game.payoff)
+    return run_population(method, oracle, game, state, iterations, seed=0), state
+
+
+def test_psro_with_exact_answers_is_the_double_oracle_and_reaches_the_equilibrium(game):
+    history, state = run(game, "psro", 6)
+    nash_conv = [h["relative_nash_conv"] for h in history]
+    assert nash_conv[:3] == pytest.approx([0.9191, 1.0702, 0.2271], abs=1e-4)
+    assert max(nash_conv[3:]) <= 1e-12  # the support is found at iteration 4
+    x, y = state.x, state.y
+    assert x @ game.payoff @ y == pytest.approx(game.value, rel=1e-12)
+    e = exploitability(game.payoff, x, y, game.value)
+    assert e.nash_conv == pytest.approx(0.0, abs=1e-9 * game.value)
+    # the meta-game played in the env equals the matrix on the populations' actions
+    rows, cols = state.actions["defender"], state.actions["attacker"]
+    np.testing.assert_allclose(state.meta, game.payoff[np.ix_(rows, cols)], rtol=1e-9)
+    assert solve_zero_sum(state.meta)[2] == pytest.approx(game.value, rel=1e-9)
+
+
+def test_ibr_cycles_and_every_exact_answer_has_zero_gap(game):
+    history, _ = run(game, "ibr", 8)
+    attacker = [h["br_attacker"] for h in history]
+    defender = [h["br_defender"] for h in history]
+    assert attacker == [0, 1, 1, 0, 0, 1, 1, 0] and defender == [5, 5, 4, 4, 5, 5, 4, 4]
+    assert all(h["br_gap_attacker"] == h["br_gap_defender"] == 0.0 for h in history)
+    assert history[4]["nash_conv"] == history[0]["nash_conv"] > 0  # period 4: no convergence
+
+
+def test_fsp_averages_its_answers_and_its_exploitability_falls(game):
+    history, state = run(game, "fsp", 12)
+    nash_conv = [h["relative_nash_conv"] for h in history]
+    assert nash_conv[0] == pytest.approx(0.9191, abs=1e-4)
+    assert nash_conv[-1] < 0.13 and nash_conv[-1] < nash_conv[0] / 7
+    counts = np.bincount(state.actions["attacker"], minlength=game.sizes["attacker"])
+    np.testing.assert_allclose(state.y, counts / 12)  # the uniform mix over the population
+    assert [h["timesteps"] for h in history] == [0] * 12  # exact answers take no env steps
+
+
+def test_a_resumed_loop_continues_as_if_never_stopped(game):
+    straight, _ = run(game, "psro", 6)
+    _, first = run(game, "psro", 2)
+    saved = json.loads(json.dumps({**first.saved(), "history": first.history}))  # state.json
+    # PSRO's meta-game needs the earlier policies back (here: pure strategies)
+    policies = {side: [ConstantPolicy(a) for a in saved["populations"][side]] for side in SIDES}
+    state = PopulationState(
+        saved["populations"],
+        policies,
+        saved["policies"],
+        np.array(saved["meta_payoff"]),
+        np.array(saved["x"]),
+        np.array(saved["y"]),
+        saved["history"],
+    )
+    resumed, _ = run(game, "psro", 6, state)
+    drop = ("train_seconds",)
+    assert [{k: v for k, v in h.items() if k not in drop} for h in resumed] == [
+        {k: v for k, v in h.items() if k not in drop} for h in straight
+    ]
+
+
+class StopsAt:
+    """The exact oracle, cut short (None) for ``side`` in ``iteration``: a stop request."""
+
+    def __init__(self, payoff, side, iteration):
+        self.inner, self.side, self.iteration = ExactOracle(payoff), side, iteration
+        self.saved = []
+
+    def learn(self, side, opponent, iteration):
+        if (side, iteration) == (self.side, self.iteration):
+            return None
+        return self.inner.learn(side, opponent, iteration)
+
+    def save(self, side, index, response):
+        self.saved.append((side, index))
+        return self.inner.save(side, index, response)
+
+
+def test_an_answer_cut_short_drops_its_iteration(game):
+    oracle = StopsAt(game.payoff, "defender", 3)
+    history, state = run(game, "fsp", 6, oracle=oracle)
+    assert [h["iteration"] for h in history] == [1, 2]
+    assert {side: len(state.actions[side]) for side in SIDES} == {"attacker": 2, "defender": 2}
+    assert oracle.saved == [("attacker", 0), ("defender", 0), ("attacker", 1), ("defender", 1)]
+
+
+def test_unknown_methods_are_refused(game):
+    with pytest.raises(ValueError, match="unknown method 'dqn'; valid methods: psro, fsp, ibr"):
+        run(game, "dqn", 1)
+
+
+# ---------------------------------------------------------------------------- train.py game
+
+
+def run_game(tmp_path, *args):
+    return train.main(
+        ["game", *args, "--no-progress-bar", "--final-eval-episodes", "20",
+         "--runs-root", str(tmp_path / "runs")]
+    )  # fmt: skip
+
+
+def test_the_game_command_runs_the_exact_oracle_and_resumes_it(tmp_path):
+    first = run_game(tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "3")
+    assert first.run_dir.name.startswith("sensor_game_v0-psro-exact-s0-")
+    assert [h["timesteps"] for h in first.history] == [0, 0, 0]  # nothing learned
+    state = json.loads((first.run_dir / "state.json").read_text())
+    assert state["policies"] == state["populations"]  # a pure strategy is its own record
+    more = run_game(
+        tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "5", "--resume"
+    )
+    assert more.run_dir == first.run_dir and len(more.history) == 5
+    assert more.history[:3] == first.history
+    assert more.history[-1]["relative_nash_conv"] <= 1e-12
+    with pytest.raises(ValueError, match=r"--algo exact .* --learning-rate do"):
+        run_game(tmp_path, "--algo", "exact", "--learning-rate", "0.1", "--run-dir", "x")
+
+
+def test_the_game_command_runs_torch_ppo_best_responses_and_resumes_them(tmp_path):
+    args = ["--method", "psro", "--algo", "torch-ppo", "--device", "cpu",
+            "--steps-per-iteration", "768"]  # fmt: skip
+    first = run_game(tmp_path, *args, "--iterations", "2")
+    assert first.run_dir.name.startswith("sensor_game_v0-psro-torch-ppo-s0-")
+    assert [h["timesteps"] for h in first.history] == [1536, 3072]
+    names = sorted(p.name for p in (first.run_dir / "policies").iterdir())
+    assert names == [f"{side}_{k}.{ext}" for side in ("attacker", "defender") for k in (0, 1)
+                     for ext in ("json", "pt")]  # fmt: skip
+    more = run_game(tmp_path, *args, "--iterations", "3", "--resume")
+    assert more.history[:2] == first.history and len(more.history) == 3
+    # the meta-game grew from the reloaded policies: each entry is the payoff of their actions
+    state = json.loads((more.run_dir / "state.json").read_text())
+    rows, cols = state["populations"]["defender"], state["populations"]["attacker"]
+    L = payoff_matrix("ch5-game")
+    np.testing.assert_allclose(state["meta_payoff"], L[np.ix_(rows, cols)], rtol=1e-9)
