@@ -327,3 +327,14 @@ def test_site_pages_link_back_from_the_source_and_show_usage(site):
     page = (site / "environments" / "sparse_attack_v0.html").read_text(encoding="utf-8")
     assert "Gymnasium view" in page and "agent_iter" in page and ":class:" not in page
     assert 'href="../math.html#math-4"' in page
+
+
+def test_a_rebuild_rewrites_the_highlighted_sources(tmp_path):
+    import local_links
+
+    stale = tmp_path / "_modules" / "fdia_env" / "systems" / "tracking.html"
+    stale.parent.mkdir(parents=True)
+    stale.write_text('<a class="viewcode-back" href="../gone.html#x">[docs]</a>', "utf-8")
+    app = type("App", (), {"outdir": str(tmp_path), "builder": type("B", (), {"format": "html"})})
+    local_links.fresh_source_pages(app)
+    assert not (tmp_path / "_modules").exists()
