@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import tyro
+
+from agents.options import check_choice, check_number, flag
 
 _PPO = {
     "learning_rate": 1e-3,
@@ -123,36 +124,6 @@ _HYPERPARAMETER_RULES: dict[str, _Rule] = {
     "exploration_final_eps": _UNIT,
     "tau": (float, lambda v: 0 < v <= 1, "in (0, 1]"),
 }
-
-
-def flag(name: str) -> str:
-    """``learning_rate`` -> ``learning_rate (--learning-rate)``: the field and its CLI flag."""
-    return f"{name} (--{name.replace('_', '-')})"
-
-
-def check_number(name: str, value: object, kind: type, ok: Callable[[float], bool], allowed: str):
-    """Raise unless ``value`` is a finite number of ``kind`` for which ``ok`` holds.
-
-    Raises:
-        TypeError: For a value that is not an integer (``kind=int``) or a real number.
-        ValueError: For one outside the allowed values (named in the message with the flag).
-    """
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise TypeError(f"{flag(name)} must be a number {allowed}, got {value!r}")
-    if kind is int and not isinstance(value, int):
-        raise TypeError(f"{flag(name)} must be an integer {allowed}, got {value!r}")
-    if not math.isfinite(value) or not ok(value):
-        raise ValueError(f"{flag(name)} must be {allowed}, got {value!r}")
-
-
-def check_choice(name: str, value: object, choices: tuple[str, ...]) -> None:
-    """Raise unless ``value`` is one of ``choices``.
-
-    Raises:
-        ValueError: Listing the choices.
-    """
-    if value not in choices:
-        raise ValueError(f"{flag(name)} must be one of {', '.join(choices)}, got {value!r}")
 
 
 def check_device_name(device: object) -> None:
@@ -497,7 +468,8 @@ class GameConfig:
     env_kwargs: dict[str, str] = field(default_factory=dict)
     """Extra env options as name value pairs (JSON values), e.g. --env-kwargs power 50."""
     algo: str | None = None
-    """Best-response learner: PPO, A2C or DQN (default: PPO)."""
+    """Best-response oracle: PPO, A2C or DQN (default: PPO), torch-ppo (on --device), or exact
+    (the exact best response on the payoff matrix: nothing is learned)."""
     iterations: int = 8
     """Iterations; each trains one attacker and one defender best response."""
     steps_per_iteration: int = 3_000

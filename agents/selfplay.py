@@ -22,11 +22,12 @@ and the scores of the finished iterations are written.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -42,9 +43,11 @@ from agents.checkpoint import (
     save_model,
 )
 from agents.config import (
+    TORCH_PPO,
     GameConfig,
     algo_kwargs,
     check_device_available,
+    is_torch_ppo,
     parse_env_kwargs,
     resolved_hyperparameters,
 )
@@ -56,7 +59,10 @@ from agents.population import (
     METHODS,
     SIDES,
     BestResponse,
+    ConstantPolicy,
+    ExactOracle,
     MatrixGame,
+    Oracle,
     PopulationState,
     initial_action,
     report_line,
@@ -69,7 +75,12 @@ from agents.training import check_env_kwargs, env_thunk, make_env
 from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
 
+if TYPE_CHECKING:
+    from agents.torch_ppo import TorchPPOConfig
+
 STATE = "state.json"  # a game run folder that --resume can continue has it
+EXACT = "exact"  # --algo exact: the exact best response on the payoff matrix
+GAME_NUM_ENVS = 64  # torch-ppo best responses: members of the torch vector env
 
 
 @dataclass
@@ -136,10 +147,22 @@ def learn_best_response(
     return model, initial_action(model, entry, env_kwargs)
 
 
+def game_algo(cfg: GameConfig) -> str:
+    """The best-response oracle ``--algo`` names: ``exact``, ``torch-ppo`` or an SB3 algorithm.
+
+    Raises:
+        ValueError: For an algorithm that does not apply (listing the valid ones).
+    """
+    if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT:
+        return EXACT
+    if is_torch_ppo(cfg.algo):
+        return TORCH_PPO
+    return get(cfg.env, "attacker").algorithm(cfg.algo)
+
+
 def game_prefix(cfg: GameConfig) -> str:
     """Run folder name without its time: ``<env>-<method>-<algo>-s<seed>``."""
-    algo = get(cfg.env, "attacker").algorithm(cfg.algo)
-    return run_prefix(f"{cfg.env}-{cfg.method}", algo, cfg.run.seed)
+    return run_prefix(f"{cfg.env}-{cfg.method}", game_algo(cfg), cfg.run.seed)
 
 
 def policy_names(state: dict[str, Any]) -> dict[str, list[str]]:
@@ -237,16 +260,16 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(game_names())}")
     check_device_available(cfg.run.device)
     entries = {side: get(cfg.env, side) for side in SIDES}
-    algo = entries["attacker"].algorithm(cfg.algo)
-    kwargs = algo_kwargs(algo, cfg.hp)
-    hyperparameters = resolved_hyperparameters(algo, cfg.hp)
+    algo = game_algo(cfg)
+    kwargs, hyperparameters, torch_config = _learner_options(cfg, algo)
     env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
     env = make_env(lambda: entries["attacker"].make(**env_kwargs), entries["attacker"].gym_id)
     with env:
         reference = entries["attacker"].reference_of(env)
         n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
-        build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)  # SB3 checks the options
+        if algo not in (EXACT, TORCH_PPO):  # SB3 checks the options when it builds a model
+            build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     L, value = reference.matrix_game(), reference.value  # the uninformed Bayesian game: L̄
@@ -260,9 +283,14 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             state = _read_state(run_dir / STATE)
             run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")
             names = policy_names(state)
-            models = load_policies(
-                run_dir, names, entries, env_kwargs, algo, kwargs, cfg.run.device, trusted
-            )
+            if algo == EXACT:
+                models = {s: [ConstantPolicy(a) for a in state["populations"][s]] for s in SIDES}
+            elif algo == TORCH_PPO:
+                models = _load_torch_policies(run_dir, names, cfg.run.device)
+            else:
+                models = load_policies(
+                    run_dir, names, entries, env_kwargs, algo, kwargs, cfg.run.device, trusted
+                )
             say(f"resuming {run_dir} after iteration {len(state['history'])}")
         else:
             run.begin()
@@ -281,7 +309,15 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         stop = run.watch_signals()
         game = MatrixGame(entries, env_kwargs, L, value)
-        oracle = SB3Oracle(cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop)
+        oracle: Oracle
+        if algo == EXACT:
+            oracle = ExactOracle(L)
+        elif algo == TORCH_PPO:
+            oracle = TorchPPOOracle(cfg, run_dir, entries, env_kwargs, torch_config, stop)
+        else:
+            oracle = SB3Oracle(
+                cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop
+            )
         loop = _population_state(state, names, models, n)
         history = _iterate(cfg, run_dir, loop, oracle, game, stop, report)
         if not history:  # stopped before the first iteration finished
@@ -325,6 +361,116 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             train_seconds,
             interrupted=stop.signum,
         )
+
+
+def _learner_options(
+    cfg: GameConfig, algo: str
+) -> tuple[dict[str, Any], dict[str, Any], TorchPPOConfig | None]:
+    """The SB3 kwargs, the resolved hyperparameters and torch-ppo's config of ``algo``.
+
+    Raises:
+        ValueError: For a hyperparameter given with ``--algo exact`` (nothing learns), or one
+            that does not apply to the learner.
+    """
+    if algo == EXACT:
+        given = [f.name for f in dataclasses.fields(cfg.hp) if getattr(cfg.hp, f.name) is not None]
+        if given:
+            raise ValueError(
+                f"--algo exact answers with the exact best response on the payoff matrix: "
+                f"{', '.join('--' + g.replace('_', '-') for g in given)} do(es) not apply"
+            )
+        return {}, {}, None
+    if algo == TORCH_PPO:
+        from agents.torch_ppo import TorchPPOConfig
+
+        hyperparameters = resolved_hyperparameters(TORCH_PPO, cfg.hp)
+        num_envs = min(GAME_NUM_ENVS, cfg.steps_per_iteration)
+        try:
+            config = TorchPPOConfig.from_hyperparameters(
+                hyperparameters, cfg.steps_per_iteration, num_envs
+            )
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"--algo torch-ppo: {exc}") from None
+        return {}, hyperparameters, config
+    return algo_kwargs(algo, cfg.hp), resolved_hyperparameters(algo, cfg.hp), None
+
+
+def _load_torch_policies(
+    run_dir: Path, names: dict[str, list[str]], device: str
+) -> dict[str, list[Any]]:
+    """A torch-ppo game's saved policies (tensors and JSON, :func:`~agents.torch_ppo.load_policy`).
+
+    Raises:
+        ValueError: For a file outside the run folder, missing, corrupt or tampered with.
+    """
+    from agents.torch_ppo import load_policy
+
+    folder = Path(run_dir) / "policies"
+    return {
+        side: [
+            load_policy(inside(folder, name, run_dir, "policy file"), run_dir, device)
+            for name in names[side]
+        ]
+        for side in SIDES
+    }
+
+
+class TorchPPOOracle:
+    """Best responses learned by torch-ppo on the device (the ``torch-ppo`` oracle).
+
+    Each answer trains a fresh :func:`~agents.torch_ppo.train_torch_ppo` policy for
+    ``--steps-per-iteration`` env steps on the side's torch vector env (B = min(64, steps)
+    members), the other side's mix drawn per member as its fixed opponent; it is saved as
+    ``policies/<side>_<k>.json`` / ``.pt`` (tensors only). A stop request ends training after
+    the current PPO iteration and drops the answer.
+    """
+
+    def __init__(
+        self,
+        cfg: GameConfig,
+        run_dir: Path,
+        entries: dict[str, Trainable],
+        env_kwargs: dict[str, Any],
+        config: TorchPPOConfig,
+        stop: StopRequest,
+    ) -> None:
+        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
+        self.config, self.stop = config, stop
+        self.device = _torch_device(cfg.run.device)
+
+    def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
+        """A fresh torch-ppo policy's answer to ``opponent``, or None if a stop cut it short."""
+        from agents.torch_ppo import make_torch_env, train_torch_ppo
+
+        entry = self.entries[side]
+        seed = derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
+        mix = FixedMix(opponent, seed=derived_seed(seed, 1))
+        venv = make_torch_env(
+            entry.gym_id, self.config.num_envs, self.device, opponent=mix, **self.env_kwargs
+        )
+        try:
+            result = train_torch_ppo(venv, self.config, seed, stop=lambda: self.stop.requested)
+        finally:
+            venv.close()
+        if self.stop.requested:
+            return None
+        return BestResponse(result.policy, initial_action(result.policy, entry, self.env_kwargs))
+
+    def save(self, side: str, index: int, response: BestResponse) -> str:
+        """Save the policy as ``policies/<side>_<index>.json``; returns the file's name."""
+        from agents.torch_ppo import save_policy
+
+        path = self.run_dir / "policies" / f"{side}_{index}.json"
+        return save_policy(response.policy, path, self.config).name
+
+
+def _torch_device(name: str) -> str:
+    """``--device``, with ``auto`` resolved to cuda when present, else cpu."""
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
 
 
 class SB3Oracle:
@@ -399,7 +545,7 @@ def _iterate(
     cfg: GameConfig,
     run_dir: Path,
     loop: PopulationState,
-    oracle: SB3Oracle,
+    oracle: Oracle,
     game: MatrixGame,
     stop: StopRequest,
     report: Callable[[str], None] | None,
@@ -429,8 +575,9 @@ def _iterate(
         def progress(steps: range) -> Any:
             return tqdm(steps, desc=f"{cfg.method} on {cfg.env}", unit="iter")
 
+    steps = 0 if isinstance(oracle, ExactOracle) else cfg.steps_per_iteration  # exact: none
     history = run_population(
-        cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, cfg.steps_per_iteration,
+        cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, steps,
         lambda: stop.requested, on_iteration, progress,
     )  # fmt: skip
     tb.close()

@@ -42,27 +42,11 @@ from gymnasium import spaces
 from torch import nn
 
 from agents.checkpoint import inside, load_tensors, read_json, save_pair, tensor_file
+from agents.options import check_int, check_real
 
 ALGO = "torch-ppo"
 FORMAT = "fdia_env-torch-ppo-v1"
 MAX_NUM_ENVS = 2**24
-
-
-def _check_int(name: str, value: object, minimum: int, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise TypeError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    if value < minimum or (maximum is not None and value > maximum):
-        allowed = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
-    return int(value)
-
-
-def _check_real(name: str, value: object, ok: Callable[[float], bool], allowed: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise TypeError(f"{name} must be a number {allowed}, got {value!r}")
-    if not math.isfinite(value) or not ok(value):
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -111,24 +95,24 @@ class TorchPPOConfig:
     init_log_std: float = -0.5
 
     def __post_init__(self) -> None:
-        _check_int("total_timesteps", self.total_timesteps, 1)
-        _check_int("num_envs", self.num_envs, 1, MAX_NUM_ENVS)
-        _check_int("num_steps", self.num_steps, 1)
-        _check_int("num_minibatches", self.num_minibatches, 1)
-        _check_int("update_epochs", self.update_epochs, 1)
+        check_int("total_timesteps", self.total_timesteps, 1)
+        check_int("num_envs", self.num_envs, 1, MAX_NUM_ENVS)
+        check_int("num_steps", self.num_steps, 1)
+        check_int("num_minibatches", self.num_minibatches, 1)
+        check_int("update_epochs", self.update_epochs, 1)
         if self.num_minibatches > self.num_envs * self.num_steps:
             raise ValueError(
                 f"num_minibatches must be <= num_envs × num_steps = "
                 f"{self.num_envs * self.num_steps}, got {self.num_minibatches}"
             )
-        _check_real("learning_rate", self.learning_rate, lambda v: v > 0, "> 0")
-        _check_real("gamma", self.gamma, lambda v: 0 < v <= 1, "in (0, 1]")
-        _check_real("gae_lambda", self.gae_lambda, lambda v: 0 <= v <= 1, "in [0, 1]")
-        _check_real("clip_coef", self.clip_coef, lambda v: v > 0, "> 0")
-        _check_real("ent_coef", self.ent_coef, lambda v: v >= 0, ">= 0")
-        _check_real("vf_coef", self.vf_coef, lambda v: v >= 0, ">= 0")
-        _check_real("max_grad_norm", self.max_grad_norm, lambda v: v > 0, "> 0")
-        _check_real("init_log_std", self.init_log_std, lambda v: True, "finite")
+        check_real("learning_rate", self.learning_rate, lambda v: v > 0, "> 0")
+        check_real("gamma", self.gamma, lambda v: 0 < v <= 1, "in (0, 1]")
+        check_real("gae_lambda", self.gae_lambda, lambda v: 0 <= v <= 1, "in [0, 1]")
+        check_real("clip_coef", self.clip_coef, lambda v: v > 0, "> 0")
+        check_real("ent_coef", self.ent_coef, lambda v: v >= 0, ">= 0")
+        check_real("vf_coef", self.vf_coef, lambda v: v >= 0, ">= 0")
+        check_real("max_grad_norm", self.max_grad_norm, lambda v: v > 0, "> 0")
+        check_real("init_log_std", self.init_log_std, lambda v: True, "finite")
         for name in ("anneal_lr", "norm_adv", "norm_obs", "norm_reward"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -137,7 +121,7 @@ class TorchPPOConfig:
                 f"hidden must be a non-empty sequence of layer sizes, got {self.hidden!r}"
             )
         for size in self.hidden:
-            _check_int("hidden (each layer size)", size, 1)
+            check_int("hidden (each layer size)", size, 1)
 
     @classmethod
     def from_hyperparameters(
@@ -215,8 +199,8 @@ class PolicySpec:
     init_log_std: float = -0.5
 
     def __post_init__(self) -> None:
-        _check_int("obs_dim", self.obs_dim, 1)
-        _check_int("n", self.n, 1)
+        check_int("obs_dim", self.obs_dim, 1)
+        check_int("n", self.n, 1)
         if self.kind not in ("discrete", "box"):
             raise ValueError(f"kind must be 'discrete' or 'box', got {self.kind!r}")
         if self.kind == "box":
@@ -513,8 +497,8 @@ def train_torch_ppo(
         raise ValueError(f"env has {env.num_envs} members, config.num_envs is {config.num_envs}")
     if env.metadata.get("autoreset_mode") != gym.vector.AutoresetMode.SAME_STEP:
         raise ValueError("env must run in AutoresetMode.SAME_STEP (make_torch_env does)")
-    _check_int("seed", seed, 0, 2**63 - 1)
-    _check_int("checkpoint_freq", checkpoint_freq, 0)
+    check_int("seed", seed, 0, 2**63 - 1)
+    check_int("checkpoint_freq", checkpoint_freq, 0)
     device = torch.device(env.device)
     B, T = config.num_envs, config.num_steps
     torch.manual_seed(seed)

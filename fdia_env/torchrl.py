@@ -61,8 +61,8 @@ def action_spec_of(space: spaces.Space, batch: int, device: torch.device) -> Any
             raise TypeError(f"a Discrete action space must start at 0 for TorchRL, got {space}")
         return Categorical(int(space.n), shape=(batch,), dtype=torch.int64, device=device)
     if isinstance(space, spaces.Box):
-        low = torch.as_tensor(np.broadcast_to(space.low, space.shape), device=device)
-        high = torch.as_tensor(np.broadcast_to(space.high, space.shape), device=device)
+        low = torch.as_tensor(np.broadcast_to(space.low, space.shape).copy(), device=device)
+        high = torch.as_tensor(np.broadcast_to(space.high, space.shape).copy(), device=device)
         dtype = torch.float32 if space.dtype == np.float32 else torch.float64
         return Bounded(
             low.expand(batch, *space.shape).to(dtype),

@@ -2,7 +2,10 @@
 
 import contextlib
 import io
+import logging
+import re
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -11,17 +14,60 @@ from pettingzoo.test import max_cycles_test, performance_benchmark, render_test
 
 import fdia_env
 from fdia_env import (
-    covariance_attack_v0,
     detection_game_v0,
-    fdia_v0,
     sensor_game_v0,
     sparse_attack_v0,
 )
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 from fdia_env.wrappers import flatten_observation_v0, shared_policy_v0
 
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+CLIENTS_PAGE = Path(__file__).resolve().parent.parent / "docs" / "guide" / "clients.md"
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 pytestmark = pytest.mark.filterwarnings("ignore")
+
+
+# --- the clients page: every snippet prints the output shown under it -------------------------
+def page_snippets() -> list[tuple[str, str]]:
+    """(code, shown output) of each snippet of docs/guide/clients.md, in page order."""
+    text = CLIENTS_PAGE.read_text(encoding="utf-8")
+    fence = r"```(?:python|\{code-block\} python)\n(.*?)```\n\n```(?:text)?\n(.*?)```"
+    return re.findall(fence, text, flags=re.S)
+
+
+def run_snippet(code: str, name: str) -> str:
+    """What ``code`` prints (TorchRL's INFO log lines, timestamped, are not shown on the page)."""
+    import torchrl  # noqa: F401  (its import sets the level of its logger)
+
+    out = io.StringIO()
+    log = logging.getLogger("torchrl")
+    level = log.level
+    log.setLevel(logging.WARNING)
+    try:
+        with contextlib.redirect_stdout(out), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            exec(compile(code, name, "exec"), {"__name__": "__main__"})
+    finally:
+        log.setLevel(level)
+    return out.getvalue()
+
+
+def test_the_clients_page_opens_with_the_spawned_worker_id_form():
+    snippets = page_snippets()
+    assert len(snippets) == 6
+    text = CLIENTS_PAGE.read_text(encoding="utf-8")
+    first_section = text.split("\n## ", 2)[1]
+    assert first_section.startswith("Workers in other processes")
+    assert 'GymEnv("fdia_env:fdia_env/' in snippets[0][0]
+    # every family is in a TorchRL, a Tianshou and an SB3 snippet
+    families = ("sparse", "covariance", "sensor", "detection")
+    for code in (snippets[1][0], snippets[2][0] + snippets[3][0], snippets[4][0]):
+        assert all(family in code.lower() for family in families)  # TorchRL, Tianshou, SB3
+
+
+@pytest.mark.parametrize("index", range(len(page_snippets())), ids=lambda i: f"snippet{i + 1}")
+def test_clients_page_snippet_prints_what_the_page_shows(index):
+    code, shown = page_snippets()[index]
+    assert run_snippet(code, f"docs/guide/clients.md, snippet {index + 1}") == shown
 
 
 # --- PettingZoo's own test set (the API and seed tests are in test_envs_api.py) ------------

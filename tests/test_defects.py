@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from baselines.covariance import det_optimal, kkt_residuals, water_filling
+from fdia_env.systems import position_sensor, pv_sensor, tracking_system
 
 # --- water-filling at tiny powers and with negative gains -------------------------------------
 
@@ -300,3 +301,56 @@ def test_spd_inv_sum_matches_a_high_precision_reference_for_a_rank_one_sum(power
     ref_np = np.array(ref.tolist(), dtype=float)
     assert np.linalg.norm(inverse - ref_np) <= 1e-12 * np.linalg.norm(ref_np)
     assert logdet == pytest.approx(float(mp.log(mp.det(exact))), rel=1e-12, abs=1e-12)
+
+
+# --- extreme noise scales: clear errors instead of OverflowError, steady states at any scale ----
+
+
+@pytest.mark.parametrize(
+    ("make", "name"),
+    [
+        (
+            lambda: tracking_system(1e200, [3.0]),
+            "sigma_v",
+        ),
+        (
+            lambda: tracking_system(1.0, [1e200]),
+            "sigma_w",
+        ),
+        (
+            lambda: tracking_system(1e100, [3.0], T=1e60),
+            "sigma_v",
+        ),
+        (
+            lambda: tracking_system(1e-170, [3.0]),
+            "sigma_v",
+        ),
+        (lambda: pv_sensor(1e200, 1.0), "sigma_p"),
+        (lambda: position_sensor(1e-200), "sigma"),
+    ],
+)
+def test_noise_whose_variance_leaves_float64_is_refused_by_name(make, name):
+    # tracking_system(1e200, [3.0]) raised a bare OverflowError (sigma_v ** 2)
+    with pytest.raises(ValueError, match=rf"{name}.* outside float64's normal range"):
+        make()
+
+
+@pytest.mark.parametrize("c", [1e-150, 1e-100, 1e100, 1e150])
+def test_steady_state_scales_with_the_noise_at_any_absolute_scale(c):
+    # P(cσ) = c² P(σ), W(cσ) = W(σ): σ_v = σ_w = 1e-150 "diverged" before (the DARE solver's
+    # absolute tolerances, then a 2 × 2 determinant of 1e-600)
+    from fdia_env.kalman import steady_state
+
+    P_pred, P_post, W = steady_state(tracking_system(0.5 * c, [3.0 * c, 4.0 * c]))
+    ref_pred, ref_post, ref_W = steady_state(tracking_system(0.5, [3.0, 4.0]))
+    np.testing.assert_allclose(P_pred / c**2, ref_pred, rtol=1e-12)
+    np.testing.assert_allclose(P_post / c**2, ref_post, rtol=1e-12)
+    np.testing.assert_allclose(W, ref_W, rtol=1e-12)
+
+
+def test_inv2_of_tiny_and_huge_matrices_is_the_scaled_inverse():
+    from fdia_env.kalman import inv2
+
+    a = np.array([[2.0, 1.0], [1.0, 3.0]])
+    for c in (1e-200, 1e-160, 1e160, 1e200):
+        np.testing.assert_allclose(inv2(a * c) * c, np.linalg.inv(a), rtol=1e-14)

@@ -1,10 +1,15 @@
 """The one population loop (IBR, FSP, PSRO) with the exact best-response oracle."""
 
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py lives at the root
+
+import train
 from agents.population import (
     SIDES,
     ConstantPolicy,
@@ -14,7 +19,7 @@ from agents.population import (
     run_population,
 )
 from agents.registry import get
-from baselines.game import exploitability, solve_zero_sum
+from baselines.game import exploitability, payoff_matrix, solve_zero_sum
 
 
 @pytest.fixture(scope="module")
@@ -117,3 +122,47 @@ def test_an_answer_cut_short_drops_its_iteration(game):
 def test_unknown_methods_are_refused(game):
     with pytest.raises(ValueError, match="unknown method 'dqn'; valid methods: psro, fsp, ibr"):
         run(game, "dqn", 1)
+
+
+# ---------------------------------------------------------------------------- train.py game
+
+
+def run_game(tmp_path, *args):
+    return train.main(
+        ["game", *args, "--no-progress-bar", "--final-eval-episodes", "20",
+         "--runs-root", str(tmp_path / "runs")]
+    )  # fmt: skip
+
+
+def test_the_game_command_runs_the_exact_oracle_and_resumes_it(tmp_path):
+    first = run_game(tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "3")
+    assert first.run_dir.name.startswith("sensor_game_v0-psro-exact-s0-")
+    assert [h["timesteps"] for h in first.history] == [0, 0, 0]  # nothing learned
+    state = json.loads((first.run_dir / "state.json").read_text())
+    assert state["policies"] == state["populations"]  # a pure strategy is its own record
+    more = run_game(
+        tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "5", "--resume"
+    )
+    assert more.run_dir == first.run_dir and len(more.history) == 5
+    assert more.history[:3] == first.history
+    assert more.history[-1]["relative_nash_conv"] <= 1e-12
+    with pytest.raises(ValueError, match=r"--algo exact .* --learning-rate do"):
+        run_game(tmp_path, "--algo", "exact", "--learning-rate", "0.1", "--run-dir", "x")
+
+
+def test_the_game_command_runs_torch_ppo_best_responses_and_resumes_them(tmp_path):
+    args = ["--method", "psro", "--algo", "torch-ppo", "--device", "cpu",
+            "--steps-per-iteration", "768"]  # fmt: skip
+    first = run_game(tmp_path, *args, "--iterations", "2")
+    assert first.run_dir.name.startswith("sensor_game_v0-psro-torch-ppo-s0-")
+    assert [h["timesteps"] for h in first.history] == [1536, 3072]
+    names = sorted(p.name for p in (first.run_dir / "policies").iterdir())
+    assert names == [f"{side}_{k}.{ext}" for side in ("attacker", "defender") for k in (0, 1)
+                     for ext in ("json", "pt")]  # fmt: skip
+    more = run_game(tmp_path, *args, "--iterations", "3", "--resume")
+    assert more.history[:2] == first.history and len(more.history) == 3
+    # the meta-game grew from the reloaded policies: each entry is the payoff of their actions
+    state = json.loads((more.run_dir / "state.json").read_text())
+    rows, cols = state["populations"]["defender"], state["populations"]["attacker"]
+    L = payoff_matrix("ch5-game")
+    np.testing.assert_allclose(state["meta_payoff"], L[np.ix_(rows, cols)], rtol=1e-9)

@@ -97,7 +97,7 @@ class StealthyKalmanAttack:
         sensors: The attacked sensors (positions of rows of C).
         eigenvalue: The unstable eigenvalue used (``None`` if not vulnerable).
         direction: v, the error direction that grows (unit norm; ``None`` if not vulnerable).
-        reach: (n, |S|) the reach phase's inputs (``None`` if not vulnerable or complex λ).
+        reach: ``(n, |S|)``: the reach phase's inputs (``None`` if not vulnerable or complex λ).
     """
 
     vulnerable: bool

@@ -19,6 +19,7 @@ from __future__ import annotations
 import html
 import importlib
 import re
+import shutil
 import urllib.parse
 from collections import Counter
 from pathlib import Path
@@ -130,10 +131,21 @@ def _citation_link(match: re.Match, line: str) -> str:
     return f":ref:`docs/{page}.md §{section} <{page}-{section.replace('.', '-')}>`"
 
 
+def fresh_source_pages(app) -> None:
+    """Remove last build's highlighted sources, so that viewcode writes them with today's links.
+
+    viewcode skips a source page that is newer than its module, which would keep a back-link of
+    an earlier build (and fail the link check) after only the documentation changed.
+    """
+    if app.builder.format == "html":
+        shutil.rmtree(Path(app.outdir) / "_modules", ignore_errors=True)
+
+
 def setup(app):
     """Sphinx extension entry point."""
     # after every document is read, before viewcode writes its source pages
     app.connect("env-updated", fix_viewcode_backlinks)
+    app.connect("builder-inited", fresh_source_pages)
     app.connect("build-finished", check_local_links)
     app.connect("autodoc-process-docstring", link_citations)
     return {"parallel_read_safe": True, "version": "1"}

@@ -65,6 +65,7 @@ def spd_inv_sum(P: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 _COFACTOR_SIGNS = np.array([[1.0, -1.0], [-1.0, 1.0]])
+_TINY = float(np.finfo(np.float64).tiny)
 
 
 def inv2(a: np.ndarray) -> np.ndarray:
@@ -84,15 +85,19 @@ def inv2(a: np.ndarray) -> np.ndarray:
             return inv2(a / scale) / scale
         signs = xp.asarray(_COFACTOR_SIGNS)
         return mT(xp.flip_last2(a)) * (signs / det[..., None, None])
-    with np.errstate(over="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
         det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
-    if not np.all(np.isfinite(det)):  # entries beyond ~1e154: invert a / max|a| instead
+    if not np.all(np.isfinite(det)) or np.any(np.abs(det) < _TINY):
+        # entries beyond ~1e154 overflow the determinant, entries below ~1e-154 underflow it
+        # (a covariance of 1e-300): invert a / max|a| instead
         scale = np.abs(a).max(axis=(-2, -1), keepdims=True)
         if not np.all(np.isfinite(scale)) or np.any(scale == 0.0):
-            # NaN/inf entries (a diverged iterate): no rescaling helps; LAPACK gives NaN/inf
-            # instead of recursing without end
+            # NaN/inf entries (a diverged iterate) or a zero matrix: no rescaling helps;
+            # LAPACK gives NaN/inf or its error
             return np.linalg.inv(a)
-        return inv2(a / scale) / scale
+        a = a / scale
+        det = (a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0])[..., None, None]
+        return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / (det * scale))
     return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / det[..., None, None])
 
 

@@ -99,8 +99,11 @@ def _solve_dare(
     system: LinearSystem, mask: np.ndarray | None, rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     H, R = system.H[rows], system.R[np.ix_(rows, rows)]
+    # P(cQ, cR) = c P(Q, R): solved at unit noise scale, so that covariances of 1e-300 (or
+    # 1e300) are neither lost to underflow nor rejected by the solver's absolute tolerances
+    c = float(np.abs(R).max())
     try:
-        P_pred = sym(scipy.linalg.solve_discrete_are(system.F.T, H.T, system.Q, R))
+        P_pred = c * sym(scipy.linalg.solve_discrete_are(system.F.T, H.T, system.Q / c, R / c))
         if not np.all(np.isfinite(P_pred)) or np.linalg.eigvalsh(P_pred).min() <= 0:
             raise np.linalg.LinAlgError("non-positive DARE solution")
         if _dare_residual(system, P_pred, rows) > 1e-8:

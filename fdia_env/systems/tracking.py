@@ -11,10 +11,28 @@ from fdia_env._validation import check_positive
 from fdia_env.systems.system import LinearSystem, Sensor
 
 
+def _variance(name: str, sigma: float, factor: float = 1.0) -> float:
+    """``(factor · sigma)²`` as a finite positive float, else ``ValueError`` naming ``name``.
+
+    ``sigma ** 2`` of a Python float raises a bare ``OverflowError`` above ~1.3e154 and
+    underflows to 0 below ~1e-162; the variance must be a normal float64 in both directions.
+    """
+    with np.errstate(over="ignore", under="ignore"):
+        value = float(np.float64(factor * sigma) ** 2)
+    if not np.isfinite(value) or value < np.finfo(np.float64).tiny:
+        scaled = "" if factor == 1.0 else f" with T (the largest entry of Q is (σ_v·{factor:g})²)"
+        raise ValueError(
+            f"{name} = {sigma:g}{scaled} gives a variance {value:g} outside float64's normal "
+            f"range (about 2.2e-308 to 1.8e308): a standard deviation must lie roughly in "
+            "[1e-154, 1e154]"
+        )
+    return value
+
+
 def position_sensor(sigma: float, name: str = "") -> Sensor:
     """A position sensor ``H = [1, 0]`` with noise standard deviation ``sigma``."""
     sigma = check_positive("sigma", sigma)
-    return Sensor(H=np.array([[1.0, 0.0]]), R=np.array([[sigma**2]]), name=name)
+    return Sensor(H=np.array([[1.0, 0.0]]), R=np.array([[_variance("sigma", sigma)]]), name=name)
 
 
 def pv_sensor(sigma_p: float, sigma_vel: float, rho: float = 0.0, name: str = "") -> Sensor:
@@ -28,6 +46,8 @@ def pv_sensor(sigma_p: float, sigma_vel: float, rho: float = 0.0, name: str = ""
     """
     sigma_p = check_positive("sigma_p", sigma_p)
     sigma_vel = check_positive("sigma_vel", sigma_vel)
+    _variance("sigma_p", sigma_p)
+    _variance("sigma_vel", sigma_vel)
     if isinstance(rho, bool) or not isinstance(rho, numbers.Real):
         raise ValueError(f"rho must be a number strictly between -1 and 1, got {rho!r}")
     rho = float(rho)
@@ -81,7 +101,8 @@ def tracking_system(
             f"deviations), got {sigma_w!r}"
         )
     for i, s in enumerate(() if sigma_w is None else sigma_w):
-        all_sensors.append(position_sensor(check_positive(f"sigma_w[{i}]", s), name=f"z{i + 1}"))
+        _variance(f"sigma_w[{i}]", check_positive(f"sigma_w[{i}]", s))
+        all_sensors.append(position_sensor(s, name=f"z{i + 1}"))
     if sensors is not None:
         if isinstance(sensors, Sensor | str) or not isinstance(sensors, Iterable):
             raise ValueError(f"sensors must be a sequence of Sensor, got {type(sensors).__name__}")
@@ -95,9 +116,13 @@ def tracking_system(
     if not all_sensors:
         raise ValueError("tracking_system needs sigma_w or sensors: got no sensor at all")
     gamma = np.array([[T**2 / 2.0], [T]])
+    _variance("sigma_v", sigma_v, max(T**2 / 2.0, T))  # the largest entry of Q = σ_v² Γ Γ'
+    q = _variance("sigma_v", sigma_v)
+    with np.errstate(under="ignore"):
+        Q = q * (gamma @ gamma.T)
     return LinearSystem(
         F=np.array([[1.0, T], [0.0, 1.0]]),
-        Q=sigma_v**2 * (gamma @ gamma.T),
+        Q=Q,
         sensors=tuple(all_sensors),
         x0=x0,
         P0=P0,
