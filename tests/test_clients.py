@@ -14,17 +14,15 @@ from pettingzoo.test import max_cycles_test, performance_benchmark, render_test
 
 import fdia_env
 from fdia_env import (
-    covariance_attack_v0,
     detection_game_v0,
-    fdia_v0,
     sensor_game_v0,
     sparse_attack_v0,
 )
-from fdia_env.registration import GYM_IDS
+from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 from fdia_env.wrappers import flatten_observation_v0, shared_policy_v0
 
 CLIENTS_PAGE = Path(__file__).resolve().parent.parent / "docs" / "guide" / "clients.md"
-MODULES = [sparse_attack_v0, covariance_attack_v0, sensor_game_v0, detection_game_v0, fdia_v0]
+MODULES = [load(name) for name in ENV_NAMES]  # every entry of the table of environments
 pytestmark = pytest.mark.filterwarnings("ignore")
 
 

@@ -348,6 +348,10 @@ def test_the_system_family_env_runs_sparse_attack_v0_on_each_drawn_system(object
         )
         assert a[1] == b[1]
     assert a[1]["attacker"] != 0.0  # the terminal reward: Φ of the attacked window
+    # the sparse part of the observation space is the inner env's, bound for bound
+    box, size = env._inner.observation_space, env.sparse_size
+    np.testing.assert_array_equal(env.observation_space.low[:size], box.low)
+    np.testing.assert_array_equal(env.observation_space.high[:size], box.high)
 
 
 def test_no_library_module_is_a_re_export_shim():

@@ -189,6 +189,36 @@ def test_plain_ppo_config_trains_one_iteration_on_every_env(local_ray, name):
         algo.stop()
 
 
+def test_plain_ppo_config_on_rllibs_own_pettingzoo_wrapper_masks_the_int8_mask(local_ray):
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+    from ray.tune.registry import register_env
+
+    from agents.rllib.module import MaskedPPOTorchRLModule, register_default_module
+    from fdia_env import sparse_attack_v0
+
+    register_default_module()
+
+    def creator(env_config):
+        return ParallelPettingZooEnv(sparse_attack_v0.parallel_env(illegal_action="error"))
+
+    register_env("pettingzoo_sparse_attack", creator)
+    config = (
+        PPOConfig()
+        .environment("pettingzoo_sparse_attack")
+        .env_runners(num_env_runners=0)
+        .multi_agent(policies={"attacker"}, policy_mapping_fn=lambda agent_id, *a, **k: agent_id)
+        .training(train_batch_size_per_learner=48, minibatch_size=48, num_epochs=1)
+    )
+    algo = config.build_algo()
+    try:  # PettingZoo's {"observation", "action_mask" (int8)}: an illegal action would raise
+        result = algo.train()
+        assert result["env_runners"]["num_env_steps_sampled"] >= 48
+        assert isinstance(algo.get_module("attacker"), MaskedPPOTorchRLModule)
+    finally:
+        algo.stop()
+
+
 def test_plain_ppo_config_with_a_remote_env_runner_masks_there_too(local_ray):
     from ray.rllib.algorithms.ppo import PPOConfig
 

@@ -253,3 +253,66 @@ def test_vector_step_before_reset_and_bad_actions_raise():
         cov.step(np.full((2, 3), np.nan, dtype=np.float32))
     with pytest.raises(ValueError, match="SAME_STEP"):
         SB3VecEnv(venv)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_closed_form_2x2_update_equals_the_generic_information_update(seed):
+    # the one-division closed form of the 2-state kernel against (P_pred⁻¹ + J)⁻¹ by inverses,
+    # over random SPD covariances, PSD information sums (J = 0 included) and F with F[1,0] != 0
+    from fdia_env.kalman import information_update, predict_cov, small
+    from fdia_env.vector.simulation import info_update2_stacked
+
+    rng = np.random.default_rng(seed)
+    B = 200
+    L = rng.normal(size=(B, 2, 2))
+    P = L @ L.transpose(0, 2, 1) + 0.1 * np.eye(2)
+    G = rng.normal(size=(B, 2, 2)) * (rng.random((B, 1, 1)) < 0.8)  # some members use nothing
+    J = G @ G.transpose(0, 2, 1)
+    F = rng.normal(size=(2, 2))
+    Q = np.array([[0.3, 0.1], [0.1, 0.2]])
+    comp = np.stack([P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]])
+    j = np.stack([J[:, 0, 0], J[:, 0, 1], J[:, 1, 1]])
+    C = small.predict_matrix2(small.to_mat2(F))
+    q = np.array(small.to_sym2(Q))
+    out = info_update2_stacked(comp, C, q, j.copy())
+    want = np.stack([information_update(predict_cov(P[i], F, Q), J[i][None]) for i in range(B)])
+    got = np.stack([[[a, b], [b, d]] for a, b, d in out.T])
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("scenario", ["ch2-pv-1", "ch2-position", "ch4-position", "ch4-random"])
+def test_sparse_attacked_info_of_every_sensor_count_matches_sync(scenario):
+    # the batched "attacked" info is looked up in a table of the subsets' sensor bits (M = 1, 2,
+    # 3 packed in machine words, 10 as rows); each member must report its own trimmed subset
+    kwargs = {"scenario": scenario, "budget": 2, "horizon": 3}
+    if scenario == "ch4-random":
+        kwargs["action"] = "bitmask"
+    compare_with_sync("fdia_env/SparseAttack-v0", kwargs, B=6, steps=8)
+
+
+@pytest.mark.parametrize("autoreset", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_vector_infos_handed_out_never_change_afterwards(autoreset):
+    # the infos hold the step's own arrays (no copies): later steps and the members' autoresets
+    # must build new arrays, never write into ones already returned
+    venv = gym.make_vec(
+        "fdia_env/SparseAttack-v0",
+        num_envs=4,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=autoreset,
+        max_episode_steps=3,
+        horizon=6,
+    )
+    _, info = venv.reset(seed=3)
+    kept = [info]
+    snapshots = [{k: np.copy(v) for k, v in info.items() if not isinstance(v, dict)}]
+    rng = np.random.default_rng(0)
+    for _ in range(8):
+        _, _, _, _, info = venv.step(rng.integers(0, 8, size=4))
+        kept.append(info)
+        snapshots.append({k: np.copy(v) for k, v in info.items() if not isinstance(v, dict)})
+    for t, (info, snap) in enumerate(zip(kept, snapshots, strict=True)):
+        for key, value in snap.items():
+            if value.dtype == object:
+                continue
+            np.testing.assert_array_equal(info[key], value, err_msg=f"step {t} key {key}")
+    assert any(s["budget_left"].min() < 5 for s in snapshots)  # attacks were spent

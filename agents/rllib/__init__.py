@@ -5,6 +5,9 @@ the ``fdia-env[rllib]`` extra (``pip install -e ".[rllib]"``).
 
 - :mod:`agents.rllib.envs`: RLlib env names for every module (multi-agent) and every Gymnasium
   view (single-agent), with masked players' observations as ``{"observations", "action_mask"}``;
+- :mod:`agents.rllib.module`: RLlib's default PPO module, masked, registered by
+  :func:`~agents.rllib.envs.register_envs` so that a plain ``PPOConfig().environment(name)``
+  runs on every env;
 - :mod:`agents.rllib.config`: :func:`~agents.rllib.config.ppo_config`, the PPO config with the
   settings these one-step and few-step episodes need (see its docstring for the figures);
 - :mod:`agents.rllib.train`: ``train.py attacker|defender|game --backend rllib``: training,

@@ -10,7 +10,7 @@ import numpy as np
 from baselines._inputs import resolve_system
 from baselines.covariance.problem import check_weight
 from fdia_env._validation import as_matrix, check_choice, check_psd
-from fdia_env.kalman import psd_sqrt, steady_state
+from fdia_env.kalman import psd_sqrt, spd_inv_sum, steady_state
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, power_weight
 
@@ -90,8 +90,13 @@ class CovarianceResult:
 
     @property
     def logdet(self) -> float:
-        """``log det(P + W Σ W')``."""
-        return float(np.linalg.slogdet(self.covariance)[1])
+        """``log det(P + W Σ W')``.
+
+        Computed from ``P`` and ``W Σ W'``: their sum is singular in float64 when a huge power
+        goes into few directions.
+        """
+        added = self.W @ self.sigma @ self.W.T
+        return float(spd_inv_sum(self.P, 0.5 * (added + added.T))[1])
 
     @property
     def det(self) -> float:

@@ -373,8 +373,10 @@ class SystemFamilyEnv(gym.Env):
         self.sort_sensors = sort_sensors
         self.order = np.zeros(0, dtype=np.int64)  # slot j -> sensor order[j]
         n = family.state_size
-        lo = [0.0, *([-30.0] * n), *([-1.0] * (n * (n - 1) // 2)), 0.0]
-        hi = [1.0, *([30.0] * n), *([1.0] * (n * (n - 1) // 2)), 1.0]
+        # the inner env's observation bounds (they depend on n only): read from one built on
+        # the family's first system
+        inner = SingleAgentEnv(self._sparse_env(family.system(0)), agent="attacker")
+        lo, hi = inner.observation_space.low.tolist(), inner.observation_space.high.tolist()
         self.sparse_size = len(lo)
         if self.sequential:
             lo, hi = lo + [0.0] * self.max_sensors, hi + [1.0] * self.max_sensors
@@ -396,6 +398,15 @@ class SystemFamilyEnv(gym.Env):
         self._chosen = 0  # sequential: bitmask picked for the current window step
         self._left = 0  # sequential: budget left after the committed steps
         self._commits = 0  # sequential: window steps played
+
+    def _sparse_env(self, system: LinearSystem) -> FdiaParallelEnv:
+        """``sparse_attack_v0``'s env on ``system``, composed from the models.
+
+        (The env modules are a layer above this package, so it is built here, not imported.)
+        """
+        sc, spec = episode_spec(system, horizon=self.family.horizon, objective=self.objective)
+        attack = SparseAttack(self.family.budget)
+        return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, name="sparse_attack_v0")
 
     def _observation(self, sparse_obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._sparse_obs = np.asarray(sparse_obs, dtype=np.float64)
@@ -438,12 +449,7 @@ class SystemFamilyEnv(gym.Env):
             k = int(self.system_seeds[int(self.np_random.integers(len(self.system_seeds)))])
         self.system_seed = k
         self.system = self.family.system(k)
-        # sparse_attack_v0's env on this system, composed here from the models (the env modules
-        # are a layer above this package)
-        sc, spec = episode_spec(self.system, horizon=self.family.horizon, objective=self.objective)
-        attack = SparseAttack(self.family.budget)
-        parallel = FdiaParallelEnv(sc, attack, PerfectDetection(), spec, name="sparse_attack_v0")
-        self._inner = SingleAgentEnv(parallel, agent="attacker")
+        self._inner = SingleAgentEnv(self._sparse_env(self.system), agent="attacker")
         M = self.system.M
         self.order = effect_order(self.system, self.objective) if self.sort_sensors else None
         self.order = np.arange(M) if self.order is None else self.order

@@ -76,6 +76,9 @@ class BatchedSimulation:
         self._row_sensor = c(np.asarray(system.row_sensor, dtype=np.int64))
         self._shifts = c(np.arange(M, dtype=np.int64)) if M <= 62 else np.arange(M)
         self._eye = xp.eye(n)
+        horizon = single.spec.horizon  # the first feature for k = 0..horizon, as float32
+        steps_left = (horizon - np.arange(horizon + 1)) / horizon
+        self._steps_left = c(steps_left.astype(np.float32))
         self._eye_nz = xp.eye(system.nz)
         self._J_flat = c(system.J.reshape(M, -1))
         self._start = c(single.P_start)
@@ -264,10 +267,10 @@ class BatchedSimulation:
             and not self.sampled
             and (self._clean or self.all_consistent())
         ):
-            # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components
-            info = small.inv2_stacked(small.predict2_stacked(self._comp, self._C, self._q))
-            info += self._used_components(used)
-            self._comp = small.inv2_stacked(info)
+            # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components, one closed form
+            self._comp = info_update2_stacked(
+                self._comp, self._C, self._q, self._used_components(used)
+            )
         else:
             self._generic_step(used, leak, present, active)
         self.k += 1
@@ -420,7 +423,7 @@ class BatchedSimulation:
         """
         xp = self.xp
         n = self.system.n
-        out[0] = (self.spec.horizon - self.k) / self.spec.horizon
+        out[0] = xp.take(self._steps_left, self.k)  # (horizon − k) / horizon, looked up
         if self._comp is not None and (self._clean or self.all_consistent()):
             a, b, d = self._comp
             a0, _, d0 = self._start2
@@ -428,7 +431,9 @@ class BatchedSimulation:
             xp.log_into(a * (1.0 / a0), out[1])
             xp.log_into(d * (1.0 / d0), out[2])
             xp.clip_(out[1:3], 30.0)
-            xp.divide(b, xp.sqrt(a * d), out=out[3])
+            # the correlation in float64, then stored (a float32 ``out=`` of a float64 division
+            # runs numpy's buffered casting loop, several times slower)
+            out[3] = b / xp.sqrt(a * d)
             xp.clip_(out[3], 1.0)
             col = 4
         else:
@@ -443,3 +448,39 @@ class BatchedSimulation:
             out[col] = xp.where(xp.isfinite(self.nis), xp.minimum(self.nis, 1e3), 1e3)
             col += 1
         return col
+
+
+def info_update2_stacked(comp: Any, C: Any, q: Any, j: Any) -> Any:
+    """``P[k|k] = ((F P F' + Q)⁻¹ + J)⁻¹`` for (3, B) components, in one closed form.
+
+    With ``A = F P F' + Q = [[a, b], [b, d]]``, ``δ = det A`` and
+    ``N = adj(A) + δ J = [[d + δ j11, δ j12 − b], [δ j12 − b, a + δ j22]]``,
+    ``(A⁻¹ + J)⁻¹ = δ adj(N) / det N``: one division per member instead of the two of
+    inverting twice (the same matrix; checked against the generic step by the tests).
+
+    Args:
+        comp: (3, B) components of P[k−1|k−1] (numpy or torch).
+        C: (3, 3) prediction matrix of F (:func:`~fdia_env.kalman.small.predict_matrix2`).
+        q: (3,) components of Q.
+        j: (3, B) components of each member's ``Σ_used J_i``; overwritten.
+
+    Returns:
+        (3, B) components of P[k|k] (a new array).
+    """
+    p = C @ comp
+    p += q[:, None]
+    a, b, d = p
+    delta = a * d
+    delta -= b * b  # det A
+    j *= delta
+    j[0] += d  # N11
+    j[1] -= b  # N12
+    j[2] += a  # N22
+    det = j[0] * j[2]
+    det -= j[1] * j[1]
+    delta /= det  # δ / det N
+    p[0] = j[2] * delta  # a, b, d are read no more: p holds the result
+    p[1] = j[1] * delta
+    p[1] *= -1.0
+    p[2] = j[0] * delta
+    return p
