@@ -15,7 +15,16 @@ import pytest
 
 import agents.registry
 from fdia_env import fdia_v0
-from fdia_env.registration import ENV_NAMES, ENVS, GYM_IDS, EnvEntry, register_env, torch_ids
+from fdia_env.registration import (
+    ENV_NAMES,
+    ENVS,
+    GYM_IDS,
+    EnvEntry,
+    kalman_env_names,
+    register_env,
+    torch_ids,
+    vector_ids,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -160,6 +169,16 @@ def test_every_consumer_lists_the_table():
 def test_an_entry_with_bad_fields_is_refused_by_name(kwargs, message):
     with pytest.raises(ValueError, match=message):
         EnvEntry(**kwargs)
+
+
+def test_the_kalman_flag_is_a_bool_and_splits_the_table():
+    with pytest.raises(TypeError, match="kalman must be a bool"):
+        EnvEntry("toy_v0", "toy", kalman="no")
+    assert kalman_env_names() == [n for n, e in ENVS.items() if e.kalman]
+    assert "stealth_attack_v0" in ENV_NAMES and "stealth_attack_v0" not in kalman_env_names()
+    assert (
+        "fdia_env/StealthAttack-v0" in GYM_IDS and "fdia_env/StealthAttack-v0" not in vector_ids()
+    )
 
 
 def test_a_name_or_gym_id_already_taken_is_refused():
