@@ -41,7 +41,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from agents.algos import ALGO_CLASSES, build_model
+from agents.algos import build_model
 from agents.checkpoint import (
     STAGED,
     UntrustedCheckpointError,
@@ -71,12 +71,10 @@ from agents.registry import Reference, Trainable, get
 from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 
-__all__ = [  # ALGO_CLASSES and build_model live in agents.algos; kept here for importers
-    "ALGO_CLASSES",
+__all__ = [
     "CheckpointState",
     "TrainResult",
     "UntrustedCheckpointError",
-    "build_model",
     "load_checkpoint",
     "save_checkpoint",
     "train",
