@@ -354,3 +354,14 @@ def test_inv2_of_tiny_and_huge_matrices_is_the_scaled_inverse():
     a = np.array([[2.0, 1.0], [1.0, 3.0]])
     for c in (1e-200, 1e-160, 1e160, 1e200):
         np.testing.assert_allclose(inv2(a * c) * c, np.linalg.inv(a), rtol=1e-14)
+
+
+def test_a_detectable_system_out_of_float64_reach_is_not_called_undetectable():
+    # tracking_system(1e150, [3.0, 4.0]) is detectable; the error asked "is every unstable mode
+    # detectable?" instead of naming the scale gap (its tracking index is 4.7e149)
+    from fdia_env.kalman import steady_state
+
+    with pytest.raises(RuntimeError, match="detectable, but the process noise") as info:
+        steady_state(tracking_system(1e150, [3.0, 4.0]))
+    assert "is every unstable mode detectable" not in str(info.value)
+    assert "4.66e+149" in str(info.value)

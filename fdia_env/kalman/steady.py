@@ -86,6 +86,21 @@ def _check_steady_state_exists(
         )
 
 
+def _out_of_reach(system: LinearSystem, mask: np.ndarray | None, exc: RuntimeError) -> str:
+    """Why a detectable subset has no computable steady state (the scales are too far apart)."""
+    what = _subset_name(system, None if mask is None else np.asarray(mask, dtype=bool))
+    q = float(np.linalg.eigvalsh(system.Q).max())
+    used = system.J if mask is None else system.J[np.asarray(mask, dtype=bool)]
+    j = float(np.linalg.eigvalsh(used.sum(axis=0)).max())
+    return (
+        f"no steady state computable in float64 for {what}: its unstable modes are detectable, "
+        f"but the process noise and the sensors' information are too far apart in scale "
+        f"(√(λ_max(Q) λ_max(Σ J)) = {np.sqrt(q) * np.sqrt(j):.3g}; for tracking_system this is "
+        "the tracking index σ_v T²/σ_w, and about 1e-8 to 1e6 is solvable): the Riccati "
+        f"recursion cannot resolve it ({str(exc).split(' (is every')[0]})"
+    )
+
+
 def _dare_residual(system: LinearSystem, P_pred: np.ndarray, rows: np.ndarray) -> float:
     """Relative residual of ``P = F (P − P H' (H P H' + R)⁻¹ H P) F' + Q`` on the used rows."""
     H, R = system.H[rows], system.R[np.ix_(rows, rows)]
@@ -109,7 +124,10 @@ def _solve_dare(
         if _dare_residual(system, P_pred, rows) > 1e-8:
             raise np.linalg.LinAlgError("inaccurate DARE solution")
     except (np.linalg.LinAlgError, ValueError):
-        return steady_state_iterate(system, mask)
+        try:
+            return steady_state_iterate(system, mask)
+        except RuntimeError as exc:
+            raise RuntimeError(_out_of_reach(system, mask, exc)) from exc
     P_post = information_update(P_pred, system.J, mask)
     return P_pred, P_post, masked_gain(P_post, system, mask)
 
