@@ -16,8 +16,9 @@ import math
 import numpy as np
 
 from fdia_env.attacks.base import bits_to_mask
+from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import FilterInput
-from fdia_env.detection.step import detection_step
+from fdia_env.detection.step import SystemArrays, detection_step
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
     information_update,
@@ -54,6 +55,7 @@ class Simulation:
         self._R_factor = psd_sqrt(system.R)
         self.P_start = self._start_covariance()
         self._iu = np.triu_indices(system.n, 1)
+        self._detection_arrays: SystemArrays | None = None
         self._fast = fast and system.n == 2
         if self._fast:
             self._f2 = small.to_mat2(system.F)
@@ -143,6 +145,10 @@ class Simulation:
 
     def _detection_step(self, fi: FilterInput, rng: np.random.Generator | None) -> None:
         """A step of the detection game (see :mod:`fdia_env.detection.step`)."""
+        if self._detection_arrays is None:  # the system's arrays, built once
+            self._detection_arrays = SystemArrays.of(
+                self.system, NUMPY, self._Q_factor, self._R_factor
+            )
         out = detection_step(
             self.system,
             fi.detection,
@@ -152,7 +158,7 @@ class Simulation:
             rng=rng if self.sampled else None,
             x=getattr(self, "x", None),
             x_hat=getattr(self, "x_hat", None),
-            factors=(self._Q_factor, self._R_factor),
+            arrays=self._detection_arrays,
         )
         self._P = out.P
         self._p2 = small.to_sym2(out.P) if self._fast else None

@@ -21,13 +21,15 @@ from fdia_env.stealth.static import (
 )
 
 GYM_ID = "fdia_env/StealthAttack-v0"
-"""Gymnasium id of the attacker's single-agent view (no native vector env: ``make_vec`` steps
-copies in ``SyncVectorEnv``)."""
+"""Gymnasium id of the attacker's single-agent view; ``make_vec(...,
+vectorization_mode="vector_entry_point")`` gives the native numpy vector env
+(:class:`fdia_env.stealth.vector.StealthVectorEnv`)."""
 
 if GYM_ID not in gymnasium.registry:
     gymnasium.register(
         id=GYM_ID,
         entry_point="fdia_env.envs.single_agent:make_single_agent",
+        vector_entry_point="fdia_env.stealth.vector:make_vector",
         kwargs={"module": "fdia_env.stealth.stealth_attack_v0", "agent": "attacker"},
     )
 

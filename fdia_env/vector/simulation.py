@@ -25,6 +25,7 @@ import numpy as np
 from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits
 from fdia_env.backend import NUMPY, Backend
 from fdia_env.defenses.base import BatchDetection
+from fdia_env.detection.step import SystemArrays, batched_detection_step
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
@@ -39,7 +40,6 @@ from fdia_env.kalman import (
     steady_state,
     sym,
 )
-from fdia_env.vector.detection import batched_detection_step
 
 
 class BatchedSimulation:
@@ -112,6 +112,7 @@ class BatchedSimulation:
         self.rngs: list[np.random.Generator] = []
         self.generator: Any = None
         self.value_override: Any = None
+        self._detection_arrays: SystemArrays | None = None
         self.reset(None, draw=False)  # the env's reset draws the sampled states
 
     # --- state -------------------------------------------------------------------------------
@@ -255,7 +256,7 @@ class BatchedSimulation:
             (B,) Φ after the step.
         """
         if detection is not None:  # the detection game: the detector decides per measurement
-            batched_detection_step(self, detection, leak, probability, active)
+            self._detection_step(detection, leak, probability, active)
             self.k += 1
             self.phi = self._measure_all()
             return self.phi
@@ -276,6 +277,78 @@ class BatchedSimulation:
         self.k += 1
         self.phi = self._measure_all()
         return self.phi
+
+    def _detection_step(
+        self, rule: BatchDetection, sigma: Any, probability: Any, active: Any
+    ) -> None:
+        """The detection game's step (:func:`~fdia_env.detection.step.batched_detection_step`).
+
+        Sampled dynamics draw for the ``active`` members: on numpy each from its own generator
+        in the single env's order (a fresh prior's state, H1, then the noises), on torch every
+        member from the device generator.
+        """
+        xp, sys, B = self.xp, self.system, self.B
+        n, nz = sys.n, sys.nz
+        if self._detection_arrays is None:
+            self._detection_arrays = SystemArrays(
+                F=self._F,
+                Q=self._Q,
+                H=self._H,
+                R=self._R,
+                Gu=self._Gu,
+                x0=self._x0,
+                P0=xp.asarray(sys.P0),
+                P0_root_T=xp.asarray(psd_sqrt(sys.P0).T),
+                Q_factor_T=self._Q_factor_T,
+                R_factor_T=self._R_factor_T,
+            )
+        arrays = self._detection_arrays
+        draw = prior = None
+        if self.sampled:
+            if rule.fresh_prior:
+                prior = self._normal(n, active)
+
+            def draw(p: Any) -> tuple[Any, Any]:
+                if xp is not NUMPY:  # the device generator, for every member at once
+                    return xp.uniform(self.generator, B) < p, self._normal(n + 2 * nz, active)
+                members = np.arange(B) if active is None else np.flatnonzero(active)
+                attacked = np.zeros(B, dtype=bool)
+                noise = np.zeros((B, n + 2 * nz))
+                for i in members:  # each member's generator, in the single env's order
+                    rng = self.rngs[i]
+                    attacked[i] = rng.random() < p[i]
+                    count = n + nz + (nz if attacked[i] else 0)
+                    noise[i, :count] = rng.standard_normal(count)
+                return attacked, noise
+
+        out = batched_detection_step(
+            xp,
+            sys,
+            arrays,
+            rule,
+            sigma,
+            probability,
+            None if rule.fresh_prior else self.P,
+            draw=draw,
+            prior=prior,
+            x=self.x if self.sampled else None,
+            x_hat=self.x_hat if self.sampled else None,
+        )
+        self.detection_info = out.info
+        if not self.sampled:
+            self._set_P(xp.copy(out.P))
+            self._M = out.error_cov
+            self._set_consistent(xp.zeros(B, dtype=xp.bool))
+            return
+        if active is None:
+            self.x, self.x_hat = out.x, out.x_hat
+        else:  # members about to be reset keep their state (a fresh prior redraws only theirs)
+            keep = ~active[:, None]
+            self.x = xp.where(keep, self.x, out.x)
+            self.x_hat = xp.where(keep, self.x_hat, out.x_hat)
+        self._set_P(out.P)
+        self._set_consistent(xp.ones(B, dtype=xp.bool))
+        self.value_override = out.value
 
     def _mask_of(self, used: Any) -> Any:
         """(B, M) boolean masks of (B,) bitmasks (masks pass through)."""
