@@ -65,7 +65,7 @@ from agents.config import (
 )
 from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import StopTrainingCallback
-from agents.lifecycle import RunFolder, open_run, tensorboard
+from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
 from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
@@ -436,9 +436,8 @@ class TrainResult:
 def train_prefix(cfg: TrainConfig) -> str:
     """Run folder name without its time: ``<env>[-defender]-<algo>-s<seed>`` (also torch-ppo's)."""
     entry = get(cfg.env, cfg.agent)
-    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
     algo = TORCH_PPO if is_torch_ppo(cfg.algo) else entry.algorithm(cfg.algo)
-    return run_prefix(name, algo, cfg.run.seed)
+    return run_prefix(run_name(entry.env, cfg.agent), algo, cfg.run.seed)
 
 
 def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> TrainResult:

@@ -61,6 +61,8 @@ class EnvEntry:
             vectorization_mode="vector_entry_point", backend=...)``); empty when the env's
             models have no batched implementation (``make_vec`` then steps copies in
             ``SyncVectorEnv``).
+        vector: The ``vector_entry_point`` of its native vector env (used when ``backends`` is
+            not empty): the engine's :func:`fdia_env.vector.env.make_vector` by default.
         kalman: Whether the env runs the Kalman-filter engine (an ``FdiaParallelEnv``: a
             scenario, ``dynamics``, the ``phi``/``step`` infos, Φ in the render); False for an
             env of its own (the static stealthy attacker). Tests of the engine's conventions
@@ -72,6 +74,7 @@ class EnvEntry:
     views: Mapping[str, str] = field(default_factory=dict)
     backends: tuple[str, ...] = BACKENDS
     kalman: bool = True
+    vector: str = VECTOR_ENTRY_POINT
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
@@ -92,6 +95,8 @@ class EnvEntry:
             raise ValueError(f"views: each agent needs its own Gymnasium id, got {self.views}")
         if not isinstance(self.backends, tuple) or not set(self.backends) <= set(BACKENDS):
             raise ValueError(f"backends must be a tuple of {list(BACKENDS)}, got {self.backends!r}")
+        if not isinstance(self.vector, str) or not re.fullmatch(r"[\w.]+:\w+", self.vector):
+            raise ValueError(f"vector must read 'module:function', got {self.vector!r}")
         if not isinstance(self.kalman, bool):
             raise TypeError(f"kalman must be a bool, got {self.kalman!r}")
         if "torch" in self.backends and "numpy" not in self.backends:
@@ -99,7 +104,8 @@ class EnvEntry:
         object.__setattr__(self, "views", MappingProxyType(dict(self.views)))
 
     def __hash__(self) -> int:
-        return hash((self.name, self.module, tuple(self.views.items()), self.backends, self.kalman))
+        views = tuple(self.views.items())
+        return hash((self.name, self.module, views, self.backends, self.kalman, self.vector))
 
 
 _ENVS: dict[str, EnvEntry] = {}
@@ -238,7 +244,7 @@ def _register_gym_ids(entry: EnvEntry) -> None:
         gymnasium.register(
             id=env_id,
             entry_point=SINGLE_ENTRY_POINT,
-            vector_entry_point=VECTOR_ENTRY_POINT if entry.backends else None,
+            vector_entry_point=entry.vector if entry.backends else None,
             kwargs={"module": entry.module, "agent": agent},
         )
 
@@ -270,8 +276,9 @@ for _entry in (
         "stealth_attack_v0",
         "fdia_env.stealth.stealth_attack_v0",
         {"attacker": "fdia_env/StealthAttack-v0"},
-        backends=(),
+        backends=("numpy",),
         kalman=False,
+        vector="fdia_env.stealth.vector:make_vector",
     ),
 ):
     register_env(_entry)

@@ -176,9 +176,11 @@ def test_the_kalman_flag_is_a_bool_and_splits_the_table():
         EnvEntry("toy_v0", "toy", kalman="no")
     assert kalman_env_names() == [n for n, e in ENVS.items() if e.kalman]
     assert "stealth_attack_v0" in ENV_NAMES and "stealth_attack_v0" not in kalman_env_names()
-    assert (
-        "fdia_env/StealthAttack-v0" in GYM_IDS and "fdia_env/StealthAttack-v0" not in vector_ids()
-    )
+    stealth_id = "fdia_env/StealthAttack-v0"
+    assert stealth_id in GYM_IDS and stealth_id in vector_ids() and stealth_id not in torch_ids()
+    assert ENVS["stealth_attack_v0"].vector == "fdia_env.stealth.vector:make_vector"
+    with pytest.raises(ValueError, match="vector must read 'module:function'"):
+        EnvEntry("toy_v0", "toy", vector="toy.make")
 
 
 def test_a_name_or_gym_id_already_taken_is_refused():

@@ -31,7 +31,7 @@ import numpy as np
 
 from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
 from agents.evaluate import Evaluation
-from agents.lifecycle import RunFolder
+from agents.lifecycle import RunFolder, run_name
 from agents.lifecycle import open_run as open_folder
 from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
@@ -235,8 +235,7 @@ def rllib_prefix(cfg: TrainConfig | GameConfig) -> str:
     if isinstance(cfg, GameConfig):
         return run_prefix(f"{cfg.env}-{cfg.method}", f"rllib-{ALGO}", cfg.run.seed)
     entry = get(cfg.env, cfg.agent)
-    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
-    return run_prefix(name, f"rllib-{ALGO}", cfg.run.seed)
+    return run_prefix(run_name(entry.env, cfg.agent), f"rllib-{ALGO}", cfg.run.seed)
 
 
 def open_run(

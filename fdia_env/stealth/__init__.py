@@ -19,8 +19,9 @@ from fdia_env.stealth.static import (
 )
 
 GYM_ID = "fdia_env/StealthAttack-v0"
-"""Gymnasium id of the attacker's single-agent view (no native vector env: ``make_vec`` steps
-copies in ``SyncVectorEnv``); its entry is in the table of environments
+"""Gymnasium id of the attacker's single-agent view; ``make_vec(...,
+vectorization_mode="vector_entry_point")`` gives the native numpy vector env
+(:class:`fdia_env.stealth.vector.StealthVectorEnv`). Its entry is in the table of environments
 (:data:`fdia_env.registration.ENVS`)."""
 
 __all__ = [
