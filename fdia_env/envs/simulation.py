@@ -34,6 +34,19 @@ from fdia_env.kalman import (
 from fdia_env.systems import LinearSystem
 
 
+def start_covariance(system: LinearSystem, spec: EpisodeSpec) -> np.ndarray:
+    """P at the window start: steady state, or the prior after ``spec.warmup`` clean steps.
+
+    The one definition of the start for the single and the batched engine.
+    """
+    if spec.warmup == "steady":
+        return steady_state(system)[1]
+    P = np.array(system.P0)
+    for _ in range(int(spec.warmup)):
+        P = information_update(predict_cov(P, system.F, system.Q), system.J)
+    return P
+
+
 class Simulation:
     """A Kalman filter under attack, stepped one window step at a time.
 
@@ -53,7 +66,7 @@ class Simulation:
         self._full = (1 << system.M) - 1
         self._Q_factor = psd_sqrt(system.Q)
         self._R_factor = psd_sqrt(system.R)
-        self.P_start = self._start_covariance()
+        self.P_start = start_covariance(system, spec)
         self._iu = np.triu_indices(system.n, 1)
         self._detection_arrays: SystemArrays | None = None
         self._fast = fast and system.n == 2
@@ -63,15 +76,6 @@ class Simulation:
             self._start2 = small.to_sym2(self.P_start)
             self._j2: dict[int, small.Sym2] = {}
         self.k = 0
-
-    def _start_covariance(self) -> np.ndarray:
-        """P at the window start: steady state, or the prior after ``warmup`` clean steps."""
-        if self.spec.warmup == "steady":
-            return steady_state(self.system)[1]
-        P = np.array(self.system.P0)
-        for _ in range(int(self.spec.warmup)):
-            P = information_update(predict_cov(P, self.system.F, self.system.Q), self.system.J)
-        return P
 
     # --- state -------------------------------------------------------------------------------
     @property

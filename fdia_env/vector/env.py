@@ -188,7 +188,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             if hasattr(self.opponent, "reset"):
                 self.opponent.reset(seed=int(seed) + 1)
         if self.sim is None:
-            self.sim = BatchedSimulation(self.parallel.sim, B)
+            self.sim = BatchedSimulation(self.parallel.system, self.parallel.spec, B)
         self.sim.rngs = self._rngs
         return self._reset_all(options)
 
@@ -206,7 +206,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if seed is not None and not self._mix and hasattr(self.opponent, "reset"):
             self.opponent.reset(seed=int(seed) + 1)  # a policy opponent, as on numpy
         if self.sim is None:
-            self.sim = BatchedSimulation(self.parallel.sim, self.num_envs, self.xp)
+            self.sim = BatchedSimulation(
+                self.parallel.system, self.parallel.spec, self.num_envs, self.xp
+            )
         self.sim.generator = self._generator
         return self._reset_all(options)
 
