@@ -316,3 +316,90 @@ def test_vector_infos_handed_out_never_change_afterwards(autoreset):
                 continue
             np.testing.assert_array_equal(info[key], value, err_msg=f"step {t} key {key}")
     assert any(s["budget_left"].min() < 5 for s in snapshots)  # attacks were spent
+
+
+@pytest.mark.parametrize("statistic", ["chi2", "quadratic"])
+@pytest.mark.parametrize("on_detect", ["discard", "incorporate"])
+@pytest.mark.parametrize("sampled", [False, True])
+def test_single_detection_step_is_the_batched_step_of_one(statistic, on_detect, sampled):
+    # one detection step: the single env's detection_step runs batched_detection_step with
+    # B = 1; each member of a batch (own threshold, covariance, Σ, p) equals its single step
+    from fdia_env import scenarios
+    from fdia_env.backend import NUMPY
+    from fdia_env.defenses.base import BatchDetection, Detection
+    from fdia_env.detection.step import SystemArrays, batched_detection_step, detection_step
+    from fdia_env.kalman import psd_sqrt
+
+    system = scenarios.get("ch4-position").system
+    n, nz = system.n, system.nz
+    rng = np.random.default_rng(5)
+    B = 4
+    L = rng.normal(size=(B, n, n))
+    P = L @ L.transpose(0, 2, 1) + 0.5 * np.eye(n)
+    S = rng.normal(size=(B, nz, nz))
+    sigma = S @ S.transpose(0, 2, 1)
+    p = np.array([0.0, 0.3, 0.7, 1.0])
+    thresholds = np.array([0.5, 2.0, 4.0, np.inf])
+    assumed = 0.5 * np.eye(nz)
+    arrays = SystemArrays.of(system, NUMPY, psd_sqrt(system.Q), psd_sqrt(system.R))
+    rule = BatchDetection(statistic, thresholds, on_detect, assumed, False, "mse")
+    x = rng.normal(size=(B, n)) if sampled else None
+    x_hat = rng.normal(size=(B, n)) if sampled else None
+    draw = None
+    if sampled:  # each member's own generator, as the single env's
+        seeds = [10, 11, 12, 13]
+
+        def draw(prob):
+            attacked, noise = np.zeros(B, bool), np.zeros((B, n + 2 * nz))
+            for i, s in enumerate(seeds):
+                g = np.random.default_rng(s)
+                attacked[i] = g.random() < prob[i]
+                count = n + nz + (nz if attacked[i] else 0)
+                noise[i, :count] = g.standard_normal(count)
+            return attacked, noise
+
+    batch = batched_detection_step(
+        NUMPY, system, arrays, rule, sigma, p, P, draw=draw, x=x, x_hat=x_hat
+    )
+    for i in range(B):
+        one = detection_step(
+            system,
+            Detection(statistic, float(thresholds[i]), on_detect, assumed),
+            sigma[i],
+            float(p[i]),
+            P[i],
+            rng=np.random.default_rng(seeds[i]) if sampled else None,
+            x=None if x is None else x[i],
+            x_hat=None if x_hat is None else x_hat[i],
+            arrays=arrays,
+        )
+        np.testing.assert_allclose(one.P, batch.P[i], rtol=1e-12, atol=1e-14)
+        if sampled:
+            np.testing.assert_allclose(one.x_hat, batch.x_hat[i], rtol=1e-12, atol=1e-14)
+            np.testing.assert_allclose(one.x, batch.x[i], rtol=1e-12, atol=1e-14)
+            assert one.info["detected"] == bool(batch.info["detected"][i])
+            assert one.info["attacked_now"] == bool(batch.info["attacked_now"][i])
+        else:
+            np.testing.assert_allclose(one.error_cov, batch.error_cov[i], rtol=1e-12)
+            assert one.info["p_detection"] == pytest.approx(batch.info["p_detection"][i])
+    if not sampled:  # τ = inf never detects; τ grows, P_fa falls
+        assert batch.info["p_false_alarm"][3] == 0.0
+        assert np.all(np.diff(batch.info["p_false_alarm"]) <= 0)
+
+
+@pytest.mark.parametrize("mode", ["terminal", "shaped", "per_step"])
+def test_one_reward_for_floats_and_batches(mode):
+    from fdia_env.backend import NUMPY
+    from fdia_env.envs.parallel import attacker_reward
+
+    phi, prev = np.array([3.0, 5.0, -np.inf]), np.array([1.0, 5.5, 2.0])
+    done = np.array([True, False, False])
+    batch = attacker_reward(mode, phi, prev, done, NUMPY)
+    single = [
+        attacker_reward(mode, float(a), float(b), bool(d))
+        for a, b, d in zip(phi, prev, done, strict=True)
+    ]
+    np.testing.assert_array_equal(batch, single)
+    want = {"terminal": [3.0, 0.0, 0.0], "shaped": [2.0, -0.5, -np.inf], "per_step": phi}[mode]
+    np.testing.assert_array_equal(batch, want)
+    assert batch is not phi  # a new array: the vector env zeroes members' rewards in place
