@@ -30,6 +30,7 @@ docs/guide/stealth.md.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -333,7 +334,7 @@ def _check_R(R: Any, sigma: Any, m: int, default: np.ndarray | None) -> np.ndarr
 
 def grid_source(source: Any) -> Any:
     """The :class:`GridModel` of a case name, a grid preset name or a GridModel, else ``None``."""
-    from fdia_env.systems.grid import CASES, GridModel, grid_model
+    from fdia_env.systems.grid import CASES, GridModel
 
     if isinstance(source, GridModel):
         return source
@@ -345,8 +346,16 @@ def grid_source(source: Any) -> Any:
                 f"{['grid-' + c for c in sorted(CASES)]}, a GridModel or an (m, n) matrix H, "
                 f"got {source!r}"
             )
-        return grid_model(case)
+        return _grid_case(case)
     return None
+
+
+@functools.cache
+def _grid_case(case: str) -> Any:
+    """The default grid model of a case, built once (it is immutable: read-only arrays)."""
+    from fdia_env.systems.grid import grid_model
+
+    return grid_model(case)
 
 
 def static_estimation(
