@@ -146,6 +146,15 @@ def check_device_name(device: object) -> None:
         ) from None
 
 
+def resolve_device(device: str) -> str:
+    """``--device`` as a torch device name: ``auto`` is cuda when present, else cpu."""
+    import torch
+
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return device
+
+
 def check_device_available(device: str) -> None:
     """Raise unless ``device`` is present on this machine (``auto`` always is).
 

@@ -136,6 +136,11 @@ class RunFolder:
         )
 
 
+def run_name(env: str, agent: str) -> str:
+    """A run folder's env part: ``<env>`` for the attacker, ``<env>-<agent>`` otherwise."""
+    return env if agent == "attacker" else f"{env}-{agent}"
+
+
 def open_run(
     cfg: Any,
     stack: ExitStack,

@@ -49,6 +49,7 @@ from agents.config import (
     check_device_available,
     is_torch_ppo,
     parse_env_kwargs,
+    resolve_device,
     resolved_hyperparameters,
 )
 from agents.evaluate import Evaluation, evaluate
@@ -436,7 +437,7 @@ class TorchPPOOracle:
     ) -> None:
         self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
         self.config, self.stop = config, stop
-        self.device = _torch_device(cfg.run.device)
+        self.device = resolve_device(cfg.run.device)
 
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
         """A fresh torch-ppo policy's answer to ``opponent``, or None if a stop cut it short."""
@@ -462,15 +463,6 @@ class TorchPPOOracle:
 
         path = self.run_dir / "policies" / f"{side}_{index}.json"
         return save_policy(response.policy, path, self.config).name
-
-
-def _torch_device(name: str) -> str:
-    """``--device``, with ``auto`` resolved to cuda when present, else cpu."""
-    import torch
-
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    return name
 
 
 class SB3Oracle:

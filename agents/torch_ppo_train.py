@@ -31,12 +31,13 @@ from agents.config import (
     check_device_available,
     flag,
     parse_env_kwargs,
+    resolve_device,
     resolved_hyperparameters,
 )
 from agents.evaluate import Evaluation, evaluate
 from agents.lifecycle import open_run
 from agents.registry import get
-from agents.runs import read_jsonl, run_prefix, write_jsonl
+from agents.runs import read_jsonl, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 from agents.torch_ppo import (
     TorchPolicy,
@@ -98,14 +99,6 @@ def torch_ppo_config(cfg: TrainConfig) -> tuple[TorchPPOConfig, dict[str, Any]]:
     return config, hp
 
 
-def _device(name: str) -> str:
-    import torch
-
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    return name
-
-
 def train_torch_ppo_run(
     cfg: TrainConfig, report: Callable[[str], None] | None = print
 ) -> TorchPPORun:
@@ -130,7 +123,7 @@ def train_torch_ppo_run(
             "fixed opponent is the uniform mix, drawn on the device)"
         )
     check_device_available(cfg.run.device)
-    device = _device(cfg.run.device)
+    device = resolve_device(cfg.run.device)
     entry = get(cfg.env, cfg.agent)
     config, hyperparameters = torch_ppo_config(cfg)
     env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
@@ -139,11 +132,11 @@ def train_torch_ppo_run(
         final_evaluations,
         history_record,
         reference_record,
+        train_prefix,
         write_scores,
     )
 
     check_env_kwargs(entry.gym_id, env_kwargs)
-    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
     with ExitStack() as stack:
         try:
             eval_env = gym.make(entry.gym_id, **env_kwargs)
@@ -155,7 +148,7 @@ def train_torch_ppo_run(
         stack.callback(eval_env.close)
         stack.callback(venv.close)
         reference = entry.reference_of(eval_env)
-        run = open_run(cfg, stack, run_prefix(name, TORCH_PPO, cfg.run.seed), CHECKPOINT, report)
+        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report)
         resume: TrainingState | None = None
         if run.resumed:
             resume = load_training_state(run.path / CHECKPOINT, run.path)

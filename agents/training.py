@@ -41,7 +41,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from agents.algos import ALGO_CLASSES, build_model
+from agents.algos import build_model
 from agents.checkpoint import (
     STAGED,
     UntrustedCheckpointError,
@@ -65,18 +65,16 @@ from agents.config import (
 )
 from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import StopTrainingCallback
-from agents.lifecycle import RunFolder, open_run, tensorboard
+from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
 from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 
-__all__ = [  # ALGO_CLASSES and build_model live in agents.algos; kept here for importers
-    "ALGO_CLASSES",
+__all__ = [
     "CheckpointState",
     "TrainResult",
     "UntrustedCheckpointError",
-    "build_model",
     "load_checkpoint",
     "save_checkpoint",
     "train",
@@ -438,9 +436,8 @@ class TrainResult:
 def train_prefix(cfg: TrainConfig) -> str:
     """Run folder name without its time: ``<env>[-defender]-<algo>-s<seed>`` (also torch-ppo's)."""
     entry = get(cfg.env, cfg.agent)
-    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
     algo = TORCH_PPO if is_torch_ppo(cfg.algo) else entry.algorithm(cfg.algo)
-    return run_prefix(name, algo, cfg.run.seed)
+    return run_prefix(run_name(entry.env, cfg.agent), algo, cfg.run.seed)
 
 
 def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> TrainResult:

@@ -354,3 +354,97 @@ def test_inv2_of_tiny_and_huge_matrices_is_the_scaled_inverse():
     a = np.array([[2.0, 1.0], [1.0, 3.0]])
     for c in (1e-200, 1e-160, 1e160, 1e200):
         np.testing.assert_allclose(inv2(a * c) * c, np.linalg.inv(a), rtol=1e-14)
+
+
+def test_a_detectable_system_out_of_float64_reach_is_not_called_undetectable():
+    # a position+velocity sensor at tracking index ~4e149 is detectable; the error asked "is
+    # every unstable mode detectable?" instead of naming the scale gap
+    from fdia_env.kalman import steady_state
+
+    with pytest.raises(RuntimeError, match="detectable, but the process noise") as info:
+        steady_state(tracking_system(1e150, sensors=[pv_sensor(3.0, 4.0)]))
+    assert "is every unstable mode detectable" not in str(info.value)
+    assert "3.73e+149" in str(info.value)
+
+
+def _alpha_beta_reference(sigma_v, sigma_w, T):
+    """The α-β filter of tracking index λ in 60-digit arithmetic (Kalata's textbook form)."""
+    mp = pytest.importorskip("mpmath")
+    mp.mp.dps = 400
+    s2 = 1 / sum(1 / mp.mpf(w) ** 2 for w in sigma_w)
+    lam = mp.mpf(sigma_v) * mp.mpf(T) ** 2 / mp.sqrt(s2)
+    r = (4 + lam - mp.sqrt(8 * lam + lam**2)) / 4
+    alpha = 1 - r**2
+    beta = 2 * (2 - alpha) - 4 * mp.sqrt(1 - alpha)
+    T = mp.mpf(T)
+    P = [[alpha, beta / T], [beta / T, beta * (alpha - beta / 2) / ((1 - alpha) * T**2)]]
+    return np.array([[float(s2 * v) for v in row] for row in P])
+
+
+@pytest.mark.parametrize(
+    ("sigma_v", "sigma_w", "T"),
+    [
+        (1e150, [3.0, 4.0], 1.0),  # "diverged … is every unstable mode detectable?"
+        (1e9, [1.0], 1.0),  # the documented xfail of the property suite
+        (1e-150, [3.0], 1.0),  # "did not converge" after ~10 s
+        (1e-20, [3.0], 1.0),
+        (1.0, [1e-17], 1.0),
+        (1e-140, [1e-5, 2e-5], 1e-3),
+    ],
+)
+def test_steady_state_at_extreme_tracking_indices_is_the_alpha_beta_filter(sigma_v, sigma_w, T):
+    from fdia_env.kalman import steady_state
+
+    P_pred, P_post, W = steady_state(tracking_system(sigma_v, sigma_w, T=T))
+    np.testing.assert_allclose(P_post, _alpha_beta_reference(sigma_v, sigma_w, T), rtol=1e-12)
+    assert np.all(np.isfinite(P_pred)) and np.all(np.isfinite(W))
+
+
+@pytest.mark.parametrize("sensors", [np.array("x"), np.array(3.0), "xy"])
+def test_linear_system_sensors_that_are_no_sequence_are_named(sensors):
+    # a 0-d array raised a bare TypeError "iteration over a 0-d array"
+    from fdia_env.systems import LinearSystem
+
+    with pytest.raises(ValueError, match=r"LinearSystem\.sensors must be a sequence of Sensor"):
+        LinearSystem(F=np.eye(1), Q=np.eye(1), sensors=sensors)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"sigma_w": np.array("x")}, "sigma_w"),
+        ({"sigma_w": np.array(3.0)}, "sigma_w"),
+        ({"sigma_w": [3.0], "sensors": np.array("x")}, "sensors"),
+    ],
+)
+def test_tracking_system_zero_d_arrays_are_named(kwargs, name):
+    # tracking_system(1.0, sigma_w=np.array("x")) raised "iteration over a 0-d array"
+    with pytest.raises(ValueError, match=rf"^{name} must be"):
+        tracking_system(1.0, **kwargs)
+
+
+def test_grid_steady_state_at_a_tiny_random_walk_variance():
+    # grid_system(q=1e-300): "did not converge" after ~20 s; the steady state of a random walk
+    # scales as √q, and P[k|k] J P[k|k−1] = Q is the DARE for F = I
+    from fdia_env.kalman import steady_state
+    from fdia_env.systems.grid import grid_system
+
+    states = {}
+    for q in (1e-300, 1e-200):
+        system = grid_system("ieee14", q=q)
+        P_pred, P_post, W = steady_state(system)
+        J = system.J.sum(axis=0)
+        assert np.abs(P_post @ J @ P_pred - system.Q).max() <= 1e-6 * q
+        assert np.all(np.isfinite(W))
+        states[q] = P_post
+    np.testing.assert_allclose(states[1e-300], 1e-50 * states[1e-200], rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("scenario", "rank"), [("ch2-pv-2", 2), ("ch2-pv-1", 2), ("ch2-position", 1)]
+)
+def test_det_optimal_value_grows_as_rank_times_log_power_up_to_1e300(scenario, rank):
+    # log det(P + W Σ W') of a rank-r Σ grows by r ln(10) per decade of power; ch2-pv-2 gave
+    # 1572.97 at 1e250 and 1915.70 at 1e300 (rounding "eigenvalues" of 1e284 counted)
+    values = [det_optimal(scenario, power=10.0**e).value for e in (200, 250, 300)]
+    np.testing.assert_allclose(np.diff(values), rank * 50 * np.log(10.0), rtol=1e-9)

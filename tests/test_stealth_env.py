@@ -165,3 +165,24 @@ def test_non_finite_action_is_refused(est):
     bad[0] = np.nan
     with pytest.raises(ValueError, match="attacker"):
         env.step({"attacker": bad})
+
+
+def test_agents_evaluate_scores_policies_against_the_milp_optimum(est):
+    from agents.evaluate import evaluate
+
+    best = budgeted_attack(est, budget=3, a_max=0.5, target=6)
+    kwargs = {"scenario": est, "budget": 3, "action": "free", "a_max": 0.5, "dynamics": "expected"}
+    reference = (1 - ALPHA) * best.value
+    scored = evaluate(best.policy(a_max=0.5), GYM_ID, n_episodes=2, reference=reference, **kwargs)
+    assert scored.score == pytest.approx(1.0, rel=1e-9)
+    random = evaluate("random", GYM_ID, n_episodes=10, reference=reference, **kwargs)
+    assert random.score < 0.01  # random injections on 3 meters are detected
+
+
+def test_alpha_rethresholds_a_given_estimation_keeping_its_noise():
+    own = static_estimation("ieee14", sigma=0.05)
+    env = stealth_attack_v0.parallel_env(scenario=own, alpha=0.01)
+    assert env.estimation.alpha == 0.01
+    np.testing.assert_array_equal(env.estimation.R, own.R)
+    assert env.estimation.threshold == pytest.approx(38.93217268351607)  # chi2(21) upper 1 %
+    assert stealth_attack_v0.parallel_env(scenario=own).estimation is own

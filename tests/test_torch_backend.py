@@ -476,7 +476,11 @@ def test_engine_partial_resets_equal_numpy(scenario, options):
 
     single = covariance_attack_v0.parallel_env(scenario=scenario, **options).sim
     system, B = single.system, 5
-    sims = {"numpy": BatchedSimulation(single, B), "torch": BatchedSimulation(single, B, TORCH)}
+    spec = single.spec
+    sims = {
+        "numpy": BatchedSimulation(system, spec, B),
+        "torch": BatchedSimulation(system, spec, B, TORCH),
+    }
     rng = np.random.default_rng(2)
     for step in range(6):
         used = rng.integers(0, 2 ** min(system.M, 30), size=B)

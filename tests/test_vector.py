@@ -4,6 +4,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecCheckNan
@@ -253,3 +255,240 @@ def test_vector_step_before_reset_and_bad_actions_raise():
         cov.step(np.full((2, 3), np.nan, dtype=np.float32))
     with pytest.raises(ValueError, match="SAME_STEP"):
         SB3VecEnv(venv)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_closed_form_2x2_update_equals_the_generic_information_update(seed):
+    # the one-division closed form of the 2-state kernel against (P_pred⁻¹ + J)⁻¹ by inverses,
+    # over random SPD covariances, PSD information sums (J = 0 included) and F with F[1,0] != 0
+    from fdia_env.kalman import information_update, predict_cov, small
+    from fdia_env.vector.simulation import info_update2_stacked
+
+    rng = np.random.default_rng(seed)
+    B = 200
+    L = rng.normal(size=(B, 2, 2))
+    P = L @ L.transpose(0, 2, 1) + 0.1 * np.eye(2)
+    G = rng.normal(size=(B, 2, 2)) * (rng.random((B, 1, 1)) < 0.8)  # some members use nothing
+    J = G @ G.transpose(0, 2, 1)
+    F = rng.normal(size=(2, 2))
+    Q = np.array([[0.3, 0.1], [0.1, 0.2]])
+    comp = np.stack([P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]])
+    j = np.stack([J[:, 0, 0], J[:, 0, 1], J[:, 1, 1]])
+    C = small.predict_matrix2(small.to_mat2(F))
+    q = np.array(small.to_sym2(Q))
+    out = info_update2_stacked(comp, C, q, j.copy())
+    want = np.stack([information_update(predict_cov(P[i], F, Q), J[i][None]) for i in range(B)])
+    got = np.stack([[[a, b], [b, d]] for a, b, d in out.T])
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("scenario", ["ch2-pv-1", "ch2-position", "ch4-position", "ch4-random"])
+def test_sparse_attacked_info_of_every_sensor_count_matches_sync(scenario):
+    # the batched "attacked" info is looked up in a table of the subsets' sensor bits (M = 1, 2,
+    # 3 packed in machine words, 10 as rows); each member must report its own trimmed subset
+    kwargs = {"scenario": scenario, "budget": 2, "horizon": 3}
+    if scenario == "ch4-random":
+        kwargs["action"] = "bitmask"
+    compare_with_sync("fdia_env/SparseAttack-v0", kwargs, B=6, steps=8)
+
+
+@pytest.mark.parametrize("autoreset", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_vector_infos_handed_out_never_change_afterwards(autoreset):
+    # the infos hold the step's own arrays (no copies): later steps and the members' autoresets
+    # must build new arrays, never write into ones already returned
+    venv = gym.make_vec(
+        "fdia_env/SparseAttack-v0",
+        num_envs=4,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=autoreset,
+        max_episode_steps=3,
+        horizon=6,
+    )
+    _, info = venv.reset(seed=3)
+    kept = [info]
+    snapshots = [{k: np.copy(v) for k, v in info.items() if not isinstance(v, dict)}]
+    rng = np.random.default_rng(0)
+    for _ in range(8):
+        _, _, _, _, info = venv.step(rng.integers(0, 8, size=4))
+        kept.append(info)
+        snapshots.append({k: np.copy(v) for k, v in info.items() if not isinstance(v, dict)})
+    for t, (info, snap) in enumerate(zip(kept, snapshots, strict=True)):
+        for key, value in snap.items():
+            if value.dtype == object:
+                continue
+            np.testing.assert_array_equal(info[key], value, err_msg=f"step {t} key {key}")
+    assert any(s["budget_left"].min() < 5 for s in snapshots)  # attacks were spent
+
+
+@pytest.mark.parametrize("statistic", ["chi2", "quadratic"])
+@pytest.mark.parametrize("on_detect", ["discard", "incorporate"])
+@pytest.mark.parametrize("sampled", [False, True])
+def test_single_detection_step_is_the_batched_step_of_one(statistic, on_detect, sampled):
+    # one detection step: the single env's detection_step runs batched_detection_step with
+    # B = 1; each member of a batch (own threshold, covariance, Σ, p) equals its single step
+    from fdia_env import scenarios
+    from fdia_env.backend import NUMPY
+    from fdia_env.defenses.base import BatchDetection, Detection
+    from fdia_env.detection.step import SystemArrays, batched_detection_step, detection_step
+    from fdia_env.kalman import psd_sqrt
+
+    system = scenarios.get("ch4-position").system
+    n, nz = system.n, system.nz
+    rng = np.random.default_rng(5)
+    B = 4
+    L = rng.normal(size=(B, n, n))
+    P = L @ L.transpose(0, 2, 1) + 0.5 * np.eye(n)
+    S = rng.normal(size=(B, nz, nz))
+    sigma = S @ S.transpose(0, 2, 1)
+    p = np.array([0.0, 0.3, 0.7, 1.0])
+    thresholds = np.array([0.5, 2.0, 4.0, np.inf])
+    assumed = 0.5 * np.eye(nz)
+    arrays = SystemArrays.of(system, NUMPY, psd_sqrt(system.Q), psd_sqrt(system.R))
+    rule = BatchDetection(statistic, thresholds, on_detect, assumed, False, "mse")
+    x = rng.normal(size=(B, n)) if sampled else None
+    x_hat = rng.normal(size=(B, n)) if sampled else None
+    draw = None
+    if sampled:  # each member's own generator, as the single env's
+        seeds = [10, 11, 12, 13]
+
+        def draw(prob):
+            attacked, noise = np.zeros(B, bool), np.zeros((B, n + 2 * nz))
+            for i, s in enumerate(seeds):
+                g = np.random.default_rng(s)
+                attacked[i] = g.random() < prob[i]
+                count = n + nz + (nz if attacked[i] else 0)
+                noise[i, :count] = g.standard_normal(count)
+            return attacked, noise
+
+    batch = batched_detection_step(
+        NUMPY, system, arrays, rule, sigma, p, P, draw=draw, x=x, x_hat=x_hat
+    )
+    for i in range(B):
+        one = detection_step(
+            system,
+            Detection(statistic, float(thresholds[i]), on_detect, assumed),
+            sigma[i],
+            float(p[i]),
+            P[i],
+            rng=np.random.default_rng(seeds[i]) if sampled else None,
+            x=None if x is None else x[i],
+            x_hat=None if x_hat is None else x_hat[i],
+            arrays=arrays,
+        )
+        np.testing.assert_allclose(one.P, batch.P[i], rtol=1e-12, atol=1e-14)
+        if sampled:
+            np.testing.assert_allclose(one.x_hat, batch.x_hat[i], rtol=1e-12, atol=1e-14)
+            np.testing.assert_allclose(one.x, batch.x[i], rtol=1e-12, atol=1e-14)
+            assert one.info["detected"] == bool(batch.info["detected"][i])
+            assert one.info["attacked_now"] == bool(batch.info["attacked_now"][i])
+        else:
+            np.testing.assert_allclose(one.error_cov, batch.error_cov[i], rtol=1e-12)
+            assert one.info["p_detection"] == pytest.approx(batch.info["p_detection"][i])
+    if not sampled:  # τ = inf never detects; τ grows, P_fa falls
+        assert batch.info["p_false_alarm"][3] == 0.0
+        assert np.all(np.diff(batch.info["p_false_alarm"]) <= 0)
+
+
+@pytest.mark.parametrize("mode", ["terminal", "shaped", "per_step"])
+def test_one_reward_for_floats_and_batches(mode):
+    from fdia_env.backend import NUMPY
+    from fdia_env.envs.parallel import attacker_reward
+
+    phi, prev = np.array([3.0, 5.0, -np.inf]), np.array([1.0, 5.5, 2.0])
+    done = np.array([True, False, False])
+    batch = attacker_reward(mode, phi, prev, done, NUMPY)
+    single = [
+        attacker_reward(mode, float(a), float(b), bool(d))
+        for a, b, d in zip(phi, prev, done, strict=True)
+    ]
+    np.testing.assert_array_equal(batch, single)
+    want = {"terminal": [3.0, 0.0, 0.0], "shaped": [2.0, -0.5, -np.inf], "per_step": phi}[mode]
+    np.testing.assert_array_equal(batch, want)
+    assert batch is not phi  # a new array: the vector env zeroes members' rewards in place
+
+
+# --- property: one engine behind every face -----------------------------------------------------
+_PROP_SCENARIOS = {
+    "fdia_env/SparseAttack-v0": ["ch4-position", "ch2-pv-2", "ch3-tracking", "grid-ieee14"],
+    "fdia_env/CovarianceAttack-v0": ["ch4-position", "ch2-pv-2", "grid-ieee14"],
+    "fdia_env/SensorGameAttacker-v0": ["ch4-position", "ch5-game"],
+    "fdia_env/SensorGameDefender-v0": ["ch4-position", "ch5-game"],
+    "fdia_env/DetectionDefender-v0": ["ch3-tracking", "ch3-static", "ch2-pv-2"],
+    "fdia_env/DetectionAttacker-v0": ["ch3-tracking", "ch3-static", "ch2-pv-2"],
+}
+
+
+@st.composite
+def vector_configs(draw):
+    """A torch-capable env id with random scenario, dynamics, reward, window, B and seed."""
+    env_id = draw(st.sampled_from(sorted(_PROP_SCENARIOS)))
+    kwargs = {
+        "scenario": draw(st.sampled_from(_PROP_SCENARIOS[env_id])),
+        "dynamics": draw(st.sampled_from(["expected", "sampled"])),
+        "reward_mode": draw(st.sampled_from(["terminal", "shaped", "per_step"])),
+    }
+    window = draw(st.integers(1, 4))
+    if "Detection" in env_id and kwargs["dynamics"] == "expected":
+        if kwargs["scenario"] != "ch3-static":  # a moving state: one step keeps it Gaussian
+            window = 1
+    if env_id == "fdia_env/SparseAttack-v0":  # a budget the window can hold
+        kwargs["budget"] = draw(st.integers(0, window))
+    else:  # not every preset defines the attack's power
+        kwargs["power"] = draw(st.sampled_from([1.0, 25.0]))
+    if "SensorGame" in env_id:
+        kwargs["rounds"] = window
+        kwargs.update(opponent_for(env_id))  # deterministic: numpy and torch draw alike
+    else:
+        kwargs["horizon"] = window
+    return env_id, kwargs, draw(st.integers(1, 4)), draw(st.integers(0, 2**16))
+
+
+def _prop_actions(space, rng, B, mask):
+    if isinstance(space, gym.spaces.Discrete):
+        if mask is None:
+            return rng.integers(space.n, size=B)
+        return np.array([rng.choice(np.flatnonzero(m)) for m in mask])
+    if isinstance(space, gym.spaces.MultiBinary):
+        return rng.integers(0, 2, size=(B, *space.shape))
+    return rng.uniform(-1, 1, size=(B, *space.shape)).astype(np.float32)
+
+
+@settings(max_examples=12, deadline=None)
+@given(config=vector_configs())
+def test_single_native_numpy_torch_and_sync_agree(config):
+    # the single env (through SyncVectorEnv), the native vector env on numpy and on torch (CPU)
+    # step the same engine: numpy equals SyncVectorEnv (observations to float32 round-off,
+    # rewards and infos to 1e-9) in both dynamics; torch equals numpy to 1e-10 in expected
+    # dynamics (sampled: its own device generator, equal only in distribution)
+    torch = pytest.importorskip("torch")
+    env_id, kwargs, B, seed = config
+    sync = SyncVectorEnv([lambda: gym.make(env_id, **kwargs) for _ in range(B)])
+    native = gym.make_vec(env_id, num_envs=B, vectorization_mode="vector_entry_point", **kwargs)
+    on_torch = gym.make_vec(
+        env_id, num_envs=B, vectorization_mode="vector_entry_point", backend="torch", **kwargs
+    )
+    obs_s, info_s = sync.reset(seed=seed)
+    obs_n, info_n = native.reset(seed=seed)
+    obs_t, _ = on_torch.reset(seed=seed)
+    np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-7)
+    assert_infos_equal(info_n, info_s, "reset")
+    expected = kwargs["dynamics"] == "expected"
+    if expected:
+        np.testing.assert_allclose(obs_t.numpy(), obs_n, rtol=1e-6, atol=1e-7)
+    rng = np.random.default_rng(seed)
+    for t in range(2 * kwargs.get("horizon", kwargs.get("rounds", 1)) + 1):
+        actions = _prop_actions(sync.single_action_space, rng, B, info_s.get("action_mask"))
+        out_s = sync.step(actions)
+        out_n = native.step(actions)
+        out_t = on_torch.step(torch.as_tensor(actions))
+        np.testing.assert_allclose(out_n[0], out_s[0], rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(out_n[1], out_s[1], rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(out_n[2], out_s[2])
+        np.testing.assert_array_equal(out_n[3], out_s[3])
+        assert_infos_equal(out_n[4], out_s[4], f"step {t}")
+        np.testing.assert_array_equal(out_t[2].numpy(), out_n[2])
+        np.testing.assert_array_equal(out_t[3].numpy(), out_n[3])
+        if expected:
+            np.testing.assert_allclose(out_t[0].numpy(), out_n[0], rtol=1e-5, atol=1e-6)
+            np.testing.assert_allclose(out_t[1].numpy(), out_n[1], rtol=1e-10, atol=1e-10)
+        info_s = out_s[4]

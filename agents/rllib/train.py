@@ -31,7 +31,7 @@ import numpy as np
 
 from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
 from agents.evaluate import Evaluation
-from agents.lifecycle import RunFolder
+from agents.lifecycle import RunFolder, run_name
 from agents.lifecycle import open_run as open_folder
 from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
@@ -235,8 +235,7 @@ def rllib_prefix(cfg: TrainConfig | GameConfig) -> str:
     if isinstance(cfg, GameConfig):
         return run_prefix(f"{cfg.env}-{cfg.method}", f"rllib-{ALGO}", cfg.run.seed)
     entry = get(cfg.env, cfg.agent)
-    name = entry.env if cfg.agent == "attacker" else f"{entry.env}-{cfg.agent}"
-    return run_prefix(name, f"rllib-{ALGO}", cfg.run.seed)
+    return run_prefix(run_name(entry.env, cfg.agent), f"rllib-{ALGO}", cfg.run.seed)
 
 
 def open_run(
@@ -326,7 +325,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         FileExistsError: When a new run's folder exists.
         agents.rllib.ZeroStepsSampled: When an iteration sampled nothing.
     """
-    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.envs import is_masked
     from agents.rllib.policy import policy_of
     from agents.training import check_env_kwargs, final_evaluations
@@ -342,26 +341,10 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         run = open_run(cfg, stack, report)
         run_dir = run.run_dir
         reference = entry.reference_of(eval_env)
-        seed_everything(run.seed(cfg.run.seed), cfg.run.torch_threads)
-        init_ray(cfg.run)
-        config = _with_run(
-            ppo_config(
-                entry.gym_id,
-                env_config,
-                hp=cfg.hp,
-                num_env_runners=cfg.run.num_env_runners,
-                envs_per_env_runner=cfg.run.envs_per_env_runner,
-                seed=run.seed(cfg.run.seed),
-                total_timesteps=cfg.total_timesteps,
-                sample_timeout_s=cfg.run.sample_timeout_s,
-            ),
-            cfg.run,
-        )
-        algo = config.build_algo()
-        stack.callback(algo.stop)
-        begin(run, algo)
-        _write_config(run, cfg.agent, cfg, entry.gym_id, env_kwargs, hyperparameters, reference)
-        stop = run.folder.watch_signals()
+        algo, stop = _start(
+            run, cfg, stack, entry.gym_id, env_config, cfg.total_timesteps, cfg.agent, env_kwargs,
+            hyperparameters, reference,
+        )  # fmt: skip
         history, steps, seconds = _iterate(
             algo,
             cfg.total_timesteps,
@@ -397,6 +380,71 @@ def _view_space(gym_id: str, env_config: dict[str, Any]) -> Any:
 
     with make_view(gym_id, env_config) as env:
         return env.observation_space
+
+
+def _ppo(
+    cfg: TrainConfig | GameConfig, env: str, env_config: dict[str, Any], seed: int, total: int
+) -> Any:
+    """RLlib PPO's config of ``env`` with the run's settings (env runners, timeout, device)."""
+    from agents.rllib.config import ppo_config
+
+    return _with_run(
+        ppo_config(
+            env,
+            env_config,
+            hp=cfg.hp,
+            num_env_runners=cfg.run.num_env_runners,
+            envs_per_env_runner=cfg.run.envs_per_env_runner,
+            seed=seed,
+            total_timesteps=total,
+            sample_timeout_s=cfg.run.sample_timeout_s,
+        ),
+        cfg.run,
+    )
+
+
+def _start(
+    run: Session,
+    cfg: TrainConfig | GameConfig,
+    stack: ExitStack,
+    env: str,
+    env_config: dict[str, Any],
+    total: int,
+    command: str,
+    env_kwargs: dict[str, Any],
+    hyperparameters: dict[str, Any],
+    reference: Any,
+) -> tuple[Any, Any]:
+    """The lifecycle steps every RLlib driver shares, after :func:`open_run`.
+
+    Seed, start Ray, build the algorithm (a resumed run's state loaded into it), write
+    config.json and watch SIGINT/SIGTERM.
+
+    Returns:
+        The algorithm (stopped when ``stack`` closes) and the stop request.
+    """
+    seed = run.seed(cfg.run.seed)
+    seed_everything(seed, cfg.run.torch_threads)
+    init_ray(cfg.run)
+    algo = _ppo(cfg, env, env_config, seed, total).build_algo()
+    stack.callback(algo.stop)
+    begin(run, algo)
+    _write_config(run, command, cfg, env, env_kwargs, hyperparameters, reference)
+    return algo, run.folder.watch_signals()
+
+
+def _per_iteration(cfg: GameConfig, run: Session, hyperparameters: dict[str, Any]) -> int:
+    """Env steps of one self-play iteration (whole rollouts), the resume's length checked.
+
+    Raises:
+        ValueError: For a resume whose ``--iterations`` is below the iterations done.
+    """
+    n_steps = hyperparameters["n_steps"]
+    per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
+    run.folder.check_not_shorter(
+        "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+    )
+    return per_iteration
 
 
 def _with_run(config: Any, run: RunSettings) -> Any:
@@ -493,7 +541,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         FileExistsError: When a new run's folder exists.
     """
     from agents.population import SIDES
-    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.envs import make_multi_agent
     from agents.rllib.policy import policy_of
     from agents.selfplay import SelfPlayResult, _final_evaluations
@@ -511,31 +559,11 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
     with ExitStack() as stack:
         run = open_run(cfg, stack, report)
         run_dir = run.run_dir
-        seed_everything(run.seed(cfg.run.seed), cfg.run.torch_threads)
-        init_ray(cfg.run)
-        n_steps = hyperparameters["n_steps"]
-        per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
-        run.folder.check_not_shorter(
-            "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
-        )
-        config = _with_run(
-            ppo_config(
-                cfg.env,
-                env_kwargs,
-                hp=cfg.hp,
-                num_env_runners=cfg.run.num_env_runners,
-                envs_per_env_runner=cfg.run.envs_per_env_runner,
-                seed=run.seed(cfg.run.seed),
-                total_timesteps=cfg.iterations * per_iteration,
-                sample_timeout_s=cfg.run.sample_timeout_s,
-            ),
-            cfg.run,
-        )
-        algo = config.build_algo()
-        stack.callback(algo.stop)
-        begin(run, algo)
-        _write_config(run, "game", cfg, cfg.env, env_kwargs, hyperparameters, reference)
-        stop = run.folder.watch_signals()
+        per_iteration = _per_iteration(cfg, run, hyperparameters)
+        algo, stop = _start(
+            run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game",
+            env_kwargs, hyperparameters, reference,
+        )  # fmt: skip
         policies = {
             side: policy_of(algo, side, parallel.action_space(side), False) for side in SIDES
         }
@@ -562,7 +590,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
                 last_defender=now["defender"].tolist(),
                 last_attacker=now["attacker"].tolist(),
             )
-            if len(mixes["attacker"]) % (per_iteration // n_steps) == 0:
+            if len(mixes["attacker"]) % (per_iteration // hyperparameters["n_steps"]) == 0:
                 say(_selfplay_line(rec, value))
 
         history, steps, seconds = _iterate(
@@ -656,23 +684,10 @@ def learn_best_response_rllib(
     state) and its last per-agent returns.
     """
     from agents.population import initial_action
-    from agents.rllib.config import ppo_config
     from agents.rllib.policy import policy_of
 
     env_config = {**env_kwargs, "opponent": [float(p) for p in opponent], "opponent_seed": seed}
-    config = _with_run(
-        ppo_config(
-            entry.gym_id,
-            env_config,
-            hp=cfg.hp,
-            num_env_runners=cfg.run.num_env_runners,
-            envs_per_env_runner=cfg.run.envs_per_env_runner,
-            seed=seed,
-            total_timesteps=cfg.steps_per_iteration,
-            sample_timeout_s=cfg.run.sample_timeout_s,
-        ),
-        cfg.run,
-    )
+    config = _ppo(cfg, entry.gym_id, env_config, seed, cfg.steps_per_iteration)
     with warnings.catch_warnings():  # each learner re-registers RLlib's internal env id
         warnings.filterwarnings("ignore", message="Overriding environment rllib-")
         algo = config.build_algo()
@@ -863,7 +878,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     from agents.evaluate import evaluate
     from agents.population import SIDES
     from agents.registry import REGISTRY
-    from agents.rllib.config import ppo_config, rllib_hyperparameters
+    from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.policy import policy_of
     from agents.selfplay import SelfPlayResult
     from agents.training import check_env_kwargs
@@ -878,28 +893,11 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     with ExitStack() as stack:
         run = open_run(cfg, stack, report)
         run_dir = run.run_dir
-        seed_everything(run.seed(cfg.run.seed), cfg.run.torch_threads)
-        init_ray(cfg.run)
-        n_steps = hyperparameters["n_steps"]
-        per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
-        run.folder.check_not_shorter(
-            "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
-        )
-        config = ppo_config(
-            cfg.env,
-            env_kwargs,
-            hp=cfg.hp,
-            num_env_runners=cfg.run.num_env_runners,
-            envs_per_env_runner=cfg.run.envs_per_env_runner,
-            seed=run.seed(cfg.run.seed),
-            total_timesteps=cfg.iterations * per_iteration,
-            sample_timeout_s=cfg.run.sample_timeout_s,
-        )
-        algo = _with_run(config, cfg.run).build_algo()
-        stack.callback(algo.stop)
-        begin(run, algo)
-        _write_config(run, "game", cfg, cfg.env, env_kwargs, hyperparameters, None)
-        stop = run.folder.watch_signals()
+        per_iteration = _per_iteration(cfg, run, hyperparameters)
+        algo, stop = _start(
+            run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game",
+            env_kwargs, hyperparameters, None,
+        )  # fmt: skip
 
         def on_iteration(rec: dict[str, Any]) -> None:
             if rec["timesteps"] % per_iteration == 0:

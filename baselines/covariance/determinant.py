@@ -23,6 +23,7 @@ import numpy as np
 from baselines.covariance.problem import make_problem, weight_roots
 from baselines.covariance.result import CovarianceResult
 from fdia_env._validation import check_positive
+from fdia_env.kalman import spd_inv_sum
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -161,7 +162,9 @@ def kkt_residuals(result: CovarianceResult, power: float | None = None) -> KKTRe
     half, inv_half = weight_roots(result.weight)
     sigma_t = half @ result.sigma @ half  # Σ̃ = Ω^{1/2} Σ Ω^{1/2}
     Wt = result.W @ inv_half
-    G = Wt.T @ np.linalg.solve(result.covariance, Wt)  # ∂ log det / ∂Σ̃
+    added = result.W @ result.sigma @ result.W.T
+    inverse, _ = spd_inv_sum(result.P, 0.5 * (added + added.T))  # not inv(P + W Σ W'): singular
+    G = Wt.T @ inverse @ Wt  # ∂ log det / ∂Σ̃
     G = 0.5 * (G + G.T)
     lam = float(np.trace(G @ sigma_t)) / a2
     return KKTResiduals(

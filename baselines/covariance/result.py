@@ -10,7 +10,7 @@ import numpy as np
 from baselines._inputs import resolve_system
 from baselines.covariance.problem import check_weight
 from fdia_env._validation import as_matrix, check_choice, check_psd
-from fdia_env.kalman import psd_sqrt, steady_state
+from fdia_env.kalman import psd_sqrt, spd_inv_sum, steady_state
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, power_weight
 
@@ -90,8 +90,13 @@ class CovarianceResult:
 
     @property
     def logdet(self) -> float:
-        """``log det(P + W Σ W')``."""
-        return float(np.linalg.slogdet(self.covariance)[1])
+        """``log det(P + W Σ W')``.
+
+        Computed from ``P`` and ``W Σ W'``: their sum is singular in float64 when a huge power
+        goes into few directions.
+        """
+        added = self.W @ self.sigma @ self.W.T
+        return float(spd_inv_sum(self.P, 0.5 * (added + added.T))[1])
 
     @property
     def det(self) -> float:
@@ -165,5 +170,12 @@ def _logdet(P: np.ndarray, W: np.ndarray, sigma: np.ndarray) -> float:
         return float(np.linalg.slogdet(P + W @ sigma @ W.T)[1])
     S = psd_sqrt(sigma)
     X = np.linalg.solve(L, W @ S)  # L⁻¹ W S: X'X = S' W' P⁻¹ W S
-    lam = np.linalg.eigvalsh(X.T @ X)
-    return float(2.0 * np.log(np.diag(L)).sum() + np.log1p(np.maximum(lam, 0.0)).sum())
+    # λ = squared singular values of X; those below size · eps of the largest are rounding of
+    # the large ones (a rank-two Σ of 1e300: eigvalsh(X'X) gave "eigenvalues" near 1e284,
+    # each adding ~650 to the log-determinant)
+    sv = np.linalg.svd(X, compute_uv=False)
+    sv = np.where(sv > max(X.shape) * np.finfo(np.float64).eps * sv.max(initial=0.0), sv, 0.0)
+    big = sv > 1.0
+    safe = np.where(big, sv, 1.0)
+    log1p_lam = np.where(big, 2.0 * np.log(safe) + np.log1p(safe**-2.0), np.log1p(sv * sv))
+    return float(2.0 * np.log(np.diag(L)).sum() + log1p_lam.sum())

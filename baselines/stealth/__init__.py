@@ -7,7 +7,9 @@
 - :func:`basic_measurement_set`, :func:`undetectable_attack`: protecting n independent meters
   rules out every undetectable attack, and fewer do not;
 - :func:`mo_sinopoli`: whether a sensor set admits a stealthy attack that drives a Kalman
-  filter's error unbounded under a χ² innovation detector, and the attack.
+  filter's error unbounded under a χ² innovation detector, and the attack;
+- :func:`optimal_linear_attack`: the linear attack ``z̃ = T z + b`` on a remote estimator's
+  innovations with the largest error under a Kullback-Leibler stealthiness budget.
 
 Their ``.policy()`` plays them in ``stealth_attack_v0``. See docs/guide/stealth.md.
 """
@@ -20,11 +22,13 @@ from baselines.stealth.attack import (
     undetectable_attack,
 )
 from baselines.stealth.dynamic import StealthyKalmanAttack, kalman_model, mo_sinopoli
+from baselines.stealth.linear import LinearAttack, optimal_linear_attack
 from baselines.stealth.policy import StealthPolicy
 from baselines.stealth.security_index import METHODS, SecurityIndex, security_index
 
 __all__ = [
     "METHODS",
+    "LinearAttack",
     "SecurityIndex",
     "StealthPolicy",
     "StealthyAttack",
@@ -34,6 +38,7 @@ __all__ = [
     "kalman_model",
     "minimum_meter_attack",
     "mo_sinopoli",
+    "optimal_linear_attack",
     "security_index",
     "undetectable_attack",
 ]

@@ -196,8 +196,9 @@ def as_index(action: Any) -> int | None:
 def as_index_array(actions: Any, n: int, who: str, what: str) -> np.ndarray:
     """(B,) integer actions in [0, n) as int64, or ``ValueError`` naming ``who``."""
     a = np.asarray(actions)
-    if a.ndim != 1 or not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool):
-        if a.ndim == 1 and np.issubdtype(a.dtype, np.floating) and np.all(a == np.round(a)):
+    kind = a.dtype.kind  # "i"/"u" integers, "b" bool, "f" floats (cheaper than issubdtype)
+    if a.ndim != 1 or kind not in "iub":
+        if a.ndim == 1 and kind == "f" and np.all(a == np.round(a)):
             a = a.astype(np.int64)
         else:
             raise ValueError(f"{who} actions must be a 1-D integer array ({what}), got {actions!r}")

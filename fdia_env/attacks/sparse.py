@@ -208,14 +208,14 @@ class SparseAttack(AttackModel):
     def batch_reset(self, batch: int, where: Any = None) -> None:
         """Restore the full budget of the members ``where``."""
         xp = self.xp
-        if where is None:
+        if where is None or xp.all(where):  # every member (episodes of one length end together)
             self.b_remaining = xp.full(batch, self.budget, dtype=xp.int64)
             self.b_attacked = xp.zeros((batch, self.M), dtype=xp.int8)
             if self.format == "bitmask":
                 self._b_tables = self._tables()  # read every step: kept as an attribute
-        else:
-            self.b_remaining[where] = self.budget
-            self.b_attacked[where] = 0
+        else:  # fresh arrays: the infos handed out earlier never change afterwards
+            self.b_remaining = xp.where(where, self.budget, self.b_remaining)
+            self.b_attacked = xp.where(where[:, None], 0, self.b_attacked)
 
     def batch_features(self) -> Any:
         """(B, 1) remaining budget fraction."""
@@ -236,9 +236,10 @@ class SparseAttack(AttackModel):
             count += take
         self._trim_table = kept.reshape(-1)  # flat: index action * (M + 1) + left
         self._mask_table = (self._sizes[None, :] <= left.T).astype(np.int8)
+        self._bit_table = ((actions >> np.arange(self.M)) & 1).astype(np.int8)  # (A, M)
 
-    def _tables(self) -> tuple[Any, Any, Any]:
-        """``(trim, mask, sizes)`` tables on the backend (built once, moved once)."""
+    def _tables(self) -> tuple[Any, Any, Any, Any]:
+        """``(trim, mask, sizes, bits)`` tables on the backend (built once, moved once)."""
         if self._trim_table is None:  # bind() cleared it: new tables, nothing cached
             self._batch_tables()
             self._xp_tables = None
@@ -246,8 +247,28 @@ class SparseAttack(AttackModel):
         cached = self._xp_tables
         if cached is None or cached[0] is not xp:
             arrays = (self._trim_table, self._mask_table, np.asarray(self._sizes, np.int64))
-            self._xp_tables = (xp, *(xp.asarray(a) for a in arrays))
+            bits = self._bit_table
+            if xp is NUMPY and self.M <= 8:  # each row as one 1/2/4/8-byte word (see _attacked)
+                width = 1 << (self.M - 1).bit_length()
+                padded = np.zeros((bits.shape[0], width), dtype=np.int8)
+                padded[:, : self.M] = bits
+                bits = padded.view(f"<u{width}").reshape(-1)
+            self._xp_tables = (xp, *(xp.asarray(a) for a in arrays), xp.asarray(bits))
         return self._xp_tables[1:]
+
+    def _attacked(self, a: Any) -> Any:
+        """(B, M) int8 sensors attacked by the bitmasks ``a``, looked up in the bit table.
+
+        On numpy with M <= 8 the table's rows are packed into one machine word each, so the
+        lookup gathers B words (a gather of B rows of M bytes is several times slower); the
+        result is a view of the words' first M bytes.
+        """
+        bits = self._b_tables[3]
+        if bits.ndim == 2:
+            return self.xp.take(bits, a, axis=0)
+        width = bits.dtype.itemsize
+        rows = np.take(bits, a).view(np.int8).reshape(a.shape[0], width)
+        return rows if width == self.M else rows[:, : self.M]
 
     def batch_action_mask(self) -> Any:
         """(B, A) legal actions of each member for its budget left (see :meth:`action_mask`)."""
@@ -258,7 +279,7 @@ class SparseAttack(AttackModel):
             return xp.where(
                 (self.b_remaining > 0)[:, None], xp.asarray(self._open), xp.asarray(self._closed)
             )
-        _, mask_table, _ = self._b_tables
+        _, mask_table, _, _ = self._b_tables
         return xp.take(mask_table, xp.minimum(self.b_remaining, self.M), axis=0)
 
     def _batch_apply_large(self, actions: Any) -> tuple[Any, None]:
@@ -307,7 +328,7 @@ class SparseAttack(AttackModel):
             a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
         else:
             a = xp.astype(actions, xp.int64)
-        trim, _, sizes = self._b_tables
+        trim, _, sizes, _ = self._b_tables
         if self.illegal_action != "trim":
             over = xp.take(sizes, a) > self.b_remaining
             if xp.any(over):
@@ -316,13 +337,12 @@ class SparseAttack(AttackModel):
                 a = xp.where(over, 0, a)
         a = xp.take(trim, a * (self.M + 1) + xp.minimum(self.b_remaining, self.M))
         self.b_remaining = self.b_remaining - xp.take(sizes, a)
-        self.b_attacked = xp.astype((a[:, None] >> xp.arange(self.M)) & 1, xp.int8)
+        self.b_attacked = self._attacked(a)
         return a, None
 
     def batch_info(self) -> dict[str, Any]:
-        """Batched :meth:`info`."""
-        xp = self.xp
-        return {"attacked": xp.copy(self.b_attacked), "budget_left": xp.copy(self.b_remaining)}
+        """Batched :meth:`info` (arrays of this step: the next step and resets make new ones)."""
+        return {"attacked": self.b_attacked, "budget_left": self.b_remaining}
 
 
 def _sensors(bits: int) -> list[int]:

@@ -43,7 +43,7 @@ class NumpyBackend(Backend):
     empty_like = staticmethod(np.empty_like)
     cumsum = staticmethod(np.cumsum)
     stack = staticmethod(np.stack)
-    take = staticmethod(np.take)
+    take = staticmethod(np.ndarray.take)  # the method: np.take adds two Python frames
     flatnonzero = staticmethod(np.flatnonzero)
     unique = staticmethod(np.unique)
     einsum = staticmethod(np.einsum)

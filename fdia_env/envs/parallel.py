@@ -25,6 +25,32 @@ RENDER_MODES = ("human", "ansi", "rgb_array")
 RENDER_FPS = 4
 
 
+def attacker_reward(mode: str, phi: Any, phi_prev: Any, done: Any, xp: Any = None) -> Any:
+    """The attacker's reward for one step; the defender's is its negative (zero-sum).
+
+    The one reward of every face: the parallel env calls it with floats, the native vector env
+    with (B,) arrays of its backend ``xp``.
+
+    Args:
+        mode: The episode's ``reward_mode``: ``"terminal"`` (Φ at the window's end, else 0),
+            ``"shaped"`` (Φ − Φ of the step before) or ``"per_step"`` (Φ).
+        phi: Φ after the step.
+        phi_prev: Φ before the step.
+        done: Whether the window ended with this step.
+        xp: None for floats; the backend of (B,) arrays (the result is then a new array).
+
+    Returns:
+        The reward (a float, or a (B,) array).
+    """
+    if mode == "terminal":
+        if xp is None:
+            return phi if done else 0.0
+        return xp.where(done, phi, 0.0)
+    if mode == "shaped":
+        return phi - phi_prev
+    return phi if xp is None else xp.copy(phi)
+
+
 class FdiaParallelEnv(ParallelEnv):
     """A Kalman filter attacked by ``"attacker"`` and protected by ``"defender"``.
 
@@ -195,7 +221,7 @@ class FdiaParallelEnv(ParallelEnv):
         phi = self.sim.step(filter_input, self.np_random)
         done = self.sim.k >= self.spec.horizon
         truncated = not done and self.max_cycles is not None and self.sim.k >= self.max_cycles
-        reward = self._reward(phi, phi_prev, done)
+        reward = attacker_reward(self.spec.reward_mode, phi, phi_prev, done)
         agents = self.agents
         obs = {a: self._observe(a) for a in agents}
         rewards = {"attacker": reward, "defender": -reward}
@@ -226,14 +252,6 @@ class FdiaParallelEnv(ParallelEnv):
         if "attacker" in infos:
             infos["attacker"].update(self.attack.private_info())
         return infos
-
-    def _reward(self, phi: float, phi_prev: float, done: bool) -> float:
-        mode = self.spec.reward_mode
-        if mode == "terminal":
-            return phi if done else 0.0
-        if mode == "shaped":
-            return phi - phi_prev
-        return phi
 
     def _observe(self, agent: str) -> Any:
         model = self._models[agent]

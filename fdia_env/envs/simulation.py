@@ -16,8 +16,9 @@ import math
 import numpy as np
 
 from fdia_env.attacks.base import bits_to_mask
+from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import FilterInput
-from fdia_env.detection.step import detection_step
+from fdia_env.detection.step import SystemArrays, detection_step
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
     information_update,
@@ -31,6 +32,19 @@ from fdia_env.kalman import (
     steady_state,
 )
 from fdia_env.systems import LinearSystem
+
+
+def start_covariance(system: LinearSystem, spec: EpisodeSpec) -> np.ndarray:
+    """P at the window start: steady state, or the prior after ``spec.warmup`` clean steps.
+
+    The one definition of the start for the single and the batched engine.
+    """
+    if spec.warmup == "steady":
+        return steady_state(system)[1]
+    P = np.array(system.P0)
+    for _ in range(int(spec.warmup)):
+        P = information_update(predict_cov(P, system.F, system.Q), system.J)
+    return P
 
 
 class Simulation:
@@ -52,8 +66,9 @@ class Simulation:
         self._full = (1 << system.M) - 1
         self._Q_factor = psd_sqrt(system.Q)
         self._R_factor = psd_sqrt(system.R)
-        self.P_start = self._start_covariance()
+        self.P_start = start_covariance(system, spec)
         self._iu = np.triu_indices(system.n, 1)
+        self._detection_arrays: SystemArrays | None = None
         self._fast = fast and system.n == 2
         if self._fast:
             self._f2 = small.to_mat2(system.F)
@@ -61,15 +76,6 @@ class Simulation:
             self._start2 = small.to_sym2(self.P_start)
             self._j2: dict[int, small.Sym2] = {}
         self.k = 0
-
-    def _start_covariance(self) -> np.ndarray:
-        """P at the window start: steady state, or the prior after ``warmup`` clean steps."""
-        if self.spec.warmup == "steady":
-            return steady_state(self.system)[1]
-        P = np.array(self.system.P0)
-        for _ in range(int(self.spec.warmup)):
-            P = information_update(predict_cov(P, self.system.F, self.system.Q), self.system.J)
-        return P
 
     # --- state -------------------------------------------------------------------------------
     @property
@@ -143,6 +149,10 @@ class Simulation:
 
     def _detection_step(self, fi: FilterInput, rng: np.random.Generator | None) -> None:
         """A step of the detection game (see :mod:`fdia_env.detection.step`)."""
+        if self._detection_arrays is None:  # the system's arrays, built once
+            self._detection_arrays = SystemArrays.of(
+                self.system, NUMPY, self._Q_factor, self._R_factor
+            )
         out = detection_step(
             self.system,
             fi.detection,
@@ -152,7 +162,7 @@ class Simulation:
             rng=rng if self.sampled else None,
             x=getattr(self, "x", None),
             x_hat=getattr(self, "x_hat", None),
-            factors=(self._Q_factor, self._R_factor),
+            arrays=self._detection_arrays,
         )
         self._P = out.P
         self._p2 = small.to_sym2(out.P) if self._fast else None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from typing import Any, ClassVar
 
@@ -13,7 +14,12 @@ from pettingzoo import ParallelEnv
 from fdia_env._validation import check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_action
 from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
-from fdia_env.stealth.static import StaticEstimation, static_estimation
+from fdia_env.stealth.static import (
+    StaticEstimation,
+    check_alpha,
+    sidak_threshold,
+    static_estimation,
+)
 
 ACTIONS = ("shift", "free")
 DYNAMICS = ("expected", "sampled")
@@ -52,7 +58,7 @@ class StealthAttackEnv(ParallelEnv):
         a_max: float = 0.5,
         dynamics: str = "sampled",
         test: str = "chi2",
-        alpha: float = 0.05,
+        alpha: float | None = None,
         on_detect: str = "zero",
         penalty: float = 1.0,
         protected: Any = None,
@@ -61,10 +67,13 @@ class StealthAttackEnv(ParallelEnv):
     ) -> None:
         if isinstance(scenario, StaticEstimation):
             est = scenario
-            if alpha != est.alpha:
-                est = static_estimation(est.grid if est.grid is not None else est.H, alpha=alpha)
+            if alpha is not None and check_alpha(alpha) != est.alpha:
+                # same model (R, meters) at another false-alarm rate; Šidák's LNR threshold
+                est = dataclasses.replace(
+                    est, alpha=float(alpha), lnr_threshold=sidak_threshold(float(alpha), est.m)
+                )
         else:
-            est = static_estimation(scenario, alpha=alpha)
+            est = static_estimation(scenario, alpha=0.05 if alpha is None else alpha)
         self.estimation = est
         self.budget = check_int("budget", budget, minimum=1, maximum=est.m)
         self.max_cycles = (

@@ -30,6 +30,7 @@ docs/guide/stealth.md.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -100,6 +101,7 @@ class StaticEstimation:
     _Linv: np.ndarray = field(init=False, repr=False)
     _Q: np.ndarray = field(init=False, repr=False)
     _lnr_scale: np.ndarray = field(init=False, repr=False)
+    _diag_Linv: np.ndarray | None = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         m, n = self.H.shape
@@ -130,6 +132,8 @@ class StaticEstimation:
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
+        is_diag = not np.any(self.R - np.diag(np.diag(self.R)))
+        object.__setattr__(self, "_diag_Linv", np.diag(Linv).copy() if is_diag else None)
         scale = np.where(critical, 1.0, np.sqrt(np.where(critical, 1.0, diag)))
         object.__setattr__(self, "_lnr_scale", scale)
 
@@ -195,11 +199,21 @@ class StaticEstimation:
         """(..., m) residuals r = z − H θ̂."""
         return self._z("z", z) @ self.S.T
 
+    def _whiten(self, x: np.ndarray) -> np.ndarray:
+        """``L⁻¹ x`` along the last axis (elementwise when R is diagonal)."""
+        if self._diag_Linv is not None:
+            return x * self._diag_Linv
+        return x @ self._Linv.T
+
+    def _parts(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(|(I − P) L⁻¹ x|², |L⁻¹ x|)`` along the last axis."""
+        w = self._whiten(x)
+        r = w - (w @ self._Q) @ self._Q.T
+        return np.einsum("...i,...i->...", r, r), np.linalg.norm(w, axis=-1)
+
     def statistic(self, z: Any) -> np.ndarray:
         """(...,) the χ² statistic J = r' W r."""
-        w = self._z("z", z) @ self._Linv.T
-        w = w - (w @ self._Q) @ self._Q.T
-        return np.einsum("...i,...i->...", w, w)
+        return self._parts(self._z("z", z))[0]
 
     def normalized_residuals(self, z: Any) -> np.ndarray:
         """(..., m) ``r_i / sqrt(Ω_ii)`` (0 on critical meters)."""
@@ -230,12 +244,17 @@ class StaticEstimation:
 
         ``P[χ²_{m−n}(λ(a)) > τ]``; exactly ``alpha`` where :meth:`is_stealthy` (``a = H c``).
         """
-        lam = self.noncentrality(a)
-        return np.where(
-            self.is_stealthy(a),
-            self.alpha,
-            stats.ncx2.sf(self.threshold, self.dof, np.maximum(lam, 1e-300)),
-        )
+        lam, size = self._parts(self.injection(a))
+        stealthy = np.sqrt(lam) <= 1e-9 * np.maximum(size, 1e-300)
+        out = np.full(lam.shape, self.alpha)
+        # Laurent & Massart: P[χ²_D(λ) ≤ D + λ − 2 sqrt((D + 2λ) x)] ≤ e^{−x}; with x = 750 the
+        # miss probability is below the smallest double, so p is 1.0 exactly (no ncx2 call)
+        certain = self.dof + lam - self.threshold >= 2.0 * np.sqrt((self.dof + 2.0 * lam) * 750.0)
+        out[certain & ~stealthy] = 1.0
+        seen = ~stealthy & ~certain
+        if np.any(seen):
+            out[seen] = stats.ncx2.sf(self.threshold, self.dof, lam[seen])
+        return out if out.ndim else float(out)
 
     def detection_rate(
         self, a: Any, samples: int = 10_000, seed: int | None = None, test: str = "chi2"
@@ -260,10 +279,8 @@ class StaticEstimation:
 
         ``tol`` is relative to ``|L⁻¹ a|``: the injection's whitened size.
         """
-        a = self.injection(a)
-        w = a @ self._Linv.T
-        lam = self.statistic(a)
-        return np.sqrt(lam) <= tol * np.maximum(np.linalg.norm(w, axis=-1), 1e-300)
+        lam, size = self._parts(self.injection(a))
+        return np.sqrt(lam) <= tol * np.maximum(size, 1e-300)
 
 
 def _check_test(test: Any) -> str:
@@ -317,7 +334,7 @@ def _check_R(R: Any, sigma: Any, m: int, default: np.ndarray | None) -> np.ndarr
 
 def grid_source(source: Any) -> Any:
     """The :class:`GridModel` of a case name, a grid preset name or a GridModel, else ``None``."""
-    from fdia_env.systems.grid import CASES, GridModel, grid_model
+    from fdia_env.systems.grid import CASES, GridModel
 
     if isinstance(source, GridModel):
         return source
@@ -329,8 +346,16 @@ def grid_source(source: Any) -> Any:
                 f"{['grid-' + c for c in sorted(CASES)]}, a GridModel or an (m, n) matrix H, "
                 f"got {source!r}"
             )
-        return grid_model(case)
+        return _grid_case(case)
     return None
+
+
+@functools.cache
+def _grid_case(case: str) -> Any:
+    """The default grid model of a case, built once (it is immutable: read-only arrays)."""
+    from fdia_env.systems.grid import grid_model
+
+    return grid_model(case)
 
 
 def static_estimation(

@@ -47,8 +47,9 @@ first alarm with ``on_detect="end"`` (sampled). Truncates after ``max_cycles``.
 a :class:`~fdia_env.stealth.StaticEstimation`), ``budget`` (meters, default 6), ``horizon``,
 ``action`` (``"shift"`` | ``"free"``), ``magnitude`` (rad, 0.05), ``a_max`` (pu, 0.5),
 ``dynamics`` (``"sampled"`` | ``"expected"``), ``test`` (``"chi2"`` | ``"lnr"``), ``alpha``
-(0.05), ``on_detect`` (``"zero"`` | ``"penalty"`` | ``"end"``), ``penalty`` (1.0),
-``protected`` (meter positions or names), ``render_mode``, ``max_cycles``.
+(0.05, or the given StaticEstimation's; another value re-thresholds that model),
+``on_detect`` (``"zero"`` | ``"penalty"`` | ``"end"``), ``penalty`` (1.0), ``protected``
+(meter positions or names), ``render_mode``, ``max_cycles``.
 
 Infos (the same keys at reset and every step): ``phi`` (the last damage), ``step``,
 ``detected``, ``detection_probability`` (exact, χ² test), ``statistic`` (J; its mean under
@@ -89,7 +90,7 @@ def parallel_env(
     a_max: float = 0.5,
     dynamics: str = "sampled",
     test: str = "chi2",
-    alpha: float = 0.05,
+    alpha: float | None = None,
     on_detect: str = "zero",
     penalty: float = 1.0,
     protected: Any = None,

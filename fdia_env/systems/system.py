@@ -181,7 +181,12 @@ class LinearSystem:
             raise ValueError(f"LinearSystem.F must be square, got shape {F.shape}")
         Q = as_matrix("LinearSystem.Q", self.Q, shape=(n, n))
         check_psd("LinearSystem.Q", Q)
-        if isinstance(self.sensors, Sensor) or not isinstance(self.sensors, Iterable | None):
+        zero_d = isinstance(self.sensors, np.ndarray) and self.sensors.ndim == 0  # not iterable
+        if (
+            isinstance(self.sensors, Sensor | str)
+            or zero_d
+            or not isinstance(self.sensors, Iterable | None)
+        ):
             raise ValueError(
                 "LinearSystem.sensors must be a sequence of Sensor, got "
                 f"{type(self.sensors).__name__} (wrap a single sensor as (sensor,))"

@@ -11,6 +11,11 @@ from fdia_env._validation import check_positive
 from fdia_env.systems.system import LinearSystem, Sensor
 
 
+def _zero_d(value: object) -> bool:
+    """A 0-d array: ``Iterable`` by type, but iterating it raises a bare ``TypeError``."""
+    return isinstance(value, np.ndarray) and value.ndim == 0
+
+
 def _variance(name: str, sigma: float, factor: float = 1.0) -> float:
     """``(factor · sigma)²`` as a finite positive float, else ``ValueError`` naming ``name``.
 
@@ -95,7 +100,9 @@ def tracking_system(
     all_sensors: list[Sensor] = []
     if isinstance(sigma_w, numbers.Real) and not isinstance(sigma_w, bool):
         sigma_w = [sigma_w]  # one position sensor
-    elif sigma_w is not None and (isinstance(sigma_w, str) or not isinstance(sigma_w, Iterable)):
+    elif sigma_w is not None and (
+        isinstance(sigma_w, str) or _zero_d(sigma_w) or not isinstance(sigma_w, Iterable)
+    ):
         raise ValueError(
             "sigma_w must be a number or a sequence of numbers > 0 (position-sensor standard "
             f"deviations), got {sigma_w!r}"
@@ -104,7 +111,11 @@ def tracking_system(
         _variance(f"sigma_w[{i}]", check_positive(f"sigma_w[{i}]", s))
         all_sensors.append(position_sensor(s, name=f"z{i + 1}"))
     if sensors is not None:
-        if isinstance(sensors, Sensor | str) or not isinstance(sensors, Iterable):
+        if (
+            isinstance(sensors, Sensor | str)
+            or _zero_d(sensors)
+            or not isinstance(sensors, Iterable)
+        ):
             raise ValueError(f"sensors must be a sequence of Sensor, got {type(sensors).__name__}")
         sensors = tuple(sensors)  # not ``sensors or ()``: an array has no truth value
         for i, s in enumerate(sensors):

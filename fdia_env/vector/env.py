@@ -30,7 +30,7 @@ that every member draws from (sampled dynamics: equal to the numpy backend in di
 draw for draw; expected dynamics: equal member by member). In ``SAME_STEP`` mode
 ``infos["final_obs"]`` is a (B, d) tensor (rows of the members whose ``_final_obs`` is False are
 zeros). A policy opponent's ``predict`` gets and gives numpy (a host round trip); the detection
-game's exact expected errors are integrated on the host (see :mod:`fdia_env.vector.detection`).
+game's exact expected errors are integrated on the host (see :mod:`fdia_env.detection.step`).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from fdia_env._validation import check_int
 from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.opponents import FixedMix
-from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
+from fdia_env.envs.parallel import FdiaParallelEnv, attacker_reward, check_reset_args
 from fdia_env.envs.single_agent import Policy, check_agent, check_no_opponent, check_opponent
 from fdia_env.registration import ENVS, torch_ids
 from fdia_env.vector.simulation import BatchedSimulation
@@ -188,7 +188,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             if hasattr(self.opponent, "reset"):
                 self.opponent.reset(seed=int(seed) + 1)
         if self.sim is None:
-            self.sim = BatchedSimulation(self.parallel.sim, B)
+            self.sim = BatchedSimulation(self.parallel.system, self.parallel.spec, B)
         self.sim.rngs = self._rngs
         return self._reset_all(options)
 
@@ -206,7 +206,9 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if seed is not None and not self._mix and hasattr(self.opponent, "reset"):
             self.opponent.reset(seed=int(seed) + 1)  # a policy opponent, as on numpy
         if self.sim is None:
-            self.sim = BatchedSimulation(self.parallel.sim, self.num_envs, self.xp)
+            self.sim = BatchedSimulation(
+                self.parallel.system, self.parallel.spec, self.num_envs, self.xp
+            )
         self.sim.generator = self._generator
         return self._reset_all(options)
 
@@ -284,13 +286,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             truncated |= ~done & (k >= self.parallel.max_cycles)
         if self.max_episode_steps is not None:  # Gymnasium's TimeLimit
             truncated |= k >= self.max_episode_steps
-        mode = self.spec_episode.reward_mode
-        if mode == "terminal":
-            reward = xp.where(done, phi, 0.0)
-        elif mode == "shaped":
-            reward = phi - phi_prev
-        else:
-            reward = xp.copy(phi)
+        reward = attacker_reward(self.spec_episode.reward_mode, phi, phi_prev, done, xp)
         if self.agent == "defender":
             reward = -reward
         infos: dict[str, Any] = {}

@@ -25,7 +25,8 @@ import numpy as np
 from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits
 from fdia_env.backend import NUMPY, Backend
 from fdia_env.defenses.base import BatchDetection
-from fdia_env.envs.simulation import Simulation
+from fdia_env.detection.step import SystemArrays, batched_detection_step
+from fdia_env.envs.simulation import start_covariance
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
     information_update,
@@ -39,14 +40,15 @@ from fdia_env.kalman import (
     steady_state,
     sym,
 )
-from fdia_env.vector.detection import batched_detection_step
+from fdia_env.systems import LinearSystem
 
 
 class BatchedSimulation:
     """B filters under attack, on numpy or on torch.
 
     Args:
-        single: The single environment's engine (its system, episode spec and start state).
+        system: The model.
+        spec: The episode (its window, warm-up, objective and dynamics).
         batch: B.
         backend: Where the arrays live (:data:`~fdia_env.backend.NUMPY` by default).
 
@@ -59,13 +61,15 @@ class BatchedSimulation:
         generator: torch backend, sampled dynamics: the ``torch.Generator`` of every draw.
     """
 
-    def __init__(self, single: Simulation, batch: int, backend: Backend = NUMPY) -> None:
-        self.single = single
-        self.system = system = single.system
-        self.spec: EpisodeSpec = single.spec
+    def __init__(
+        self, system: LinearSystem, spec: EpisodeSpec, batch: int, backend: Backend = NUMPY
+    ) -> None:
+        self.system = system
+        self.spec = spec
+        P_start = start_covariance(system, spec)
         self.B = batch
         self.xp = xp = backend
-        self.sampled = single.sampled
+        self.sampled = spec.dynamics == "sampled"
         self.fast = system.n == 2
         n, M = system.n, system.M
         c = xp.asarray  # the system's constants, once, on the backend's device
@@ -76,13 +80,16 @@ class BatchedSimulation:
         self._row_sensor = c(np.asarray(system.row_sensor, dtype=np.int64))
         self._shifts = c(np.arange(M, dtype=np.int64)) if M <= 62 else np.arange(M)
         self._eye = xp.eye(n)
+        horizon = spec.horizon  # the first feature for k = 0..horizon, as float32
+        steps_left = (horizon - np.arange(horizon + 1)) / horizon
+        self._steps_left = c(steps_left.astype(np.float32))
         self._eye_nz = xp.eye(system.nz)
         self._J_flat = c(system.J.reshape(M, -1))
-        self._start = c(single.P_start)
-        self._start_diag = c(np.diag(single.P_start))
+        self._start = c(P_start)
+        self._start_diag = c(np.diag(P_start))
         self._iu = tuple(c(np.asarray(i, dtype=np.int64)) for i in np.triu_indices(n, 1))
-        self._Q_factor_T = c(single._Q_factor.T)
-        self._R_factor_T = c(single._R_factor.T)
+        self._Q_factor_T = c(psd_sqrt(system.Q).T)  # the single engine's noise factors
+        self._R_factor_T = c(psd_sqrt(system.R).T)
         if M <= 16:  # Σ_{i used} J_i for every subset, looked up by bitmask
             bits = (np.arange(2**M)[:, None] >> np.arange(M)) & 1
             jtab = (bits.astype(float) @ system.J.reshape(M, -1)).reshape(-1, n, n)
@@ -92,13 +99,13 @@ class BatchedSimulation:
         if self.fast:
             self._C = c(small.predict_matrix2(small.to_mat2(system.F)))
             self._q = c(np.array(small.to_sym2(system.Q)))
-            self._start2 = small.to_sym2(single.P_start)
+            self._start2 = small.to_sym2(P_start)
             self._start_comp = c(np.array(self._start2)[:, None])
             if jtab is not None:
                 self._jcomp = c(np.stack([jtab[:, 0, 0], jtab[:, 0, 1], jtab[:, 1, 1]]))
         if self.sampled:  # the sampled reset's constants: start factor, or warm-up gains
             warmup = self.spec.warmup
-            root = psd_sqrt(single.P_start if warmup == "steady" else system.P0)
+            root = psd_sqrt(P_start if warmup == "steady" else system.P0)
             self._start_root_T = c(root.T)
             self._warm_gains_T = []
             if warmup != "steady":
@@ -109,6 +116,7 @@ class BatchedSimulation:
         self.rngs: list[np.random.Generator] = []
         self.generator: Any = None
         self.value_override: Any = None
+        self._detection_arrays: SystemArrays | None = None
         self.reset(None, draw=False)  # the env's reset draws the sampled states
 
     # --- state -------------------------------------------------------------------------------
@@ -252,7 +260,7 @@ class BatchedSimulation:
             (B,) Φ after the step.
         """
         if detection is not None:  # the detection game: the detector decides per measurement
-            batched_detection_step(self, detection, leak, probability, active)
+            self._detection_step(detection, leak, probability, active)
             self.k += 1
             self.phi = self._measure_all()
             return self.phi
@@ -264,15 +272,87 @@ class BatchedSimulation:
             and not self.sampled
             and (self._clean or self.all_consistent())
         ):
-            # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components
-            info = small.inv2_stacked(small.predict2_stacked(self._comp, self._C, self._q))
-            info += self._used_components(used)
-            self._comp = small.inv2_stacked(info)
+            # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components, one closed form
+            self._comp = info_update2_stacked(
+                self._comp, self._C, self._q, self._used_components(used)
+            )
         else:
             self._generic_step(used, leak, present, active)
         self.k += 1
         self.phi = self._measure_all()
         return self.phi
+
+    def _detection_step(
+        self, rule: BatchDetection, sigma: Any, probability: Any, active: Any
+    ) -> None:
+        """The detection game's step (:func:`~fdia_env.detection.step.batched_detection_step`).
+
+        Sampled dynamics draw for the ``active`` members: on numpy each from its own generator
+        in the single env's order (a fresh prior's state, H1, then the noises), on torch every
+        member from the device generator.
+        """
+        xp, sys, B = self.xp, self.system, self.B
+        n, nz = sys.n, sys.nz
+        if self._detection_arrays is None:
+            self._detection_arrays = SystemArrays(
+                F=self._F,
+                Q=self._Q,
+                H=self._H,
+                R=self._R,
+                Gu=self._Gu,
+                x0=self._x0,
+                P0=xp.asarray(sys.P0),
+                P0_root_T=xp.asarray(psd_sqrt(sys.P0).T),
+                Q_factor_T=self._Q_factor_T,
+                R_factor_T=self._R_factor_T,
+            )
+        arrays = self._detection_arrays
+        draw = prior = None
+        if self.sampled:
+            if rule.fresh_prior:
+                prior = self._normal(n, active)
+
+            def draw(p: Any) -> tuple[Any, Any]:
+                if xp is not NUMPY:  # the device generator, for every member at once
+                    return xp.uniform(self.generator, B) < p, self._normal(n + 2 * nz, active)
+                members = np.arange(B) if active is None else np.flatnonzero(active)
+                attacked = np.zeros(B, dtype=bool)
+                noise = np.zeros((B, n + 2 * nz))
+                for i in members:  # each member's generator, in the single env's order
+                    rng = self.rngs[i]
+                    attacked[i] = rng.random() < p[i]
+                    count = n + nz + (nz if attacked[i] else 0)
+                    noise[i, :count] = rng.standard_normal(count)
+                return attacked, noise
+
+        out = batched_detection_step(
+            xp,
+            sys,
+            arrays,
+            rule,
+            sigma,
+            probability,
+            None if rule.fresh_prior else self.P,
+            draw=draw,
+            prior=prior,
+            x=self.x if self.sampled else None,
+            x_hat=self.x_hat if self.sampled else None,
+        )
+        self.detection_info = out.info
+        if not self.sampled:
+            self._set_P(xp.copy(out.P))
+            self._M = out.error_cov
+            self._set_consistent(xp.zeros(B, dtype=xp.bool))
+            return
+        if active is None:
+            self.x, self.x_hat = out.x, out.x_hat
+        else:  # members about to be reset keep their state (a fresh prior redraws only theirs)
+            keep = ~active[:, None]
+            self.x = xp.where(keep, self.x, out.x)
+            self.x_hat = xp.where(keep, self.x_hat, out.x_hat)
+        self._set_P(out.P)
+        self._set_consistent(xp.ones(B, dtype=xp.bool))
+        self.value_override = out.value
 
     def _mask_of(self, used: Any) -> Any:
         """(B, M) boolean masks of (B,) bitmasks (masks pass through)."""
@@ -420,7 +500,7 @@ class BatchedSimulation:
         """
         xp = self.xp
         n = self.system.n
-        out[0] = (self.spec.horizon - self.k) / self.spec.horizon
+        out[0] = xp.take(self._steps_left, self.k)  # (horizon − k) / horizon, looked up
         if self._comp is not None and (self._clean or self.all_consistent()):
             a, b, d = self._comp
             a0, _, d0 = self._start2
@@ -428,7 +508,9 @@ class BatchedSimulation:
             xp.log_into(a * (1.0 / a0), out[1])
             xp.log_into(d * (1.0 / d0), out[2])
             xp.clip_(out[1:3], 30.0)
-            xp.divide(b, xp.sqrt(a * d), out=out[3])
+            # the correlation in float64, then stored (a float32 ``out=`` of a float64 division
+            # runs numpy's buffered casting loop, several times slower)
+            out[3] = b / xp.sqrt(a * d)
             xp.clip_(out[3], 1.0)
             col = 4
         else:
@@ -443,3 +525,39 @@ class BatchedSimulation:
             out[col] = xp.where(xp.isfinite(self.nis), xp.minimum(self.nis, 1e3), 1e3)
             col += 1
         return col
+
+
+def info_update2_stacked(comp: Any, C: Any, q: Any, j: Any) -> Any:
+    """``P[k|k] = ((F P F' + Q)⁻¹ + J)⁻¹`` for (3, B) components, in one closed form.
+
+    With ``A = F P F' + Q = [[a, b], [b, d]]``, ``δ = det A`` and
+    ``N = adj(A) + δ J = [[d + δ j11, δ j12 − b], [δ j12 − b, a + δ j22]]``,
+    ``(A⁻¹ + J)⁻¹ = δ adj(N) / det N``: one division per member instead of the two of
+    inverting twice (the same matrix; checked against the generic step by the tests).
+
+    Args:
+        comp: (3, B) components of P[k−1|k−1] (numpy or torch).
+        C: (3, 3) prediction matrix of F (:func:`~fdia_env.kalman.small.predict_matrix2`).
+        q: (3,) components of Q.
+        j: (3, B) components of each member's ``Σ_used J_i``; overwritten.
+
+    Returns:
+        (3, B) components of P[k|k] (a new array).
+    """
+    p = C @ comp
+    p += q[:, None]
+    a, b, d = p
+    delta = a * d
+    delta -= b * b  # det A
+    j *= delta
+    j[0] += d  # N11
+    j[1] -= b  # N12
+    j[2] += a  # N22
+    det = j[0] * j[2]
+    det -= j[1] * j[1]
+    delta /= det  # δ / det N
+    p[0] = j[2] * delta  # a, b, d are read no more: p holds the result
+    p[1] = j[1] * delta
+    p[1] *= -1.0
+    p[2] = j[0] * delta
+    return p
