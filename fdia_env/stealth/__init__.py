@@ -33,7 +33,22 @@ if GYM_ID not in gymnasium.registry:
         kwargs={"module": "fdia_env.stealth.stealth_attack_v0", "agent": "attacker"},
     )
 
+DEFENDER_GYM_ID = "fdia_env/StealthDefender-v0"
+"""Gymnasium id of the threshold defender's view (``defender="threshold"``; sync vectors only)."""
+
+if DEFENDER_GYM_ID not in gymnasium.registry:
+    gymnasium.register(
+        id=DEFENDER_GYM_ID,
+        entry_point="fdia_env.envs.single_agent:make_single_agent",
+        kwargs={
+            "module": "fdia_env.stealth.stealth_attack_v0",
+            "agent": "defender",
+            "defender": "threshold",
+        },
+    )
+
 __all__ = [
+    "DEFENDER_GYM_ID",
     "GYM_ID",
     "TESTS",
     "StaticEstimation",
