@@ -25,7 +25,8 @@ DESCRIPTION = "\n\n".join(
         "attacker: the attacker of a registered env, against a fixed defender or a passive "
         "filter. defender: the defender of a two-player env, against a fixed attacker. game: "
         "self-play (PSRO, fictitious self-play, iterated best response) with learned best "
-        "responses, reporting the exploitability after every iteration.",
+        "responses (--algo PPO, A2C, DQN or torch-ppo; --algo exact answers exactly on the "
+        "payoff matrix), reporting the exploitability after every iteration.",
         "Each run writes runs/<env>-<algo>-s<seed>-<time>/ (config.json, checkpoints/, tb/, "
         "evaluations.jsonl, scores.json, learning_curve.png) and prints the learned policy, the "
         "analytic answer and random play, scored by one evaluation loop (agents.evaluate).",

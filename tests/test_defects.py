@@ -421,3 +421,20 @@ def test_tracking_system_zero_d_arrays_are_named(kwargs, name):
     # tracking_system(1.0, sigma_w=np.array("x")) raised "iteration over a 0-d array"
     with pytest.raises(ValueError, match=rf"^{name} must be"):
         tracking_system(1.0, **kwargs)
+
+
+def test_grid_steady_state_at_a_tiny_random_walk_variance():
+    # grid_system(q=1e-300): "did not converge" after ~20 s; the steady state of a random walk
+    # scales as √q, and P[k|k] J P[k|k−1] = Q is the DARE for F = I
+    from fdia_env.kalman import steady_state
+    from fdia_env.systems.grid import grid_system
+
+    states = {}
+    for q in (1e-300, 1e-200):
+        system = grid_system("ieee14", q=q)
+        P_pred, P_post, W = steady_state(system)
+        J = system.J.sum(axis=0)
+        assert np.abs(P_post @ J @ P_pred - system.Q).max() <= 1e-6 * q
+        assert np.all(np.isfinite(W))
+        states[q] = P_post
+    np.testing.assert_allclose(states[1e-300], 1e-50 * states[1e-200], rtol=1e-6)

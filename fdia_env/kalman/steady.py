@@ -16,7 +16,7 @@ import numpy as np
 import scipy.linalg
 
 from fdia_env.kalman.filter import information_update, masked_gain, predict_cov
-from fdia_env.kalman.linalg import sym
+from fdia_env.kalman.linalg import spd_inv, sym
 from fdia_env.systems import LinearSystem, check_detectable, noise_factor, pbh_defects
 
 
@@ -138,6 +138,64 @@ def _tracking_closed_form(
     return P_pred, P_post
 
 
+def _information(system: LinearSystem, mask: np.ndarray | None) -> np.ndarray:
+    """``Σ_used J_i`` (n, n)."""
+    if mask is None:
+        return system.J.sum(axis=0)
+    return np.einsum("m,mij->ij", np.asarray(mask, dtype=float), system.J)
+
+
+def _random_walk_doubling(
+    system: LinearSystem, mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Steady state of a random walk (``F = I``) by the doubling algorithm, verified.
+
+    With ``Q`` far below the sensors' noise (a grid with ``q = 1e-300``) the closed loop is
+    within ``√(q/σ²)`` of the unit circle: the iteration never converges and the Schur solver
+    sees a marginal pencil. The structure-preserving doubling algorithm (``A₀ = I``,
+    ``G₀ = Σ J_i``, ``H₀ = Q``; ``W = I + G H``, ``A ← A W⁻¹ A``, ``G ← G + A W⁻¹ G A'``,
+    ``H ← H + A' H W⁻¹ A``) runs the Riccati recursion ``2^k`` steps at a time. The answer is
+    accepted only if ``P[k|k] J P[k|k−1] = Q`` to 1e-6: for ``F = I`` that product equals
+    ``P[k|k−1] − P[k|k]``, the DARE's own residual, without the cancellation of forming the
+    difference of two covariances 1e146 times larger than Q.
+
+    Returns:
+        ``(P[k+1|k], P[k|k])``, or None when ``F`` is not the identity or the check fails.
+    """
+    n = system.n
+    if not np.array_equal(system.F, np.eye(n)):
+        return None
+    J = _information(system, mask)
+    Q = np.asarray(system.Q, dtype=float)
+    q, g = np.abs(Q).max(), np.abs(J).max()
+    if not (q > 0.0 and g > 0.0):
+        return None
+    c = np.sqrt(q) / np.sqrt(g)  # P = c P̃ with Q̃ = Q / c and G̃ = c J of one size
+    A, G, Hk = np.eye(n), c * J, Q / c
+    for _ in range(3000):
+        W = np.eye(n) + G @ Hk
+        WA, WG = np.linalg.solve(W, A), np.linalg.solve(W, G)
+        H_new = sym(Hk + A.T @ Hk @ WA)
+        G, A = sym(G + A @ WG @ A.T), A @ WA
+        if not np.all(np.isfinite(H_new)):
+            return None
+        change = np.abs(H_new - Hk).max() / max(np.abs(H_new).max(), 1e-300)
+        Hk = H_new
+        if change <= 1e-15:
+            break
+    else:
+        return None
+    P_pred = c * Hk
+    try:
+        P_post = spd_inv(spd_inv(P_pred) + J)
+    except np.linalg.LinAlgError:
+        return None
+    residual = np.abs(P_post @ J @ P_pred - Q).max() / q
+    if not (np.isfinite(residual) and residual <= 1e-6):
+        return None
+    return P_pred, sym(P_post)
+
+
 def _out_of_reach(system: LinearSystem, mask: np.ndarray | None, exc: RuntimeError) -> str:
     """Why a detectable subset has no computable steady state (the scales are too far apart)."""
     what = _subset_name(system, None if mask is None else np.asarray(mask, dtype=bool))
@@ -176,8 +234,8 @@ def _solve_dare(
         if _dare_residual(system, P_pred, rows) > 1e-8:
             raise np.linalg.LinAlgError("inaccurate DARE solution")
     except (np.linalg.LinAlgError, ValueError):
-        closed = _tracking_closed_form(system, rows)
-        if closed is not None:  # extreme tracking index: Kalata's α-β filter, exact
+        closed = _tracking_closed_form(system, rows) or _random_walk_doubling(system, mask)
+        if closed is not None:  # an extreme index: closed form, or doubling where F = I
             P_pred, P_post = closed
             return P_pred, P_post, masked_gain(P_post, system, mask)
         try:
