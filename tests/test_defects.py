@@ -438,3 +438,13 @@ def test_grid_steady_state_at_a_tiny_random_walk_variance():
         assert np.all(np.isfinite(W))
         states[q] = P_post
     np.testing.assert_allclose(states[1e-300], 1e-50 * states[1e-200], rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("scenario", "rank"), [("ch2-pv-2", 2), ("ch2-pv-1", 2), ("ch2-position", 1)]
+)
+def test_det_optimal_value_grows_as_rank_times_log_power_up_to_1e300(scenario, rank):
+    # log det(P + W Σ W') of a rank-r Σ grows by r ln(10) per decade of power; ch2-pv-2 gave
+    # 1572.97 at 1e250 and 1915.70 at 1e300 (rounding "eigenvalues" of 1e284 counted)
+    values = [det_optimal(scenario, power=10.0**e).value for e in (200, 250, 300)]
+    np.testing.assert_allclose(np.diff(values), rank * 50 * np.log(10.0), rtol=1e-9)

@@ -170,5 +170,12 @@ def _logdet(P: np.ndarray, W: np.ndarray, sigma: np.ndarray) -> float:
         return float(np.linalg.slogdet(P + W @ sigma @ W.T)[1])
     S = psd_sqrt(sigma)
     X = np.linalg.solve(L, W @ S)  # L⁻¹ W S: X'X = S' W' P⁻¹ W S
-    lam = np.linalg.eigvalsh(X.T @ X)
-    return float(2.0 * np.log(np.diag(L)).sum() + np.log1p(np.maximum(lam, 0.0)).sum())
+    # λ = squared singular values of X; those below size · eps of the largest are rounding of
+    # the large ones (a rank-two Σ of 1e300: eigvalsh(X'X) gave "eigenvalues" near 1e284,
+    # each adding ~650 to the log-determinant)
+    sv = np.linalg.svd(X, compute_uv=False)
+    sv = np.where(sv > max(X.shape) * np.finfo(np.float64).eps * sv.max(initial=0.0), sv, 0.0)
+    big = sv > 1.0
+    safe = np.where(big, sv, 1.0)
+    log1p_lam = np.where(big, 2.0 * np.log(safe) + np.log1p(safe**-2.0), np.log1p(sv * sv))
+    return float(2.0 * np.log(np.diag(L)).sum() + log1p_lam.sum())
