@@ -10,6 +10,8 @@
 See docs/guide/stealth.md.
 """
 
+import gymnasium
+
 from fdia_env.stealth.static import (
     TESTS,
     StaticEstimation,
