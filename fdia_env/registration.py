@@ -6,10 +6,11 @@ of its native vector env. Everything else that lists the environments reads this
 
 - the Gymnasium ids (``gymnasium.make`` / ``gymnasium.make_vec``), registered by
   :func:`register_env`; :data:`GYM_IDS` maps each id to ``(module, agent)``;
-- the native vector env's torch ids (:func:`torch_ids`);
+- the ids with a native vector env on each backend (:func:`vector_ids`, :func:`torch_ids`);
 - ``agents.registry`` (each trainable's Gymnasium id), the RLlib env names
   (``agents.rllib.envs``), the docs' env pages and the tests' parametrisations
-  (:data:`ENV_NAMES`, :func:`load`).
+  (:data:`ENV_NAMES`, :func:`load`; the tests of the Kalman-filter engine's conventions
+  :func:`kalman_env_names` and :func:`kalman_gym_ids`).
 
 Adding an environment is its module plus one :func:`register_env` call (a package of your own
 calls it at import; the suite's own entries are at the end of this module):
