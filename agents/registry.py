@@ -26,6 +26,7 @@ import numpy as np
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
 from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.sequential import SequentialSetEnv
 from fdia_env.registration import get_env
 
 AGENTS = ("attacker", "defender")
@@ -113,10 +114,14 @@ class Reference:
         return mean_return / value
 
 
-def parallel_of(env: gym.Env) -> FdiaParallelEnv:
-    """The :class:`FdiaParallelEnv` behind a (possibly wrapped) fdia_env Gymnasium view."""
+def parallel_of(env: gym.Env) -> FdiaParallelEnv | SequentialSetEnv:
+    """The :class:`FdiaParallelEnv` behind a (possibly wrapped) fdia_env Gymnasium view.
+
+    For the sparse attack's ``action="sequential"`` it is the format's wrapper, which has the
+    wrapped env's ``spec``, ``scenario``, ``system`` and ``attack``.
+    """
     parallel = getattr(env.unwrapped, "parallel", None)
-    if not isinstance(parallel, FdiaParallelEnv):
+    if not isinstance(getattr(parallel, "inner", parallel), FdiaParallelEnv):
         raise ValueError(f"not an fdia_env single-agent view: {env.unwrapped!r}")
     return parallel
 
@@ -137,24 +142,27 @@ def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
     """
     from baselines.sparse import branch_and_bound, exhaustive, sfs
 
+    sequential = isinstance(env, SequentialSetEnv)  # its plan played one sensor per decision
     spec = env.spec
     if spec.reward_mode != "terminal" or spec.warmup != "steady":
         return None  # the solvers' objective is Φ at the window end from steady state
     args = (env.scenario, env.attack.budget, spec.horizon, spec.objective)
     if math.comb(env.system.M * spec.horizon, env.attack.budget) <= EXS_MAX_SETS:
         best = exhaustive(*args)
-        return Reference(best.value, "EXS", spec.objective, policy=best.policy())
+        return Reference(best.value, "EXS", spec.objective, policy=best.policy(sequential))
     proof = branch_and_bound(*args, time_limit=BNB_TIME_LIMIT)
     greedy = ("SFS", sfs(*args).value)
     if proof.proved_optimal:
         name = "B&B (certified optimum)"
-        return Reference(proof.value, name, spec.objective, policy=proof.policy(), heuristic=greedy)
+        return Reference(
+            proof.value, name, spec.objective, policy=proof.policy(sequential), heuristic=greedy
+        )
     return Reference(
         proof.value,
         "best known (B&B incumbent)",
         spec.objective,
         False,
-        policy=proof.policy(),
+        policy=proof.policy(sequential),
         bound=proof.upper_bound,
         heuristic=greedy,
     )

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from pettingzoo.test import api_test, parallel_api_test
 
-from baselines.sparse import branch_and_bound, sfs
+from baselines.sparse import SparsePolicy, branch_and_bound, sfs
 from baselines.sparse.testbeds import mixed_tracking
 from fdia_env import sparse_attack_v0
 from fdia_env.attacks import SparseAttack
@@ -235,3 +235,52 @@ def test_gymnasium_view_and_maskable_ppo_on_grid_preset():
     assert info["action_mask"].tolist() == [[1, 1, 1, 1]] * 2
     terminated = vec.step(np.array([2, 0]))[2]
     assert terminated.tolist() == [True, False]  # the only pair spent: the rest played by the env
+
+
+def test_solver_policy_in_sequential_format_returns_its_value():
+    for scenario, budget, horizon in (("ch4-position", 5, 6), ("grid-ieee14", 6, 6)):
+        result = sfs(scenario, budget, horizon)
+        policy = result.policy(sequential=True)
+        env = gym.make(
+            "fdia_env/SparseAttack-v0",
+            scenario=scenario,
+            budget=budget,
+            horizon=horizon,
+            action="sequential",
+            illegal_action="error",
+        )
+        obs, _ = env.reset(seed=0)
+        total, done = 0.0, False
+        while not done:
+            action, _ = policy.predict(obs)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total, done = total + reward, terminated or truncated
+        assert total == pytest.approx(result.value, rel=1e-12)
+    batch = np.zeros((2, 9), dtype=np.float32)  # ch4-position: 5 features + 3 set + budget
+    batch[:, 0] = 1.0  # step K+1 (6 steps left of 6)
+    batch[1, 5] = 1.0  # member 1 already has sensor 1 in the set
+    plan = SparsePolicy([[1, 1, 0]] + [[0, 0, 0]] * 5, sequential=True)
+    assert plan.predict(batch)[0].tolist() == [1, 2]
+    with pytest.raises(ValueError, match=r"needs an \(N, M\) 0/1 plan"):
+        SparsePolicy([1, 3], sequential=True)
+
+
+def test_train_py_attacker_on_the_sequential_format_scores_the_optimum(tmp_path, capsys):
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py is at the root
+    import train
+
+    result = train.main(
+        [
+            "attacker", "--env-kwargs", "action", '"sequential"', "--algo", "MaskablePPO",
+            "--total-timesteps", "128", "--eval-freq", "0", "--checkpoint-freq", "128",
+            "--no-progress-bar", "--final-eval-episodes", "3", "--n-steps", "64",
+            "--batch-size", "32", "--n-epochs", "1", "--runs-root", str(tmp_path / "runs"),
+        ]
+    )  # fmt: skip
+    scores = json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
+    assert scores["EXS"]["score"] == pytest.approx(1.0, rel=1e-12)  # its plan, one by one
+    assert 0 < scores["learned (MaskablePPO)"]["score"] <= 1 + 1e-12

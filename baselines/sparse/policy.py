@@ -25,6 +25,10 @@ class SparsePolicy:
         actions: (N,) bitmask per step (bit 0 = sensor 1), e.g. :meth:`SparseResult.actions`,
             for the ``Discrete(2**M)`` action; or an (N, M) 0/1 plan (:meth:`SparseResult.plan`)
             for the ``MultiBinary(M)`` action of envs with more than 16 sensors.
+        sequential: Play the plan in the ``action="sequential"`` format (``Discrete(M + 1)``):
+            at each decision, the lowest-numbered sensor of the step's row that is not yet in
+            the set being built (read from the observation's set entries), else 0 (stop).
+            Needs an (N, M) plan.
 
     Example:
         >>> policy = SparsePolicy([0, 0, 1, 1, 1, 3])
@@ -32,8 +36,15 @@ class SparsePolicy:
         np.int64(1)
     """
 
-    def __init__(self, actions: Sequence[int] | np.ndarray) -> None:
+    def __init__(self, actions: Sequence[int] | np.ndarray, sequential: bool = False) -> None:
         arr = np.asarray(actions)
+        if not isinstance(sequential, bool):
+            raise TypeError(f"sequential must be a bool, got {type(sequential).__name__}")
+        if sequential and arr.ndim != 2:
+            raise ValueError(
+                f"sequential=True needs an (N, M) 0/1 plan (SparseResult.plan()), got {actions!r}"
+            )
+        self.sequential = sequential
         ints = np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool
         if arr.ndim not in (1, 2) or arr.size == 0 or not ints:
             raise ValueError(
@@ -49,8 +60,13 @@ class SparsePolicy:
         self.horizon = check_int("horizon", arr.shape[0], minimum=1)
 
     @classmethod
-    def from_result(cls, result: SparseResult) -> SparsePolicy:
-        """The policy that plays ``result.attacks`` (a 0/1 plan above 16 sensors)."""
+    def from_result(cls, result: SparseResult, sequential: bool = False) -> SparsePolicy:
+        """The policy that plays ``result.attacks`` (a 0/1 plan above 16 sensors).
+
+        ``sequential=True``: for the ``action="sequential"`` format (see the class doc).
+        """
+        if sequential:
+            return cls(result.plan(), sequential=True)
         return cls(result.plan() if result.num_sensors > MAX_SENSORS else result.actions())
 
     def step_of(self, observation: Any) -> np.ndarray:
@@ -82,6 +98,8 @@ class SparsePolicy:
         """
         step = self.step_of(observation)
         inside = (step >= 0) & (step < self.horizon)
+        if self.sequential:
+            return self._sequential_action(observation, step, inside), state
         if self.actions.ndim == 2:  # MultiBinary rows; zeros outside the window
             rows = self.actions[np.clip(step, 0, self.horizon - 1)]
             return np.where(np.asarray(inside)[..., None], rows, 0).astype(np.int8), state
@@ -89,3 +107,13 @@ class SparsePolicy:
         if action.ndim == 0:
             return np.int64(action), state
         return action, state
+
+    def _sequential_action(self, observation: Any, step: np.ndarray, inside: np.ndarray) -> Any:
+        """Next sensor (1-based) of the step's row not yet in the set, else 0 (stop)."""
+        obs = observation["observation"] if isinstance(observation, dict) else observation
+        M = self.actions.shape[1]
+        chosen = np.asarray(obs, dtype=np.float64)[..., -(M + 1) : -1] > 0.5
+        todo = (self.actions[np.clip(step, 0, self.horizon - 1)] == 1) & ~chosen
+        todo &= np.asarray(inside)[..., None]
+        action = np.where(todo.any(-1), todo.argmax(-1) + 1, 0).astype(np.int64)
+        return np.int64(action) if action.ndim == 0 else action

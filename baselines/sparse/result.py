@@ -125,8 +125,11 @@ class SparseResult:
                 out[i, k] = rank
         return out
 
-    def policy(self) -> SparsePolicy:
-        """This answer as a policy that plays ``sparse_attack_v0``."""
+    def policy(self, sequential: bool = False) -> SparsePolicy:
+        """This answer as a policy that plays ``sparse_attack_v0``.
+
+        ``sequential=True``: in its ``action="sequential"`` format.
+        """
         from baselines.sparse.policy import SparsePolicy
 
-        return SparsePolicy.from_result(self)
+        return SparsePolicy.from_result(self, sequential=sequential)

@@ -48,6 +48,9 @@ from fdia_env._validation import check_choice
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.envs.actions import check_action
 from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.episode import EpisodeSpec
+from fdia_env.scenarios import Scenario
+from fdia_env.systems import LinearSystem
 
 STOP = 0
 """The stop action: commit the set built so far and take the window step."""
@@ -130,6 +133,21 @@ class SequentialSetEnv(ParallelEnv):
     @max_cycles.setter
     def max_cycles(self, value: int | None) -> None:
         self.inner.max_cycles = value
+
+    @property
+    def spec(self) -> EpisodeSpec:
+        """The wrapped env's episode spec."""
+        return self.inner.spec
+
+    @property
+    def scenario(self) -> Scenario:
+        """The wrapped env's scenario."""
+        return self.inner.scenario
+
+    @property
+    def system(self) -> LinearSystem:
+        """The wrapped env's system."""
+        return self.inner.system
 
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
