@@ -10,6 +10,8 @@
 See docs/guide/stealth.md.
 """
 
+import gymnasium
+
 from fdia_env.stealth.static import (
     TESTS,
     StaticEstimation,
@@ -24,7 +26,22 @@ vectorization_mode="vector_entry_point")`` gives the native numpy vector env
 (:class:`fdia_env.stealth.vector.StealthVectorEnv`). Its entry is in the table of environments
 (:data:`fdia_env.registration.ENVS`)."""
 
+DEFENDER_GYM_ID = "fdia_env/StealthDefender-v0"
+"""Gymnasium id of the threshold defender's view (``defender="threshold"``; sync vectors only)."""
+
+if DEFENDER_GYM_ID not in gymnasium.registry:
+    gymnasium.register(
+        id=DEFENDER_GYM_ID,
+        entry_point="fdia_env.envs.single_agent:make_single_agent",
+        kwargs={
+            "module": "fdia_env.stealth.stealth_attack_v0",
+            "agent": "defender",
+            "defender": "threshold",
+        },
+    )
+
 __all__ = [
+    "DEFENDER_GYM_ID",
     "GYM_ID",
     "TESTS",
     "StaticEstimation",

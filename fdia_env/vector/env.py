@@ -456,6 +456,12 @@ def make_vector(
         )
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
+    if not isinstance(parallel, FdiaParallelEnv):  # e.g. the sparse attack's action="sequential"
+        raise ValueError(
+            f"action={kwargs.get('action')!r} is not available in the native vector env (it "
+            f"wraps the env as a {type(parallel).__name__}); use gymnasium.make_vec(..., "
+            "vectorization_mode='sync') or another action format"
+        )
     check_agent(agent, parallel.possible_agents)
     if opponent is None and hasattr(mod, "default_opponent") and len(parallel.possible_agents) > 1:
         opponent = mod.default_opponent(parallel, agent)
