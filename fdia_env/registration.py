@@ -6,10 +6,11 @@ of its native vector env. Everything else that lists the environments reads this
 
 - the Gymnasium ids (``gymnasium.make`` / ``gymnasium.make_vec``), registered by
   :func:`register_env`; :data:`GYM_IDS` maps each id to ``(module, agent)``;
-- the native vector env's torch ids (:func:`torch_ids`);
+- the ids with a native vector env on each backend (:func:`vector_ids`, :func:`torch_ids`);
 - ``agents.registry`` (each trainable's Gymnasium id), the RLlib env names
   (``agents.rllib.envs``), the docs' env pages and the tests' parametrisations
-  (:data:`ENV_NAMES`, :func:`load`).
+  (:data:`ENV_NAMES`, :func:`load`; the tests of the Kalman-filter engine's conventions
+  :func:`kalman_env_names` and :func:`kalman_gym_ids`).
 
 Adding an environment is its module plus one :func:`register_env` call (a package of your own
 calls it at import; the suite's own entries are at the end of this module):
@@ -61,12 +62,20 @@ class EnvEntry:
             vectorization_mode="vector_entry_point", backend=...)``); empty when the env's
             models have no batched implementation (``make_vec`` then steps copies in
             ``SyncVectorEnv``).
+        vector: The ``vector_entry_point`` of its native vector env (used when ``backends`` is
+            not empty): the engine's :func:`fdia_env.vector.env.make_vector` by default.
+        kalman: Whether the env runs the Kalman-filter engine (an ``FdiaParallelEnv``: a
+            scenario, ``dynamics``, the ``phi``/``step`` infos, Φ in the render); False for an
+            env of its own (the static stealthy attacker). Tests of the engine's conventions
+            run on the entries with ``kalman`` set.
     """
 
     name: str
     module: str
     views: Mapping[str, str] = field(default_factory=dict)
     backends: tuple[str, ...] = BACKENDS
+    kalman: bool = True
+    vector: str = VECTOR_ENTRY_POINT
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
@@ -87,12 +96,17 @@ class EnvEntry:
             raise ValueError(f"views: each agent needs its own Gymnasium id, got {self.views}")
         if not isinstance(self.backends, tuple) or not set(self.backends) <= set(BACKENDS):
             raise ValueError(f"backends must be a tuple of {list(BACKENDS)}, got {self.backends!r}")
+        if not isinstance(self.vector, str) or not re.fullmatch(r"[\w.]+:\w+", self.vector):
+            raise ValueError(f"vector must read 'module:function', got {self.vector!r}")
+        if not isinstance(self.kalman, bool):
+            raise TypeError(f"kalman must be a bool, got {self.kalman!r}")
         if "torch" in self.backends and "numpy" not in self.backends:
             raise ValueError("backends: the torch backend needs the numpy one (the reference)")
         object.__setattr__(self, "views", MappingProxyType(dict(self.views)))
 
     def __hash__(self) -> int:
-        return hash((self.name, self.module, tuple(self.views.items()), self.backends))
+        views = tuple(self.views.items())
+        return hash((self.name, self.module, views, self.backends, self.kalman, self.vector))
 
 
 _ENVS: dict[str, EnvEntry] = {}
@@ -139,6 +153,17 @@ class _LiveNames(Sequence):
 ENV_NAMES: Sequence[str] = _LiveNames()
 """The registry names of :data:`ENVS`, in registration order (follows the table)."""
 
+
+def kalman_env_names() -> list[str]:
+    """The registry names of the entries that run the Kalman-filter engine (``kalman``)."""
+    return [name for name, entry in _ENVS.items() if entry.kalman]
+
+
+def kalman_gym_ids() -> list[str]:
+    """The Gymnasium ids of the views of the entries that run the Kalman-filter engine."""
+    return [i for entry in _ENVS.values() if entry.kalman for i in entry.views.values()]
+
+
 GYM_IDS: Mapping[str, tuple[str, str]] = _LiveIndex(
     lambda: {
         env_id: (entry.module, agent)
@@ -165,11 +190,16 @@ def load(name: str) -> ModuleType:
     return importlib.import_module(get_env(name).module)
 
 
+def vector_ids(backend: str = "numpy") -> tuple[str, ...]:
+    """The Gymnasium ids with a native vector env on ``backend`` (``"numpy"`` or ``"torch"``)."""
+    return tuple(
+        env_id for e in _ENVS.values() if backend in e.backends for env_id in e.views.values()
+    )
+
+
 def torch_ids() -> tuple[str, ...]:
     """The Gymnasium ids whose native vector env runs on torch (``backend="torch"``)."""
-    return tuple(
-        env_id for e in _ENVS.values() if "torch" in e.backends for env_id in e.views.values()
-    )
+    return vector_ids("torch")
 
 
 def register_env(entry: EnvEntry) -> EnvEntry:
@@ -215,7 +245,7 @@ def _register_gym_ids(entry: EnvEntry) -> None:
         gymnasium.register(
             id=env_id,
             entry_point=SINGLE_ENTRY_POINT,
-            vector_entry_point=VECTOR_ENTRY_POINT if entry.backends else None,
+            vector_entry_point=entry.vector if entry.backends else None,
             kwargs={"module": entry.module, "agent": agent},
         )
 
@@ -243,5 +273,13 @@ for _entry in (
         {"defender": "fdia_env/DetectionDefender-v0", "attacker": "fdia_env/DetectionAttacker-v0"},
     ),
     EnvEntry("fdia_v0", "fdia_env.fdia_v0"),
+    EnvEntry(
+        "stealth_attack_v0",
+        "fdia_env.stealth.stealth_attack_v0",
+        {"attacker": "fdia_env/StealthAttack-v0"},
+        backends=("numpy",),
+        kalman=False,
+        vector="fdia_env.stealth.vector:make_vector",
+    ),
 ):
     register_env(_entry)

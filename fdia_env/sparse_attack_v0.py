@@ -22,8 +22,19 @@ power-grid presets have 34 to 304 meters) ``"auto"`` gives ``MultiBinary(M)`` (e
 attacks sensor i; no action mask, so the observation is the plain ``Box``: MaskablePPO's
 per-entry MultiBinary mask cannot express a budget, and Gymnasium's MultiBinary mask has another
 shape; train it with PPO/A2C); ``action="single"`` gives ``Discrete(M + 1)`` (0 = no attack, j =
-sensor j alone, masked to 0 once the budget is spent: the MaskablePPO choice). The same
-over-budget rule applies to every format (see :class:`fdia_env.attacks.SparseAttack`).
+sensor j alone, masked to 0 once the budget is spent). The same over-budget rule applies to
+every format (see :class:`fdia_env.attacks.SparseAttack`).
+
+``action="sequential"`` (any M; the MaskablePPO choice on the grid presets) builds each window
+step's set one sensor per decision: ``Discrete(M + 1)``, action j adds sensor j, action 0 stops
+and takes the window step with the set built. The ``(M + 1,)`` mask forbids a sensor already in
+the set and every sensor once the set uses up the budget left; decisions with stop as the only
+legal action are played by the env, so an episode takes at most N + c decisions. Rewards are
+paid at the stops, so every attack set of the other formats is reachable and returns the same
+value. An action outside the mask acts as stop (``"trim"``, ``"noop"``) or raises
+(``"error"``). The observation ``Box`` adds M entries (1 = in the set being built) and the
+budget left after the set; see ``fdia_env.envs.sequential``. PettingZoo parallel, AEC and
+the Gymnasium view (``action_masks()``); not yet in the native vector env.
 
 ## Observation Space
 
@@ -59,7 +70,8 @@ Terminates after N steps. No truncation.
 ``scenario`` (preset name, Scenario or LinearSystem; default ``"ch4-position"``), ``budget``
 (c, default the preset's), ``horizon`` (N, default the preset's), ``objective``,
 ``reward_mode``, ``dynamics``, ``warmup``, ``render_mode`` (``"human"`` | ``"ansi"`` |
-``"rgb_array"``), ``action`` (``"auto"`` | ``"bitmask"`` | ``"multibinary"`` | ``"single"``),
+``"rgb_array"``), ``action`` (``"auto"`` | ``"bitmask"`` | ``"multibinary"`` | ``"single"``
+| ``"sequential"``),
 ``illegal_action`` (``"trim"`` | ``"noop"`` | ``"error"``), ``max_cycles``.
 
 ## Version History
@@ -85,6 +97,7 @@ from fdia_env.attacks import SparseAttack
 from fdia_env.defenses import PerfectDetection
 from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.sequential import SequentialSetEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -103,8 +116,27 @@ def parallel_env(
     max_cycles: int | None = None,
     illegal_action: str = "trim",
     action: str = "auto",
-) -> FdiaParallelEnv:
-    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
+) -> FdiaParallelEnv | SequentialSetEnv:
+    """The PettingZoo ``ParallelEnv`` (see the module docstring).
+
+    ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSetEnv``
+    over the ``"multibinary"`` env (see the module docstring's Action Space).
+    """
+    if action == "sequential":
+        inner = parallel_env(
+            scenario,
+            budget,
+            horizon,
+            objective,
+            reward_mode,
+            dynamics,
+            warmup,
+            render_mode,
+            max_cycles,
+            illegal_action="error",
+            action="multibinary",
+        )
+        return SequentialSetEnv(inner, illegal_action=illegal_action)
     sc, spec = episode_spec(
         scenario,
         horizon=horizon,

@@ -203,7 +203,7 @@ def test_batched_random_policy_respects_masks():
 
 
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
-@pytest.mark.parametrize("env_id", sorted(fdia_env.registration.GYM_IDS))
+@pytest.mark.parametrize("env_id", sorted(fdia_env.registration.kalman_gym_ids()))
 def test_batched_evaluation_equals_sequential_for_every_id_with_default_opponents(env_id, dynamics):
     # the random policy and the views' default opponents (the sensor game's uniform mix
     # included) draw per episode, so episode i is the same in both loops

@@ -18,7 +18,14 @@ from fdia_env import (
     sensor_game_v0,
     sparse_attack_v0,
 )
-from fdia_env.registration import ENV_NAMES, GYM_IDS, load
+from fdia_env.registration import (
+    ENV_NAMES,
+    GYM_IDS,
+    kalman_env_names,
+    kalman_gym_ids,
+    load,
+    vector_ids,
+)
 from fdia_env.wrappers import flatten_observation_v0, shared_policy_v0
 
 CLIENTS_PAGE = Path(__file__).resolve().parent.parent / "docs" / "guide" / "clients.md"
@@ -71,7 +78,7 @@ def test_clients_page_snippet_prints_what_the_page_shows(index):
 
 
 # --- PettingZoo's own test set (the API and seed tests are in test_envs_api.py) ------------
-@pytest.mark.parametrize("module", MODULES, ids=lambda m: m.NAME)
+@pytest.mark.parametrize("module", [load(n) for n in kalman_env_names()], ids=lambda m: m.NAME)
 def test_pettingzoo_render_max_cycles_and_performance_tests(module):
     with contextlib.redirect_stdout(io.StringIO()) as out:
         render_test(module.env)  # human, ansi and rgb_array
@@ -117,7 +124,7 @@ def test_torchrl_gym_env_with_four_async_envs(env_id):
     assert torch_finite(rollout["next", "reward"])
 
 
-@pytest.mark.parametrize("env_id", sorted(GYM_IDS))
+@pytest.mark.parametrize("env_id", sorted(kalman_gym_ids()))  # the engine's vector env
 def test_torchrl_gym_wrapper_on_the_native_vector_env(env_id):
     from torchrl.envs.libs.gym import GymWrapper
     from torchrl.envs.utils import check_env_specs
@@ -136,7 +143,12 @@ def test_torchrl_gym_wrapper_on_the_native_vector_env(env_id):
 
 
 # --- TorchRL's native face of the native vector env (fdia_env.torchrl) -------------------------
-TORCHRL_CASES = [(env_id, b) for env_id in sorted(GYM_IDS) for b in ("torch", "numpy")]
+TORCHRL_CASES = [  # the engine's vector env (FdiaTorchRLEnv wraps it) on each of its backends
+    (env_id, b)
+    for b in ("torch", "numpy")
+    for env_id in sorted(vector_ids(b))
+    if env_id in kalman_gym_ids()
+]
 
 
 @pytest.mark.parametrize(("env_id", "backend"), TORCHRL_CASES)

@@ -448,3 +448,18 @@ def test_det_optimal_value_grows_as_rank_times_log_power_up_to_1e300(scenario, r
     # 1572.97 at 1e250 and 1915.70 at 1e300 (rounding "eigenvalues" of 1e284 counted)
     values = [det_optimal(scenario, power=10.0**e).value for e in (200, 250, 300)]
     np.testing.assert_allclose(np.diff(values), rank * 50 * np.log(10.0), rtol=1e-9)
+
+
+def test_a_stable_mode_without_process_noise_is_named_not_a_singular_matrix():
+    # F = [[0.063]], Q = 0 (found by the property suite): numpy's "Singular matrix" from the
+    # information form; the steady state is P = 0, which that form cannot represent
+    from fdia_env.kalman import steady_state
+    from fdia_env.systems import LinearSystem, Sensor
+
+    system = LinearSystem(
+        F=np.array([[0.06286511]]),
+        Q=np.zeros((1, 1)),
+        sensors=(Sensor(H=np.array([[0.12573022]]), R=np.array([[0.04156428]])),),
+    )
+    with pytest.raises(ValueError, match=r"Q gives no process noise to the stable mode"):
+        steady_state(system)

@@ -44,7 +44,7 @@ def test_every_env_module_and_gym_id_has_a_page_with_its_image(site):
     for name in generate_pages.ENV_MODULES:
         page = (site / "environments" / f"{name}.html").read_text(encoding="utf-8")
         assert f"_images/{name}.png" in page  # Sphinx copies the rendered image there
-        assert (site / "_images" / f"{name}.png").stat().st_size > 10_000
+        assert (site / "_images" / f"{name}.png").stat().st_size > 5_000  # a figure, not a blank
         for section in ("Action Space", "Observation Space", "Rewards", "Version History"):
             assert section in page, (name, section)
     pages = "".join(p.read_text(encoding="utf-8") for p in (site / "environments").glob("*.html"))

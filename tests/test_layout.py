@@ -15,7 +15,16 @@ import pytest
 
 import agents.registry
 from fdia_env import fdia_v0
-from fdia_env.registration import ENV_NAMES, ENVS, GYM_IDS, EnvEntry, register_env, torch_ids
+from fdia_env.registration import (
+    ENV_NAMES,
+    ENVS,
+    GYM_IDS,
+    EnvEntry,
+    kalman_env_names,
+    register_env,
+    torch_ids,
+    vector_ids,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -160,6 +169,18 @@ def test_every_consumer_lists_the_table():
 def test_an_entry_with_bad_fields_is_refused_by_name(kwargs, message):
     with pytest.raises(ValueError, match=message):
         EnvEntry(**kwargs)
+
+
+def test_the_kalman_flag_is_a_bool_and_splits_the_table():
+    with pytest.raises(TypeError, match="kalman must be a bool"):
+        EnvEntry("toy_v0", "toy", kalman="no")
+    assert kalman_env_names() == [n for n, e in ENVS.items() if e.kalman]
+    assert "stealth_attack_v0" in ENV_NAMES and "stealth_attack_v0" not in kalman_env_names()
+    stealth_id = "fdia_env/StealthAttack-v0"
+    assert stealth_id in GYM_IDS and stealth_id in vector_ids() and stealth_id not in torch_ids()
+    assert ENVS["stealth_attack_v0"].vector == "fdia_env.stealth.vector:make_vector"
+    with pytest.raises(ValueError, match="vector must read 'module:function'"):
+        EnvEntry("toy_v0", "toy", vector="toy.make")
 
 
 def test_a_name_or_gym_id_already_taken_is_refused():

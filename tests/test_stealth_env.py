@@ -10,7 +10,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from baselines.stealth import budgeted_attack, security_index
-from fdia_env.stealth import GYM_ID, static_estimation, stealth_attack_v0
+from fdia_env.stealth import DEFENDER_GYM_ID, GYM_ID, static_estimation, stealth_attack_v0
 
 ALPHA = 0.05
 
@@ -186,3 +186,73 @@ def test_alpha_rethresholds_a_given_estimation_keeping_its_noise():
     np.testing.assert_array_equal(env.estimation.R, own.R)
     assert env.estimation.threshold == pytest.approx(38.93217268351607)  # chi2(21) upper 1 %
     assert stealth_attack_v0.parallel_env(scenario=own).estimation is own
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+def test_threshold_defender_passes_the_pettingzoo_api(est, dynamics):
+    make = lambda: stealth_attack_v0.parallel_env(  # noqa: E731
+        scenario=est, dynamics=dynamics, horizon=3, defender="threshold"
+    )
+    parallel_api_test(make(), num_cycles=50)
+    parallel_seed_test(make)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_threshold_defender_aec_and_gymnasium_views(est):
+    api_test(stealth_attack_v0.env(scenario=est, horizon=3, defender="threshold"), num_cycles=30)
+    gym_check_env(gym.make(DEFENDER_GYM_ID).unwrapped, skip_render_check=False)
+    sb3_check_env(gym.make(DEFENDER_GYM_ID), warn=True)
+    sb3_check_env(gym.make(GYM_ID, defender="threshold"), warn=True)
+
+
+def test_threshold_defender_rewards(est):
+    # the undetectable 3-meter attack is only seen by false alarms: the attacker gets
+    # (1 − α) · shift, the defender minus that minus the cost of its false-alarm rate
+    bits = np.zeros(est.n, dtype=np.int8)
+    bits[6] = 1
+    env = stealth_attack_v0.parallel_env(
+        scenario=est,
+        budget=3,
+        dynamics="expected",
+        defender="threshold",
+        alphas=[0.01, 0.2],
+        false_alarm_cost=0.5,
+    )
+    for choice, alpha in enumerate((0.01, 0.2)):
+        env.reset(seed=0)
+        _, rewards, _, _, infos = env.step({"attacker": bits, "defender": choice})
+        assert rewards["attacker"] == pytest.approx((1 - alpha) * 0.05, rel=1e-12)
+        assert rewards["defender"] == pytest.approx(-(1 - alpha) * 0.05 - 0.5 * alpha, rel=1e-12)
+        assert infos["defender"]["alpha"] == alpha
+    # a detectable attack (a small shift of state 0 on 3 of its 5 meters): a lower
+    # false-alarm rate lets more of it through
+    bits[:] = 0
+    bits[0] = 1
+    env = stealth_attack_v0.parallel_env(
+        scenario=est,
+        budget=3,
+        dynamics="expected",
+        defender="threshold",
+        alphas=[0.01, 0.2],
+        magnitude=0.004,
+    )
+    seen = []
+    for choice in (0, 1):
+        env.reset(seed=0)
+        _, rewards, _, _, infos = env.step({"attacker": bits, "defender": choice})
+        seen.append(infos["attacker"]["detection_probability"])
+    assert 0.05 < seen[0] < seen[1] < 0.99
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"defender": "protect"}, "defender must be one of"),
+        ({"defender": "threshold", "alphas": [0.0, 0.1]}, "alphas must be a non-empty list"),
+        ({"defender": "threshold", "alphas": []}, "alphas must be a non-empty list"),
+        ({"false_alarm_cost": -1.0}, "false_alarm_cost must be a finite number >= 0"),
+    ],
+)
+def test_bad_defender_options_name_the_parameter(est, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        stealth_attack_v0.parallel_env(scenario=est, **kwargs)

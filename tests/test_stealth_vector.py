@@ -69,3 +69,8 @@ def test_sampled_alarm_rate_matches_the_exact_probability(est):
 def test_torch_backend_is_refused(est):
     with pytest.raises(ValueError, match="runs numpy on the CPU"):
         _vec(est, 2, backend="torch")
+
+
+def test_defender_is_refused_by_the_native_vector_env(est):
+    with pytest.raises(ValueError, match="plays the attacker alone"):
+        _vec(est, 2, defender="threshold")

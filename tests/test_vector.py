@@ -515,3 +515,32 @@ def test_single_env_attacked_info_lists_the_subset_of_every_action(sensors):
         attacked = infos["attacker"]["attacked"]
         assert attacked.dtype == np.int8 and attacked.shape == (sensors,)
         np.testing.assert_array_equal(attacked, [(a >> i) & 1 for i in range(sensors)])
+
+
+@pytest.mark.parametrize(
+    "case", ["sparse-sampled", "game-defender-sampled", "detection-defender-sampled-bayes"]
+)
+def test_reset_without_seed_keeps_each_members_generator_as_sync_does(case):
+    """``reset(seed=3); reset()`` is reproducible: an unseeded reset continues each draw."""
+    env_id, kwargs = CASES[case]
+    kwargs = {**kwargs, **opponent_for(env_id)}
+    B = 3
+
+    def rollout(env):
+        env.action_space.seed(5)
+        out = [env.reset(seed=3)[0]]
+        for _ in range(4):
+            out.append(env.step(env.action_space.sample())[1])
+        out.append(env.reset()[0])  # unseeded: continues each member's generator
+        for _ in range(4):
+            out.append(env.step(env.action_space.sample())[1])
+        return out
+
+    def native():
+        return gym.make_vec(env_id, num_envs=B, vectorization_mode="vector_entry_point", **kwargs)
+
+    first, second = rollout(native()), rollout(native())
+    sync = rollout(SyncVectorEnv([lambda: gym.make(env_id, **kwargs) for _ in range(B)]))
+    for a, b, s in zip(first, second, sync, strict=True):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(a, s, rtol=1e-6, atol=1e-7)

@@ -73,6 +73,13 @@ class SparseAttack(AttackModel):
 
     def __init__(self, budget: int, action: str = "auto", illegal_action: str = "trim") -> None:
         self.budget = check_int("budget", budget, minimum=0)
+        if action == "sequential":
+            raise ValueError(
+                "action='sequential' is a wrapper of the sparse_attack_v0 env, not an attack "
+                "model format: use sparse_attack_v0.parallel_env/env(action='sequential') or "
+                "the Gymnasium view (not yet the native vector env); the model takes "
+                f"action in {list(ACTION_FORMATS)}"
+            )
         self.action_format = check_choice("action", action, ACTION_FORMATS)
         self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
         self.remaining = self.budget

@@ -18,6 +18,7 @@ import scipy.linalg
 from fdia_env.kalman.filter import information_update, masked_gain, predict_cov
 from fdia_env.kalman.linalg import spd_inv, sym
 from fdia_env.systems import LinearSystem, check_detectable, noise_factor, pbh_defects
+from fdia_env.systems.system import PBH_TOL
 
 
 def _sensor_rows(system: LinearSystem, mask: np.ndarray | None) -> np.ndarray:
@@ -78,6 +79,14 @@ def _check_steady_state_exists(
     what = _subset_name(system, None if mask is None else np.asarray(mask, dtype=bool))
     check_detectable(system.F, system.H[rows], what)
     bad = pbh_defects(system.F, noise_factor(system.Q), side="cols", unstable_only=False)
+    quiet = _stable_modes_without_noise(system)
+    if quiet and not bad:
+        raise ValueError(
+            f"no steady state for {what}: Q gives no process noise to the stable mode of F with "
+            f"eigenvalue {quiet[0]:.6g}, so its error covariance decays to 0 and the steady "
+            "state is singular (the information form cannot represent it); give Q a component "
+            "along that mode, or use a finite warmup instead of 'steady'"
+        )
     if bad:
         raise ValueError(
             f"no steady state for {what}: the marginal mode of F with eigenvalue {bad[0]:.6g} "
@@ -209,6 +218,24 @@ def _out_of_reach(system: LinearSystem, mask: np.ndarray | None, exc: RuntimeErr
         "the tracking index σ_v T²/σ_w, and about 1e-8 to 1e6 is solvable): the Riccati "
         f"recursion cannot resolve it ({str(exc).split(' (is every')[0]})"
     )
+
+
+def _stable_modes_without_noise(system: LinearSystem) -> list[complex]:
+    """Eigenvalues ``|μ| < 1`` of F where ``rank [F − μI, Q^{1/2}] < n`` (no noise reaches)."""
+    F = np.asarray(system.F, dtype=float)
+    n = F.shape[0]
+    B = noise_factor(system.Q)
+    b_max = float(np.abs(B).max()) if B.size else 0.0
+    B = B / b_max if b_max > 0.0 else B
+    f_scale = max(1.0, float(np.abs(F).max()))
+    quiet = []
+    for mu in np.linalg.eigvals(F):
+        if abs(mu) >= 1.0 - PBH_TOL:
+            continue  # marginal and unstable modes: pbh_defects
+        M = np.hstack([(F - mu * np.eye(n)) / f_scale, B])
+        if np.linalg.svd(M, compute_uv=False)[n - 1] <= PBH_TOL:
+            quiet.append(complex(mu))
+    return quiet
 
 
 def _dare_residual(system: LinearSystem, P_pred: np.ndarray, rows: np.ndarray) -> float:

@@ -4,8 +4,8 @@
   residual tests, the exact detection probability of an injection;
 - ``stealth_attack_v0`` (:mod:`fdia_env.stealth.stealth_attack_v0`): the attacker's
   environment (PettingZoo parallel and AEC), with the Gymnasium view
-  ``"fdia_env/StealthAttack-v0"``, registered when this package is imported
-  (``gymnasium.make("fdia_env.stealth:fdia_env/StealthAttack-v0")`` imports it first).
+  ``"fdia_env/StealthAttack-v0"``, registered with the others by ``import fdia_env`` (its
+  entry in the table of environments, ``fdia_env.registration.ENVS``).
 
 See docs/guide/stealth.md.
 """
@@ -23,17 +23,25 @@ from fdia_env.stealth.static import (
 GYM_ID = "fdia_env/StealthAttack-v0"
 """Gymnasium id of the attacker's single-agent view; ``make_vec(...,
 vectorization_mode="vector_entry_point")`` gives the native numpy vector env
-(:class:`fdia_env.stealth.vector.StealthVectorEnv`)."""
+(:class:`fdia_env.stealth.vector.StealthVectorEnv`). Its entry is in the table of environments
+(:data:`fdia_env.registration.ENVS`)."""
 
-if GYM_ID not in gymnasium.registry:
+DEFENDER_GYM_ID = "fdia_env/StealthDefender-v0"
+"""Gymnasium id of the threshold defender's view (``defender="threshold"``; sync vectors only)."""
+
+if DEFENDER_GYM_ID not in gymnasium.registry:
     gymnasium.register(
-        id=GYM_ID,
+        id=DEFENDER_GYM_ID,
         entry_point="fdia_env.envs.single_agent:make_single_agent",
-        vector_entry_point="fdia_env.stealth.vector:make_vector",
-        kwargs={"module": "fdia_env.stealth.stealth_attack_v0", "agent": "attacker"},
+        kwargs={
+            "module": "fdia_env.stealth.stealth_attack_v0",
+            "agent": "defender",
+            "defender": "threshold",
+        },
     )
 
 __all__ = [
+    "DEFENDER_GYM_ID",
     "GYM_ID",
     "TESTS",
     "StaticEstimation",

@@ -24,6 +24,9 @@ from fdia_env.stealth.static import (
 ACTIONS = ("shift", "free")
 DYNAMICS = ("expected", "sampled")
 ON_DETECT = ("zero", "penalty", "end")
+DEFENDERS = (None, "threshold")
+DEFAULT_ALPHAS = (0.001, 0.01, 0.05, 0.1, 0.2)
+"""The defender's false-alarm rates (``defender="threshold"``)."""
 MAX_RATIO = 10.0
 """Cap of the observed χ² statistic, in units of the threshold."""
 
@@ -64,6 +67,9 @@ class StealthAttackEnv(ParallelEnv):
         protected: Any = None,
         render_mode: str | None = None,
         max_cycles: int | None = None,
+        defender: str | None = None,
+        alphas: Any = None,
+        false_alarm_cost: float = 1.0,
     ) -> None:
         if isinstance(scenario, StaticEstimation):
             est = scenario
@@ -107,13 +113,33 @@ class StealthAttackEnv(ParallelEnv):
             check_choice("render_mode", render_mode, RENDER_MODES)
         self.render_mode = render_mode
         self.attack = _NoResetOptions()
-        self.possible_agents = ["attacker"]
+        if defender not in DEFENDERS:
+            raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
+        self.defender = defender
+        self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
+        if isinstance(false_alarm_cost, bool) or not isinstance(
+            false_alarm_cost, (int, float, np.integer, np.floating)
+        ):
+            raise ValueError(f"false_alarm_cost must be a number >= 0, got {false_alarm_cost!r}")
+        if not (np.isfinite(false_alarm_cost) and false_alarm_cost >= 0.0):
+            raise ValueError(
+                f"false_alarm_cost must be a finite number >= 0, got {false_alarm_cost}"
+            )
+        self.false_alarm_cost = float(false_alarm_cost)
+        self._estimations = [
+            est
+            if a == est.alpha
+            else dataclasses.replace(est, alpha=a, lnr_threshold=sidak_threshold(a, est.m))
+            for a in self.alphas
+        ]
+        self.possible_agents = ["attacker"] if defender is None else ["attacker", "defender"]
         self.agents: list[str] = []
         if self.action_kind == "shift":
             act: spaces.Space = spaces.MultiBinary(est.n)
         else:
             act = spaces.Box(-1.0, 1.0, shape=(est.m,), dtype=np.float32)
         self._action_space = act
+        self._action_spaces = {"attacker": act, "defender": spaces.Discrete(len(self.alphas))}
         low = np.zeros(3, dtype=np.float32)
         high = np.array([1.0, 1.0, MAX_RATIO], dtype=np.float32)
         self._observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -132,8 +158,7 @@ class StealthAttackEnv(ParallelEnv):
 
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object on every call)."""
-        self._check_agent(agent)
-        return self._action_space
+        return self._action_spaces[self._check_agent(agent)]
 
     def _check_agent(self, agent: str) -> str:
         if agent not in self.possible_agents:
@@ -179,6 +204,7 @@ class StealthAttackEnv(ParallelEnv):
             "statistic": 0.0,
             "meters_used": 0,
             "attacked": np.zeros(self.estimation.m, dtype=np.int8),
+            "alpha": float(self.estimation.alpha),
         }
         self._last_a = np.zeros(self.estimation.m)
 
@@ -192,7 +218,10 @@ class StealthAttackEnv(ParallelEnv):
         self._clear()
         self._done = False
         self._reset_called = True
-        return {"attacker": self._observe()}, {"attacker": self._info()}
+        return self._per_agent(self._observe()), self._per_agent(self._info())
+
+    def _per_agent(self, value: Any) -> dict[str, Any]:
+        return {a: (dict(value) if isinstance(value, dict) else value.copy()) for a in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Inject, run the estimator and its bad-data test on one snapshot.
@@ -219,6 +248,9 @@ class StealthAttackEnv(ParallelEnv):
             )
         check_action(self._action_space, actions["attacker"], "attacker")
         est = self.estimation
+        if self.defender is not None:
+            check_action(self._action_spaces["defender"], actions["defender"], "defender")
+            est = self._estimations[int(np.asarray(actions["defender"]).reshape(()))]
         a = self.injection(actions["attacker"])
         damage = self.damage(a)
         p = float(est.detection_probability(a)) if self.test == "chi2" else float("nan")
@@ -242,17 +274,23 @@ class StealthAttackEnv(ParallelEnv):
             "statistic": statistic,
             "meters_used": int(np.count_nonzero(a)),
             "attacked": (a != 0.0).astype(np.int8),
+            "alpha": float(est.alpha),
         }
         done = self._k >= self.horizon or (detected and self.on_detect == "end")
         truncated = not done and self.max_cycles is not None and self._k >= self.max_cycles
-        obs = {"attacker": self._observe()}
-        infos = {"attacker": self._info()}
+        agents = self.agents
+        obs = self._per_agent(self._observe())
+        infos = self._per_agent(self._info())
+        rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * est.alpha}
+        rewards = {a: rewards[a] for a in agents}
+        terms = dict.fromkeys(agents, done)
+        truncs = dict.fromkeys(agents, truncated)
         if done or truncated:
             self._done = True
             self.agents = []
         if self.render_mode == "human":
             self.render()
-        return obs, {"attacker": reward}, {"attacker": done}, {"attacker": truncated}, infos
+        return obs, rewards, terms, truncs, infos
 
     def _observe(self) -> np.ndarray:
         ratio = min(self._last["statistic"] / self.estimation.threshold, MAX_RATIO)
@@ -304,3 +342,15 @@ class StealthAttackEnv(ParallelEnv):
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+def _check_alphas(alphas: Any) -> tuple[float, ...]:
+    try:
+        values = [float(a) for a in alphas]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"alphas must be false-alarm rates in (0, 1), got {alphas!r}") from exc
+    if not values or any(
+        isinstance(a, bool) or not 0.0 < v < 1.0 for a, v in zip(alphas, values, strict=True)
+    ):
+        raise ValueError(f"alphas must be a non-empty list of rates in (0, 1), got {alphas!r}")
+    return tuple(values)

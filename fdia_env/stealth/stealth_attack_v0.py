@@ -49,9 +49,17 @@ a :class:`~fdia_env.stealth.StaticEstimation`), ``budget`` (meters, default 6), 
 ``dynamics`` (``"sampled"`` | ``"expected"``), ``test`` (``"chi2"`` | ``"lnr"``), ``alpha``
 (0.05, or the given StaticEstimation's; another value re-thresholds that model),
 ``on_detect`` (``"zero"`` | ``"penalty"`` | ``"end"``), ``penalty`` (1.0), ``protected``
-(meter positions or names), ``render_mode``, ``max_cycles``.
+(meter positions or names), ``render_mode``, ``max_cycles``; ``defender`` (``None`` |
+``"threshold"``), ``alphas`` (the defender's false-alarm rates, default 0.001, 0.01, 0.05, 0.1,
+0.2), ``false_alarm_cost`` (1.0).
 
-Infos (the same keys at reset and every step): ``phi`` (the last damage), ``step``,
+With ``defender="threshold"`` the env has a second agent ``"defender"`` with ``Discrete(len(
+alphas))``: each step it picks the χ² (and LNR) test's false-alarm rate α; its reward is minus
+the attacker's minus ``false_alarm_cost · α`` (the expected cost of the false alarms it accepts).
+Its Gymnasium view is ``"fdia_env/StealthDefender-v0"`` (the attacker samples its action space);
+the attacker's view then faces the rate of ``alphas`` closest to ``alpha``.
+
+Infos (the same keys at reset and every step): ``phi`` (the last damage), ``step``, ``alpha``,
 ``detected``, ``detection_probability`` (exact, χ² test), ``statistic`` (J; its mean under
 ``"expected"``), ``meters_used``, ``attacked`` ((m,) int8).
 
@@ -75,6 +83,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from fdia_env.envs.factory import aec_views
 from fdia_env.stealth.env import StealthAttackEnv
 
@@ -96,6 +106,9 @@ def parallel_env(
     protected: Any = None,
     render_mode: str | None = None,
     max_cycles: int | None = None,
+    defender: str | None = None,
+    alphas: Any = None,
+    false_alarm_cost: float = 1.0,
 ) -> StealthAttackEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
     return StealthAttackEnv(
@@ -113,7 +126,63 @@ def parallel_env(
         protected=protected,
         render_mode=render_mode,
         max_cycles=max_cycles,
+        defender=defender,
+        alphas=alphas,
+        false_alarm_cost=false_alarm_cost,
     )
+
+
+class _Fixed:
+    """Plays one fixed action (SB3 ``predict`` signature)."""
+
+    def __init__(self, action: Any) -> None:
+        self.action = np.asarray(action)
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        obs = np.asarray(observation)
+        if obs.ndim >= 2:
+            return np.repeat(self.action[None], obs.shape[0], axis=0), state
+        return self.action.copy(), state
+
+
+class _Sampled:
+    """Samples the attacker's action space (seeded on the view's seeded reset)."""
+
+    def __init__(self, space: Any) -> None:
+        self.space = space
+
+    def reset(self, seed: int | None = None) -> None:
+        self.space.seed(seed)
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[Any, Any]:
+        obs = np.asarray(observation)
+        if obs.ndim >= 2:
+            return np.stack([self.space.sample() for _ in range(obs.shape[0])]), state
+        return self.space.sample(), state
+
+
+def default_opponent(parallel: StealthAttackEnv, agent: str) -> Any:
+    """The other player of a Gymnasium view with ``defender="threshold"``.
+
+    The attacker faces the false-alarm rate of ``alphas`` closest to the env's ``alpha``; the
+    defender faces an attacker that samples its action space (a seeded random injection).
+    """
+    if agent == "attacker":
+        alphas = np.asarray(parallel.alphas)
+        return _Fixed(np.int64(np.argmin(np.abs(alphas - parallel.estimation.alpha))))
+    return _Sampled(parallel.action_space("attacker"))
 
 
 raw_env, env = aec_views(parallel_env)

@@ -150,8 +150,13 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
         ValueError: For ``backend``/``device`` other than numpy on the CPU, or a bad option.
     """
     backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
-    kwargs.pop("agent", None)
+    agent = kwargs.pop("agent", "attacker")
     kwargs.pop("module", None)
+    if agent != "attacker" or kwargs.get("defender") is not None:
+        raise ValueError(
+            "the native vector env plays the attacker alone (defender=None); use "
+            "vectorization_mode='sync' for the defender's view"
+        )
     if backend != "numpy" or device not in (None, "cpu"):
         raise ValueError(
             f"backend={backend!r}, device={device!r}: the stealth env's native vector env runs "

@@ -178,12 +178,21 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             raise ValueError(f"seed must be an int, a list of {B} ints or None, got {seed!r}")
         self.attack.check_reset_options(dict(options or {}))
         super().reset(seed=None if seed is None or isinstance(seed, list | tuple) else int(seed))
-        self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        # a member without a seed keeps its generator (as a single env's reset(seed=None)
+        # does in SyncVectorEnv); only the first reset draws fresh entropy for it
+        old = getattr(self, "_rngs", None)
+        self._rngs = [
+            old[i] if s is None and old is not None else seeding.np_random(s)[0]
+            for i, s in enumerate(seeds)
+        ]
         if self._mix:  # one opponent generator per member, as each single env has its own
-            if self._opp_rngs is None or seed is not None:
-                self._opp_rngs = [
-                    np.random.default_rng(None if s is None else s + 1) for s in seeds
-                ]
+            prev = self._opp_rngs
+            self._opp_rngs = [
+                prev[i]
+                if s is None and prev is not None
+                else np.random.default_rng(None if s is None else s + 1)
+                for i, s in enumerate(seeds)
+            ]
         elif seed is not None and not isinstance(seed, list | tuple):
             if hasattr(self.opponent, "reset"):
                 self.opponent.reset(seed=int(seed) + 1)
@@ -447,6 +456,12 @@ def make_vector(
         )
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
+    if not isinstance(parallel, FdiaParallelEnv):  # e.g. the sparse attack's action="sequential"
+        raise ValueError(
+            f"action={kwargs.get('action')!r} is not available in the native vector env (it "
+            f"wraps the env as a {type(parallel).__name__}); use gymnasium.make_vec(..., "
+            "vectorization_mode='sync') or another action format"
+        )
     check_agent(agent, parallel.possible_agents)
     if opponent is None and hasattr(mod, "default_opponent") and len(parallel.possible_agents) > 1:
         opponent = mod.default_opponent(parallel, agent)

@@ -11,9 +11,9 @@ from prop_support import matrix_values
 from fdia_env import scenarios
 from fdia_env.attacks import CovarianceAttack, SparseAttack
 from fdia_env.defenses import PerfectDetection, UnawareFilter
-from fdia_env.registration import ENV_NAMES
+from fdia_env.registration import kalman_env_names
 
-MODULES = tuple(ENV_NAMES)  # every entry of the table of environments (each needs PARAMS)
+MODULES = tuple(kalman_env_names())  # the table's Kalman-filter envs (each needs PARAMS)
 SMALL_SCENARIOS = [  # ch4-random, game-m10: 10 sensors
     n for n in scenarios.names() if n not in ("ch4-random", "game-m10")
 ]
