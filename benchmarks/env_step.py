@@ -2,7 +2,8 @@
 
 Run: ``python benchmarks/env_step.py``. Prints the rates and the ratios the project tracks:
 the Gymnasium view (through ``gymnasium.make`` with its default wrappers) against 50,000
-steps/s, and the PettingZoo parallel env against PettingZoo's own ``rps_v2`` parallel env.
+steps/s and against Gymnasium's CartPole-v1 made the same way, and the PettingZoo parallel env
+against PettingZoo's own ``rps_v2`` parallel env.
 """
 
 from __future__ import annotations
@@ -41,6 +42,20 @@ def parallel_runner(dynamics: str):
 def gym_runner(dynamics: str):
     env = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", dynamics=dynamics)
     actions = np.random.default_rng(0).integers(0, 8, size=100_000)
+
+    def run(steps: int) -> None:
+        env.reset(seed=0)
+        for i in range(steps):
+            _, _, term, trunc, _ = env.step(int(actions[i % actions.size]))
+            if term or trunc:
+                env.reset()
+
+    return run
+
+
+def cartpole_runner():
+    env = gym.make("CartPole-v1")  # Gymnasium's own single env, through the same make()
+    actions = np.random.default_rng(0).integers(0, 2, size=100_000)
 
     def run(steps: int) -> None:
         env.reset(seed=0)
@@ -92,6 +107,7 @@ def main() -> None:
         "parallel env (sampled)": rate(parallel_runner("sampled"), steps),
         "gymnasium.make view (expected)": rate(gym_runner("expected"), steps),
         "gymnasium.make view (sampled)": rate(gym_runner("sampled"), steps),
+        "gymnasium.make CartPole-v1": rate(cartpole_runner(), steps),
         "filterpy KalmanFilter predict+update": rate(filterpy_runner(), steps),
         "pettingzoo rps_v2 parallel": rate(rps_runner(), steps),
     }
@@ -108,6 +124,8 @@ def main() -> None:
     print()
     print(f"parallel env / rps_v2:            {par / rps:6.2f}x  (target >= 3)")
     print(f"gymnasium view / 50,000 steps/s:  {view / 50_000:6.2f}x  (target >= 1)")
+    cart = results["gymnasium.make CartPole-v1"]
+    print(f"gymnasium view / CartPole-v1:     {view / cart:6.2f}x  (target >= 0.3)")
     print(f"gymnasium view / filterpy step:   {view / fp:6.2f}x")
     print(f"sampled parallel / filterpy step: {results['parallel env (sampled)'] / fp:6.2f}x")
 

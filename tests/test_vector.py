@@ -494,6 +494,29 @@ def test_single_native_numpy_torch_and_sync_agree(config):
         info_s = out_s[4]
 
 
+@pytest.mark.parametrize("sensors", [3, 12])
+def test_single_env_attacked_info_lists_the_subset_of_every_action(sensors):
+    # the single env's "attacked" info comes from a table of the subsets' bits for M <= 10 and
+    # from the bitmask itself above; both must name exactly the sensors of the action
+    from fdia_env import sparse_attack_v0
+
+    system = LinearSystem(
+        F=np.eye(2),
+        Q=0.1 * np.eye(2),
+        sensors=tuple(Sensor(H=[[1.0, 0.1 * i]], R=[[1.0 + 0.1 * i]]) for i in range(sensors)),
+        name=f"{sensors}-sensors",
+    )
+    env = sparse_attack_v0.parallel_env(
+        scenario=system, budget=sensors, horizon=1, action="bitmask"
+    )
+    for a in [0, 1, 5, 2**sensors - 1, 2 ** (sensors - 1) + 2]:
+        env.reset(seed=0)
+        _, _, _, _, infos = env.step({"attacker": a})
+        attacked = infos["attacker"]["attacked"]
+        assert attacked.dtype == np.int8 and attacked.shape == (sensors,)
+        np.testing.assert_array_equal(attacked, [(a >> i) & 1 for i in range(sensors)])
+
+
 @pytest.mark.parametrize(
     "case", ["sparse-sampled", "game-defender-sampled", "detection-defender-sampled-bayes"]
 )

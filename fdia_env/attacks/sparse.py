@@ -112,6 +112,12 @@ class SparseAttack(AttackModel):
         self.action_space = spaces.Discrete(self.n_actions)
         sizes = np.array([a.bit_count() for a in range(self.n_actions)])
         self._sizes = sizes
+        # the (M,) int8 rows of info()["attacked"] for every subset, looked up per step (for
+        # M <= 10: at most 10 KiB per env; bits_to_mask costs more than the rest of the info)
+        self._info_rows = None
+        if system.M <= 10:
+            bits = (np.arange(self.n_actions)[:, None] >> np.arange(system.M)) & 1
+            self._info_rows = bits.astype(np.int8)
         self._trim_table: np.ndarray | None = None  # built on first batched use
         self._masks = [
             (sizes <= r).astype(np.int8) for r in range(self.budget + 1)
@@ -199,7 +205,10 @@ class SparseAttack(AttackModel):
 
     def info(self) -> dict[str, Any]:
         """``attacked``: (M,) int8, 1 for each sensor attacked this step; ``budget_left``."""
-        attacked = bits_to_mask(self.last_attacked, self.M).astype(np.int8)
+        if self.format == "bitmask" and self._info_rows is not None:
+            attacked = self._info_rows[self.last_attacked].copy()
+        else:
+            attacked = bits_to_mask(self.last_attacked, self.M).astype(np.int8)
         return {"attacked": attacked, "budget_left": int(self.remaining)}
 
     # --- batched (see AttackModel; numpy or torch arrays of the backend ``xp``) -------------
