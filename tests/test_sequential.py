@@ -181,6 +181,11 @@ def test_illegal_actions():
             vectorization_mode="vector_entry_point",
             action="sequential",
         )
+    from agents.evaluate import evaluate
+
+    view = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", action="sequential")
+    with pytest.raises(TypeError, match="not available in the native vector env"):
+        evaluate("random", view, n_episodes=2, num_envs=2)  # the batched evaluation path
     with pytest.raises(RuntimeError, match="before reset"):
         sparse_attack_v0.parallel_env(scenario="ch4-position", action="sequential").step(
             {"attacker": 0}
