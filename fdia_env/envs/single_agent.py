@@ -176,6 +176,10 @@ def make_single_agent(
             "gymnasium.make_vec(id, num_envs=B, vectorization_mode='vector_entry_point', "
             "backend='torch', device=...)"
         )
+    from fdia_env.registration import view_kwargs
+
+    for name, value in view_kwargs(module, agent).items():
+        kwargs.setdefault(name, value)  # the view's fixed options (the table's view_kwargs)
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
