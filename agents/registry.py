@@ -131,6 +131,15 @@ def parallel_of(env: gym.Env) -> FdiaParallelEnv | SequentialSetEnv:
 # answer comparable with the episode return (e.g. shaped rewards, a non-steady start).
 
 
+def _plan_policy(result: Any, action: str) -> Any:
+    """The solver's plan as a policy in the env's format.
+
+    None in ``"single"``: one sensor a step cannot play every plan, so that row is not scored
+    by playing.
+    """
+    return None if action == "single" else result.policy(action)
+
+
 def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
     """EXS for the env's scenario, budget, horizon and objective, or a certified answer.
 
@@ -142,27 +151,28 @@ def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
     """
     from baselines.sparse import branch_and_bound, exhaustive, sfs
 
-    sequential = isinstance(env, SequentialSetEnv)  # its plan played one sensor per decision
+    # the plan is played in the env's own action format (one sensor per decision when sequential)
+    action = "sequential" if isinstance(env, SequentialSetEnv) else env.attack.format
     spec = env.spec
     if spec.reward_mode != "terminal" or spec.warmup != "steady":
         return None  # the solvers' objective is Φ at the window end from steady state
     args = (env.scenario, env.attack.budget, spec.horizon, spec.objective)
     if math.comb(env.system.M * spec.horizon, env.attack.budget) <= EXS_MAX_SETS:
         best = exhaustive(*args)
-        return Reference(best.value, "EXS", spec.objective, policy=best.policy(sequential))
+        return Reference(best.value, "EXS", spec.objective, policy=_plan_policy(best, action))
     proof = branch_and_bound(*args, time_limit=BNB_TIME_LIMIT)
     greedy = ("SFS", sfs(*args).value)
     if proof.proved_optimal:
         name = "B&B (certified optimum)"
         return Reference(
-            proof.value, name, spec.objective, policy=proof.policy(sequential), heuristic=greedy
+            proof.value, name, spec.objective, policy=_plan_policy(proof, action), heuristic=greedy
         )
     return Reference(
         proof.value,
         "best known (B&B incumbent)",
         spec.objective,
         False,
-        policy=proof.policy(sequential),
+        policy=_plan_policy(proof, action),
         bound=proof.upper_bound,
         heuristic=greedy,
     )

@@ -247,7 +247,7 @@ def test_gymnasium_view_and_maskable_ppo_on_grid_preset():
 def test_solver_policy_in_sequential_format_returns_its_value():
     for scenario, budget, horizon in (("ch4-position", 5, 6), ("grid-ieee14", 6, 6)):
         result = sfs(scenario, budget, horizon)
-        policy = result.policy(sequential=True)
+        policy = result.policy("sequential")
         env = gym.make(
             "fdia_env/SparseAttack-v0",
             scenario=scenario,

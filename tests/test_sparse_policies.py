@@ -109,3 +109,42 @@ def test_policy_rejects_bad_plans():
         SparsePolicy([])
     with pytest.raises(ValueError, match="actions"):
         SparsePolicy([0, -1])
+
+
+@pytest.mark.parametrize("action", ["bitmask", "multibinary", "sequential"])
+def test_policy_plays_in_the_envs_own_action_format(action):
+    """``result.policy(action)`` returns the solver's value in each format a plan plays in."""
+    best = SOLVERS["exs"]("ch4-position", budget=4, horizon=5)
+    policy = best.policy(action)
+    total = play_parallel(policy, scenario="ch4-position", budget=4, horizon=5, action=action)
+    np.testing.assert_allclose(total, best.value, rtol=RTOL)
+
+
+def test_policy_refuses_formats_a_plan_cannot_play_in():
+    best = sfs("ch4-position", budget=3, horizon=4)
+    with pytest.raises(ValueError, match=r"action must be one of .*'single'"):
+        best.policy("single")
+    with pytest.raises(ValueError, match="action must be one of"):
+        best.policy("bits")
+    big = sfs("grid-ieee14", budget=2, horizon=2)
+    with pytest.raises(ValueError, match="action='bitmask' takes at most 16 sensors"):
+        big.policy("bitmask")
+
+
+def test_training_reference_plays_in_the_envs_format():
+    """The EXS row of ``train.py attacker`` is scored in the env's format (MultiBinary here)."""
+    from agents import registry
+    from agents.evaluate import evaluate
+
+    env = gymnasium.make(
+        "fdia_env/SparseAttack-v0",
+        scenario="ch4-position",
+        budget=4,
+        horizon=5,
+        action="multibinary",
+    )
+    ref = registry.sparse_reference(registry.parallel_of(env))
+    assert ref is not None and ref.policy is not None
+    result = evaluate(ref.policy, env, 2, 0, ref)
+    np.testing.assert_allclose(result.mean, ref.value, rtol=1e-9)
+    np.testing.assert_allclose(result.score, 1.0, rtol=1e-9)

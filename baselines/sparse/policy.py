@@ -60,14 +60,34 @@ class SparsePolicy:
         self.horizon = check_int("horizon", arr.shape[0], minimum=1)
 
     @classmethod
-    def from_result(cls, result: SparseResult, sequential: bool = False) -> SparsePolicy:
-        """The policy that plays ``result.attacks`` (a 0/1 plan above 16 sensors).
+    def from_result(cls, result: SparseResult, action: str = "auto") -> SparsePolicy:
+        """The policy that plays ``result.attacks`` in the env's ``action`` format.
 
-        ``sequential=True``: for the ``action="sequential"`` format (see the class doc).
+        Args:
+            result: A solver's answer.
+            action: ``"auto"`` (bitmask up to 16 sensors, a 0/1 plan above, as the env's
+                default), ``"bitmask"``, ``"multibinary"`` or ``"sequential"`` (see the class
+                doc).
+
+        Raises:
+            ValueError: For another format, or ``"bitmask"`` above 16 sensors.
         """
-        if sequential:
-            return cls(result.plan(), sequential=True)
-        return cls(result.plan() if result.num_sensors > MAX_SENSORS else result.actions())
+        formats = ("auto", "bitmask", "multibinary", "sequential")
+        if action not in formats:
+            raise ValueError(
+                f"action must be one of {formats} (the formats a plan can be played in; "
+                f"'single' attacks at most one sensor a step), got {action!r}"
+            )
+        if action == "auto":
+            action = "bitmask" if result.num_sensors <= MAX_SENSORS else "multibinary"
+        if action == "bitmask" and result.num_sensors > MAX_SENSORS:
+            raise ValueError(
+                f"action='bitmask' takes at most {MAX_SENSORS} sensors, the plan has "
+                f"{result.num_sensors}: use 'multibinary' or 'sequential'"
+            )
+        if action == "bitmask":
+            return cls(result.actions())
+        return cls(result.plan(), sequential=action == "sequential")
 
     def step_of(self, observation: Any) -> np.ndarray:
         """Window step(s) encoded in a (d,) or (B, d) observation (dict or plain Box)."""

@@ -125,11 +125,18 @@ class SparseResult:
                 out[i, k] = rank
         return out
 
-    def policy(self, sequential: bool = False) -> SparsePolicy:
-        """This answer as a policy that plays ``sparse_attack_v0``.
+    def policy(self, action: str = "auto") -> SparsePolicy:
+        """This answer as a policy that plays ``sparse_attack_v0`` in its ``action`` format.
 
-        ``sequential=True``: in its ``action="sequential"`` format.
+        Args:
+            action: The env's action format: ``"auto"`` (the env's default: bitmask up to 16
+                sensors, MultiBinary above), ``"bitmask"``, ``"multibinary"`` or
+                ``"sequential"``.
+
+        Raises:
+            ValueError: For another format (``"single"`` attacks one sensor a step, so it cannot
+                play every plan), or ``"bitmask"`` above 16 sensors.
         """
         from baselines.sparse.policy import SparsePolicy
 
-        return SparsePolicy.from_result(self, sequential=sequential)
+        return SparsePolicy.from_result(self, action=action)

@@ -137,9 +137,10 @@ class AttackModel(ABC):
     # The batch state lives in attributes prefixed ``b_``; it is independent of the single-env
     # state above, and each batch method must equal its single-env twin member by member.
     # The batch arrays belong to the backend ``xp`` (the vector env sets it before
-    # ``batch_reset``); ``batch_backends`` names the backends a model implements. On torch, the
-    # vector env has checked the actions' type, device, shape and range before ``batch_apply``,
-    # and sensor sets may be (B, M) boolean masks instead of bitmasks.
+    # ``batch_reset``); ``batch_backends`` names the backends a model implements. On both
+    # backends the vector env has checked the actions' type, shape and range (and on torch the
+    # device) before ``batch_apply``, once per step (fdia_env.envs.actions): ``batch_apply``
+    # takes them as valid. On torch, sensor sets may be (B, M) boolean masks, not bitmasks.
 
     xp: Backend = NUMPY
     batch_backends: tuple[str, ...] = ("numpy",)
@@ -176,7 +177,7 @@ class AttackModel(ABC):
         return {}
 
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """Validate (B, ...) actions and act: ``(attacked bits (B,), Σ (B, nz, nz) or None)``."""
+        """Act on checked (B, ...) actions: ``(attacked bits (B,), Σ (B, nz, nz) or None)``."""
         raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
 
 
@@ -191,17 +192,3 @@ def as_index(action: Any) -> int | None:
     ):
         return int(action.reshape(()))
     return None
-
-
-def as_index_array(actions: Any, n: int, who: str, what: str) -> np.ndarray:
-    """(B,) integer actions in [0, n) as int64, or ``ValueError`` naming ``who``."""
-    a = np.asarray(actions)
-    kind = a.dtype.kind  # "i"/"u" integers, "b" bool, "f" floats (cheaper than issubdtype)
-    if a.ndim != 1 or kind not in "iub":
-        if a.ndim == 1 and kind == "f" and np.all(a == np.round(a)):
-            a = a.astype(np.int64)
-        else:
-            raise ValueError(f"{who} actions must be a 1-D integer array ({what}), got {actions!r}")
-    if a.size and (a.min() < 0 or a.max() >= n):
-        raise ValueError(f"{who} actions must be integers in [0, {n}) ({what}), got {a.tolist()}")
-    return a.astype(np.int64, copy=False)

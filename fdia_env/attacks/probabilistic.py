@@ -9,7 +9,6 @@ from gymnasium import spaces
 
 from fdia_env.attacks.base import AttackEffect
 from fdia_env.attacks.covariance import CovarianceAttack
-from fdia_env.backend import NUMPY
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -87,22 +86,8 @@ class ProbabilisticAttack(CovarianceAttack):
     def batch_apply(self, actions: Any) -> tuple[Any, Any]:
         """Batched :meth:`apply`; the attack probabilities are kept in ``b_probability``."""
         xp = self.xp
-        if xp is NUMPY:
-            a = np.asarray(actions, dtype=np.float64) if _is_vector(actions) else None
-            if a is None or a.ndim != 2 or a.shape[1:] != self.action_space.shape:
-                raise ValueError(
-                    f"attacker actions must be an array of shape (B, "
-                    f"{self.action_space.shape[0]}) in [-1, 1], got {actions!r}"
-                )
-            if not np.all(np.isfinite(a[:, 0])) or np.any(np.abs(a[:, 0]) > 1.0 + 1e-6):
-                raise ValueError("attacker actions must be finite and in [-1, 1]")
-        else:  # checked by the vector env
-            a = xp.astype(actions, xp.float64)
-        self.action_space, space = self._cov_space, self.action_space
-        try:
-            attacked, sigma = super().batch_apply(a[:, 1:])
-        finally:
-            self.action_space = space
+        a = xp.astype(actions, xp.float64)  # checked by the vector env (shape, finite, in Box)
+        attacked, sigma = super().batch_apply(a[:, 1:])
         self.b_probability = 0.5 * (xp.clip(a[:, 0], -1.0, 1.0) + 1.0)
         return attacked, sigma
 

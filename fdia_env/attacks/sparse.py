@@ -12,7 +12,6 @@ from fdia_env.attacks.base import (
     AttackEffect,
     AttackModel,
     as_index,
-    as_index_array,
     bits_to_mask,
     mask_array_to_bits,
 )
@@ -294,27 +293,11 @@ class SparseAttack(AttackModel):
     def _batch_apply_large(self, actions: Any) -> tuple[Any, None]:
         """Batched ``"multibinary"`` / ``"single"`` actions: the same trimming rule."""
         xp = self.xp
-        B = self.b_remaining.shape[0]
         if self.format == "single":
-            if xp is NUMPY:
-                j = as_index_array(actions, self.M + 1, "attacker", "0 = none, j = sensor j")
-            else:
-                j = xp.astype(actions, xp.int64)
+            j = xp.astype(actions, xp.int64)  # checked by the vector env
             chosen = (j[:, None] - 1) == xp.arange(self.M)  # j = 0 matches no sensor
         else:
-            a = actions
-            if xp is NUMPY:
-                a = np.asarray(actions)
-                if (
-                    a.shape != (B, self.M)
-                    or a.dtype.kind not in "biuf"  # 0/1 of any real dtype
-                    or not np.isin(a, (0, 1)).all()
-                ):
-                    raise ValueError(
-                        f"attacker actions must be a 0/1 array of shape ({B}, {self.M}) "
-                        f"(MultiBinary, any real dtype), got {actions!r}"
-                    )
-            chosen = xp.astype(a, xp.bool)
+            chosen = xp.astype(actions, xp.bool)  # 0/1 of any real dtype, checked
         over = xp.sum(chosen, 1) > self.b_remaining
         if self.illegal_action != "trim" and xp.any(over):
             i = int(xp.flatnonzero(over)[0])
@@ -333,10 +316,7 @@ class SparseAttack(AttackModel):
         if self.format != "bitmask":
             return self._batch_apply_large(actions)
         xp = self.xp
-        if xp is NUMPY:
-            a = as_index_array(actions, self.n_actions, "attacker", "sensor bitmasks")
-        else:
-            a = xp.astype(actions, xp.int64)
+        a = xp.astype(actions, xp.int64)  # checked by the vector env
         trim, _, sizes, _ = self._b_tables
         if self.illegal_action != "trim":
             over = xp.take(sizes, a) > self.b_remaining

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from fdia_env._validation import check_choice, check_int, check_power
-from fdia_env.attacks.base import AttackEffect, AttackModel, as_index_array, bits_to_mask
+from fdia_env.attacks.base import AttackEffect, AttackModel, bits_to_mask
 from fdia_env.attacks.subsets import SubsetChoice
 from fdia_env.backend import NUMPY, namespace
 from fdia_env.episode import EpisodeSpec
@@ -189,10 +189,7 @@ class SubsetAttack(SubsetChoice, AttackModel):
     def batch_apply(self, actions: Any) -> tuple[Any, Any]:
         """Σ_A of each member's subset (rank one, from the allocation directions)."""
         xp = self.xp
-        if xp is NUMPY:
-            j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")
-        else:  # checked by the vector env
-            j = xp.astype(actions, xp.int64)
+        j = xp.astype(actions, xp.int64)  # checked by the vector env
         self.b_last = j
         self.b_attacked = xp.astype(self._masks[j], xp.int8)
         u = attack_directions(self._system, self._masks[j], self.allocation)

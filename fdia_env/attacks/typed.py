@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from fdia_env._validation import check_choice
-from fdia_env.attacks.base import as_index_array
 from fdia_env.attacks.subset import (
     ALLOCATIONS,
     SubsetAttack,
@@ -232,7 +231,7 @@ class TypedSubsetAttack(SubsetAttack):
 
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Σ_A of each member's subset under its own type."""
-        j = as_index_array(actions, len(self.subsets), "attacker", "subset indices")
+        j = np.asarray(actions, dtype=np.int64)  # checked by the vector env
         self.b_last = j
         self.b_attacked = self._masks[j].astype(np.int8)
         u = self._dirs[self.b_type, j]

@@ -6,9 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.attacks.base import AttackEffect, as_index_array, bits_to_mask
+from fdia_env.attacks.base import AttackEffect, bits_to_mask
 from fdia_env.attacks.subsets import SubsetChoice
-from fdia_env.backend import NUMPY
 from fdia_env.defenses.base import DefenseModel, FilterInput
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -56,10 +55,7 @@ class SensorSelection(SubsetChoice, DefenseModel):
     def batch_apply(self, actions, attacked, sigma):
         """Each member's subset; Σ restricted to A ∩ D leaks; every round restarts steady."""
         xp = self.xp
-        if xp is NUMPY:
-            j = as_index_array(actions, len(self.subsets), "defender", "subset indices")
-        else:  # checked by the vector env
-            j = xp.astype(actions, xp.int64)
+        j = xp.astype(actions, xp.int64)  # checked by the vector env
         self.b_last = j
         rows = self._row_masks[j]
         used = self._bits_arr[j]

@@ -48,8 +48,11 @@ def check_action(space: spaces.Space, action: Any, who: str) -> None:
     _check_values(space, arr, who)
 
 
-def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str) -> None:
+def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str) -> np.ndarray:
     """Raise ``ValueError`` unless ``actions`` holds one element of ``space`` per member.
+
+    This is the vector env's only check of a step's actions: the models' ``batch_apply`` take
+    the array it returns as valid (type, shape and range), as they do on the torch backend.
 
     Args:
         space: The single env's action space.
@@ -57,7 +60,17 @@ def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str)
         batch: B, the number of members; a shorter or longer batch is an error (never
             broadcast).
         who: ``"attacker"`` or ``"defender"``, for the message.
+
+    Returns:
+        The actions as a numpy array (int64 for ``Discrete`` and ``MultiDiscrete``, the given
+        dtype otherwise), of shape (B, *space.shape).
     """
+    if isinstance(actions, np.ndarray) and isinstance(space, spaces.Discrete):
+        # the common case (a policy's integer batch), checked without the general path
+        if actions.dtype.kind in "iu" and actions.shape == (batch,):
+            if batch and (actions.min() < space.start or actions.max() >= space.start + space.n):
+                _discrete_range_error(space, actions, who)
+            return actions.astype(np.int64, copy=False)
     arr = _real_array(actions, who, space, batch=batch)
     want = (batch, *(space.shape or ()))
     if arr.shape != want:
@@ -66,20 +79,28 @@ def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str)
             f"of the {batch} members), got shape {arr.shape}"
         )
     if isinstance(space, spaces.Discrete):
-        if not np.issubdtype(arr.dtype, np.integer):
+        if arr.dtype.kind not in "iu":
             raise ValueError(
                 f"{who} actions must be integers (an integer dtype, as for a single env) for "
                 f"{space}, got dtype {arr.dtype}"
             )
-        bad = (arr < space.start) | (arr >= space.start + space.n)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(
-                f"{who} actions must be integers in [{space.start}, {space.start + space.n}); "
-                f"member {i} has {arr[i].item()!r}"
-            )
-        return
+        if batch and (arr.min() < space.start or arr.max() >= space.start + space.n):
+            _discrete_range_error(space, arr, who)
+        return arr.astype(np.int64, copy=False)
     _check_values(space, arr, who)
+    if isinstance(space, spaces.MultiDiscrete):
+        return arr.astype(np.int64, copy=False)
+    return arr
+
+
+def _discrete_range_error(space: spaces.Discrete, arr: np.ndarray, who: str) -> None:
+    """Raise the ``ValueError`` naming the first member outside ``space``."""
+    bad = (arr < space.start) | (arr >= space.start + space.n)
+    i = int(np.flatnonzero(bad)[0])
+    raise ValueError(
+        f"{who} actions must be integers in [{space.start}, {space.start + space.n}); "
+        f"member {i} has {arr[i].item()!r}"
+    )
 
 
 def _integer(action: Any) -> int | None:

@@ -262,8 +262,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             raise RuntimeError("step() called before reset(): call reset() first")
         B, xp = self.num_envs, self.xp
         resetting = self._prev_done
-        if xp is NUMPY:
-            check_batch_actions(self.single_action_space, actions, B, self.agent)
+        if xp is NUMPY:  # the only check: the models take the checked array as valid
+            actions = check_batch_actions(self.single_action_space, actions, B, self.agent)
         else:
             check_batch_tensor_actions(self.single_action_space, actions, B, self.agent, xp)
         actions = {self.agent: actions}
@@ -271,7 +271,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             actions[self.other] = self._opponent_actions(~resetting)
             space = self.parallel.action_space(self.other)
             if xp is NUMPY:
-                check_batch_actions(space, actions[self.other], B, self.other)
+                actions[self.other] = check_batch_actions(space, actions[self.other], B, self.other)
             else:
                 check_batch_tensor_actions(space, actions[self.other], B, self.other, xp)
         attacked, sigma = self.attack.batch_apply(actions["attacker"])
