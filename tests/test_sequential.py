@@ -572,3 +572,43 @@ def test_covariance_game_page_sequential_snippet_prints_what_the_page_shows(caps
     code, shown = re.findall(r"^```(?:python)?\n(.*?)^```", section, re.S | re.M)[:2]
     exec(compile(code, "<covariance_game.md>", "exec"), {})
     assert capsys.readouterr().out == shown
+
+
+def test_sensor_game_sequential_evaluation_plays_subset_mixes_and_scores_learned_policies(
+    tmp_path,
+):
+    import json
+    import sys
+    from pathlib import Path
+
+    from agents.evaluate import evaluate
+    from agents.registry import get
+    from baselines.game import MixedStrategyPolicy
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py is at the root
+    import train
+
+    entry = get("sensor_game_v0", "defender")
+    old = gym.make("fdia_env/SensorGameDefender-v0")
+    seq = gym.make("fdia_env/SensorGameDefender-v0", action="sequential")
+    ref = entry.reference_of(seq)
+    results = [
+        evaluate(MixedStrategyPolicy(ref.policy.probs, seed=0), env, 12, 0, ref)
+        for env in (old, seq)
+    ]
+    assert results[1].mean == pytest.approx(results[0].mean, rel=1e-12)  # the same rounds
+    assert results[1].score == pytest.approx(0.0, abs=1e-9)  # the equilibrium: exploitability 0
+    np.testing.assert_allclose(results[1].strategy, ref.policy.probs)
+    result = train.main(
+        [
+            "defender", "--env-kwargs", "action", '"sequential"', "--algo", "PPO",
+            "--total-timesteps", "128", "--eval-freq", "0", "--checkpoint-freq", "128",
+            "--no-progress-bar", "--final-eval-episodes", "4", "--n-steps", "64",
+            "--batch-size", "32", "--n-epochs", "1", "--runs-root", str(tmp_path / "runs"),
+        ]
+    )  # fmt: skip
+    scores = json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
+    learned = scores["learned (PPO)"]
+    assert sorted(learned["strategy"]) == [0.0] * 6 + [1.0]  # one subset: its pure strategy
+    assert learned["score"] >= 0 and scores["game value (LP)"]["score"] < 1e-9
+    assert sum(scores["random"]["strategy"]) == pytest.approx(1.0)

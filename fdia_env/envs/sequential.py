@@ -411,6 +411,8 @@ class SequentialSubsetEnv(ParallelEnv):
         self._infos: dict[str, dict] = {}
         self.committed = False
         """Whether the last :meth:`step` (or :meth:`reset`) started a new round."""
+        self.rounds_started = 0
+        """Rounds started since the env was made (never reset: identifies a round)."""
 
     # --- PettingZoo API ------------------------------------------------------------------
     @property
@@ -466,6 +468,7 @@ class SequentialSubsetEnv(ParallelEnv):
             self._chosen[p][:] = 0
             self._stopped[p] = self.skip_forced and self._forced(p)
         self.committed = True
+        self.rounds_started += 1
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Take one decision of both players; play the round once both have stopped.
@@ -642,6 +645,9 @@ class SequentialGameView(gym.Env):
         self.observation_space = parallel.observation_space(agent)["observation"]
         self.action_space = parallel.action_space(agent)
         self._plan: list[int] = []
+        self._first_round = False
+        self.first_subsets: list[int] = []
+        """The learner's subset index (subset format) in the first round of each episode."""
 
     def _plan_round(self) -> None:
         obs = self.parallel.inner_observation(self.other)
@@ -661,6 +667,7 @@ class SequentialGameView(gym.Env):
         if seed is not None and hasattr(self.opponent, "reset"):
             self.opponent.reset(seed=int(seed) + 1)  # as the subset format's view
         self._plan_round()
+        self._first_round = True
         own = obs[self.agent]
         return own["observation"], {**infos[self.agent], "action_mask": own["action_mask"]}
 
@@ -671,6 +678,9 @@ class SequentialGameView(gym.Env):
             {self.agent: action, self.other: other}
         )
         term, trunc = bool(terms[self.agent]), bool(truncs[self.agent])
+        if self.parallel.committed and self._first_round:
+            self._first_round = False
+            self.first_subsets.append(int(self.parallel.models[self.agent].last))
         if self.parallel.committed and not (term or trunc):
             self._plan_round()
         own = obs[self.agent]
@@ -686,6 +696,97 @@ class SequentialGameView(gym.Env):
         """Legal actions now (bool, sb3-contrib's MaskablePPO convention)."""
         return self.parallel.action_masks(self.agent).astype(bool)
 
+    def subset_player(self, policy: Any) -> SubsetPlayer:
+        """``policy`` of the subset format (e.g. an equilibrium mix) as a player of this view."""
+        return SubsetPlayer(policy, self)
+
+    def is_subset_policy(self, policy: Any) -> bool:
+        """Whether ``policy`` is a subset-format mix (``probs`` over the learner's subsets)."""
+        probs = getattr(policy, "probs", None)
+        return probs is not None and np.size(probs) == len(self.parallel.models[self.agent].subsets)
+
+    def subset_strategy(
+        self,
+        policy: Any,
+        seed: int = 0,
+        deterministic: bool = True,
+        played: list[Any] | None = None,
+    ) -> np.ndarray:
+        """The learner's one-shot strategy over the subset format's subsets.
+
+        A subset-format mix: its ``probs``. A trained SB3 model played deterministically: the
+        subset it builds in one round from ``reset(seed=seed)`` (it sees nothing that changes
+        within a round but its own picks, so that subset is its pure strategy; the mask is
+        passed as ``action_masks`` where ``predict`` takes it). Otherwise the frequencies of the
+        subsets built in the first rounds of the last ``len(played)`` episodes of this view.
+
+        Raises:
+            ValueError: When none of these applies, or a deterministic model does not end the
+                round within ``2 * (M + 1)`` decisions (an illegal stop repeated by an unmasked
+                policy).
+        """
+        n = len(self.parallel.models[self.agent].subsets)
+        if self.is_subset_policy(policy):
+            return np.asarray(policy.probs, dtype=np.float64)
+        if deterministic and hasattr(policy, "policy") and hasattr(policy, "learn"):
+            import inspect
+
+            masked = "action_masks" in inspect.signature(policy.predict).parameters
+            obs, _ = self.reset(seed=seed)
+            for _ in range(2 * (self.parallel.M + 1)):
+                extra = {"action_masks": self.action_masks()} if masked else {}
+                action, _ = policy.predict(obs, deterministic=True, **extra)
+                obs, *_ = self.step(int(np.asarray(action).reshape(-1)[0]))
+                if self.parallel.committed:
+                    return np.eye(n)[int(self.parallel.models[self.agent].last)]
+            raise ValueError(
+                f"the policy did not end the round within {2 * (self.parallel.M + 1)} "
+                "decisions (an illegal action repeated: train with the mask, e.g. MaskablePPO)"
+            )
+        if played and len(self.first_subsets) >= len(played):
+            return np.bincount(self.first_subsets[-len(played) :], minlength=n) / len(played)
+        raise ValueError(
+            "the strategy of this policy over the subsets needs played episodes of this view "
+            "(or a subset-format mix with probs, or an SB3 model played deterministically)"
+        )
+
     def render(self) -> str | np.ndarray | None:
         """Delegate to the sequential game."""
         return self.parallel.render()
+
+
+class SubsetPlayer:
+    """A subset-format policy playing the learner's side of a :class:`SequentialGameView`.
+
+    At a round's first decision it asks ``policy`` for a subset index with the subset-format
+    observation, then sends that subset's picks one per decision, then stop. ``probs`` (the
+    mix, where ``policy`` has one) and ``reset`` are passed through.
+
+    Args:
+        policy: A policy with SB3's ``predict`` over the subset format's ``Discrete`` actions.
+        view: The view whose learner it plays.
+    """
+
+    def __init__(self, policy: Any, view: SequentialGameView) -> None:
+        self.policy = policy
+        self.view = view
+        self.probs = getattr(policy, "probs", None)
+        self._plan: list[int] = []
+        self._round = -1
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the wrapped policy's draws (where it has any)."""
+        if hasattr(self.policy, "reset"):
+            self.policy.reset(seed=seed)
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, **kwargs: Any
+    ) -> tuple[int, Any]:
+        """The next pick of the subset drawn at the round's start, or stop."""
+        parallel, agent = self.view.parallel, self.view.agent
+        if parallel.rounds_started != self._round:  # a new round: draw its subset
+            self._round = parallel.rounds_started
+            a, _ = self.policy.predict(parallel.inner_observation(agent), deterministic=True)
+            subset = parallel.models[agent].subsets[int(a)]
+            self._plan = subset_actions(parallel, agent, subset)
+        return (self._plan.pop(0) if self._plan else STOP), state
