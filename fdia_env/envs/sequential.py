@@ -38,6 +38,7 @@ Infos are the wrapped env's (of its last window step; at a pick, unchanged).
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -646,8 +647,8 @@ class SequentialGameView(gym.Env):
         self.action_space = parallel.action_space(agent)
         self._plan: list[int] = []
         self._first_round = False
-        self.first_subsets: list[int] = []
-        """The learner's subset index (subset format) in the first round of each episode."""
+        self.first_subsets: deque[int] = deque(maxlen=100_000)
+        """The learner's subset index (subset format) in the first round of the last episodes."""
 
     def _plan_round(self) -> None:
         obs = self.parallel.inner_observation(self.other)
@@ -744,7 +745,8 @@ class SequentialGameView(gym.Env):
                 "decisions (an illegal action repeated: train with the mask, e.g. MaskablePPO)"
             )
         if played and len(self.first_subsets) >= len(played):
-            return np.bincount(self.first_subsets[-len(played) :], minlength=n) / len(played)
+            last = list(self.first_subsets)[-len(played) :]
+            return np.bincount(last, minlength=n) / len(played)
         raise ValueError(
             "the strategy of this policy over the subsets needs played episodes of this view "
             "(or a subset-format mix with probs, or an SB3 model played deterministically)"
