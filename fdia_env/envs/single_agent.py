@@ -183,6 +183,8 @@ def make_single_agent(
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
+    if hasattr(parallel, "gymnasium_view"):  # a wrapper with its own view (sensor game sequential)
+        return parallel.gymnasium_view(agent, opponent)
     others = [a for a in parallel.possible_agents if a != agent]
     if not others:
         check_no_opponent(opponent, parallel.possible_agents)
