@@ -306,6 +306,9 @@ def mixed_strategy(
 
     n = int(env.action_space.n)
     probs = getattr(policy, "probs", None)
+    view = getattr(env, "unwrapped", env)
+    if hasattr(view, "subset_strategy"):  # the sensor game's sequential format
+        return view.subset_strategy(policy, seed, deterministic, played)
     if probs is not None:
         return np.asarray(probs, dtype=np.float64)
     if isinstance(policy, BaseAlgorithm):
@@ -470,6 +473,9 @@ def evaluate(
             player: Any = RandomPolicy(env.action_space, seed)
         else:
             player = policy
+        view = getattr(env, "unwrapped", env)
+        if hasattr(view, "subset_player") and view.is_subset_policy(player):
+            player = view.subset_player(player)  # a subset mix in the sequential format
         ref = _as_reference(reference, env)
         types: list[int] = []
         if num_envs is None:

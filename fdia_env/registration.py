@@ -64,6 +64,12 @@ class EnvEntry:
             ``SyncVectorEnv``).
         vector: The ``vector_entry_point`` of its native vector env (used when ``backends`` is
             not empty): the engine's :func:`fdia_env.vector.env.make_vector` by default.
+        vector_views: The agents whose view has the native vector env (``None``, the default:
+            every view; ``()``: none). A view without one is still registered, and
+            ``make_vec`` steps its copies in ``SyncVectorEnv`` (``"sync"``/``"async"`` modes).
+        view_kwargs: Agent → fixed options its view passes to ``parallel_env`` (the stealth
+            env's defender view: ``{"defender": "threshold"}``, the env without them having no
+            defender); a user's option of the same name overrides them.
         kalman: Whether the env runs the Kalman-filter engine (an ``FdiaParallelEnv``: a
             scenario, ``dynamics``, the ``phi``/``step`` infos, Φ in the render); False for an
             env of its own (the static stealthy attacker). Tests of the engine's conventions
@@ -76,6 +82,8 @@ class EnvEntry:
     backends: tuple[str, ...] = BACKENDS
     kalman: bool = True
     vector: str = VECTOR_ENTRY_POINT
+    vector_views: tuple[str, ...] | None = None
+    view_kwargs: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
@@ -102,11 +110,55 @@ class EnvEntry:
             raise TypeError(f"kalman must be a bool, got {self.kalman!r}")
         if "torch" in self.backends and "numpy" not in self.backends:
             raise ValueError("backends: the torch backend needs the numpy one (the reference)")
+        if self.vector_views is not None:
+            if not isinstance(self.vector_views, tuple) or not set(self.vector_views) <= set(
+                self.views
+            ):
+                raise ValueError(
+                    "vector_views must be None or a tuple of agents with a view "
+                    f"{list(self.views)}, got {self.vector_views!r}"
+                )
+        if not isinstance(self.view_kwargs, Mapping) or not all(
+            agent in self.views
+            and isinstance(options, Mapping)
+            and all(isinstance(k, str) for k in options)
+            for agent, options in self.view_kwargs.items()
+        ):
+            raise ValueError(
+                "view_kwargs must map agents with a view "
+                f"{list(self.views)} to mappings of option names, got {self.view_kwargs!r}"
+            )
+        reserved = {"module", "agent"} & {k for o in self.view_kwargs.values() for k in o}
+        if reserved:
+            raise ValueError(f"view_kwargs: {sorted(reserved)} are set by the table itself")
         object.__setattr__(self, "views", MappingProxyType(dict(self.views)))
+        object.__setattr__(
+            self,
+            "view_kwargs",
+            MappingProxyType({a: MappingProxyType(dict(o)) for a, o in self.view_kwargs.items()}),
+        )
+
+    def has_vector(self, agent: str) -> bool:
+        """Whether ``agent``'s view has the native vector env (on at least one backend)."""
+        if agent not in self.views or not self.backends:
+            return False
+        return self.vector_views is None or agent in self.vector_views
 
     def __hash__(self) -> int:
         views = tuple(self.views.items())
-        return hash((self.name, self.module, views, self.backends, self.kalman, self.vector))
+        options = tuple((a, tuple(sorted(o.items()))) for a, o in self.view_kwargs.items())
+        return hash(
+            (
+                self.name,
+                self.module,
+                views,
+                self.backends,
+                self.kalman,
+                self.vector,
+                self.vector_views,
+                options,
+            )
+        )
 
 
 _ENVS: dict[str, EnvEntry] = {}
@@ -193,7 +245,11 @@ def load(name: str) -> ModuleType:
 def vector_ids(backend: str = "numpy") -> tuple[str, ...]:
     """The Gymnasium ids with a native vector env on ``backend`` (``"numpy"`` or ``"torch"``)."""
     return tuple(
-        env_id for e in _ENVS.values() if backend in e.backends for env_id in e.views.values()
+        env_id
+        for e in _ENVS.values()
+        if backend in e.backends
+        for agent, env_id in e.views.items()
+        if e.has_vector(agent)
     )
 
 
@@ -232,6 +288,18 @@ def register_env(entry: EnvEntry) -> EnvEntry:
     return entry
 
 
+def view_kwargs(module: str, agent: str) -> dict[str, Any]:
+    """The fixed options of the view of ``agent`` on the env of ``module`` (``{}`` if none).
+
+    :func:`fdia_env.envs.single_agent.make_single_agent` applies them, so a view built from
+    ``(module, agent)`` (:data:`GYM_IDS`) is the one ``gymnasium.make`` gives.
+    """
+    for entry in _ENVS.values():
+        if entry.module == module:
+            return dict(entry.view_kwargs.get(agent, {}))
+    return {}
+
+
 def register_envs() -> None:
     """Register the Gymnasium ids of every entry of :data:`ENVS` (idempotent)."""
     for entry in _ENVS.values():
@@ -245,8 +313,8 @@ def _register_gym_ids(entry: EnvEntry) -> None:
         gymnasium.register(
             id=env_id,
             entry_point=SINGLE_ENTRY_POINT,
-            vector_entry_point=entry.vector if entry.backends else None,
-            kwargs={"module": entry.module, "agent": agent},
+            vector_entry_point=entry.vector if entry.has_vector(agent) else None,
+            kwargs={"module": entry.module, "agent": agent, **entry.view_kwargs.get(agent, {})},
         )
 
 
@@ -276,10 +344,12 @@ for _entry in (
     EnvEntry(
         "stealth_attack_v0",
         "fdia_env.stealth.stealth_attack_v0",
-        {"attacker": "fdia_env/StealthAttack-v0"},
+        {"attacker": "fdia_env/StealthAttack-v0", "defender": "fdia_env/StealthDefender-v0"},
         backends=("numpy",),
         kalman=False,
         vector="fdia_env.stealth.vector:make_vector",
+        vector_views=("attacker",),  # the defender's view: copies in SyncVectorEnv
+        view_kwargs={"defender": {"defender": "threshold"}},
     ),
 ):
     register_env(_entry)

@@ -37,6 +37,23 @@ attacker ``Discrete(M)`` (one sensor) and the defender ``Discrete(M + 1)`` (drop
 then the full set last). The power-grid presets set k (``scenario.extra["max_subset_size"]``);
 ``max_subset_size=None`` takes the preset's k, or every subset when the preset has none.
 
+``action="sequential"`` (any M; the MaskablePPO choice where the subsets are too many) builds
+each player's subset one sensor per decision: ``Discrete(M + 1)`` for each, 0 = stop, j = pick
+sensor j. The attacker picks the sensors of A; the defender picks the sensors it leaves out of
+D, so with ``max_subset_size=k`` each player takes at most k picks. Both decide at every
+decision (the game stays simultaneous) and the round is played once both have stopped; a
+player that has stopped waits, sending stop. The ``(M + 1,)`` mask (in the observation dict,
+and ``action_masks()``) forbids a sensor already picked, every sensor once the player's picks
+are used up, the attacker's stop before its first pick, and everything but stop while waiting;
+a player with stop as its only legal action has stopped. Rewards are paid when the round is
+played, so every pair of subsets of the subset format is reachable and pays the same.
+``illegal_action``: an action outside the mask raises (``"error"``), or acts as stop
+(``"trim"``, default, and ``"noop"``; an illegal stop or a waiting player's pick is ignored).
+The observation ``Box`` adds M entries (1 = picked by the player this round). The Gymnasium
+views take ``opponent=`` a policy of the subset format (default the uniform mix), asked once
+per round as in the subset format. See ``fdia_env.envs.sequential``; not in the native vector
+env.
+
 ## Observation Space
 
 ``Box(float32)``: steps left / rounds, log variance growth and correlations of the actual error
@@ -59,7 +76,8 @@ Terminates after ``rounds`` rounds.
 (default ``"independent"``; not with ``types``), ``types``, ``priors``, ``attacker_model``,
 ``rounds`` (default 1, or ``max_cycles`` when only that is given), ``reward_mode``,
 ``dynamics``, ``render_mode`` (``"human"`` | ``"ansi"`` | ``"rgb_array"``), ``max_cycles``,
-``max_subset_size``.
+``max_subset_size``, ``action`` (``"subset"``, the default, or ``"sequential"``),
+``illegal_action`` (``"sequential"`` only).
 
 Gymnasium views: ``fdia_env/SensorGameAttacker-v0`` and ``fdia_env/SensorGameDefender-v0``, the
 other player fixed to ``opponent=`` (any SB3-style policy, e.g.
@@ -69,7 +87,8 @@ other player fixed to ``opponent=`` (any SB3-style policy, e.g.
 
 - v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
   ``render_mode="human"``. ``types``, ``priors``, ``attacker_model`` (incomplete
-  information); the default (no types) is unchanged.
+  information); the default (no types) is unchanged. ``action="sequential"`` (one sensor per
+  decision, masked); the default format is unchanged.
 
 ## Example
 
@@ -91,10 +110,13 @@ from fdia_env.attacks.typed import ATTACKER_MODELS, TypedSubsetAttack
 from fdia_env.defenses.selection import SensorSelection
 from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.sequential import SequentialSubsetEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 NAME = "sensor_game_v0"
+ACTIONS = ("subset", "sequential")
+"""Action formats: a subset index per round, or the subset built one sensor per decision."""
 
 
 def parallel_env(
@@ -110,14 +132,32 @@ def parallel_env(
     types: Sequence[str] | None = None,
     priors: Sequence[float] | None = None,
     attacker_model: str = "informed",
-) -> FdiaParallelEnv:
+    action: str = "subset",
+    illegal_action: str | None = None,
+) -> FdiaParallelEnv | SequentialSubsetEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring).
+
+    ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSubsetEnv`` over
+    the subset-format env (see the module docstring's Action Space); ``illegal_action``
+    (``"trim"`` default, ``"noop"``, ``"error"``) is its rule and needs that format.
 
     Raises:
         ValueError: Naming the parameter, e.g. ``allocation`` together with ``types``,
             ``priors`` or an ``"uninformed"`` ``attacker_model`` without ``types``, priors of
             the wrong length, negative or not summing to 1, an unknown or repeated type.
     """
+    check_choice("action", action, ACTIONS)
+    if action == "sequential":
+        inner = parallel_env(
+            scenario, power, allocation, rounds, reward_mode, dynamics, render_mode,
+            max_cycles, max_subset_size, types, priors, attacker_model,
+        )  # fmt: skip
+        return SequentialSubsetEnv(inner, "trim" if illegal_action is None else illegal_action)
+    if illegal_action is not None:
+        raise ValueError(
+            f"illegal_action applies to action='sequential' only (every subset index of the "
+            f"'subset' format is legal), got illegal_action={illegal_action!r}"
+        )
     if types is None:
         if priors is not None:
             raise ValueError("priors needs types: pass types=(...) with one prior per type")

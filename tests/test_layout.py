@@ -10,6 +10,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -181,6 +182,28 @@ def test_the_kalman_flag_is_a_bool_and_splits_the_table():
     assert ENVS["stealth_attack_v0"].vector == "fdia_env.stealth.vector:make_vector"
     with pytest.raises(ValueError, match="vector must read 'module:function'"):
         EnvEntry("toy_v0", "toy", vector="toy.make")
+
+
+def test_the_table_says_which_views_have_a_native_vector_env():
+    views = {"attacker": "toy/Toy-v0", "defender": "toy/ToyDefender-v0"}
+    with pytest.raises(ValueError, match="vector_views must be None or a tuple of agents"):
+        EnvEntry("toy_v0", "toy", {"attacker": "toy/Toy-v0"}, vector_views=("defender",))
+    with pytest.raises(ValueError, match="view_kwargs must map agents with a view"):
+        EnvEntry("toy_v0", "toy", {"attacker": "toy/Toy-v0"}, view_kwargs={"defender": {}})
+    with pytest.raises(ValueError, match=r"\['agent'\] are set by the table"):
+        EnvEntry("toy_v0", "toy", views, view_kwargs={"defender": {"agent": "attacker"}})
+    entry = EnvEntry("toy_v0", "toy", views, vector_views=("attacker",))
+    assert entry.has_vector("attacker") and not entry.has_vector("defender")
+    assert EnvEntry("toy_v0", "toy", views).has_vector("defender")  # default: every view
+    assert not EnvEntry("toy_v0", "toy", views, backends=()).has_vector("attacker")
+    same = EnvEntry("toy_v0", "toy", views, view_kwargs={"defender": {"x": 1}})
+    assert same == EnvEntry("toy_v0", "toy", views, view_kwargs={"defender": {"x": 1}})
+    assert len({same, EnvEntry("toy_v0", "toy", views, view_kwargs={"defender": {"x": 1}})}) == 1
+    # every id without a native vector env is still registered, with no vector entry point
+    for entry in ENVS.values():
+        for agent, env_id in entry.views.items():
+            has = gym.spec(env_id).vector_entry_point is not None
+            assert has == entry.has_vector(agent) == (env_id in vector_ids()), env_id
 
 
 def test_a_name_or_gym_id_already_taken_is_refused():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -289,3 +291,324 @@ def test_train_py_attacker_on_the_sequential_format_scores_the_optimum(tmp_path,
     scores = json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
     assert scores["EXS"]["score"] == pytest.approx(1.0, rel=1e-12)  # its plan, one by one
     assert 0 < scores["learned (MaskablePPO)"]["score"] <= 1 + 1e-12
+
+
+# --- The sensor game's sequential format (SequentialSubsetEnv) ---------------------------------
+
+
+def seq_round(env, plans: dict[str, list[int]]) -> dict[str, float]:
+    """Play one round: each player sends its plan's picks, then stop; return the rewards."""
+    queues = {p: list(v) for p, v in plans.items()}
+    total = dict.fromkeys(env.agents, 0.0)
+    while True:
+        acts = {p: queues[p].pop(0) if queues[p] else STOP for p in env.agents}
+        rewards = env.step(acts)[1]
+        for p in total:
+            total[p] += rewards[p]
+        if env.committed:
+            return total
+
+
+def game_pairs(M: int, k: int | None):
+    from fdia_env.attacks.subsets import game_subsets
+
+    return game_subsets(M, k, "attacker"), game_subsets(M, k, "defender")
+
+
+@pytest.mark.parametrize("k", [None, 1, 2])
+def test_sensor_game_every_subset_pair_pays_as_in_the_subset_format(k):
+    from fdia_env import sensor_game_v0
+    from fdia_env.envs.sequential import SequentialSubsetEnv, subset_actions
+
+    old = sensor_game_v0.parallel_env(max_subset_size=k)
+    seq = sensor_game_v0.parallel_env(
+        max_subset_size=k, action="sequential", illegal_action="error"
+    )
+    assert isinstance(seq, SequentialSubsetEnv)
+    attacks, defenses = game_pairs(3, k)
+    assert [old.attack.subsets, old.defense.subsets] == [attacks, defenses]
+    for a, A in enumerate(attacks):
+        for d, D in enumerate(defenses):
+            old.reset(seed=0)
+            want = old.step({"attacker": a, "defender": d})[1]
+            seq.reset(seed=0)
+            plans = {p: subset_actions(seq, p, S) for p, S in [("attacker", A), ("defender", D)]}
+            assert len(plans["attacker"]) == len(A) and len(plans["defender"]) == 3 - len(D)
+            got = seq_round(seq, plans)
+            assert got["attacker"] == want["attacker"] > 0
+            assert got["defender"] == want["defender"] == -want["attacker"]
+            assert seq.agents == []  # rounds=1: the episode ended with the round
+
+
+def test_sensor_game_only_the_subset_formats_sets_are_legal():
+    """Every pick set is tried: it is legal exactly when its subset is a strategy."""
+    from fdia_env import sensor_game_v0
+
+    for k in (None, 1, 2):
+        env = sensor_game_v0.parallel_env(
+            max_subset_size=k, action="sequential", illegal_action="error"
+        )
+        for p, other in (("attacker", "defender"), ("defender", "attacker")):
+            reached = set()
+            for r in range(4):
+                for picks in itertools.combinations(range(1, 4), r):
+                    env.reset(seed=0)
+                    plans = {p: list(picks), other: [1] if other == "attacker" else []}
+                    try:
+                        seq_round(env, plans)
+                    except ValueError as exc:
+                        assert "is illegal" in str(exc)
+                        continue
+                    chosen = {j - 1 for j in picks}
+                    induced = tuple(sorted(set(range(3)) - chosen if p == "defender" else chosen))
+                    if env.models[p].last_subset == induced:  # else the round ended before
+                        reached.add(induced)
+            model = env.models[p]
+            assert reached == set(model.subsets), (k, p)
+
+
+def test_sensor_game_repeated_random_rounds_match_the_subset_format():
+    from fdia_env import sensor_game_v0
+    from fdia_env.envs.sequential import subset_actions
+
+    rng = np.random.default_rng(3)
+    kw = dict(rounds=4, types=("independent", "dependent"), reward_mode="per_step")
+    for dynamics in ("expected", "sampled"):
+        old = sensor_game_v0.parallel_env(dynamics=dynamics, **kw)
+        seq = sensor_game_v0.parallel_env(dynamics=dynamics, action="sequential", **kw)
+        for seed in range(3):
+            o_obs, o_inf = old.reset(seed=seed)
+            _, s_inf = seq.reset(seed=seed)
+            assert o_inf["attacker"]["type"] == s_inf["attacker"]["type"]
+            while old.agents:
+                a, d = (int(rng.integers(7)) for _ in range(2))
+                o_obs, want, *_ = old.step({"attacker": a, "defender": d})
+                plans = {
+                    "attacker": subset_actions(seq, "attacker", old.attack.subsets[a]),
+                    "defender": subset_actions(seq, "defender", old.defense.subsets[d]),
+                }
+                got = seq_round(seq, plans)
+                assert got == want
+                for p in ("attacker", "defender"):  # the same features, then an empty set
+                    obs = seq.inner_observation(p)
+                    np.testing.assert_array_equal(obs, o_obs[p])
+            assert seq.agents == []
+
+
+def test_sensor_game_masks_forced_stops_and_waiting():
+    from fdia_env import sensor_game_v0
+    from fdia_env.envs.sequential import SequentialSubsetEnv
+
+    env = sensor_game_v0.parallel_env(max_subset_size=1, rounds=2, action="sequential")
+    obs, _ = env.reset(seed=0)
+    assert obs["attacker"]["action_mask"].tolist() == [0, 1, 1, 1]  # at least one sensor
+    assert obs["defender"]["action_mask"].tolist() == [1, 1, 1, 1]  # may keep every sensor
+    obs, rewards, *_ = env.step({"attacker": 2, "defender": 3})
+    assert env.committed and rewards["attacker"] > 0  # both used their one pick: round played
+    assert env.inner.attack.last_subset == (1,) and env.inner.defense.last_subset == (0, 1)
+    np.testing.assert_array_equal(obs["attacker"]["observation"][-3:], [0, 0, 0])
+    obs, rewards, *_ = env.step({"attacker": 1, "defender": 0})  # the defender stops at once
+    assert env.committed and rewards["attacker"] > 0 and env.agents == []
+    assert env.inner.defense.last_subset == (0, 1, 2)
+    env = sensor_game_v0.parallel_env(action="sequential")  # every subset: up to 3 picks
+    env.reset(seed=0)
+    obs, rewards, *_ = env.step({"attacker": 1, "defender": 0})
+    assert not env.committed and rewards["attacker"] == 0.0
+    assert obs["defender"]["action_mask"].tolist() == [1, 0, 0, 0]  # stopped: waits
+    obs, rewards, *_ = env.step({"attacker": 2, "defender": 0})
+    assert obs["attacker"]["action_mask"].tolist() == [1, 0, 0, 1]
+    np.testing.assert_array_equal(obs["attacker"]["observation"][-3:], [1, 1, 0])
+    env.step({"attacker": 3, "defender": 0})  # every sensor picked: the env stops for it
+    assert env.committed and env.inner.attack.last_subset == (0, 1, 2)
+    free = SequentialSubsetEnv(sensor_game_v0.parallel_env(), "error", skip_forced=False)
+    free.reset(seed=0)
+    free.step({"attacker": 1, "defender": 0})
+    obs = free.step({"attacker": 2, "defender": 0})[0]
+    assert obs["defender"]["action_mask"].tolist() == [1, 0, 0, 0]  # stopped: waits
+    assert obs["attacker"]["action_mask"].tolist() == [1, 0, 0, 1]
+    free.step({"attacker": 3, "defender": 0})
+    assert not free.committed  # every sensor picked, stop not yet taken
+    assert free.action_masks("attacker").tolist() == [1, 0, 0, 0]
+    free.step({"attacker": 0, "defender": 0})
+    assert free.committed and free.inner.attack.last_subset == (0, 1, 2)
+
+
+def test_sensor_game_sequential_illegal_actions():
+    from fdia_env import sensor_game_v0
+    from fdia_env.envs.sequential import SequentialSubsetEnv
+
+    def make(rule):
+        env = sensor_game_v0.parallel_env(action="sequential", illegal_action=rule)
+        env.reset(seed=0)
+        return env
+
+    with pytest.raises(ValueError, match="attacker's set is empty"):
+        make("error").step({"attacker": 0, "defender": 0})
+    env = make("error")
+    env.step({"attacker": 1, "defender": 0})
+    with pytest.raises(ValueError, match="sensor 1 is already picked"):
+        env.step({"attacker": 1, "defender": 0})
+    with pytest.raises(ValueError, match="defender has stopped this round and waits"):
+        env.step({"attacker": 2, "defender": 2})
+    env = SequentialSubsetEnv(sensor_game_v0.parallel_env(), "error", skip_forced=False)
+    env.reset(seed=0)
+    env.step({"attacker": 1, "defender": 1})
+    env.step({"attacker": 2, "defender": 2})
+    with pytest.raises(ValueError, match="defender has used its 2 picks"):
+        env.step({"attacker": 3, "defender": 3})
+    for rule in ("trim", "noop"):
+        env = make(rule)
+        env.step({"attacker": 0, "defender": 2})  # an illegal stop is ignored
+        assert env.action_mask("attacker").tolist() == [0, 1, 1, 1] and not env.committed
+        env.step({"attacker": 1, "defender": 3})  # the defender's 2 picks: it has stopped
+        env.step({"attacker": 1, "defender": 1})  # a repeated pick stops; a waiting one: ignored
+        assert env.committed
+        assert env.inner.attack.last_subset == (0,) and env.inner.defense.last_subset == (0,)
+    with pytest.raises(ValueError, match=r"integer in \[0, 4\)"):
+        make("error").step({"attacker": 4, "defender": 0})
+    with pytest.raises(ValueError, match="exactly one entry per live agent"):
+        make("error").step({"attacker": 1})
+    with pytest.raises(ValueError, match="action must be one of"):
+        sensor_game_v0.parallel_env(action="bitmask")
+    with pytest.raises(ValueError, match="illegal_action applies to action='sequential' only"):
+        sensor_game_v0.parallel_env(illegal_action="error")
+    with pytest.raises(ValueError, match="illegal_action must be one of"):
+        sensor_game_v0.parallel_env(action="sequential", illegal_action="x")
+    with pytest.raises(ValueError, match="not available in the native vector env"):
+        gym.make_vec(
+            "fdia_env/SensorGameAttacker-v0",
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            action="sequential",
+        )
+
+
+def test_sensor_game_sequential_pettingzoo_api_and_aec_mask():
+    from fdia_env import sensor_game_v0
+
+    parallel_api_test(sensor_game_v0.parallel_env(rounds=3, action="sequential"), num_cycles=40)
+    parallel_api_test(
+        sensor_game_v0.parallel_env(scenario="grid-ieee14", action="sequential"), num_cycles=20
+    )
+    api_test(sensor_game_v0.env(rounds=3, action="sequential"), num_cycles=40)
+    aec = sensor_game_v0.env(max_subset_size=1, action="sequential")
+    aec.reset(seed=0)
+    assert aec.observe("attacker")["action_mask"].tolist() == [0, 1, 1, 1]
+    aec.step(2)  # the attacker picks z2
+    assert aec.observe("defender")["action_mask"].tolist() == [1, 1, 1, 1]
+    aec.step(0)  # the defender keeps every sensor: the round is played
+    assert aec.terminations["attacker"] and aec.rewards["attacker"] > 0
+
+
+@pytest.mark.parametrize("agent", ["attacker", "defender"])
+def test_sensor_game_gymnasium_view_matches_the_subset_formats_view(agent):
+    from gymnasium.utils.env_checker import check_env
+
+    from fdia_env.envs.opponents import FixedMix
+    from fdia_env.envs.sequential import SequentialGameView, subset_actions
+
+    gid = (
+        "fdia_env/SensorGameAttacker-v0"
+        if agent == "attacker"
+        else "fdia_env/SensorGameDefender-v0"
+    )
+    kw = dict(scenario="ch5-game", rounds=3)
+    old = gym.make(gid, opponent=FixedMix([0.2, 0.1, 0.3, 0.1, 0.1, 0.1, 0.1]), **kw)
+    seq = gym.make(
+        gid, opponent=FixedMix([0.2, 0.1, 0.3, 0.1, 0.1, 0.1, 0.1]), action="sequential", **kw
+    )
+    assert isinstance(seq.unwrapped, SequentialGameView)
+    check_env(gym.make(gid, action="sequential", **kw).unwrapped)
+    rng = np.random.default_rng(0)
+    for seed in range(4):
+        old.reset(seed=seed)
+        obs, info = seq.reset(seed=seed)
+        assert obs.shape == (4 + 3 + 3,) and info["action_mask"].dtype == np.int8
+        done = False
+        while not done:
+            j = int(rng.integers(7))
+            _, want, term, trunc, _ = old.step(j)
+            view = seq.unwrapped
+            queue = subset_actions(view.parallel, agent, view.parallel.models[agent].subsets[j])
+            got, view.parallel.committed = 0.0, False
+            while not view.parallel.committed:
+                a = queue.pop(0) if queue else STOP
+                assert view.action_masks()[a]
+                _, r, s_term, s_trunc, _ = seq.step(a)
+                got += r
+            assert got == want and (s_term, s_trunc) == (term, trunc)
+            done = term or trunc
+
+
+def test_sensor_game_maskable_ppo_on_grid_preset():
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+
+    env = gym.make("fdia_env/SensorGameAttacker-v0", scenario="grid-ieee14", action="sequential")
+    obs, info = env.reset(seed=0)
+    assert env.action_space.n == 35 and info["action_mask"].sum() == 34  # no stop yet
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, seed=0)
+    model.learn(total_timesteps=256)
+    assert model.num_timesteps == 256
+    total, rounds = 0.0, 0
+    obs, _ = env.reset(seed=1)
+    for _ in range(20):
+        action, _ = model.predict(
+            obs, action_masks=env.unwrapped.action_masks(), deterministic=True
+        )
+        obs, r, term, trunc, _ = env.step(action)
+        total += r
+        if term or trunc:
+            rounds += 1
+            obs, _ = env.reset()
+    assert rounds >= 10 and total > 0  # the preset's k = 2: at most 2 decisions per round
+
+
+def test_covariance_game_page_sequential_snippet_prints_what_the_page_shows(capsys):
+    import pathlib
+    import re
+
+    page = pathlib.Path(__file__).parents[1] / "docs" / "guide" / "covariance_game.md"
+    section = page.read_text(encoding="utf-8").split("## Sequential action format")[1]
+    code, shown = re.findall(r"^```(?:python)?\n(.*?)^```", section, re.S | re.M)[:2]
+    exec(compile(code, "<covariance_game.md>", "exec"), {})
+    assert capsys.readouterr().out == shown
+
+
+def test_sensor_game_sequential_evaluation_plays_subset_mixes_and_scores_learned_policies(
+    tmp_path,
+):
+    import json
+    import sys
+    from pathlib import Path
+
+    from agents.evaluate import evaluate
+    from agents.registry import get
+    from baselines.game import MixedStrategyPolicy
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py is at the root
+    import train
+
+    entry = get("sensor_game_v0", "defender")
+    old = gym.make("fdia_env/SensorGameDefender-v0")
+    seq = gym.make("fdia_env/SensorGameDefender-v0", action="sequential")
+    ref = entry.reference_of(seq)
+    results = [
+        evaluate(MixedStrategyPolicy(ref.policy.probs, seed=0), env, 12, 0, ref)
+        for env in (old, seq)
+    ]
+    assert results[1].mean == pytest.approx(results[0].mean, rel=1e-12)  # the same rounds
+    assert results[1].score == pytest.approx(0.0, abs=1e-9)  # the equilibrium: exploitability 0
+    np.testing.assert_allclose(results[1].strategy, ref.policy.probs)
+    result = train.main(
+        [
+            "defender", "--env-kwargs", "action", '"sequential"', "--algo", "PPO",
+            "--total-timesteps", "128", "--eval-freq", "0", "--checkpoint-freq", "128",
+            "--no-progress-bar", "--final-eval-episodes", "4", "--n-steps", "64",
+            "--batch-size", "32", "--n-epochs", "1", "--runs-root", str(tmp_path / "runs"),
+        ]
+    )  # fmt: skip
+    scores = json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
+    learned = scores["learned (PPO)"]
+    assert sorted(learned["strategy"]) == [0.0] * 6 + [1.0]  # one subset: its pure strategy
+    assert learned["score"] >= 0 and scores["game value (LP)"]["score"] < 1e-9
+    assert sum(scores["random"]["strategy"]) == pytest.approx(1.0)

@@ -10,6 +10,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from baselines.stealth import budgeted_attack, security_index
+from fdia_env.registration import GYM_IDS
 from fdia_env.stealth import DEFENDER_GYM_ID, GYM_ID, static_estimation, stealth_attack_v0
 
 ALPHA = 0.05
@@ -256,3 +257,53 @@ def test_threshold_defender_rewards(est):
 def test_bad_defender_options_name_the_parameter(est, kwargs, match):
     with pytest.raises(ValueError, match=match):
         stealth_attack_v0.parallel_env(scenario=est, **kwargs)
+
+
+def test_every_id_is_made_after_only_import_fdia_env_in_a_fresh_process():
+    # both views of the stealth env come from the table of environments: a fresh interpreter
+    # that imports fdia_env alone (not fdia_env.stealth) makes every registered id
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gymnasium as gym, fdia_env\n"
+        "from fdia_env.registration import GYM_IDS\n"
+        "assert 'fdia_env.stealth' not in sys.modules\n"
+        "ids = sorted(i for i in gym.registry if i.startswith('fdia_env/'))\n"
+        "assert ids == sorted(GYM_IDS), (ids, sorted(GYM_IDS))\n"
+        "for i in ids:\n"
+        "    env = gym.make(i)\n"
+        "    env.reset(seed=0)\n"
+        "    env.close()\n"
+        "print(' '.join(ids))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=200, check=False
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    made = done.stdout.split()
+    assert GYM_ID in made and DEFENDER_GYM_ID in made and set(made) == set(GYM_IDS)
+
+
+def test_the_defender_view_is_in_the_table_without_a_native_vector_env():
+    from fdia_env.registration import ENVS, vector_ids
+
+    entry = ENVS["stealth_attack_v0"]
+    assert GYM_IDS[DEFENDER_GYM_ID] == ("fdia_env.stealth.stealth_attack_v0", "defender")
+    assert entry.has_vector("attacker") and not entry.has_vector("defender")
+    assert GYM_ID in vector_ids() and DEFENDER_GYM_ID not in vector_ids()
+    spec = gym.spec(DEFENDER_GYM_ID)
+    assert spec.vector_entry_point is None and spec.kwargs["defender"] == "threshold"
+    venv = gym.make_vec(DEFENDER_GYM_ID, num_envs=2)  # copies in SyncVectorEnv
+    obs, _ = venv.reset(seed=0)
+    assert isinstance(venv, gym.vector.SyncVectorEnv) and obs.shape == (2, 3)
+    _, reward, *_ = venv.step(np.array([0, 4]))
+    assert reward.shape == (2,) and np.all(np.isfinite(reward))
+    venv.close()
+    with pytest.raises(gym.error.Error, match="vector entry point"):
+        gym.make_vec(DEFENDER_GYM_ID, num_envs=2, vectorization_mode="vector_entry_point")
+    # the view built from (module, agent) alone is the defender's (the table's fixed options)
+    from fdia_env.envs.single_agent import make_single_agent
+
+    view = make_single_agent(*GYM_IDS[DEFENDER_GYM_ID])
+    assert view.agent == "defender" and view.action_space == gym.spaces.Discrete(5)

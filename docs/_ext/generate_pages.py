@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdia_env.registration import ENV_NAMES, get_env, load
+from fdia_env.registration import ENV_NAMES, get_env, load, view_kwargs
 
 ENV_MODULES = list(ENV_NAMES)  # one page per entry of the table of environments
 API_PACKAGES = [
@@ -191,7 +191,9 @@ def usage_section(name: str) -> str:
         "",
     ]
     for agent, gym_id in views.items():
-        mask = 'info["action_mask"]' if _masked(env.observation_space(agent)) else ""
+        # the view's env: the default one, with the table's fixed options for that view
+        view_env = load(name).parallel_env(**view_kwargs(get_env(name).module, agent))
+        mask = 'info["action_mask"]' if _masked(view_env.observation_space(agent)) else ""
         out += [
             "```python",
             "import gymnasium as gym",

@@ -38,14 +38,17 @@ Infos are the wrapped env's (of its last window step; at a pick, unchanged).
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any, ClassVar
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_choice
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
+from fdia_env.attacks.subsets import SubsetChoice, game_sizes
 from fdia_env.envs.actions import check_action
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.episode import EpisodeSpec
@@ -301,3 +304,491 @@ def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = N
     if env.agents:
         raise ValueError(f"plan has {len(plan)} window steps; the episode is longer")
     return total
+
+
+# --- The sensor game: both players build their subset one sensor per decision ----------------
+
+
+class SequentialSubsetEnv(ParallelEnv):
+    """Sensor game (``sensor_game_v0``) with both players' subsets built one sensor per decision.
+
+    ``sensor_game_v0.parallel_env(action="sequential")`` builds it; its AEC view
+    (``sensor_game_v0.env(action="sequential")``) and Gymnasium views
+    (``gymnasium.make("fdia_env/SensorGameAttacker-v0", action="sequential")``, ...Defender...)
+    wrap it as they wrap the subset format.
+
+    Both players decide at every decision (the game stays simultaneous: neither sees the other's
+    picks of the round). Action space ``Discrete(M + 1)`` for each: ``0`` = stop, ``j`` (1..M) =
+    pick sensor j. The attacker picks the sensors it attacks (the set A); the defender picks the
+    sensors it leaves out (D is the rest), so that with ``max_subset_size=k`` it takes at most
+    k decisions, as the attacker does. A round of the wrapped game is played once both players
+    have stopped; until then the player that stopped waits (its only legal action is stop).
+
+    Masks (``(M + 1,)`` int8, in the observation dict and from :meth:`action_masks`): a sensor is
+    legal while it is not picked and the player has picks left (attacker: ``k`` with
+    ``max_subset_size=k``, else M; defender: ``min(k, M - 1)``, else ``M - 1``, so D is never
+    empty); stop is legal once the attacker's set is non-empty (the defender may stop at once:
+    D = every sensor). Every subset of the ``Discrete`` subset format is reachable, and only
+    those. With ``skip_forced=True`` (default) a player whose only legal action is stop has
+    stopped (its stop is played by the env): it then waits, sending stop.
+
+    Rewards: 0 at a decision that plays no round; at the decision that plays one, the wrapped
+    env's rewards of that round, so an episode's returns equal those of the same subsets played
+    in the subset format. Infos are the wrapped env's of its last round.
+
+    Illegal actions (``illegal_action``): with ``"error"`` an action outside the mask raises
+    ``ValueError``; with ``"trim"`` (default) or ``"noop"`` a pick outside the mask acts as stop,
+    and an illegal stop (the attacker's, with nothing picked) or a waiting player's pick is
+    ignored for that decision. An action outside ``Discrete(M + 1)`` is always a ``ValueError``.
+
+    Observation per player: ``{"observation": Box, "action_mask": Box(0, 1, (M + 1,), int8)}``,
+    the ``Box`` being the wrapped env's features of that player followed by M entries
+    (1 = sensor picked this round by this player).
+
+    Args:
+        inner: A sensor-game :class:`FdiaParallelEnv` (``sensor_game_v0.parallel_env()``, any
+            ``max_subset_size``, ``types``, ``rounds``).
+        illegal_action: ``"trim"`` (default), ``"noop"`` or ``"error"``.
+        skip_forced: Stop for a player whose only legal action is stop (default True).
+
+    Raises:
+        TypeError: If ``inner`` is not a sensor-game env, or ``skip_forced`` not a bool.
+        ValueError: For a bad ``illegal_action``.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = dict(FdiaParallelEnv.metadata)
+
+    def __init__(
+        self, inner: FdiaParallelEnv, illegal_action: str = "trim", skip_forced: bool = True
+    ) -> None:
+        if (
+            not isinstance(inner, FdiaParallelEnv)
+            or not isinstance(inner.attack, SubsetChoice)
+            or not isinstance(inner.defense, SubsetChoice)
+        ):
+            raise TypeError(
+                "inner must be a sensor-game FdiaParallelEnv (sensor_game_v0.parallel_env), "
+                f"got {type(inner).__name__}"
+            )
+        if not isinstance(skip_forced, bool):
+            raise TypeError(f"skip_forced must be a bool, got {type(skip_forced).__name__}")
+        self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
+        self.skip_forced = skip_forced
+        self.inner = inner
+        self.attack = inner.attack
+        self.defense = inner.defense
+        self.M = M = inner.system.M
+        self.metadata = dict(inner.metadata)
+        self.render_mode = inner.render_mode
+        self.possible_agents = list(inner.possible_agents)
+        self.agents: list[str] = []
+        self.state_space = inner.state_space
+        self.models = {"attacker": inner.attack, "defender": inner.defense}
+        self.drops = {"attacker": False, "defender": True}
+        k = inner.attack.max_subset_size
+        self.max_picks = {"attacker": M if k is None else k}
+        self.max_picks["defender"] = M - game_sizes(M, k, "defender")[0]
+        self.min_picks = {"attacker": 1, "defender": 0}
+        self.index = {
+            p: {s: j for j, s in enumerate(m.subsets)} for p, m in self.models.items()
+        }  # fmt: skip
+        self._obs_spaces = {}
+        for p in self.possible_agents:
+            box = inner.observation_space(p)
+            self._obs_spaces[p] = spaces.Dict(
+                {
+                    "observation": spaces.Box(
+                        low=np.concatenate([box.low, np.zeros(M, np.float32)]),
+                        high=np.concatenate([box.high, np.ones(M, np.float32)]),
+                        dtype=np.float32,
+                    ),
+                    "action_mask": spaces.Box(0, 1, shape=(M + 1,), dtype=np.int8),
+                }
+            )
+        self._action_space = spaces.Discrete(M + 1)
+        self._chosen = {p: np.zeros(M, dtype=np.int8) for p in self.possible_agents}
+        self._stopped = dict.fromkeys(self.possible_agents, False)
+        self._box: dict[str, np.ndarray] | None = None
+        self._infos: dict[str, dict] = {}
+        self.committed = False
+        """Whether the last :meth:`step` (or :meth:`reset`) started a new round."""
+        self.rounds_started = 0
+        """Rounds started since the env was made (never reset: identifies a round)."""
+
+    # --- PettingZoo API ------------------------------------------------------------------
+    @property
+    def max_cycles(self) -> int | None:
+        """The wrapped env's ``max_cycles`` (counted in rounds, not decisions)."""
+        return self.inner.max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int | None) -> None:
+        self.inner.max_cycles = value
+
+    @property
+    def spec(self) -> EpisodeSpec:
+        """The wrapped env's episode spec."""
+        return self.inner.spec
+
+    @property
+    def scenario(self) -> Scenario:
+        """The wrapped env's scenario."""
+        return self.inner.scenario
+
+    @property
+    def system(self) -> LinearSystem:
+        """The wrapped env's system."""
+        return self.inner.system
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent`` (the same object on every call)."""
+        self._check_agent(agent)
+        return self._obs_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call)."""
+        self._check_agent(agent)
+        return self._action_space
+
+    def _check_agent(self, agent: str) -> None:
+        if agent not in self.possible_agents:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """Reset the wrapped env; the first decision is the first pick of round 1."""
+        obs, infos = self.inner.reset(seed=seed, options=options)
+        self.np_random = self.inner.np_random
+        self._new_round(obs, infos)
+        self.agents = list(self.inner.agents)
+        return self._observe_all(), {p: dict(self._infos[p]) for p in self.agents}
+
+    def _new_round(self, obs: dict, infos: dict) -> None:
+        self._box = dict(obs)
+        self._infos = dict(infos)
+        for p in self.possible_agents:
+            self._chosen[p][:] = 0
+            self._stopped[p] = self.skip_forced and self._forced(p)
+        self.committed = True
+        self.rounds_started += 1
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Take one decision of both players; play the round once both have stopped.
+
+        Raises:
+            RuntimeError: Before :meth:`reset` or after the episode ended.
+            ValueError: For a missing or unknown agent's action, an action outside
+                ``Discrete(M + 1)``, or (with ``illegal_action="error"``) outside the mask.
+        """
+        if self._box is None:
+            raise RuntimeError("step() called before reset(): call reset() first")
+        if not self.agents:
+            raise RuntimeError(
+                "step() called after the episode ended: call reset() to start a new one"
+            )
+        if not isinstance(actions, dict) or set(actions) != set(self.agents):
+            raise ValueError(
+                f"actions must be a dict with exactly one entry per live agent {self.agents}, "
+                f"got {actions!r}"
+            )
+        moves = {}
+        for p in self.agents:
+            check_action(self._action_space, actions[p], p)
+            j = int(actions[p])
+            mask = self.action_mask(p)
+            if not mask[j]:
+                if self.illegal_action == "error":
+                    raise ValueError(self._illegal_message(p, j, mask))
+                j = STOP if (j != STOP and not self._stopped[p]) else -1  # -1: ignored
+            moves[p] = j
+        for p, j in moves.items():
+            if j == STOP:
+                self._stopped[p] = True
+            elif j > 0:
+                self._chosen[p][j - 1] = 1
+                if self.skip_forced and self._forced(p):
+                    self._stopped[p] = True
+        self.committed = False
+        rewards = dict.fromkeys(self.agents, 0.0)
+        terms = dict.fromkeys(self.agents, False)
+        truncs = dict.fromkeys(self.agents, False)
+        if all(self._stopped[p] for p in self.agents):
+            played = {p: self.index[p][self.subset(p)] for p in self.agents}
+            obs, rewards, terms, truncs, infos = self.inner.step(played)
+            rewards = {p: float(r) for p, r in rewards.items()}
+            self._new_round(obs, infos)
+        out = (
+            self._observe_all(),
+            rewards,
+            {p: bool(t) for p, t in terms.items()},
+            {p: bool(t) for p, t in truncs.items()},
+            {p: dict(self._infos[p]) for p in self.agents},
+        )
+        if any(terms.values()) or any(truncs.values()):
+            self.agents = []
+        return out
+
+    def _illegal_message(self, p: str, j: int, mask: np.ndarray) -> str:
+        if self._stopped[p]:
+            why = f"{p} has stopped this round and waits: its only legal action is stop (0)"
+        elif j == STOP:
+            why = "the attacker's set is empty (it attacks at least one sensor)"
+        elif self._chosen[p][j - 1]:
+            why = f"sensor {j} is already picked this round"
+        else:
+            why = f"{p} has used its {self.max_picks[p]} picks of the round"
+        legal = np.flatnonzero(mask).tolist()
+        return f"{p} action {j} is illegal: {why}; legal actions (action_mask = 1): {legal}"
+
+    def subset(self, agent: str) -> tuple[int, ...]:
+        """The 0-based subset ``agent`` plays with its picks so far (the defender's: the rest)."""
+        picked = self._chosen[agent].astype(bool)
+        return tuple(np.flatnonzero(~picked if self.drops[agent] else picked).tolist())
+
+    def _forced(self, p: str) -> bool:
+        """True when stop is the only legal action of ``p`` (``p`` has used its picks)."""
+        return int(self._chosen[p].sum()) >= self.max_picks[p]
+
+    def action_mask(self, agent: str) -> np.ndarray:
+        """(M + 1,) int8: 1 = legal now for ``agent`` (see the class docstring)."""
+        n = int(self._chosen[agent].sum())
+        mask = np.zeros(self.M + 1, dtype=np.int8)
+        if self._stopped[agent]:
+            mask[STOP] = 1
+            return mask
+        mask[STOP] = n >= self.min_picks[agent]
+        mask[1:] = (self._chosen[agent] == 0) & (n < self.max_picks[agent])
+        return mask
+
+    def action_masks(self, agent: str) -> np.ndarray:
+        """Legal actions of ``agent`` now (sb3-contrib's MaskablePPO convention)."""
+        self._check_agent(agent)
+        return self.action_mask(agent)
+
+    def gymnasium_view(self, agent: str = "attacker", opponent: Any = None) -> SequentialGameView:
+        """The Gymnasium view for ``agent`` (what ``gymnasium.make`` returns for this format)."""
+        return SequentialGameView(self, agent, opponent)
+
+    def inner_observation(self, agent: str) -> np.ndarray:
+        """``agent``'s observation in the wrapped (subset-format) env after its last round."""
+        self._check_agent(agent)
+        if self._box is None:
+            raise RuntimeError("inner_observation() called before reset(): call reset() first")
+        return self._box[agent]
+
+    def _observe_all(self) -> dict[str, dict[str, np.ndarray]]:
+        return {
+            p: {
+                "observation": np.concatenate(
+                    [self._box[p], self._chosen[p].astype(np.float32)]
+                ).astype(np.float32),
+                "action_mask": self.action_mask(p),
+            }
+            for p in self.agents or self.possible_agents
+        }
+
+    def render(self, mode: str | None = None) -> str | np.ndarray | None:
+        """The wrapped env's rendering of its last round."""
+        return self.inner.render(mode)
+
+    def state(self) -> np.ndarray:
+        """Global state: the wrapped env's."""
+        return self.inner.state()
+
+    def close(self) -> None:
+        """Close the wrapped env."""
+        self.inner.close()
+
+
+def subset_actions(env: SequentialSubsetEnv, agent: str, subset: tuple[int, ...]) -> list[int]:
+    """The picks (1-based, increasing) that make ``agent`` play the 0-based ``subset``."""
+    chosen = set(subset)
+    if env.drops[agent]:
+        return [i + 1 for i in range(env.M) if i not in chosen]
+    return [i + 1 for i in sorted(chosen)]
+
+
+class SequentialGameView(gym.Env):
+    """Gymnasium view of :class:`SequentialSubsetEnv` for one player, the other fixed.
+
+    The other player is a policy of the subset format (``Discrete`` subset index, e.g.
+    :class:`~fdia_env.envs.opponents.FixedMix`, default the uniform mix), asked once per round
+    with its subset-format observation, exactly as the subset format's view asks it; its subset
+    is then picked one sensor per decision, then stop. So a learner and opponent play the same
+    rounds as in the subset format. The mask is in ``info["action_mask"]`` and
+    :meth:`action_masks` (sb3-contrib's MaskablePPO).
+
+    Args:
+        parallel: The sequential sensor game.
+        agent: ``"attacker"`` or ``"defender"``.
+        opponent: The other player's subset-format policy (None: the uniform mix).
+    """
+
+    def __init__(
+        self, parallel: SequentialSubsetEnv, agent: str = "attacker", opponent: Any = None
+    ) -> None:
+        from fdia_env.envs.opponents import FixedMix
+        from fdia_env.envs.single_agent import check_agent, check_opponent
+
+        check_agent(agent, parallel.possible_agents)
+        self.parallel = parallel
+        self.agent = agent
+        self.other = next(p for p in parallel.possible_agents if p != agent)
+        n_other = len(parallel.models[self.other].subsets)
+        if opponent is None:
+            opponent = FixedMix.uniform(n_other)
+        check_opponent(opponent, spaces.Discrete(n_other))
+        self.opponent = opponent
+        self.render_mode = parallel.render_mode
+        self.metadata = {
+            "render_modes": list(parallel.metadata["render_modes"]),
+            "render_fps": parallel.metadata["render_fps"],
+        }
+        self.observation_space = parallel.observation_space(agent)["observation"]
+        self.action_space = parallel.action_space(agent)
+        self._plan: list[int] = []
+        self._first_round = False
+        self.first_subsets: deque[int] = deque(maxlen=100_000)
+        """The learner's subset index (subset format) in the first round of the last episodes."""
+
+    def _plan_round(self) -> None:
+        obs = self.parallel.inner_observation(self.other)
+        a, _ = self.opponent.predict(obs, deterministic=True)
+        subset = self.parallel.models[self.other].subsets[int(a)]
+        self._plan = subset_actions(self.parallel, self.other, subset)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict]:
+        """Reset the sequential game; ``seed`` seeds every draw (the opponent's too)."""
+        from fdia_env.envs.parallel import check_reset_args
+
+        check_reset_args(seed, options, self.parallel.attack.reset_options)
+        super().reset(seed=None if seed is None else int(seed))
+        obs, infos = self.parallel.reset(seed=seed, options=options)
+        if seed is not None and hasattr(self.opponent, "reset"):
+            self.opponent.reset(seed=int(seed) + 1)  # as the subset format's view
+        self._plan_round()
+        self._first_round = True
+        own = obs[self.agent]
+        return own["observation"], {**infos[self.agent], "action_mask": own["action_mask"]}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Take one decision against the opponent's next pick (or stop)."""
+        other = self._plan.pop(0) if self._plan else STOP
+        obs, rewards, terms, truncs, infos = self.parallel.step(
+            {self.agent: action, self.other: other}
+        )
+        term, trunc = bool(terms[self.agent]), bool(truncs[self.agent])
+        if self.parallel.committed and self._first_round:
+            self._first_round = False
+            self.first_subsets.append(int(self.parallel.models[self.agent].last))
+        if self.parallel.committed and not (term or trunc):
+            self._plan_round()
+        own = obs[self.agent]
+        return (
+            own["observation"],
+            float(rewards[self.agent]),
+            term,
+            trunc,
+            {**infos[self.agent], "action_mask": own["action_mask"]},
+        )
+
+    def action_masks(self) -> np.ndarray:
+        """Legal actions now (bool, sb3-contrib's MaskablePPO convention)."""
+        return self.parallel.action_masks(self.agent).astype(bool)
+
+    def subset_player(self, policy: Any) -> SubsetPlayer:
+        """``policy`` of the subset format (e.g. an equilibrium mix) as a player of this view."""
+        return SubsetPlayer(policy, self)
+
+    def is_subset_policy(self, policy: Any) -> bool:
+        """Whether ``policy`` is a subset-format mix (``probs`` over the learner's subsets)."""
+        probs = getattr(policy, "probs", None)
+        return probs is not None and np.size(probs) == len(self.parallel.models[self.agent].subsets)
+
+    def subset_strategy(
+        self,
+        policy: Any,
+        seed: int = 0,
+        deterministic: bool = True,
+        played: list[Any] | None = None,
+    ) -> np.ndarray:
+        """The learner's one-shot strategy over the subset format's subsets.
+
+        A subset-format mix: its ``probs``. A trained SB3 model played deterministically: the
+        subset it builds in one round from ``reset(seed=seed)`` (it sees nothing that changes
+        within a round but its own picks, so that subset is its pure strategy; the mask is
+        passed as ``action_masks`` where ``predict`` takes it). Otherwise the frequencies of the
+        subsets built in the first rounds of the last ``len(played)`` episodes of this view.
+
+        Raises:
+            ValueError: When none of these applies, or a deterministic model does not end the
+                round within ``2 * (M + 1)`` decisions (an illegal stop repeated by an unmasked
+                policy).
+        """
+        n = len(self.parallel.models[self.agent].subsets)
+        if self.is_subset_policy(policy):
+            return np.asarray(policy.probs, dtype=np.float64)
+        if deterministic and hasattr(policy, "policy") and hasattr(policy, "learn"):
+            import inspect
+
+            masked = "action_masks" in inspect.signature(policy.predict).parameters
+            obs, _ = self.reset(seed=seed)
+            for _ in range(2 * (self.parallel.M + 1)):
+                extra = {"action_masks": self.action_masks()} if masked else {}
+                action, _ = policy.predict(obs, deterministic=True, **extra)
+                obs, *_ = self.step(int(np.asarray(action).reshape(-1)[0]))
+                if self.parallel.committed:
+                    return np.eye(n)[int(self.parallel.models[self.agent].last)]
+            raise ValueError(
+                f"the policy did not end the round within {2 * (self.parallel.M + 1)} "
+                "decisions (an illegal action repeated: train with the mask, e.g. MaskablePPO)"
+            )
+        if played and len(self.first_subsets) >= len(played):
+            last = list(self.first_subsets)[-len(played) :]
+            return np.bincount(last, minlength=n) / len(played)
+        raise ValueError(
+            "the strategy of this policy over the subsets needs played episodes of this view "
+            "(or a subset-format mix with probs, or an SB3 model played deterministically)"
+        )
+
+    def render(self) -> str | np.ndarray | None:
+        """Delegate to the sequential game."""
+        return self.parallel.render()
+
+
+class SubsetPlayer:
+    """A subset-format policy playing the learner's side of a :class:`SequentialGameView`.
+
+    At a round's first decision it asks ``policy`` for a subset index with the subset-format
+    observation, then sends that subset's picks one per decision, then stop. ``probs`` (the
+    mix, where ``policy`` has one) and ``reset`` are passed through.
+
+    Args:
+        policy: A policy with SB3's ``predict`` over the subset format's ``Discrete`` actions.
+        view: The view whose learner it plays.
+    """
+
+    def __init__(self, policy: Any, view: SequentialGameView) -> None:
+        self.policy = policy
+        self.view = view
+        self.probs = getattr(policy, "probs", None)
+        self._plan: list[int] = []
+        self._round = -1
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the wrapped policy's draws (where it has any)."""
+        if hasattr(self.policy, "reset"):
+            self.policy.reset(seed=seed)
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, **kwargs: Any
+    ) -> tuple[int, Any]:
+        """The next pick of the subset drawn at the round's start, or stop."""
+        parallel, agent = self.view.parallel, self.view.agent
+        if parallel.rounds_started != self._round:  # a new round: draw its subset
+            self._round = parallel.rounds_started
+            a, _ = self.policy.predict(parallel.inner_observation(agent), deterministic=True)
+            subset = parallel.models[agent].subsets[int(a)]
+            self._plan = subset_actions(parallel, agent, subset)
+        return (self._plan.pop(0) if self._plan else STOP), state

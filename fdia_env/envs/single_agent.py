@@ -176,9 +176,15 @@ def make_single_agent(
             "gymnasium.make_vec(id, num_envs=B, vectorization_mode='vector_entry_point', "
             "backend='torch', device=...)"
         )
+    from fdia_env.registration import view_kwargs
+
+    for name, value in view_kwargs(module, agent).items():
+        kwargs.setdefault(name, value)  # the view's fixed options (the table's view_kwargs)
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
     check_agent(agent, parallel.possible_agents)
+    if hasattr(parallel, "gymnasium_view"):  # a wrapper with its own view (sensor game sequential)
+        return parallel.gymnasium_view(agent, opponent)
     others = [a for a in parallel.possible_agents if a != agent]
     if not others:
         check_no_opponent(opponent, parallel.possible_agents)

@@ -3,14 +3,13 @@
 - :func:`static_estimation` / :class:`StaticEstimation`: WLS, the χ² and largest-normalised-
   residual tests, the exact detection probability of an injection;
 - ``stealth_attack_v0`` (:mod:`fdia_env.stealth.stealth_attack_v0`): the attacker's
-  environment (PettingZoo parallel and AEC), with the Gymnasium view
-  ``"fdia_env/StealthAttack-v0"``, registered with the others by ``import fdia_env`` (its
-  entry in the table of environments, ``fdia_env.registration.ENVS``).
+  environment (PettingZoo parallel and AEC), with the Gymnasium views
+  ``"fdia_env/StealthAttack-v0"`` and ``"fdia_env/StealthDefender-v0"``, registered with the
+  others by ``import fdia_env`` (its entry in the table of environments,
+  ``fdia_env.registration.ENVS``).
 
 See docs/guide/stealth.md.
 """
-
-import gymnasium
 
 from fdia_env.stealth.static import (
     TESTS,
@@ -27,18 +26,8 @@ vectorization_mode="vector_entry_point")`` gives the native numpy vector env
 (:data:`fdia_env.registration.ENVS`)."""
 
 DEFENDER_GYM_ID = "fdia_env/StealthDefender-v0"
-"""Gymnasium id of the threshold defender's view (``defender="threshold"``; sync vectors only)."""
-
-if DEFENDER_GYM_ID not in gymnasium.registry:
-    gymnasium.register(
-        id=DEFENDER_GYM_ID,
-        entry_point="fdia_env.envs.single_agent:make_single_agent",
-        kwargs={
-            "module": "fdia_env.stealth.stealth_attack_v0",
-            "agent": "defender",
-            "defender": "threshold",
-        },
-    )
+"""Gymnasium id of the threshold defender's view (``defender="threshold"``). It has no native
+vector env (the table's ``vector_views``): ``make_vec`` steps copies in ``SyncVectorEnv``."""
 
 __all__ = [
     "DEFENDER_GYM_ID",
