@@ -55,6 +55,7 @@ def test_low_rank_update_equals_full_update_on_ieee57(objective):
         np.testing.assert_allclose(out_fast, out_full, rtol=1e-5, atol=1e-6)
     assert fast._lr_on  # the whole run used the low-rank form
     assert 0 < fast._lr_W.shape[2] <= fast._lr_max
+    assert fast._lr_W.shape[2] == fast._lr_live.sum(1).max()  # padding columns dropped
 
 
 def test_low_rank_update_matches_the_single_engine_on_ieee118():

@@ -189,11 +189,13 @@ class BatchedSimulation:
         if where is None:
             self._lr_W = np.zeros((self.B, self.system.n, 0))
             self._lr_Cinv = np.zeros((self.B, 0, 0))
+            self._lr_live = np.zeros((self.B, 0), dtype=bool)
             self._lr_on = True
         elif self._lr_on:
             r = self._lr_W.shape[2]
             self._lr_W[where] = 0.0
             self._lr_Cinv[where] = np.eye(r)
+            self._lr_live[where] = False
 
     def _low_rank_step(self, mask: Any) -> Any:
         """P[k|k] of every member from its (W, C⁻¹), or None when the rank would exceed the cap.
@@ -237,8 +239,20 @@ class BatchedSimulation:
             W_new, Cinv_new = UPs.transpose(0, 2, 1), np.eye(k) - UPsU
         else:
             W_new, Cinv_new = W, Cinv
+        live = self._lr_live
+        if k:
+            live = np.concatenate([live, np.arange(k) < counts[:, None]], axis=1)
+        # a padding column (W's column 0, C⁻¹'s row and column a unit vector) adds nothing:
+        # each member's live columns move first and the batch keeps the widest member's count
+        width = int(live.sum(1).max()) if B else 0
+        if width < live.shape[1]:
+            order = np.argsort(~live, axis=1, kind="stable")[:, :width]
+            W_new = np.take_along_axis(W_new, order[:, None, :], axis=2)
+            Cinv_new = np.take_along_axis(Cinv_new, order[:, :, None], axis=1)
+            Cinv_new = np.take_along_axis(Cinv_new, order[:, None, :], axis=2)
+            live = np.take_along_axis(live, order, axis=1)
         Cinv_new = sym(Cinv_new)
-        self._lr_W, self._lr_Cinv = W_new, Cinv_new
+        self._lr_W, self._lr_Cinv, self._lr_live = W_new, Cinv_new, live
         if not W_new.shape[2]:
             return np.broadcast_to(self._lr_Ps, (B, sys.n, sys.n)).copy()
         CWt = np.linalg.solve(Cinv_new, W_new.transpose(0, 2, 1))
