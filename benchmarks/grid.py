@@ -1,7 +1,8 @@
 """Speed of the power-grid presets against ch4-position, measured in the same run.
 
-Run: ``python benchmarks/grid.py [--quick] [--max-batch B]``. For ch4-position (the reference)
-and each grid preset (``grid-ieee14/30/57/118``, needs the ``[grid]`` extra) it prints:
+Run: ``python benchmarks/grid.py [--quick] [--max-batch B] [--presets P ...] [--vector-only]``.
+For ch4-position (the reference) and each grid preset (``grid-ieee14/30/57/118``, needs the
+``[grid]`` extra) it prints:
 
 - env-steps/s of the single ``gymnasium.make("fdia_env/SparseAttack-v0")`` view (expected
   dynamics, random actions: a few sensors per step), and its ratio to ch4-position's;
@@ -134,6 +135,12 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="shorter runs; no SBS/DO above 100 sensors")
     p.add_argument("--max-batch", type=int, default=4096, help="largest B of the native env")
+    p.add_argument(
+        "--presets", nargs="+", default=list(PRESETS), choices=PRESETS, help="presets measured"
+    )
+    p.add_argument(
+        "--vector-only", action="store_true", help="the native vector env only (with its Sync)"
+    )
     args = p.parse_args()
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
@@ -144,37 +151,44 @@ def main() -> None:
     rounds, seconds = (3, 0.3) if args.quick else (5, 0.5)
     # the slow configurations (a step of seconds) run 3 rounds of one step each
     singles, vectors, solvers = {}, {}, {}
-    for name in PRESETS:
+    for name in args.presets:
         sc = scenarios.get(name)
         t0 = time.perf_counter()
-        singles[name] = single_rate(name, 2000 if sc.system.n > 50 else 5000)
         batches = [B for B in BATCHES if B <= args.max_batch]
         vectors[name] = vector_rates(name, batches, rounds, seconds)
-        solvers[name] = solver_times(name, args.quick)
+        if not args.vector_only:
+            singles[name] = single_rate(name, 2000 if sc.system.n > 50 else 5000)
+            solvers[name] = solver_times(name, args.quick)
         print(
             f"  measured {name} (n = {sc.system.n}, M = {sc.system.M}) in "
             f"{time.perf_counter() - t0:.0f} s",
             flush=True,
         )
-    ref = "ch4-position"
-    print(f"\nsingle gymnasium.make view, {ENV_ID}, expected dynamics")
-    print(f"{'preset':<14}{'steps/s':>12}{'vs ch4-position':>17}")
-    for name, r in singles.items():
-        print(f"{name:<14}{r:12,.0f}{r / singles[ref]:16.3f}x")
+    first = args.presets[0]
     print("\nnative vector env, env-steps/s (SyncVectorEnv of the single env for comparison)")
-    keys = list(vectors[ref])
+    keys = list(vectors[first])
     print(f"{'preset':<14}" + "".join(f"{k:>16}" for k in keys) + f"{'native/Sync@1024':>18}")
     for name, rates in vectors.items():
         ratio = rates.get("native B=1024", np.nan) / rates.get("sync B=1024", np.nan)
         cells = "".join(f"{rates.get(k, np.nan):16,.0f}" for k in keys)
         print(f"{name:<14}{cells}{ratio:17.1f}x")
+    if "native B=256" in vectors.get("grid-ieee118", {}):
+        us = 1e6 / vectors["grid-ieee118"]["native B=256"]
+        print(f"grid-ieee118 native B=256: {us:,.0f} µs per member-step")
+    ref = "ch4-position"
+    if args.vector_only or ref not in args.presets or "grid-ieee14" not in args.presets:
+        return  # the ratios below need the reference and the full set
+    print(f"\nsingle gymnasium.make view, {ENV_ID}, expected dynamics")
+    print(f"{'preset':<14}{'steps/s':>12}{'vs ch4-position':>17}")
+    for name, r in singles.items():
+        print(f"{name:<14}{r:12,.0f}{r / singles[ref]:16.3f}x")
     print("\nsolver wall time (s); ratio to ch4-position (c = 5, N = 6; DO on ch5-game)")
     cols = list(solvers[ref])
     print(f"{'preset':<14}" + "".join(f"{c:>18}" for c in cols))
     for name, times in solvers.items():
         cells = "".join(f"{times[c]:9.3f} ({times[c] / solvers[ref][c]:5.0f}x)" for c in cols)
         print(f"{name:<14}{cells}")
-    v14, v118 = vectors["grid-ieee14"], vectors["grid-ieee118"]
+    v14, v118 = vectors["grid-ieee14"], vectors.get("grid-ieee118", {})
     print(
         f"\ntargets: single view grid-ieee14 {singles['grid-ieee14']:,.0f} steps/s (>= 5,000); "
         f"native/Sync at B = 1024: grid-ieee14 "

@@ -3,7 +3,10 @@
 Member ``i`` of the batch follows exactly the recursion of
 :class:`~fdia_env.envs.simulation.Simulation`: the 2-state case without a leaking bias runs the
 same closed-form kernels (:mod:`fdia_env.kalman.small`) on component arrays, everything else the
-generic batched functions of :mod:`fdia_env.kalman`.
+generic batched functions of :mod:`fdia_env.kalman`. Large systems (n >= 40) that start at the
+steady state keep each expected covariance as the steady state plus a low-rank term in the
+sensor rows dropped so far (numpy backend; see :meth:`BatchedSimulation._init_low_rank`): an
+O(n² r) step instead of an n × n solve per member.
 
 The engine is written once against an array backend (:mod:`fdia_env.backend`): numpy arrays on
 the CPU, or torch tensors on one device (CPU or CUDA; float64 throughout). The only part that
@@ -88,6 +91,7 @@ class BatchedSimulation:
         self._start = c(P_start)
         self._start_diag = c(np.diag(P_start))
         self._iu = tuple(c(np.asarray(i, dtype=np.int64)) for i in np.triu_indices(n, 1))
+        self._iu_flat = np.ravel_multi_index(np.triu_indices(n, 1), (n, n))
         self._Q_factor_T = c(psd_sqrt(system.Q).T)  # the single engine's noise factors
         self._R_factor_T = c(psd_sqrt(system.R).T)
         if M <= 16:  # Σ_{i used} J_i for every subset, looked up by bitmask
@@ -113,6 +117,7 @@ class BatchedSimulation:
                 for _ in range(int(warmup)):
                     P = information_update(predict_cov(P, system.F, system.Q), system.J)
                     self._warm_gains_T.append(c(masked_gain(P, system).T))
+        self._init_low_rank(P_start)
         self.rngs: list[np.random.Generator] = []
         self.generator: Any = None
         self.value_override: Any = None
@@ -147,6 +152,98 @@ class BatchedSimulation:
             self._clean = self.xp.all(self.consistent)
         return self._clean
 
+    # --- low-rank form of the expected covariance (large systems, steady start) -------------
+    def _init_low_rank(self, P_start: np.ndarray) -> None:
+        """Constants of the low-rank update (numpy, n >= 40, warm-up "steady"; else off).
+
+        From the steady state ``Ps`` of all sensors (the window start, a fixed point:
+        ``Ps⁻¹ = (F Ps F' + Q)⁻¹ + Σ_all J_i``), every expected covariance reached by dropping
+        sensors is ``P = Ps + W C W'`` with ``W`` (n, r), r the sensor rows dropped so far, and
+        ``C⁻¹`` (r, r) kept per member: a step costs O(n² r) instead of an n × n solve (the
+        information identities of docs/math.md §1 with the Woodbury identity). Above
+        ``r = n / 4`` the engine falls back to the full update until the next full reset.
+        """
+        sys = self.system
+        n = sys.n
+        self._lr_max = (
+            n // 4 if (self.xp is NUMPY and n >= 40 and self.spec.warmup == "steady") else 0
+        )
+        self._lr_on = False
+        if not self._lr_max:
+            return
+        Ps = np.asarray(P_start, dtype=float)
+        Hw = np.zeros((sys.nz + 1, n))  # whitened rows (U_i' U_i = J_i), then a zero row
+        for i, sensor in enumerate(sys.sensors):
+            rows = np.flatnonzero(sys.row_sensor == i)
+            L = np.linalg.cholesky(np.atleast_2d(sensor.R))
+            Hw[rows] = np.linalg.solve(L, np.atleast_2d(sensor.H))
+        self._lr_Hw = Hw
+        self._lr_HwPs = Hw @ Ps  # (nz + 1, n): rows U Ps
+        self._lr_Ps = Ps
+        self._lr_Ppi = sym(np.linalg.inv(sym(sys.F @ Ps @ sys.F.T + sys.Q)))
+
+    def _low_rank_reset(self, where: Any) -> None:
+        """Members ``where`` (None = all) back at ``Ps`` (W = 0, C⁻¹ = I)."""
+        if not self._lr_max:
+            return
+        if where is None:
+            self._lr_W = np.zeros((self.B, self.system.n, 0))
+            self._lr_Cinv = np.zeros((self.B, 0, 0))
+            self._lr_on = True
+        elif self._lr_on:
+            r = self._lr_W.shape[2]
+            self._lr_W[where] = 0.0
+            self._lr_Cinv[where] = np.eye(r)
+
+    def _low_rank_step(self, mask: Any) -> Any:
+        """P[k|k] of every member from its (W, C⁻¹), or None when the rank would exceed the cap.
+
+        With ``U`` the whitened rows dropped this step, ``Pp = F Ps F' + Q`` and ``W̃ = F W``:
+        ``P[k|k]⁻¹ = Ps⁻¹ − Z K Z' − U'U`` with ``Z = Pp⁻¹ W̃``, ``K⁻¹ = C⁻¹ + W̃' Z``; so with
+        ``V = [Z, U']``: ``W ← Ps V``, ``C⁻¹ ← diag(K⁻¹, I) − V' Ps V``.
+        """
+        sys, B = self.system, self.B
+        dropped = ~mask[:, sys.row_sensor]  # (B, nz) rows not used
+        counts = dropped.sum(1)
+        k = int(counts.max()) if B else 0
+        W, Cinv = self._lr_W, self._lr_Cinv
+        r = W.shape[2]
+        if r + k > self._lr_max:
+            self._lr_on = False
+            return None
+        if k:  # each member's dropped rows first; the padding points at the zero row
+            order = np.argsort(~dropped, axis=1, kind="stable")[:, :k]
+            idx = np.where(np.arange(k) < counts[:, None], order, sys.nz)
+            U = self._lr_Hw[idx]  # (B, k, n)
+            UPs = self._lr_HwPs[idx]  # (B, k, n)
+            UPsU = UPs @ U.transpose(0, 2, 1)
+        if r:
+            Wt = W if self._F_identity else self._F @ W
+            Z = self._lr_Ppi @ Wt  # (B, n, r)
+            PsZ = self._lr_Ps @ Z
+            Zt = Z.transpose(0, 2, 1)
+            top = Cinv + Wt.transpose(0, 2, 1) @ Z - Zt @ PsZ
+            if k:
+                UPsZ = UPs @ Z  # (B, k, r)
+                W_new = np.concatenate([PsZ, UPs.transpose(0, 2, 1)], axis=2)
+                Cinv_new = np.empty((B, r + k, r + k))
+                Cinv_new[:, :r, :r] = top
+                Cinv_new[:, r:, :r] = -UPsZ
+                Cinv_new[:, :r, r:] = -UPsZ.transpose(0, 2, 1)
+                Cinv_new[:, r:, r:] = np.eye(k) - UPsU
+            else:
+                W_new, Cinv_new = PsZ, top
+        elif k:
+            W_new, Cinv_new = UPs.transpose(0, 2, 1), np.eye(k) - UPsU
+        else:
+            W_new, Cinv_new = W, Cinv
+        Cinv_new = sym(Cinv_new)
+        self._lr_W, self._lr_Cinv = W_new, Cinv_new
+        if not W_new.shape[2]:
+            return np.broadcast_to(self._lr_Ps, (B, sys.n, sys.n)).copy()
+        CWt = np.linalg.solve(Cinv_new, W_new.transpose(0, 2, 1))
+        return sym(self._lr_Ps + W_new @ CWt)
+
     def _set_P(self, P: Any) -> None:
         if self.fast:
             self._comp = self.xp.stack([P[:, 0, 0], 0.5 * (P[:, 0, 1] + P[:, 1, 0]), P[:, 1, 1]])
@@ -176,6 +273,7 @@ class BatchedSimulation:
             else:
                 self._set_P(xp.broadcast_to(self._start, (B, n, n)))
             self._M = None  # only read where a member is inconsistent
+            self._low_rank_reset(None)
             self.consistent = xp.ones(B, dtype=xp.bool)
             self._clean = True
             self.k = xp.zeros(B, dtype=xp.int64)
@@ -191,6 +289,7 @@ class BatchedSimulation:
             if not self.all_consistent():
                 self._M[where] = self._start
             self.consistent[where] = True
+            self._low_rank_reset(where)
             self.k[where] = 0
             self.nis[where] = 0.0
         if self.sampled and draw:
@@ -339,6 +438,7 @@ class BatchedSimulation:
             x_hat=self.x_hat if self.sampled else None,
         )
         self.detection_info = out.info
+        self._lr_on = False  # P is no longer Ps + W C W'
         if not self.sampled:
             self._set_P(xp.copy(out.P))
             self._M = out.error_cov
@@ -359,6 +459,12 @@ class BatchedSimulation:
         if used.ndim == 2:
             return used
         xp = self.xp
+        if used.dtype == object:  # Python-int bitmasks (M > 62): their bytes, unpacked
+            M = self.system.M
+            size = (M + 7) // 8
+            raw = np.frombuffer(b"".join(int(u).to_bytes(size, "little") for u in used), np.uint8)
+            bits = np.unpackbits(raw.reshape(len(used), size), axis=1, bitorder="little")
+            return bits[:, :M].astype(bool)
         return xp.astype((used[:, None] >> self._shifts) & 1, xp.bool)
 
     def _used_components(self, used: Any) -> Any:
@@ -388,6 +494,7 @@ class BatchedSimulation:
             P[bits == u] = steady_state(sys, bits_to_mask(u, sys.M))[1]
         P = xp.asarray(P)
         self._set_P(P)
+        self._lr_on = False  # P is no longer Ps + W C W'
         self._M = xp.copy(P)
         self.consistent = xp.ones(self.B, dtype=xp.bool)
         self._clean = True
@@ -401,15 +508,19 @@ class BatchedSimulation:
         mask = self._mask_of(used)
         P_prev, M_prev = self.P, self.M
         # P[k|k−1] = F P F' + Q; a random walk (F = I, the grid presets) skips the products
-        P_pred = P_prev + self._Q if self._F_identity else predict_cov(P_prev, self._F, self._Q)
-        # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product,
-        # computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]: one LU solve instead of two inverses
-        # (I + P J is invertible: its eigenvalues are those of I + P^½ J P^½, all >= 1)
-        used_info = (xp.astype(mask, xp.float64) @ self._J_flat).reshape(-1, sys.n, sys.n)
-        if sys.n > 2:
-            P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
-        else:
-            P_new = spd_inv(spd_inv(P_pred) + used_info)
+        P_new = self._low_rank_step(mask) if self._lr_on else None
+        P_pred = None  # read by the full update and the sampled step's NIS only
+        if P_new is None or self.sampled:
+            P_pred = P_prev + self._Q if self._F_identity else predict_cov(P_prev, self._F, self._Q)
+        if P_new is None:
+            # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product,
+            # computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]: one LU solve instead of two inverses
+            # (I + P J is invertible: its eigenvalues are those of I + P^½ J P^½, all >= 1)
+            used_info = (xp.astype(mask, xp.float64) @ self._J_flat).reshape(-1, sys.n, sys.n)
+            if sys.n > 2:
+                P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
+            else:
+                P_new = spd_inv(spd_inv(P_pred) + used_info)
         if present is None:
             leaking = None if self.all_consistent() else ~self.consistent
         else:
@@ -518,7 +629,11 @@ class BatchedSimulation:
             var = xp.diagonal(M)
             out[1 : 1 + n] = xp.clip(xp.log(var / self._start_diag), -30.0, 30.0).T
             i, j = self._iu
-            corr = M[:, i, j] / xp.sqrt(var[:, i] * var[:, j])
+            if xp is NUMPY and M.flags.c_contiguous:  # one gather from the flat rows
+                upper = M.reshape(len(M), -1)[:, self._iu_flat]
+            else:
+                upper = M[:, i, j]
+            corr = upper / xp.sqrt(var[:, i] * var[:, j])
             out[1 + n : 1 + n + len(i)] = xp.clip(corr, -1.0, 1.0).T
             col = 1 + n + len(i)
         if self.sampled:
