@@ -252,18 +252,20 @@ def play_batched(
 ) -> tuple[np.ndarray, list[Any]]:
     """:func:`play` on the native vector env: ``num_envs`` episodes per batched step.
 
-    The vector env is built from ``env``'s own two-player env, models and opponent
-    (:class:`fdia_env.vector.FdiaVectorEnv`); rounds of B episodes are reset with
-    ``seed + r·B`` (member i gets ``seed + r·B + i``), so episode ``i`` is the same as in
-    :func:`play` (every fdia_env episode has the same length). The policy must accept batched
-    (B, d) observations, as SB3 models and the baselines' policies do.
+    The vector env is the one the table of environments gives ``env``'s id
+    (:func:`native_vector_env`). On the Kalman-filter engine it is built from ``env``'s own
+    two-player env, models and opponent (:class:`fdia_env.vector.FdiaVectorEnv`); rounds of B
+    episodes are reset with ``seed + r·B`` (member i gets ``seed + r·B + i``), so episode ``i``
+    is the same as in :func:`play` (every such episode has the same length). An env of its own
+    (the stealthy attacker's) gets its own vector entry point with the options ``env`` was made
+    with; its batch shares one noise generator seeded with ``seed + r·B``, so with sampled noise
+    the episodes are other draws of the same distribution than :func:`play`'s. Members whose
+    episode ends early are not counted after their end. The policy must accept batched (B, d)
+    observations, as SB3 models and the baselines' policies do.
     """
-    from fdia_env.vector import FdiaVectorEnv
-
-    view = env.unwrapped
     B = max(1, min(int(num_envs), n_episodes))
-    venv = FdiaVectorEnv(view.parallel, B, agent=view.agent, opponent=view.opponent)
-    pass_masks = _accepts_masks(policy)
+    venv = native_vector_env(env, B)
+    pass_masks = _accepts_masks(policy) and hasattr(venv, "action_masks")
     returns, first_actions = [], []
     for start in range(0, n_episodes, B):
         obs, info = venv.reset(seed=seed + start)
@@ -283,9 +285,65 @@ def play_batched(
             done |= terminated | truncated
             t += 1
         returns.append(total)
+    venv.close()
     if types is not None:
         del types[n_episodes:]
     return np.concatenate(returns)[:n_episodes], first_actions[:n_episodes]
+
+
+def native_vector_env(env: gym.Env, num_envs: int) -> Any:
+    """The native vector env of ``env`` (a single-agent view) with ``num_envs`` members.
+
+    The Kalman-filter engine's views get :class:`fdia_env.vector.FdiaVectorEnv` over the view's
+    own two-player env and opponent; another entry of the table of environments
+    (``fdia_env.registration.ENVS``) gets its ``vector`` entry point, called with the options
+    ``env`` was made with (``env.spec.kwargs``, so ``env`` must come from ``gymnasium.make``).
+
+    Raises:
+        ValueError: Naming ``num_envs`` when the view has no native vector env (the entry's
+            ``vector_views``), was not made by ``gymnasium.make`` from a registered id, or was
+            made with options its native vector env does not support.
+    """
+    from fdia_env.envs.parallel import FdiaParallelEnv
+    from fdia_env.registration import ENVS, GYM_IDS
+
+    view = env.unwrapped
+    parallel, agent = getattr(view, "parallel", None), getattr(view, "agent", None)
+    env_id = env.spec.id if env.spec is not None else None
+    module = GYM_IDS[env_id][0] if env_id in GYM_IDS else getattr(parallel, "__module__", None)
+    entry = next((e for e in ENVS.values() if e.module == module), None)
+    if entry.kalman if entry is not None else isinstance(parallel, FdiaParallelEnv):
+        from fdia_env.vector import FdiaVectorEnv
+
+        return FdiaVectorEnv(parallel, num_envs, agent=agent, opponent=view.opponent)
+    if entry is None or env_id not in GYM_IDS:
+        raise ValueError(
+            f"num_envs={num_envs}: the native vector env of {type(view).__name__} needs the env "
+            "made by gymnasium.make from its registered id; pass num_envs=None to play the "
+            "episodes one by one"
+        )
+    if not entry.has_vector(agent):
+        raise ValueError(
+            f"num_envs={num_envs}: {env_id} has no native vector env (only "
+            f"{', '.join(entry.views[a] for a in entry.views if entry.has_vector(a)) or 'none'} "
+            f"of {entry.name} do); pass num_envs=None to play the episodes one by one"
+        )
+    if view.opponent is not None and parallel is not None and len(parallel.possible_agents) > 1:
+        raise ValueError(
+            f"num_envs={num_envs}: {env_id}'s native vector env plays {agent!r} alone, not "
+            "against an opponent; pass num_envs=None"
+        )
+    import importlib
+
+    module_name, _, function = entry.vector.partition(":")
+    make = getattr(importlib.import_module(module_name), function)
+    try:
+        return make(num_envs, **dict(env.spec.kwargs))
+    except ValueError as error:
+        raise ValueError(
+            f"num_envs={num_envs}: {env_id}'s native vector env refuses this env's options "
+            f"({error}); pass num_envs=None to play the episodes one by one"
+        ) from error
 
 
 def mixed_strategy(
@@ -448,7 +506,8 @@ def evaluate(
         deterministic: Passed to ``predict`` (mixed baselines sample whatever it says).
         num_envs: Play ``num_envs`` episodes at a time on the native vector env (Monte-Carlo
             evaluation as one batched computation; same episodes as the sequential loop for
-            deterministic policies); None plays them one by one.
+            deterministic policies; see :func:`play_batched`); None plays them one by one.
+            A view without a native vector env (the table's ``vector_views``) is refused.
         **env_kwargs: Passed to ``gymnasium.make`` when ``env_or_id`` is an id.
 
     Returns:
@@ -457,8 +516,8 @@ def evaluate(
         optimum.
 
     Raises:
-        ValueError: For ``n_episodes < 1``, an unknown policy string, or env kwargs given with
-            an env instance.
+        ValueError: For ``n_episodes < 1``, an unknown policy string, env kwargs given with
+            an env instance, or ``num_envs`` on a view without a native vector env.
     """
     if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
         raise ValueError(f"n_episodes must be a positive integer, got {n_episodes!r}")

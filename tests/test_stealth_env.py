@@ -307,3 +307,43 @@ def test_the_defender_view_is_in_the_table_without_a_native_vector_env():
 
     view = make_single_agent(*GYM_IDS[DEFENDER_GYM_ID])
     assert view.agent == "defender" and view.action_space == gym.spaces.Discrete(5)
+
+
+class _ShiftBus7:
+    """Shift bus 7 (radial, 3 meters): undetectable, damage 0.05 rad; batched for (B, d)."""
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        bits = np.zeros(13, dtype=np.int8)
+        bits[6] = 1
+        obs = np.asarray(observation)
+        return (np.tile(bits, (obs.shape[0], 1)) if obs.ndim == 2 else bits), state
+
+
+def test_evaluate_with_num_envs_runs_the_stealth_env_on_its_native_vector_env():
+    from agents.evaluate import evaluate
+
+    kwargs = {"budget": 3, "dynamics": "expected", "horizon": 2}
+    batched = evaluate(_ShiftBus7(), GYM_ID, 5, seed=1, num_envs=2, **kwargs)  # 2, 2 and 1
+    one_by_one = evaluate(_ShiftBus7(), GYM_ID, 5, seed=1, **kwargs)
+    # expected payoff per snapshot: (1 − α) · 0.05 (only the test's false alarms catch it)
+    np.testing.assert_allclose(batched.returns, np.full(5, 2 * (1 - ALPHA) * 0.05), rtol=1e-12)
+    np.testing.assert_array_equal(batched.returns, one_by_one.returns)
+    sampled = evaluate(_ShiftBus7(), GYM_ID, 400, seed=0, num_envs=64, budget=3)
+    assert set(np.round(sampled.returns, 12)) == {0.0, 0.05}  # paid unless a false alarm
+    assert abs(np.mean(sampled.returns == 0.0) - ALPHA) < 0.04  # 400 draws: ~3.5 σ
+    assert evaluate("random", GYM_ID, 6, seed=0, num_envs=4).returns.shape == (6,)
+
+
+def test_evaluate_with_num_envs_refuses_views_without_a_native_vector_env_by_name():
+    from agents.evaluate import evaluate
+
+    with pytest.raises(ValueError, match=r"num_envs=4: fdia_env/StealthDefender-v0 has no native"):
+        evaluate("random", DEFENDER_GYM_ID, 4, num_envs=4)
+    with pytest.raises(ValueError, match=r"num_envs=2: .* plays 'attacker' alone"):
+        evaluate("random", GYM_ID, 4, num_envs=2, defender="threshold")
+    direct = stealth_attack_v0.parallel_env(budget=3)
+    from fdia_env.envs.single_agent import SingleAgentEnv
+
+    with pytest.raises(ValueError, match=r"num_envs=2: .* made by gymnasium.make"):
+        evaluate("random", SingleAgentEnv(direct), 4, num_envs=2)
+    assert evaluate("random", DEFENDER_GYM_ID, 3, seed=0).returns.shape == (3,)  # one by one
