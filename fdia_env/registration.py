@@ -294,6 +294,8 @@ def view_kwargs(module: str, agent: str) -> dict[str, Any]:
     :func:`fdia_env.envs.single_agent.make_single_agent` applies them, so a view built from
     ``(module, agent)`` (:data:`GYM_IDS`) is the one ``gymnasium.make`` gives.
     """
+    if not isinstance(agent, str):  # the caller's check names a bad agent; none has options
+        return {}
     for entry in _ENVS.values():
         if entry.module == module:
             return dict(entry.view_kwargs.get(agent, {}))
