@@ -48,6 +48,43 @@ def check_action(space: spaces.Space, action: Any, who: str) -> None:
     _check_values(space, arr, who)
 
 
+def check_step_actions(
+    actions: Any, agents: list[str], spaces_of: dict[str, spaces.Space], reset: bool, done: bool
+) -> None:
+    """The checks a PettingZoo parallel ``step`` makes before anything changes.
+
+    Args:
+        actions: The ``{agent: action}`` dict passed to ``step``.
+        agents: The live agents.
+        spaces_of: Each agent's action space.
+        reset: Whether ``reset`` has been called.
+        done: Whether the episode has ended.
+
+    Raises:
+        RuntimeError: Before ``reset`` or after the episode ended.
+        TypeError: When ``actions`` is not a dict.
+        ValueError: For a missing or unknown agent's action, or an action outside its space.
+    """
+    if not reset:
+        raise RuntimeError("step() called before reset(): call reset() first")
+    if done:
+        raise RuntimeError("step() called after the episode ended: call reset() to start a new one")
+    if not isinstance(actions, dict):
+        raise TypeError(
+            f"actions must be a dict {{agent: action}} for agents {agents}, "
+            f"got {type(actions).__name__}"
+        )
+    missing = [a for a in agents if a not in actions]
+    unknown = [a for a in actions if a not in agents]
+    if missing or unknown:
+        raise ValueError(
+            f"actions must have exactly one entry per live agent {agents}; "
+            f"missing {missing}, unknown {unknown}"
+        )
+    for agent in agents:
+        check_action(spaces_of[agent], actions[agent], agent)
+
+
 def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str) -> np.ndarray:
     """Raise ``ValueError`` unless ``actions`` holds one element of ``space`` per member.
 

@@ -14,7 +14,7 @@ from pettingzoo import ParallelEnv
 from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.base import AttackModel
 from fdia_env.defenses.base import DefenseModel
-from fdia_env.envs.actions import check_action
+from fdia_env.envs.actions import check_step_actions
 from fdia_env.envs.render import render_ansi, render_rgb
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
@@ -191,26 +191,9 @@ class FdiaParallelEnv(ParallelEnv):
             ValueError: For a missing or unknown agent's action, or an action outside its
                 space; nothing changes before every action has passed.
         """
-        if not self._reset_called:
-            raise RuntimeError("step() called before reset(): call reset() first")
-        if self._done:
-            raise RuntimeError(
-                "step() called after the episode ended: call reset() to start a new one"
-            )
-        if not isinstance(actions, dict):
-            raise TypeError(
-                f"actions must be a dict {{agent: action}} for agents {self.agents}, "
-                f"got {type(actions).__name__}"
-            )
-        missing = [a for a in self.agents if a not in actions]
-        unknown = [a for a in actions if a not in self.agents]
-        if missing or unknown:
-            raise ValueError(
-                f"actions must have exactly one entry per live agent {self.agents}; "
-                f"missing {missing}, unknown {unknown}"
-            )
-        for agent in self.agents:
-            check_action(self._action_spaces[agent], actions[agent], agent)
+        check_step_actions(
+            actions, self.agents, self._action_spaces, self._reset_called, self._done
+        )
         effect = self.attack.apply(actions["attacker"])
         filter_input = self.defense.apply(actions.get("defender"), effect)
         self._last_effect = effect

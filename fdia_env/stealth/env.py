@@ -12,7 +12,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_choice, check_int, check_positive
-from fdia_env.envs.actions import check_action
+from fdia_env.envs.actions import check_step_actions
 from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
 from fdia_env.stealth.static import (
     StaticEstimation,
@@ -230,26 +230,11 @@ class StealthAttackEnv(ParallelEnv):
             RuntimeError: Before :meth:`reset` or after the episode ended.
             ValueError: For a missing or unknown agent's action, or one outside its space.
         """
-        if not self._reset_called:
-            raise RuntimeError("step() called before reset(): call reset() first")
-        if self._done:
-            raise RuntimeError(
-                "step() called after the episode ended: call reset() to start a new one"
-            )
-        if not isinstance(actions, dict):
-            raise TypeError(
-                f"actions must be a dict {{agent: action}} for agents {self.agents}, "
-                f"got {type(actions).__name__}"
-            )
-        if set(actions) != set(self.agents):
-            raise ValueError(
-                f"actions must have exactly one entry per live agent {self.agents}, got "
-                f"{sorted(map(str, actions))}"
-            )
-        check_action(self._action_space, actions["attacker"], "attacker")
+        check_step_actions(
+            actions, self.agents, self._action_spaces, self._reset_called, self._done
+        )
         est = self.estimation
         if self.defender is not None:
-            check_action(self._action_spaces["defender"], actions["defender"], "defender")
             est = self._estimations[int(np.asarray(actions["defender"]).reshape(()))]
         a = self.injection(actions["attacker"])
         damage = self.damage(a)
