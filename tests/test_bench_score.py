@@ -219,7 +219,7 @@ def test_learned_rows_render_as_mean_and_ci_over_seeds(task, tmp_path):
     assert f"| {task.references.optimum.name} | 1.000 |" in text
     assert "| random | 0.000 |" in text
     assert (tmp_path / "benchmark_sparse.png").stat().st_size > 1000
-    page = tmp_path / "page.md"
+    page = tmp_path / "board.txt"
     page.write_text(f"# B\n\n{START}\nold\n{END}\n\ntail\n")
     write_section(page, "new")
     assert page.read_text() == f"# B\n\n{START}\n\nnew\n\n{END}\n\ntail\n"
@@ -231,7 +231,7 @@ def test_learned_rows_render_as_mean_and_ci_over_seeds(task, tmp_path):
 def test_the_runner_trains_scores_and_renders(tmp_path, capsys):
     from experiments.cli import main as experiments
 
-    page = tmp_path / "benchmark.md"
+    page = tmp_path / "board.txt"
     page.write_text("# Benchmark\n\n<!-- leaderboard:start -->\n<!-- leaderboard:end -->\n")
     out = tmp_path / "rows.json"
     code = experiments(

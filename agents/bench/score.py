@@ -248,7 +248,7 @@ def report(result: Score, task: Any) -> str:
     unit = "worst-case return" if result.raw_name != "return" else "return"
     lines = [
         f"task        {task.name} ({task.family}, {task.player}, {task.difficulty})",
-        f"agent       {result.agent}: {result.description}",
+        f"agent       {result.agent}" + (f": {result.description}" if result.description else ""),
         f"episodes    {n_seeds * n_eps} ({n_seeds} seed{'s' * (n_seeds != 1)} x {n_eps})",
         f"raw return  {_fmt(result.mean)} ± {_fmt(result.ci95, 3)} (95 % CI over episodes"
         " and seeds)",
@@ -280,7 +280,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Score an agent on a benchmark task: raw return, normalised score "
         "(0 = random play, 1 = the certified optimum) with its 95 % CI, and the references.",
     )
-    parser.add_argument("--task", required=True, help="task name (python -m agents.bench list)")
+    parser.add_argument(
+        "--task", required=True, help="task name (fdia_env.tasks.names() lists them)"
+    )
     parser.add_argument(
         "--agent",
         required=True,
