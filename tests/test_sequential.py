@@ -612,3 +612,41 @@ def test_sensor_game_sequential_evaluation_plays_subset_mixes_and_scores_learned
     assert sorted(learned["strategy"]) == [0.0] * 6 + [1.0]  # one subset: its pure strategy
     assert learned["score"] >= 0 and scores["game value (LP)"]["score"] < 1e-9
     assert sum(scores["random"]["strategy"]) == pytest.approx(1.0)
+
+
+def test_wrappers_pass_pettingzoo_api_tests_without_the_reset_options_warning():
+    """PettingZoo's api tests reset with options={"options": 1}: no warning for that probe."""
+    import warnings
+
+    from fdia_env import sensor_game_v0
+    from fdia_env.envs.sequential import SequentialBase, SequentialSubsetEnv
+
+    envs = [
+        lambda: sparse_attack_v0.parallel_env(scenario="ch4-position", action="sequential"),
+        lambda: sensor_game_v0.parallel_env(rounds=2, action="sequential"),
+    ]
+    for make in envs:
+        assert isinstance(make(), SequentialBase)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            parallel_api_test(make(), num_cycles=10)
+        assert not [w for w in caught if "reset options" in str(w.message)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        api_test(sensor_game_v0.env(rounds=2, action="sequential"), num_cycles=10)
+    assert not [w for w in caught if "reset options" in str(w.message)]
+    # a setting passed to reset by mistake still warns once, naming the caller's line
+    for env in (envs[0](), envs[1]()):
+        with pytest.warns(UserWarning, match=r"reset options \['budget'\] are ignored") as rec:
+            env.reset(seed=0, options={"budget": 2})
+        assert len(rec) == 1 and rec[0].filename == __file__
+    view = envs[1]().gymnasium_view("defender")
+    with pytest.warns(UserWarning, match=r"reset options \['budget'\] are ignored") as rec:
+        view.reset(seed=0, options={"budget": 2})
+    assert len(rec) == 1 and rec[0].filename == __file__  # once, not again by the wrapper
+    # the delegation of the shared base: max_cycles reaches the wrapped env
+    game = envs[1]()
+    assert isinstance(game, SequentialSubsetEnv)
+    game.max_cycles = 1
+    assert game.inner.max_cycles == 1 and game.max_cycles == 1
+    assert game.spec is game.inner.spec and game.system is game.inner.system
