@@ -95,8 +95,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if not isinstance(parallel, FdiaParallelEnv):  # e.g. the sparse attack's "sequential"
             raise TypeError(
                 f"parallel must be an FdiaParallelEnv, got {type(parallel).__name__} (the sparse "
-                "attack's action='sequential' is not available in the native vector env; use "
-                "gymnasium.make_vec(..., vectorization_mode='sync'))"
+                "attack's action='sequential' has its own native vector env, "
+                "fdia_env.vector.sequential.SequentialVectorEnv)"
             )
         self.xp = xp = get_backend(backend, device)
         self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
