@@ -1,0 +1,144 @@
+"""The definitions of the benchmark tasks (what to build; the references are stored apart).
+
+Each :class:`TaskSpec` says how to build a task's env. Its reference values live in
+``references.json`` beside this module (computed by ``python -m agents.bench compute``), and
+its difficulty is graded from them (:meth:`fdia_env.tasks.task.References.grade`).
+Adding a task is one :class:`TaskSpec` here plus ``python -m agents.bench compute --task NAME``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+SPARSE = "fdia_env/SparseAttack-v0"
+COVARIANCE = "fdia_env/CovarianceAttack-v0"
+GAME_ATTACKER = "fdia_env/SensorGameAttacker-v0"
+GAME_DEFENDER = "fdia_env/SensorGameDefender-v0"
+DETECTION_DEFENDER = "fdia_env/DetectionDefender-v0"
+STEALTH_ATTACKER = "fdia_env/StealthAttack-v0"
+FAMILY_ID = "fdia_env/SystemFamily-v0"
+FAMILY_ENTRY_POINT = "fdia_env.envs.system_family:SystemFamilyEnv"
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """How to build one task (see :class:`fdia_env.tasks.task.Task` for the fields)."""
+
+    name: str
+    family: str
+    player: str
+    env_id: str
+    env_kwargs: Mapping[str, Any]
+    module: str | None
+    description: str
+    episodes: int = 10
+    entry_point: str | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+def _sparse(
+    instance: str,
+    scenario: str,
+    budget: int,
+    horizon: int,
+    objective: str = "trace",
+    episodes: int = 10,
+    **kwargs: Any,
+) -> TaskSpec:
+    what = "log det" if objective == "logdet" else "trace"
+    return TaskSpec(
+        f"sparse/{instance}-v0",
+        "sparse",
+        "attacker",
+        SPARSE,
+        {
+            "scenario": scenario,
+            "budget": budget,
+            "horizon": horizon,
+            "objective": objective,
+            **kwargs,
+        },
+        "fdia_env.sparse_attack_v0",
+        f"{scenario}: drop at most {budget} sensor-time pairs over {horizon} steps under perfect "
+        f"detection, maximise the {what} of the error covariance at the window's end",
+        episodes,
+    )
+
+
+def _covariance(instance: str, scenario: str, power: float, objective: str) -> TaskSpec:
+    what = "log det" if objective == "logdet" else "trace"
+    return TaskSpec(
+        f"covariance/{instance}-v0",
+        "covariance",
+        "attacker",
+        COVARIANCE,
+        {"scenario": scenario, "power": power, "objective": objective},
+        "fdia_env.covariance_attack_v0",
+        f"{scenario}: one bias covariance of power {power:g} against the unaware filter, "
+        f"maximise the {what} of the actual error covariance",
+        episodes=10,
+    )
+
+
+def _game(instance: str, scenario: str, player: str, **kwargs: Any) -> TaskSpec:
+    env_id = GAME_ATTACKER if player == "attacker" else GAME_DEFENDER
+    return TaskSpec(
+        f"sensor-game/{instance}-{player}-v0",
+        "sensor-game",
+        player,
+        env_id,
+        {"scenario": scenario, **kwargs},
+        "fdia_env.sensor_game_v0",
+        f"{scenario}: the {player} of the one-shot sensor-selection game, scored by its "
+        "exploitability (worst-case return against a best response)",
+        episodes=10,
+    )
+
+
+def _bayes(instance: str, scenario: str, player: str, model: str, **kwargs: Any) -> TaskSpec:
+    env_id = GAME_ATTACKER if player == "attacker" else GAME_DEFENDER
+    return TaskSpec(
+        f"incomplete-information/{instance}-{player}-v0",
+        "incomplete-information",
+        player,
+        env_id,
+        {
+            "scenario": scenario,
+            "types": ["independent", "dependent"],
+            "priors": [0.5, 0.5],
+            "attacker_model": model,
+            **kwargs,
+        },
+        "fdia_env.sensor_game_v0",
+        f"{scenario}: the {player} of the sensor game where nature draws the attacker's "
+        f"allocation rule ({model} attacker), scored by its exploitability in the Bayesian game",
+        episodes=10,
+    )
+
+
+def _detection(instance: str, scenario: str, power: float) -> TaskSpec:
+    return TaskSpec(
+        f"detection-game/{instance}-defender-v0",
+        "detection-game",
+        "defender",
+        DETECTION_DEFENDER,
+        {"scenario": scenario, "power": power, "criterion": "bayes_cost"},
+        "fdia_env.detection_game_v0",
+        f"{scenario}: the detector's threshold against an attack of power {power:g}, "
+        "minimise the Bayes cost",
+        episodes=10,
+    )
+
+
+SPECS: tuple[TaskSpec, ...] = (
+    _sparse("ch4-position", "ch4-position", 5, 6),
+    _sparse("ch4-pv-case1-logdet", "ch4-pv-case1", 5, 6, "logdet"),
+    _sparse("ch4-random", "ch4-random", 10, 6),
+    _covariance("ch2-position", "ch2-position", 3000.0, "trace"),
+    _covariance("ch2-pv-2-logdet", "ch2-pv-2", 3000.0, "logdet"),
+    _game("ch5-game", "ch5-game", "attacker", power=100.0),
+    _game("ch5-game", "ch5-game", "defender", power=100.0),
+    _detection("ch3-static", "ch3-static", 240.0),
+)
