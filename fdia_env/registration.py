@@ -322,10 +322,7 @@ def _register_gym_ids(entry: EnvEntry) -> None:
 
 for _entry in (
     EnvEntry(
-        "sparse_attack_v0",
-        "fdia_env.sparse_attack_v0",
-        {"attacker": "fdia_env/SparseAttack-v0"},
-        vector="fdia_env.vector.sequential:make_vector",  # action="sequential" too
+        "sparse_attack_v0", "fdia_env.sparse_attack_v0", {"attacker": "fdia_env/SparseAttack-v0"}
     ),
     EnvEntry(
         "covariance_attack_v0",

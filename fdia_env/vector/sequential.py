@@ -366,23 +366,20 @@ def make_vector(
     device: Any = None,
     **kwargs: Any,
 ) -> gym.vector.VectorEnv:
-    """Gymnasium ``vector_entry_point``: the sequential format here, other formats the engine's.
+    """The native vector env of ``action="sequential"`` (what ``make_vec`` gives for it).
 
-    ``action="sequential"`` on a module of :data:`SEQUENTIAL_MODULES` gives a
-    :class:`SequentialVectorEnv`; everything else goes to
-    :func:`fdia_env.vector.env.make_vector` unchanged.
+    :func:`fdia_env.vector.env.make_vector`, the table's ``vector_entry_point``, hands the
+    sequential format of a module of :data:`SEQUENTIAL_MODULES` here (this module registers it
+    in :data:`fdia_env.vector.env.FORMAT_VECTOR_ENVS`).
+
+    Raises:
+        ValueError: For a module without the format's native vector env, a render mode, an
+            agent other than the attacker, an opponent, or a bad option of the env.
     """
-    if kwargs.get("action") != "sequential" or module not in SEQUENTIAL_MODULES:
-        return vector_env.make_vector(
-            module,
-            num_envs,
-            agent=agent,
-            opponent=opponent,
-            autoreset_mode=autoreset_mode,
-            max_episode_steps=max_episode_steps,
-            backend=backend,
-            device=device,
-            **kwargs,
+    if module not in SEQUENTIAL_MODULES:
+        raise ValueError(
+            f"action='sequential' has a native vector env for {list(SEQUENTIAL_MODULES)} only, "
+            f"got module {module!r}; use gymnasium.make_vec(..., vectorization_mode='sync')"
         )
     from fdia_env.backend import get_backend
 
@@ -405,3 +402,7 @@ def make_vector(
         backend=backend,
         device=device,
     )
+
+
+for _module in SEQUENTIAL_MODULES:
+    vector_env.FORMAT_VECTOR_ENVS[(_module, "sequential")] = make_vector
