@@ -246,6 +246,14 @@ def _vector_env(
     ids = sorted(registration.GYM_IDS)
     if env_id not in ids:
         raise ValueError(f"env must be one of {', '.join(ids)}, got {env!r}")
+    module, agent = registration.GYM_IDS[env_id]
+    entry = next(e for e in registration.ENVS.values() if e.module == module)
+    if entry.vector != registration.VECTOR_ENTRY_POINT or not entry.has_vector(agent):
+        raise ValueError(
+            f"env {env_id!r} has no native vector env of the Kalman-filter engine, which "
+            "FdiaTorchRLEnv wraps; use TorchRL's GymEnv (or GymWrapper on gymnasium.make_vec) "
+            f"for it. FdiaTorchRLEnv serves {', '.join(_engine_ids(registration))}"
+        )
     if "autoreset_mode" in kwargs or "vectorization_mode" in kwargs:
         raise ValueError(
             "autoreset_mode and vectorization_mode are set by FdiaTorchRLEnv (SAME_STEP, the "
@@ -263,6 +271,17 @@ def _vector_env(
     if not isinstance(venv, FdiaVectorEnv):  # an env without a batched implementation
         raise ValueError(f"{env_id} has no native vector env; TorchRL's GymEnv serves it")
     return venv
+
+
+def _engine_ids(registration: Any) -> list[str]:
+    """The Gymnasium ids whose view has the engine's native vector env (what this wraps)."""
+    return [
+        env_id
+        for e in registration.ENVS.values()
+        if e.vector == registration.VECTOR_ENTRY_POINT
+        for agent, env_id in e.views.items()
+        if e.has_vector(agent)
+    ]
 
 
 def _final_obs(info: dict[str, Any], venv: FdiaVectorEnv) -> Any:
