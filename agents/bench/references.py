@@ -54,7 +54,7 @@ def _random(spec: TaskSpec, episodes: int = RANDOM_EPISODES) -> RandomReference:
             result = evaluate(
                 "random", env, episodes, RANDOM_SEED, reference=1.0, num_envs=episodes
             )
-        except ValueError:  # no native vector env for this view or these options
+        except (TypeError, ValueError):  # no native vector env for this view or options
             result = evaluate("random", env, episodes, RANDOM_SEED, reference=1.0)
     finally:
         env.close()
@@ -186,7 +186,10 @@ def sensor_game(spec: TaskSpec) -> References:
     env = make(spec)
     try:
         parallel = env.unwrapped.parallel
-        L = payoff_matrix(parallel.scenario, parallel.attack.power, parallel.attack.allocation)
+        attack = parallel.attack
+        L = payoff_matrix(
+            parallel.scenario, attack.power, attack.allocation, attack.max_subset_size
+        )
     finally:
         env.close()
     _, _, value = solve_zero_sum(L)
