@@ -105,6 +105,7 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
         self.render_mode = None
         self.parallel = parallel
+        self.agent = "attacker"
         self.illegal_action = parallel.illegal_action
         self.skip_forced = parallel.skip_forced
         self.backend, self.device = self.inner.backend, self.inner.device
