@@ -153,3 +153,13 @@ def test_command_line_verify_runs_on_one_task(capsys):
     assert main(["verify", "--task", "sensor-game/ch5-game-attacker-v0"]) == 0
     out = capsys.readouterr().out
     assert "sensor-game/ch5-game-attacker-v0" in out and "1/1 tasks match" in out
+
+
+def test_the_benchmark_page_shows_the_stored_references():
+    from pathlib import Path
+
+    from agents.bench.verify import tasks_table
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "benchmark.md").read_text("utf-8")
+    assert tasks_table() in page  # rewrite it with: python -m agents.bench table
+    assert page.count("| `") >= len(ALL)
