@@ -176,18 +176,18 @@ def test_illegal_actions():
         )
     with pytest.raises(ValueError, match="not an attack model format"):
         SparseAttack(3, action="sequential")
-    with pytest.raises(ValueError, match="not available in the native vector env"):
-        gym.make_vec(
-            "fdia_env/SparseAttack-v0",
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            action="sequential",
-        )
     from agents.evaluate import evaluate
 
-    view = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", action="sequential")
-    with pytest.raises(TypeError, match="not available in the native vector env"):
-        evaluate("random", view, n_episodes=2, num_envs=2)  # the batched evaluation path
+    # the batched evaluation path plays the native vector env of the format: same returns
+    kwargs = dict(scenario="ch4-position", budget=3, horizon=5, action="sequential")
+    view = gym.make("fdia_env/SparseAttack-v0", **kwargs)
+    result = sfs("ch4-position", 3, 5)
+    one = evaluate(result.policy("sequential"), view, n_episodes=2, reference=result.value)
+    batched = evaluate(
+        result.policy("sequential"), view, n_episodes=3, num_envs=3, reference=result.value
+    )
+    assert one.returns.tolist() == pytest.approx([result.value] * 2, rel=1e-12)
+    assert batched.returns.tolist() == pytest.approx([result.value] * 3, rel=1e-12)
     with pytest.raises(RuntimeError, match="before reset"):
         sparse_attack_v0.parallel_env(scenario="ch4-position", action="sequential").step(
             {"attacker": 0}

@@ -207,6 +207,31 @@ def test_a_protected_sensor_gets_no_injection_and_the_defender_sets_the_rate():
 
 
 @pytest.mark.parametrize("action", ["bias", "linear"])
+def test_the_protect_defender_guards_its_budget_of_sensors_each_step(action):
+    env = stealth_dynamic_v0.parallel_env(
+        dynamics="expected", defender="protect", protect_budget=2, action=action
+    )
+    assert env.action_space("defender") == gym.spaces.MultiBinary(3)
+    attack = 0.5 * np.ones(env.action_space("attacker").shape, dtype=np.float32)
+    env.reset(seed=0)
+    _, rewards, _, _, infos = env.step({"attacker": attack, "defender": np.array([1, 1, 1])})
+    np.testing.assert_array_equal(infos["defender"]["protected"], [1, 1, 0])  # budget 2
+    assert rewards["defender"] == pytest.approx(-rewards["attacker"] - 0.05)
+    # the same step against a fixed protection of sensors 0 and 1: the same error
+    fixed = stealth_dynamic_v0.parallel_env(dynamics="expected", protected=[0, 1], action=action)
+    fixed.reset(seed=0)
+    _, want, _, _, fixed_infos = fixed.step({"attacker": attack})
+    assert rewards["attacker"] == pytest.approx(want["attacker"], rel=1e-12)
+    assert infos["attacker"]["phi"] > env.model.clean  # sensor 2 is still attacked
+    env.reset(seed=0)
+    _, _, _, _, infos = env.step({"attacker": attack, "defender": np.zeros(3, dtype=np.int8)})
+    assert infos["attacker"]["phi"] > fixed_infos["attacker"]["phi"]  # nothing guarded: worse
+    view = gym.make(GYM_ID, defender="protect", dynamics="expected", action=action)
+    view.reset(seed=0)
+    assert view.step(attack)[4]["protected"].tolist() == [0, 0, 0]  # the default opponent
+
+
+@pytest.mark.parametrize("action", ["bias", "linear"])
 def test_native_vector_env_matches_single_envs_in_expected_dynamics(action):
     kwargs = {"dynamics": "expected", "horizon": 3, "action": action}
     venv = gym.make_vec(GYM_ID, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
@@ -240,6 +265,24 @@ def test_sampled_episode_ends_at_the_first_alarm_with_on_detect_end():
     assert env.agents == []
 
 
+@pytest.mark.filterwarnings("ignore::UserWarning")  # PettingZoo's reset options, which we name
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"defender": "threshold"}, {"defender": "protect", "action": "linear"}],
+    ids=["threshold", "protect-linear"],
+)
+def test_pettingzoo_and_gymnasium_conformance_of_the_defender_variants(kwargs):
+    from gymnasium.utils.env_checker import check_env
+    from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, seed_test
+
+    parallel_api_test(stealth_dynamic_v0.parallel_env(**kwargs), num_cycles=40)
+    parallel_seed_test(lambda: stealth_dynamic_v0.parallel_env(**kwargs))
+    api_test(stealth_dynamic_v0.env(**kwargs), num_cycles=20)
+    seed_test(lambda: stealth_dynamic_v0.env(**kwargs), num_cycles=20)
+    for agent_id in (GYM_ID, "fdia_env/StealthDynamicDefender-v0"):
+        check_env(gym.make(agent_id, **kwargs).unwrapped, skip_render_check=True)
+
+
 def test_bad_input_is_a_value_error_naming_the_parameter():
     make = stealth_dynamic_v0.parallel_env
     for kwargs, name in [
@@ -253,7 +296,8 @@ def test_bad_input_is_a_value_error_naming_the_parameter():
         ({"a_max": -1.0}, "a_max"),
         ({"t_max": float("inf")}, "t_max"),
         ({"penalty": float("nan")}, "penalty"),
-        ({"defender": "protect"}, "defender"),
+        ({"defender": "sensors"}, "defender"),
+        ({"defender": "protect", "protect_budget": 4}, "protect_budget"),
         ({"alphas": [0.1, 1.5]}, "alphas"),
         ({"dynamics": "mean"}, "dynamics"),
         ({"horizon": 0}, "horizon"),
