@@ -309,3 +309,28 @@ def test_the_runner_refuses_bad_options(capsys):
         with pytest.raises(SystemExit):
             experiments(["bench", *argv, "--no-render"])
         assert needle in capsys.readouterr().err
+
+
+def test_an_sb3_model_in_a_game_is_scored_on_its_action_distribution():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.algos import build_model
+    from agents.config import Hyperparameters, algo_kwargs
+
+    game = get("sensor-game/ch5-game-attacker-v0")
+    with game.make_env() as env:
+        model = build_model(
+            "PPO", DummyVecEnv([lambda: env]), algo_kwargs("PPO", Hyperparameters()), 3
+        )
+        import torch
+
+        obs, _ = env.reset(seed=0)
+        obs_t, _ = model.policy.obs_to_tensor(obs)
+        with torch.no_grad():
+            probs = model.policy.get_distribution(obs_t).distribution.probs.numpy().ravel()
+    # float32 probabilities: their sum misses 1 by more than the game solver's 1e-9 tolerance
+    assert abs(probs.astype(np.float64).sum() - 1.0) > 1e-9
+    result = score_policy(game, model, seeds=(0,), episodes=2)
+    # an untrained network plays close to the uniform mix: close to random play's score, 0
+    assert result.description == "" and abs(result.normalised) < 0.5
+    assert result.extras["exploitability"] > 0
