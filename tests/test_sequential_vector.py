@@ -226,3 +226,62 @@ def test_torch_backend_matches_numpy(dynamics):
     assert ended >= 6
     with pytest.raises(TypeError, match=r"torch\.Tensor"):
         tv.step(np.zeros(6, dtype=np.int64))
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_torchrl_face_serves_the_sequential_format_with_its_action_mask(backend):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("torchrl")
+    from torchrl.envs import ActionMask, TransformedEnv
+    from torchrl.envs.utils import check_env_specs
+
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    def make(rule):
+        return FdiaTorchRLEnv(
+            ID,
+            num_envs=3,
+            backend=backend,
+            action="sequential",
+            scenario="ch4-position",
+            budget=2,
+            horizon=4,
+            illegal_action=rule,
+        )
+
+    env = make("trim")  # check_env_specs plays unmasked random actions
+    assert isinstance(env.venv, SequentialVectorEnv)
+    assert env.observation_spec["action_mask"].shape == (3, 4)
+    check_env_specs(env, seed=0)
+    env = make("error")
+    masked = TransformedEnv(env, ActionMask())  # random actions drawn within the mask
+    masked.set_seed(0)
+    rollout = masked.rollout(12, break_when_any_done=False)
+    assert tuple(rollout.batch_size) == (3, 12)
+    mask, action = rollout["action_mask"], rollout["action"]
+    assert bool(mask.gather(-1, action.unsqueeze(-1)).all())  # "error": none was illegal
+    assert int(rollout["next", "done"].sum()) >= 3  # every member ended at least once
+    assert bool(torch.isfinite(rollout["next", "reward"]).all())
+
+
+@pytest.mark.parametrize("action", ["sequential", "multibinary"])
+def test_sb3_ppo_and_a2c_train_on_grid_ieee14_in_the_native_vector_env(action):
+    from stable_baselines3 import A2C, PPO
+
+    from fdia_env.vector.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(ID, num_envs=8, scenario="grid-ieee14", action=action)
+    assert isinstance(venv.venv, SequentialVectorEnv) == (action == "sequential")
+    for algo, kwargs in ((PPO, {"n_epochs": 1, "batch_size": 128}), (A2C, {})):
+        model = algo("MlpPolicy", venv, n_steps=16, seed=0, device="cpu", **kwargs)
+        model.learn(total_timesteps=256)  # float actions of MultiBinary, ints of Discrete
+        assert model.num_timesteps >= 256
+    if action == "sequential":
+        sb3_contrib = pytest.importorskip("sb3_contrib")
+        masks = np.stack(venv.env_method("action_masks"))
+        assert masks.shape == (8, 35) and masks[:, 0].all()
+        model = sb3_contrib.MaskablePPO(
+            "MlpPolicy", venv, n_steps=16, batch_size=128, n_epochs=1, seed=0, device="cpu"
+        )
+        model.learn(total_timesteps=256)
+        assert model.num_timesteps >= 256

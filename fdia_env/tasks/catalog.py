@@ -133,6 +133,41 @@ def _detection(instance: str, scenario: str, power: float) -> TaskSpec:
     )
 
 
+def _stealth(instance: str, scenario: str, budget: int) -> TaskSpec:
+    return TaskSpec(
+        f"stealth/{instance}-v0",
+        "stealth",
+        "attacker",
+        STEALTH_ATTACKER,
+        {"scenario": scenario, "budget": budget, "action": "shift", "dynamics": "expected"},
+        "fdia_env.stealth.stealth_attack_v0",
+        f"{scenario}: shift state estimates past the chi2 bad-data test with at most {budget} "
+        "meters, maximise the expected undetected shift",
+        episodes=10,
+    )
+
+
+def _family(instance: str, objective: str, first: int, count: int, **family: Any) -> TaskSpec:
+    from fdia_env.envs.system_family import TrackingFamily
+
+    return TaskSpec(
+        f"system-family/{instance}-v0",
+        "system-family",
+        "attacker",
+        FAMILY_ID,
+        {
+            "family": TrackingFamily(**family),
+            "system_seeds": range(first, first + count),
+            "objective": objective,
+        },
+        None,
+        f"one sparse attacker for {count} random tracking systems ({family}), a system drawn "
+        "at every reset",
+        episodes=100,
+        entry_point=FAMILY_ENTRY_POINT,
+    )
+
+
 SPECS: tuple[TaskSpec, ...] = (
     _sparse("ch4-position", "ch4-position", 5, 6),
     _sparse("ch4-position-long", "ch4-position", 8, 10),
@@ -174,4 +209,6 @@ SPECS: tuple[TaskSpec, ...] = (
     _bayes("m10-strong-informed", "game-m10", "defender", "informed", power=1000.0),
     _detection("ch3-static", "ch3-static", 240.0),
     _detection("ch3-tracking", "ch3-tracking", 7.5),
+    _stealth("ieee14-b3", "grid-ieee14", 3),
+    _family("tracking-m6", "trace", 1_000_000, 20, num_sensors=6, budget=4, horizon=4),
 )
