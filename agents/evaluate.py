@@ -435,7 +435,8 @@ def _sb3_strategy(policy: Any, obs: Any, n: int, deterministic: bool) -> np.ndar
     obs_t, _ = policy.policy.obs_to_tensor(obs)
     with torch.no_grad():
         dist = policy.policy.get_distribution(obs_t).distribution
-    return dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+    probs = dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+    return probs / probs.sum()  # float32 probabilities sum to 1 within 1e-7 only
 
 
 def _bayesian_score(
