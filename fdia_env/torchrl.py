@@ -10,8 +10,11 @@ out.
 Specs come from the env's Gymnasium spaces, with the batch (B,) in front:
 
 - ``"observation"``: ``Bounded`` float32 (B, d), the single env's features;
-- ``"action_mask"`` (masked players only: the sparse attack): bool (B, A), True where legal,
-  the key TorchRL's ``ActionMask`` transform and ``MaskedCategorical`` read;
+- ``"action_mask"`` (masked players only: the sparse attack, also in its sequential format
+  ``action="sequential"``, whose native vector env
+  :class:`~fdia_env.vector.sequential.SequentialVectorEnv` this serves the same way): bool
+  (B, A), True where legal, the key TorchRL's ``ActionMask`` transform and
+  ``MaskedCategorical`` read;
 - ``"phi"``: float64 (B,), the estimation-error measure Φ after the step;
 - ``"action"``: ``Categorical`` int64 (B,) for a ``Discrete`` space (index encoding),
   ``Bounded`` (B, k) for a ``Box``, ``Binary`` / ``MultiCategorical`` for ``MultiBinary`` /
@@ -46,6 +49,7 @@ except ImportError as exc:  # pragma: no cover - the [clients] extra is installe
     ) from exc
 
 from fdia_env.vector.env import FdiaVectorEnv
+from fdia_env.vector.sequential import SequentialVectorEnv
 
 __all__ = ["FdiaTorchRLEnv", "action_spec_of"]
 
@@ -221,9 +225,9 @@ class FdiaTorchRLEnv(EnvBase):
 
 def _vector_env(
     env: Any, num_envs: int, backend: str, device: Any, kwargs: dict[str, Any]
-) -> FdiaVectorEnv:
+) -> FdiaVectorEnv | SequentialVectorEnv:
     """The SAME_STEP native vector env of an id, or the given one after its checks."""
-    if isinstance(env, FdiaVectorEnv):
+    if isinstance(env, FdiaVectorEnv | SequentialVectorEnv):
         if kwargs or num_envs != 1 or backend != "torch" or device is not None:
             raise ValueError(
                 "num_envs, backend, device and env options apply to an id only; got them with "
@@ -268,7 +272,7 @@ def _vector_env(
         device=device,
         **kwargs,
     )
-    if not isinstance(venv, FdiaVectorEnv):  # an env without a batched implementation
+    if not isinstance(venv, FdiaVectorEnv | SequentialVectorEnv):  # no batched implementation
         raise ValueError(f"{env_id} has no native vector env; TorchRL's GymEnv serves it")
     return venv
 

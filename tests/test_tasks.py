@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -29,7 +30,7 @@ def test_every_task_builds_and_steps(name):
         assert env.observation_space.contains(obs)
         masks = getattr(env.unwrapped, "action_masks", None)
         rng = np.random.default_rng(0)
-        if masks is not None and hasattr(env.action_space, "n"):
+        if masks is not None and isinstance(env.action_space, gym.spaces.Discrete):
             action = int(rng.choice(np.flatnonzero(masks())))
         else:
             env.action_space.seed(0)
@@ -152,3 +153,13 @@ def test_command_line_verify_runs_on_one_task(capsys):
     assert main(["verify", "--task", "sensor-game/ch5-game-attacker-v0"]) == 0
     out = capsys.readouterr().out
     assert "sensor-game/ch5-game-attacker-v0" in out and "1/1 tasks match" in out
+
+
+def test_the_benchmark_page_shows_the_stored_references():
+    from pathlib import Path
+
+    from agents.bench.verify import tasks_table
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "benchmark.md").read_text("utf-8")
+    assert tasks_table() in page  # rewrite it with: python -m agents.bench table
+    assert page.count("| `") >= len(ALL)

@@ -4,6 +4,8 @@
   difference);
 - ``compute [--task T ...] [--pending]``: compute references and write them to
   ``fdia_env/tasks/references.json``;
+- ``table [--page docs/benchmark.md]``: rewrite the page's table of tasks from the stored
+  references;
 - ``score --task T --agent ...``: score an agent on a task (``agents.bench.score``; its own
   ``--help`` lists the options).
 """
@@ -32,6 +34,8 @@ def _parser() -> argparse.ArgumentParser:
         "--pending", action="store_true", help="the tasks without stored references"
     )
     compute.add_argument("--all", action="store_true", help="every defined task")
+    table = sub.add_parser("table", help="write the tasks table of docs/benchmark.md")
+    table.add_argument("--page", default="docs/benchmark.md", help="the page to update")
     sub.add_parser("score", help="score an agent on a task (see score --help)", add_help=False)
     return parser
 
@@ -103,6 +107,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _score(argv[1:])
     args = _parser().parse_args(argv)
     try:
+        if args.command == "table":
+            from pathlib import Path
+
+            from agents.bench.verify import write_table
+
+            changed = write_table(Path(args.page))
+            print(f"{args.page}: {'updated' if changed else 'unchanged'}")
+            return 0
         return _verify(args) if args.command == "verify" else _compute(args)
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)

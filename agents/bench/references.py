@@ -54,7 +54,7 @@ def _random(spec: TaskSpec, episodes: int = RANDOM_EPISODES) -> RandomReference:
             result = evaluate(
                 "random", env, episodes, RANDOM_SEED, reference=1.0, num_envs=episodes
             )
-        except ValueError:  # no native vector env for this view or these options
+        except (TypeError, ValueError):  # no native vector env for this view or options
             result = evaluate("random", env, episodes, RANDOM_SEED, reference=1.0)
     finally:
         env.close()
@@ -186,7 +186,10 @@ def sensor_game(spec: TaskSpec) -> References:
     env = make(spec)
     try:
         parallel = env.unwrapped.parallel
-        L = payoff_matrix(parallel.scenario, parallel.attack.power, parallel.attack.allocation)
+        attack = parallel.attack
+        L = payoff_matrix(
+            parallel.scenario, attack.power, attack.allocation, attack.max_subset_size
+        )
     finally:
         env.close()
     _, _, value = solve_zero_sum(L)
@@ -283,12 +286,98 @@ def detection_game(spec: TaskSpec) -> References:
     )
 
 
+def _play_seeded(env: Any, policy: Any, options: dict[str, Any]) -> float:
+    """One episode of ``policy`` in ``env`` reset with ``options``: its return."""
+    obs, _ = env.reset(seed=0, options=options)
+    total, done = 0.0, False
+    while not done:
+        action, _ = policy.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total += float(reward)
+        done = terminated or truncated
+    return total
+
+
+def system_family(spec: TaskSpec) -> References:
+    """The family's expected optimum, with SFS as the heuristic.
+
+    EXS on every system of ``system_seeds`` (each drawn with equal probability), played in the
+    env with the system pinned; SFS likewise.
+    """
+    from baselines.sparse import exhaustive, sfs
+
+    env = make(spec)
+    try:
+        view = env.unwrapped
+        family, seeds, objective = view.family, view.system_seeds, view.objective
+        best, greedy = [], []
+        for k in seeds:
+            scenario = family.scenario(k)
+            args = (scenario, family.budget, family.horizon, objective)
+            options = {"system_seed": k}
+            best.append(_play_seeded(env, exhaustive(*args).policy(), options))
+            greedy.append(_play_seeded(env, sfs(*args).policy(), options))
+    finally:
+        env.close()
+    value = float(np.mean(best))
+    return References(
+        objective="trace" if objective == "trace" else "logdet",
+        metric="return",
+        random=_random(spec),
+        heuristics={"SFS": float(np.mean(greedy))},
+        optimum=Optimum(value, f"EXS on each of the {len(seeds)} systems", True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def stealth(spec: TaskSpec) -> References:
+    """The optimum over every shift pattern, with the best single-state shift as heuristic.
+
+    All patterns of the ``action="shift"`` space are played at once in the native vector env
+    (expected dynamics: exact returns).
+    """
+    import gymnasium
+
+    env = make(spec)
+    try:
+        n = int(env.action_space.n)
+    finally:
+        env.close()
+    if n > 16:
+        raise ValueError(f"{spec.name}: 2^{n} shift patterns are too many to enumerate")
+    bits = ((np.arange(2**n)[:, None] >> np.arange(n)) & 1).astype(np.int8)
+    venv = gymnasium.make_vec(
+        spec.env_id, num_envs=2**n, vectorization_mode="vector_entry_point", **spec.env_kwargs
+    )
+    try:
+        venv.reset(seed=0)
+        _, rewards, *_ = venv.step(bits)
+    finally:
+        venv.close()
+    horizon = int(spec.env_kwargs.get("horizon", 1))
+    returns = np.asarray(rewards, dtype=np.float64) * horizon  # the same snapshot every step
+    value = float(returns.max())
+    single = float(returns[[1 << j for j in range(n)]].max())
+    return References(
+        objective="trace",
+        metric="return",
+        random=_random(spec),
+        heuristics={"best single-state shift": single},
+        optimum=Optimum(value, f"exhaustive over the 2^{n} shift patterns", True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
 FAMILIES = {
     "sparse": sparse,
     "covariance": covariance,
     "sensor-game": sensor_game,
     "incomplete-information": incomplete_information,
     "detection-game": detection_game,
+    "system-family": system_family,
+    "stealth": stealth,
 }
 
 

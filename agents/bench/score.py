@@ -109,7 +109,7 @@ def score_policy(
     episodes: int | None = None,
     agent: str = "policy",
     description: str = "",
-    deterministic: bool = True,
+    deterministic: bool | None = None,
 ) -> Score:
     """Play ``policy`` on ``task`` and normalise its score (see the module docstring).
 
@@ -120,7 +120,9 @@ def score_policy(
         episodes: Episodes per seed (default: the task's ``episodes``).
         agent: The agent's name in the report.
         description: Its kind.
-        deterministic: Passed to ``predict``.
+        deterministic: Passed to ``predict``; None (default): the most likely action in a
+            single-player task, the policy's action distribution (its mixed strategy) in a
+            game, where the equilibrium is mixed.
 
     Raises:
         ValueError: For a bad task name (naming ``task``), bad ``seeds`` or ``episodes``.
@@ -132,6 +134,8 @@ def score_policy(
     n = task.episodes if episodes is None else episodes
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    if deterministic is None:
+        deterministic = not _is_game(task)
     env = task.make_env()
     try:
         runs = [
@@ -194,7 +198,7 @@ def score(
     episodes: int | None = None,
     algo: str | None = None,
     trust_checkpoint: bool = False,
-    deterministic: bool = True,
+    deterministic: bool | None = None,
 ) -> Score:
     """Load ``agent`` (:func:`agents.bench.agents.load_agent`) and score it on ``task``.
 
@@ -299,7 +303,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="allow an SB3 .zip, which is unpickled and can run code (only files you trust)",
     )
-    parser.add_argument("--stochastic", action="store_true", help="sample the policy's actions")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--stochastic",
+        action="store_true",
+        help="sample the policy's actions (the default in games: its mixed strategy)",
+    )
+    mode.add_argument(
+        "--deterministic",
+        action="store_true",
+        help="the most likely action (the default in single-player tasks)",
+    )
     parser.add_argument("--json", type=Path, default=None, help="also write the score as JSON")
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.seeds < 1:
@@ -313,7 +327,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             episodes=args.episodes,
             algo=args.algo,
             trust_checkpoint=args.trust_checkpoint,
-            deterministic=not args.stochastic,
+            deterministic=False if args.stochastic else True if args.deterministic else None,
         )
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

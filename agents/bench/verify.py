@@ -109,3 +109,51 @@ def write(names: Iterable[str], path: Path = REFERENCES_PATH) -> dict[str, float
         }
         path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
     return took
+
+
+TABLE_START = "<!-- tasks:start -->"
+TABLE_END = "<!-- tasks:end -->"
+
+
+def _num(x: float) -> str:
+    return f"{x:.4g}"
+
+
+def tasks_table() -> str:
+    """The markdown table of every task and its stored references (docs/benchmark.md)."""
+    lines = [
+        "| task | player | grade | random: raw (ratio to optimum) | best heuristic: raw "
+        "(normalised) | certified reference: raw (solver) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for task in tasks.TASKS.values():
+        refs = task.references
+        best = refs.best_heuristic
+        heur = (
+            "-" if best is None else (f"{best[0]}: {_num(best[1])} ({refs.normalise(best[1]):.3f})")
+        )
+        opt = refs.optimum
+        where = opt.name if opt.certified else f"{opt.name}, bound {_num(opt.bound)}"
+        lines.append(
+            f"| `{task.name}` | {task.player} | {task.difficulty} | "
+            f"{_num(refs.random.mean)} ({refs.random_ratio:.3f}) | {heur} | "
+            f"{_num(opt.value)} ({where}) |"
+        )
+    return "\n".join(lines)
+
+
+def write_table(page: Path) -> bool:
+    """Replace the table between the markers of ``page``; True when the page changed.
+
+    Raises:
+        ValueError: When ``page`` lacks the markers.
+    """
+    text = page.read_text(encoding="utf-8")
+    if TABLE_START not in text or TABLE_END not in text:
+        raise ValueError(f"page {page} has no {TABLE_START} ... {TABLE_END} markers")
+    head, rest = text.split(TABLE_START, 1)
+    _, tail = rest.split(TABLE_END, 1)
+    new = f"{head}{TABLE_START}\n\n{tasks_table()}\n\n{TABLE_END}{tail}"
+    if new != text:
+        page.write_text(new, encoding="utf-8")
+    return new != text

@@ -107,7 +107,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         help=f"comma-separated learners ({', '.join(LEARNERS)}); those that do not fit a task's "
         "actions are skipped there",
     )
-    parser.add_argument("--seeds", type=int, default=3, help="training seeds 0..N-1 (default 3)")
+    parser.add_argument("--seeds", type=int, default=3, help="training seeds (default 3)")
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="the first training seed (default 0)"
+    )
     parser.add_argument("--timesteps", type=int, default=20_000, help="training steps per run")
     parser.add_argument(
         "--hp",
@@ -127,6 +130,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.seeds < 1:
         parser.error(f"--seeds must be >= 1, got {args.seeds}")
+    if args.first_seed < 0:
+        parser.error(f"--first-seed must be >= 0, got {args.first_seed}")
     if args.timesteps < 1:
         parser.error(f"--timesteps must be >= 1, got {args.timesteps}")
     algos = [a.strip() for a in args.algo.split(",") if a.strip()]
@@ -149,12 +154,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 if not applicable(task, algo):
                     print(f"{task.name}: {algo} does not fit its actions, skipped", flush=True)
                     continue
-                for seed in range(args.seeds):
+                for seed in range(args.first_seed, args.first_seed + args.seeds):
                     row = learner_row(task, algo, seed, args.timesteps, args.episodes, hp)
                     new.append(row)
                     print(
                         f"{task.name} {algo} seed {seed}: normalised {row['normalised']:.4f} "
-                        f"(raw {row['mean']:.6g}, {row['train_seconds']} s)",
+                        f"(raw {row['raw']:.6g}, {row['train_seconds']} s)",
                         flush=True,
                     )
                     rows = merge_rows(rows, [row])

@@ -52,7 +52,7 @@ def learner_entries(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for method, group in by_method.items():
         group = sorted(group, key=lambda r: r["seed"])
         mean, half = seed_interval(r["normalised"] for r in group)
-        raw = float(np.mean([r["mean"] for r in group]))
+        raw = float(np.mean([r.get("raw", r["mean"]) for r in group]))
         steps = sorted({r["timesteps"] for r in group})
         note = (
             f"{len(group)} seeds, {', '.join(f'{s:,}' for s in steps)} steps, "
@@ -77,10 +77,11 @@ def _num(v: float | None, fmt: str = ".3f") -> str:
 
 def task_table(task: Any, rows: list[dict[str, Any]]) -> str:
     """The Markdown table of one task."""
+    unit = "worst-case return" if task.is_game else "return"
     lines = [
         f"**{task.name}** ({task.family}, {task.player}, {task.difficulty})",
         "",
-        "| method | normalised score | raw return | notes |",
+        f"| method | normalised score | raw ({unit}) | notes |",
         "|---|---|---|---|",
     ]
     for entry in reference_entries(task) + learner_entries(rows):

@@ -15,7 +15,7 @@ from fdia_env.envs.actions import check_step_actions
 from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
 from fdia_env.scenarios import resolve
 from fdia_env.stealth.dynamic_model import ACTIONS, DynamicModel
-from fdia_env.stealth.env import DEFAULT_ALPHAS, DEFENDERS, DYNAMICS, ON_DETECT, _check_alphas
+from fdia_env.stealth.env import DEFAULT_ALPHAS, DYNAMICS, ON_DETECT, _check_alphas
 from fdia_env.stealth.static import check_alpha
 
 MAX_RATIO = 10.0
@@ -23,6 +23,8 @@ MAX_RATIO = 10.0
 MAX_LOG_ERROR = 30.0
 """Cap of the observed ``ln(phi / tr P_f)``."""
 DEFAULT_HORIZON = 20
+DEFENDERS = (None, "threshold", "protect")
+"""The defender: none (passive), the detector's false-alarm rate, or the sensors it protects."""
 
 
 class _NoResetOptions:
@@ -65,6 +67,7 @@ class StealthDynamicEnv(ParallelEnv):
         defender: str | None = None,
         alphas: Any = None,
         false_alarm_cost: float = 1.0,
+        protect_budget: int = 1,
     ) -> None:
         sc = resolve(scenario)
         system = sc.system
@@ -93,9 +96,13 @@ class StealthDynamicEnv(ParallelEnv):
         self.defender = defender
         self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
         self.false_alarm_cost = _check_cost("false_alarm_cost", false_alarm_cost)
+        self.protect_budget = check_int(
+            "protect_budget", protect_budget, minimum=1, maximum=system.M
+        )
         row_sensor = np.asarray(system.row_sensor)
         rows = np.flatnonzero(np.isin(row_sensor, self.sensors))
         free = ~np.isin(row_sensor[rows], self.protected)
+        self._row_sensor = row_sensor[rows]
         self.model = DynamicModel(
             system=system,
             rows=rows,
@@ -108,13 +115,18 @@ class StealthDynamicEnv(ParallelEnv):
         )
         self.window = window
         # the attacker alone faces alpha; with a defender, the rate it picks among alphas
-        self._rates = (self.alpha,) if defender is None else self.alphas
+        self._rates = self.alphas if defender == "threshold" else (self.alpha,)
         self._tau = self.model.thresholds(self._rates)
         self.attack = _NoResetOptions()
         self.possible_agents = ["attacker"] if defender is None else ["attacker", "defender"]
         self.agents: list[str] = []
         act = spaces.Box(-1.0, 1.0, shape=self.model.action_shape, dtype=np.float32)
-        self._action_spaces = {"attacker": act, "defender": spaces.Discrete(len(self.alphas))}
+        guard = (
+            spaces.MultiBinary(system.M)
+            if defender == "protect"
+            else spaces.Discrete(len(self.alphas))
+        )
+        self._action_spaces = {"attacker": act, "defender": guard}
         low = np.zeros(4, dtype=np.float32)
         high = np.array([1.0, 1.0, MAX_RATIO, MAX_LOG_ERROR], dtype=np.float32)
         self._observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -157,6 +169,7 @@ class StealthDynamicEnv(ParallelEnv):
             "threshold": float(self._tau[self._default_rate(), 0]),
             "kl": 0.0,
             "alpha": float(self._rates[self._default_rate()]),
+            "protected": self._protected_indicator(self.protected),
         }
         self._history: list[tuple[float, float]] = []
 
@@ -189,9 +202,12 @@ class StealthDynamicEnv(ParallelEnv):
         check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
-        rate = self._default_rate()
-        if self.defender is not None:
+        rate, free, guarded = self._default_rate(), None, self.protected
+        if self.defender == "threshold":
             rate = int(np.asarray(actions["defender"]).reshape(()))
+        elif self.defender == "protect":
+            guarded = self.protection(actions["defender"])
+            free = ~np.isin(self._row_sensor, guarded)[None]
         act = np.asarray(actions["attacker"], dtype=np.float64).reshape(self.model.action_shape)
         alpha = self._rates[rate]
         out = self.model.step(
@@ -201,6 +217,7 @@ class StealthDynamicEnv(ParallelEnv):
             self._tau[[rate]],
             self.dynamics == "sampled",
             self.np_random,
+            free,
         )
         o = {key: value[0] for key, value in out.items()}
         caught = -self.penalty if self.on_detect == "penalty" else 0.0
@@ -220,6 +237,7 @@ class StealthDynamicEnv(ParallelEnv):
             "threshold": float(o["threshold"]),
             "kl": float(o["kl"]),
             "alpha": float(alpha),
+            "protected": self._protected_indicator(guarded),
         }
         self._history.append((self._last["phi"], self._last["statistic"] / self._last["threshold"]))
         done = self._k >= self.horizon or (detected and self.on_detect == "end")
@@ -248,7 +266,24 @@ class StealthDynamicEnv(ParallelEnv):
         )
 
     def _info(self) -> dict[str, Any]:
-        return {"step": int(self._k), **self._last}
+        info = {"step": int(self._k), **self._last}
+        info["protected"] = self._last["protected"].copy()
+        return info
+
+    def protection(self, action: Any) -> np.ndarray:
+        """Sensors protected this step (sorted positions).
+
+        The fixed ``protected`` ones and, with ``defender="protect"``, the first
+        ``protect_budget`` sensors the action's bits select (lowest positions first; bits
+        beyond the budget are ignored).
+        """
+        bits = np.flatnonzero(np.asarray(action).reshape(-1))[: self.protect_budget]
+        return np.union1d(self.protected, bits)
+
+    def _protected_indicator(self, sensors: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.scenario.system.M, dtype=np.int8)
+        out[np.asarray(sensors, dtype=np.int64)] = 1
+        return out
 
     def state(self) -> np.ndarray:
         """Global state: the attacker's observation (the defender sees the same)."""

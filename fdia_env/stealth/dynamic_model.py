@@ -4,7 +4,7 @@ System ``x[k+1] = F x[k] + w``, ``y[k] = H x[k] + v`` (``w ~ N(0, Q)``, ``v ~ N(
 stacked rows of the scenario's sensors), the steady-state Kalman filter
 ``x̂[k+1] = F x̂[k] + K z[k+1]`` on the innovation ``z[k+1] = y[k+1] − H F x̂[k]`` (covariance
 ``Σ = H P H' + R``, P the predicted steady state), and the windowed χ² detector of Mo &
-Sinopoli (docs/references.md), ``g[k] = Σ_{j=k−w+1..k} z̃[j]' Σ⁻¹ z̃[j]`` over the last w
+Sinopoli (2010), ``g[k] = Σ_{j=k−w+1..k} z̃[j]' Σ⁻¹ z̃[j]`` over the last w
 innovations the estimator receives, alarm when ``g[k] > τ``, τ the upper-α quantile of χ² with
 ``m · min(k, w)`` degrees of freedom (m rows): without attack the alarm rate is α at every step.
 
@@ -28,6 +28,7 @@ batch of one. See docs/guide/stealth.md ("Dynamic").
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -148,6 +149,7 @@ class DynamicModel:
         tau: np.ndarray,
         sampled: bool,
         rng: Any,
+        free: np.ndarray | None = None,
     ) -> dict[str, np.ndarray]:
         """Advance every member one step (in place) and return what it saw.
 
@@ -158,6 +160,8 @@ class DynamicModel:
             tau: (B, w) each member's thresholds (:meth:`thresholds` rows).
             sampled: Draw the noises (else the expected dynamics: no draw).
             rng: numpy Generator for the draws.
+            free: (B, |S|) bool, the attacked rows each member's attacker may write this step
+                (default :attr:`free`; a defender's protection clears some).
 
         Returns:
             Arrays (B,): ``phi`` (trace of the error covariance given the attack), ``error``
@@ -177,7 +181,7 @@ class DynamicModel:
             z = (state["e"] @ self.F.T + w) @ self.H.T + v
             state["e"] = state["e"] @ self.F.T + w - z @ self.K.T
         if self.action == "bias":
-            inj = self.injections(acts)
+            inj = self.injections(acts, free)
             dz = d @ self.HF.T + inj
             nc = np.sum((dz @ self.Wz.T) ** 2, axis=1)
             state["d"] = d @ self.Abar.T - inj @ self.K.T
@@ -186,7 +190,7 @@ class DynamicModel:
             zt = z + dz if sampled else None
             phi = self.clean + np.sum(state["d"] ** 2, axis=1)
         else:
-            T, Sb = self._linear(acts)
+            T, Sb = self._linear(acts, free)
             eye = np.eye(self.m)
             ImT = eye - T
             M = ImT @ self.Pz @ ImT.transpose(0, 2, 1) + Sb
@@ -238,23 +242,31 @@ class DynamicModel:
             "kl": kl,
         }
 
-    def _linear(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _free(self, batch: int, free: np.ndarray | None) -> np.ndarray:
+        """(B, |S|) float 0/1: the rows each member's attacker may write."""
+        if free is None:
+            return np.broadcast_to(self.free.astype(np.float64), (batch, len(self.rows)))
+        return np.asarray(free, dtype=np.float64) * self.free
+
+    def _linear(
+        self, acts: np.ndarray, free: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(B, m, m) T and Σ_b of (B, |S|, |S| + 1) actions (protected rows pass unchanged)."""
         B, r = acts.shape[0], len(self.rows)
-        free = self.free.astype(np.float64)
+        free = self._free(B, free)
         T = np.broadcast_to(np.eye(self.m), (B, self.m, self.m)).copy()
-        TS = np.eye(r) + self.t_max * acts[:, :, :r] * free[:, None]
+        TS = np.eye(r) + self.t_max * acts[:, :, :r] * free[:, :, None]
         T[:, self.rows[:, None], self.rows[None, :]] = TS
         Sb = np.zeros((B, self.m, self.m))
         sb = self.b_max * np.abs(acts[:, :, r]) * self.sigma * free
         Sb[:, self.rows, self.rows] = sb**2
         return T, Sb
 
-    def injections(self, actions: np.ndarray) -> np.ndarray:
+    def injections(self, actions: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
         """(B, m) the bias injections ``Γ a`` of (B, |S|) actions (``action="bias"``)."""
         acts = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
         inj = np.zeros((acts.shape[0], self.m))
-        inj[:, self.rows] = self.a_max * self.sigma * acts * self.free
+        inj[:, self.rows] = self.a_max * self.sigma * acts * self._free(acts.shape[0], free)
         return inj
 
 
@@ -301,11 +313,20 @@ def chi2_mix_sf(weights: Any, x: float) -> float:
 
 
 def _chi2_mix_sf(weights: np.ndarray, x: float, alpha: float) -> float:
-    """:func:`chi2_mix_sf`, with α where every weight is 1 or 0 (no attack: τ's own rate)."""
-    used = weights[weights > 0.0]
+    """:func:`chi2_mix_sf`, with α where every weight is 1 or 0 (no attack: τ's own rate).
+
+    Results are cached by the sorted weights and x: a stationary attack (the same T every
+    step, or every member) costs one integral.
+    """
+    used = np.sort(weights[weights > 0.0])
     if np.all(np.abs(used - 1.0) <= 1e-12):
         return float(alpha)
-    return chi2_mix_sf(weights, x)
+    return _cached_sf(used.tobytes(), float(x))
+
+
+@functools.lru_cache(maxsize=4096)
+def _cached_sf(key: bytes, x: float) -> float:
+    return chi2_mix_sf(np.frombuffer(key, dtype=np.float64), x)
 
 
 def _psd_sqrt(M: np.ndarray) -> np.ndarray:

@@ -55,20 +55,24 @@ alarm with ``on_detect="end"`` (sampled). Truncates after ``max_cycles``.
 standard deviations), ``t_max`` (4.0), ``b_max`` (2.0), ``dynamics`` (``"sampled"`` |
 ``"expected"``), ``alpha`` (0.05), ``on_detect`` (``"zero"`` | ``"penalty"`` | ``"end"``),
 ``penalty`` (1.0), ``protected`` (sensors the attacker cannot touch), ``render_mode``,
-``max_cycles``; ``defender`` (``None`` | ``"threshold"``), ``alphas`` (the defender's
-false-alarm rates, default 0.001, 0.01, 0.05, 0.1, 0.2), ``false_alarm_cost`` (1.0).
+``max_cycles``; ``defender`` (``None`` | ``"threshold"`` | ``"protect"``), ``alphas`` (the
+defender's false-alarm rates, default 0.001, 0.01, 0.05, 0.1, 0.2), ``false_alarm_cost`` (1.0),
+``protect_budget`` (sensors the ``"protect"`` defender may guard per step, 1).
 
 With ``defender="threshold"`` the env has a second agent ``"defender"`` with ``Discrete(len(
 alphas))``: each step it picks the detector's false-alarm rate; its reward is minus the
 attacker's minus ``false_alarm_cost · α``. Its Gymnasium view is
 ``"fdia_env/StealthDynamicDefender-v0"`` (the attacker samples its action space); the
-attacker's view then faces the rate of ``alphas`` closest to ``alpha``.
+attacker's view then faces the rate of ``alphas`` closest to ``alpha``. With
+``defender="protect"`` the defender has ``MultiBinary(M)`` (M sensors): each step the first
+``protect_budget`` sensors it selects pass unchanged (on top of ``protected``); its reward is
+minus the attacker's minus ``false_alarm_cost · alpha``.
 
 Infos (the same keys at reset and every step): ``phi``, ``error`` (the realised squared error;
 ``phi`` in expected dynamics), ``step``, ``alpha``, ``detected``, ``detection_probability``
 (exact: non-central χ² for a bias, Imhof's integral for a linear attack), ``statistic`` (g; its
 mean in expected dynamics), ``threshold``, ``kl`` (the KL divergence of the step's innovation
-law from the clean one).
+law from the clean one), ``protected`` ((M,) int8: the sensors guarded at the step).
 
 ## Version History
 
@@ -88,6 +92,7 @@ law from the clean one).
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
@@ -99,55 +104,29 @@ from fdia_env.stealth.stealth_attack_v0 import _Fixed, _Sampled
 NAME = "stealth_dynamic_v0"
 
 
-def parallel_env(
-    scenario: Any = "ch4-position",
-    sensors: Any = None,
-    horizon: int | None = None,
-    window: int = 5,
-    action: str = "bias",
-    a_max: float = 5.0,
-    t_max: float = 4.0,
-    b_max: float = 2.0,
-    dynamics: str = "sampled",
-    alpha: float = 0.05,
-    on_detect: str = "zero",
-    penalty: float = 1.0,
-    protected: Any = None,
-    render_mode: str | None = None,
-    max_cycles: int | None = None,
-    defender: str | None = None,
-    alphas: Any = None,
-    false_alarm_cost: float = 1.0,
-) -> StealthDynamicEnv:
-    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
-    return StealthDynamicEnv(
-        scenario,
-        sensors=sensors,
-        horizon=horizon,
-        window=window,
-        action=action,
-        a_max=a_max,
-        t_max=t_max,
-        b_max=b_max,
-        dynamics=dynamics,
-        alpha=alpha,
-        on_detect=on_detect,
-        penalty=penalty,
-        protected=protected,
-        render_mode=render_mode,
-        max_cycles=max_cycles,
-        defender=defender,
-        alphas=alphas,
-        false_alarm_cost=false_alarm_cost,
-    )
+def parallel_env(scenario: Any = "ch4-position", **kwargs: Any) -> StealthDynamicEnv:
+    """The PettingZoo ``ParallelEnv`` (see the module docstring).
+
+    Its options are :class:`~fdia_env.stealth.dynamic.StealthDynamicEnv`'s, listed once there:
+    this function's signature is the class's (``inspect.signature`` reads it).
+    """
+    return StealthDynamicEnv(scenario, **kwargs)
+
+
+parallel_env.__signature__ = inspect.signature(StealthDynamicEnv).replace(  # type: ignore[attr-defined]
+    return_annotation=StealthDynamicEnv
+)
 
 
 def default_opponent(parallel: StealthDynamicEnv, agent: str) -> Any:
     """The other player of a Gymnasium view with ``defender="threshold"``.
 
-    The attacker faces the false-alarm rate of ``alphas`` closest to the env's ``alpha``; the
-    defender faces an attacker that samples its action space (a seeded random attack).
+    The attacker faces the false-alarm rate of ``alphas`` closest to the env's ``alpha`` (with
+    ``defender="protect"``: no protection); the defender faces an attacker that samples its
+    action space (a seeded random attack).
     """
+    if agent == "attacker" and parallel.defender == "protect":
+        return _Fixed(np.zeros(parallel.scenario.system.M, dtype=np.int8))  # nothing protected
     if agent == "attacker":
         alphas = np.asarray(parallel.alphas)
         return _Fixed(np.int64(np.argmin(np.abs(alphas - parallel.alpha))))

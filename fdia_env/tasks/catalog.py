@@ -91,8 +91,9 @@ def _game(instance: str, scenario: str, player: str, **kwargs: Any) -> TaskSpec:
         env_id,
         {"scenario": scenario, **kwargs},
         "fdia_env.sensor_game_v0",
-        f"{scenario}: the {player} of the one-shot sensor-selection game, scored by its "
-        "exploitability (worst-case return against a best response)",
+        f"{scenario}: the {player} of the one-shot sensor-selection game"
+        + "".join(f", {k} {v}" for k, v in kwargs.items())
+        + ", scored by its exploitability (worst-case return against a best response)",
         episodes=10,
     )
 
@@ -132,13 +133,82 @@ def _detection(instance: str, scenario: str, power: float) -> TaskSpec:
     )
 
 
+def _stealth(instance: str, scenario: str, budget: int) -> TaskSpec:
+    return TaskSpec(
+        f"stealth/{instance}-v0",
+        "stealth",
+        "attacker",
+        STEALTH_ATTACKER,
+        {"scenario": scenario, "budget": budget, "action": "shift", "dynamics": "expected"},
+        "fdia_env.stealth.stealth_attack_v0",
+        f"{scenario}: shift state estimates past the chi2 bad-data test with at most {budget} "
+        "meters, maximise the expected undetected shift",
+        episodes=10,
+    )
+
+
+def _family(instance: str, objective: str, first: int, count: int, **family: Any) -> TaskSpec:
+    from fdia_env.envs.system_family import TrackingFamily
+
+    return TaskSpec(
+        f"system-family/{instance}-v0",
+        "system-family",
+        "attacker",
+        FAMILY_ID,
+        {
+            "family": TrackingFamily(**family),
+            "system_seeds": range(first, first + count),
+            "objective": objective,
+        },
+        None,
+        f"one sparse attacker for {count} random tracking systems ({family}), a system drawn "
+        "at every reset",
+        episodes=100,
+        entry_point=FAMILY_ENTRY_POINT,
+    )
+
+
 SPECS: tuple[TaskSpec, ...] = (
     _sparse("ch4-position", "ch4-position", 5, 6),
+    _sparse("ch4-position-long", "ch4-position", 8, 10),
     _sparse("ch4-pv-case1-logdet", "ch4-pv-case1", 5, 6, "logdet"),
+    _sparse("ch4-pv-case3-logdet", "ch4-pv-case3", 5, 6, "logdet"),
     _sparse("ch4-random", "ch4-random", 10, 6),
+    _sparse("ch4-random-logdet", "ch4-random", 5, 6, "logdet"),
+    _sparse("ieee14-logdet", "grid-ieee14", 5, 1, "logdet", action="sequential"),
+    _sparse("ieee14-logdet-window", "grid-ieee14", 4, 3, "logdet", action="sequential"),
+    _sparse("ieee14", "grid-ieee14", 3, 2, action="sequential"),
     _covariance("ch2-position", "ch2-position", 3000.0, "trace"),
+    _covariance("ch2-position-logdet", "ch2-position", 3000.0, "logdet"),
+    _covariance("ch2-pv-1", "ch2-pv-1", 3000.0, "trace"),
+    _covariance("ch2-pv-2", "ch2-pv-2", 3000.0, "trace"),
     _covariance("ch2-pv-2-logdet", "ch2-pv-2", 3000.0, "logdet"),
     _game("ch5-game", "ch5-game", "attacker", power=100.0),
     _game("ch5-game", "ch5-game", "defender", power=100.0),
+    _game("m10", "game-m10", "attacker", power=100.0),
+    _game("m10", "game-m10", "defender", power=100.0),
+    _game("m10-strong", "game-m10", "defender", power=1000.0),
+    _game("m10-strong-dependent", "game-m10", "attacker", power=1000.0, allocation="dependent"),
+    _game("m10-strong-dependent", "game-m10", "defender", power=1000.0, allocation="dependent"),
+    _game("m10-strong-k3", "game-m10", "defender", power=1000.0, max_subset_size=3),
+    _game(
+        "m10-strong-dependent-k2",
+        "game-m10",
+        "defender",
+        power=1000.0,
+        allocation="dependent",
+        max_subset_size=2,
+    ),
+    _game("ieee14", "grid-ieee14", "attacker"),
+    _game("ieee14", "grid-ieee14", "defender"),
+    _bayes("ch5-game-informed", "ch5-game", "attacker", "informed", power=100.0),
+    _bayes("ch5-game-informed", "ch5-game", "defender", "informed", power=100.0),
+    _bayes("ch5-game-uninformed", "ch5-game", "attacker", "uninformed", power=100.0),
+    _bayes("ch5-game-uninformed", "ch5-game", "defender", "uninformed", power=100.0),
+    _bayes("m10-informed", "game-m10", "defender", "informed", power=100.0),
+    _bayes("m10-strong-informed", "game-m10", "defender", "informed", power=1000.0),
     _detection("ch3-static", "ch3-static", 240.0),
+    _detection("ch3-tracking", "ch3-tracking", 7.5),
+    _stealth("ieee14-b3", "grid-ieee14", 3),
+    _family("tracking-m6", "trace", 1_000_000, 20, num_sensors=6, budget=4, horizon=4),
 )

@@ -2,5 +2,6 @@
 
 from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.vector.env import FdiaVectorEnv, make_vector
+from fdia_env.vector.sequential import SequentialVectorEnv  # registers its make_vec format
 
-__all__ = ["BatchedSimulation", "FdiaVectorEnv", "make_vector"]
+__all__ = ["BatchedSimulation", "FdiaVectorEnv", "SequentialVectorEnv", "make_vector"]
