@@ -32,6 +32,9 @@ DESCRIPTION = "\n\n".join(
         "analytic answer and random play, scored by one evaluation loop (agents.evaluate).",
         "Examples: "
         "python train.py attacker --env sparse_attack_v0 --algo MaskablePPO; "
+        "python train.py attacker --scenario grid-ieee14 (the sequential format, with the "
+        "scenario's defaults: agents.config.SCENARIO_DEFAULTS); "
+        "python train.py game --scenario grid-ieee14; "
         "python train.py attacker --env covariance_attack_v0 --algo SAC; "
         "python train.py defender --algo DQN; "
         "python train.py game --method psro; "

@@ -33,9 +33,46 @@ def build_model(
     """
     if algo not in ALGO_CLASSES:
         raise ValueError(f"unknown algorithm {algo!r}; valid algorithms: {', '.join(ALGO_CLASSES)}")
+    kwargs = dict(kwargs)
+    stop_prob = kwargs.pop("stop_prob", None)
     try:
-        return ALGO_CLASSES[algo](
+        model = ALGO_CLASSES[algo](
             "MlpPolicy", env, seed=seed, device=device, verbose=verbose, **kwargs
         )
     except AssertionError as exc:  # SB3 checks some hyperparameters with assert
         raise ValueError(f"invalid hyperparameters for {algo}: {exc}") from None
+    if stop_prob is not None:
+        set_stop_prob(model, stop_prob)
+    return model
+
+
+def set_stop_prob(model: BaseAlgorithm, prob: float) -> None:
+    """Bias a new policy so that action 0 has probability ``prob`` when all actions are legal.
+
+    SB3 initialises the action head with tiny weights (orthogonal, gain 0.01), so the logits
+    start at its bias: setting action 0's bias to ``log(prob / (1 − prob) · (n − 1))`` and
+    the others' to 0 gives ``prob`` to action 0 and the rest evenly to the others. In the
+    sequential format action 0 is stop: a high ``prob`` lets early episodes keep budget for
+    the window's last steps, where the grid presets' optimal attacks are.
+
+    Raises:
+        ValueError: For a policy whose actions are not one ``Discrete`` choice, or ``prob``
+            outside (0, 1).
+    """
+    import math
+
+    import torch
+    from gymnasium import spaces
+
+    if not 0 < prob < 1:
+        raise ValueError(f"stop_prob must be in (0, 1), got {prob!r}")
+    space = model.action_space
+    if not isinstance(space, spaces.Discrete) or int(space.n) < 2:
+        raise ValueError(
+            f"stop_prob applies to a Discrete action space of 2 or more actions (the "
+            f"sequential format's), got {space}"
+        )
+    head = model.policy.action_net
+    with torch.no_grad():
+        head.bias.zero_()
+        head.bias[0] = math.log(prob / (1 - prob) * (int(space.n) - 1))

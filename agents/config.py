@@ -34,6 +34,7 @@ _PPO = {
     "clip_range": 0.2,
     "lr_schedule": "linear",
     "net_arch": (64, 64),
+    "stop_prob": None,
 }
 
 # Per algorithm: every hyperparameter that applies to it, with its default.
@@ -48,6 +49,7 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
         "gae_lambda": 1.0,
         "lr_schedule": "linear",
         "net_arch": (64, 64),
+        "stop_prob": None,
     },
     "DQN": {
         "learning_rate": 1e-3,
@@ -123,6 +125,7 @@ _HYPERPARAMETER_RULES: dict[str, _Rule] = {
     "exploration_fraction": _UNIT,
     "exploration_final_eps": _UNIT,
     "tau": (float, lambda v: 0 < v <= 1, "in (0, 1]"),
+    "stop_prob": (float, lambda v: 0 < v < 1, "in (0, 1)"),
 }
 
 
@@ -223,6 +226,10 @@ class Hyperparameters:
     """Learning rate over training: constant, or linear decay to 0 (default: PPO/A2C linear)."""
     net_arch: tuple[int, ...] | None = None
     """Hidden layer sizes of the policy and value networks (default: 64 64)."""
+    stop_prob: float | None = None
+    """PPO/MaskablePPO/A2C: initial probability of action 0 (the sequential format's stop)
+    when every action is legal, set through the policy's output bias (default: none, uniform;
+    the grid presets' sparse attack: 0.9, so that early episodes keep budget for late steps)."""
 
     def __post_init__(self) -> None:
         for name, (kind, ok, allowed) in _HYPERPARAMETER_RULES.items():
@@ -303,7 +310,96 @@ def algo_kwargs(algo: str, hp: Hyperparameters) -> dict[str, Any]:
     if kwargs.pop("lr_schedule") == "linear":
         kwargs["learning_rate"] = LinearSchedule(kwargs["learning_rate"])
     kwargs["policy_kwargs"] = {"net_arch": kwargs.pop("net_arch")}
+    if kwargs.get("stop_prob", 0) is None:  # agents.algos.build_model applies it
+        del kwargs["stop_prob"]
     return kwargs
+
+
+@dataclass(frozen=True)
+class ScenarioDefaults:
+    """What ``train.py`` uses by default on one scenario preset of one env.
+
+    Attributes:
+        env_kwargs: Env options of the preset (``--env-kwargs`` given on the command line
+            override them).
+        algo: Default algorithm of the attacker and defender commands (None: the env's first).
+        hyperparameters: Hyperparameters that replace the algorithm's defaults
+            (:data:`ALGO_DEFAULTS`) where they apply to the algorithm run and the command line
+            leaves them unset.
+        normalize_reward: Train on the rewards rescaled by the reference (see
+            :func:`agents.training.reward_normalization`); evaluation is always on the raw
+            rewards.
+        when: The defaults apply only when the run's env options include these (e.g. the
+            sequential action format; with ``--env-kwargs action '"multibinary"'`` the
+            algorithm's own defaults are used).
+    """
+
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    algo: str | None = None
+    hyperparameters: dict[str, Any] = field(default_factory=dict)
+    normalize_reward: bool = False
+    when: dict[str, Any] = field(default_factory=dict)
+
+
+# The grid presets' sparse attack is built one sensor per decision (the sequential format):
+# at most N + c decisions of Discrete(M + 1), with the action mask for MaskablePPO.
+_SEQUENTIAL = {"action": "sequential"}
+_GRID_SPARSE = ScenarioDefaults(
+    env_kwargs=_SEQUENTIAL,
+    algo="MaskablePPO",
+    hyperparameters={
+        "n_steps": 2048,
+        "batch_size": 256,
+        "ent_coef": 0.01,
+        "net_arch": (128, 128),
+        "stop_prob": 0.9,
+    },
+    normalize_reward=True,
+    when=_SEQUENTIAL,
+)
+_GRID_GAME = ScenarioDefaults(
+    env_kwargs=_SEQUENTIAL,
+    algo="MaskablePPO",
+    hyperparameters={"n_steps": 256, "batch_size": 64, "ent_coef": 0.01},
+    normalize_reward=True,
+    when=_SEQUENTIAL,
+)
+GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57", "grid-ieee118")
+
+SCENARIO_DEFAULTS: dict[tuple[str, str], ScenarioDefaults] = {
+    **{("sparse_attack_v0", name): _GRID_SPARSE for name in GRID_PRESETS},
+    ("sensor_game_v0", "grid-ieee14"): _GRID_GAME,
+}
+"""Per (env, scenario preset): ``train.py``'s defaults there (docs/guide/training.md lists them).
+
+Scenarios not in the table train with the algorithm's defaults (:data:`ALGO_DEFAULTS`)."""
+
+
+def scenario_defaults(env: str, scenario: str, env_kwargs: dict[str, Any]) -> ScenarioDefaults:
+    """The defaults of ``env`` on ``scenario`` given the run's resolved env options.
+
+    An empty :class:`ScenarioDefaults` where the table has none, or where the run's options
+    leave the table's conditions (``when``), e.g. another action format.
+    """
+    found = SCENARIO_DEFAULTS.get((env, scenario))
+    if found is None or any(env_kwargs.get(k) != v for k, v in found.when.items()):
+        return ScenarioDefaults()
+    return found
+
+
+def with_defaults(algo: str, hp: Hyperparameters, defaults: ScenarioDefaults) -> Hyperparameters:
+    """``hp`` with each unset field that applies to ``algo`` taken from ``defaults``.
+
+    Fields that the scenario's defaults set but ``algo`` does not take are left unset (a
+    scenario tuned for MaskablePPO still runs DQN with DQN's defaults).
+    """
+    known = ALGO_DEFAULTS.get(algo, {})
+    fill = {
+        name: value
+        for name, value in defaults.hyperparameters.items()
+        if name in known and getattr(hp, name) is None
+    }
+    return dataclasses.replace(hp, **fill) if fill else hp
 
 
 def parse_env_kwargs(raw: dict[str, str]) -> dict[str, Any]:
@@ -434,6 +530,9 @@ class TrainConfig:
     """Episodes of the final evaluation (the printed table and scores.json)."""
     checkpoint_freq: int = 10_000
     """Steps between checkpoints (the final model is always saved)."""
+    normalize_reward: bool | None = None
+    """Train on rewards rescaled so that doing nothing is 0 and the reference 1 (evaluation
+    stays on the raw rewards). Default: the scenario's (on for the grid presets)."""
     run: tyro.conf.OmitArgPrefixes[RunSettings] = field(default_factory=RunSettings)
     """Run folder, seeding and output."""
     hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
@@ -485,6 +584,9 @@ class GameConfig:
     """Environment steps per best response."""
     final_eval_episodes: int = 1_000
     """Episodes of the final evaluation of each mixed strategy."""
+    normalize_reward: bool | None = None
+    """Train the best responses on rewards divided by the game value's size (evaluation stays
+    on the raw rewards). Default: the scenario's (on for grid-ieee14)."""
     run: tyro.conf.OmitArgPrefixes[RunSettings] = field(default_factory=RunSettings)
     """Run folder, seeding and output."""
     hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)

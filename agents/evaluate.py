@@ -305,6 +305,7 @@ def native_vector_env(env: gym.Env, num_envs: int) -> Any:
             made with options its native vector env does not support.
     """
     from fdia_env.envs.parallel import FdiaParallelEnv
+    from fdia_env.envs.sequential import SequentialSetEnv
     from fdia_env.registration import ENVS, GYM_IDS
 
     view = env.unwrapped
@@ -312,6 +313,10 @@ def native_vector_env(env: gym.Env, num_envs: int) -> Any:
     env_id = env.spec.id if env.spec is not None else None
     module = GYM_IDS[env_id][0] if env_id in GYM_IDS else getattr(parallel, "__module__", None)
     entry = next((e for e in ENVS.values() if e.module == module), None)
+    if isinstance(parallel, SequentialSetEnv):  # the sparse attacker's sequential format
+        from fdia_env.vector.sequential import SequentialVectorEnv
+
+        return SequentialVectorEnv(parallel, num_envs)
     if entry.kalman if entry is not None else isinstance(parallel, FdiaParallelEnv):
         from fdia_env.vector import FdiaVectorEnv
 
@@ -430,7 +435,8 @@ def _sb3_strategy(policy: Any, obs: Any, n: int, deterministic: bool) -> np.ndar
     obs_t, _ = policy.policy.obs_to_tensor(obs)
     with torch.no_grad():
         dist = policy.policy.get_distribution(obs_t).distribution
-    return dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+    probs = dist.probs.cpu().numpy().reshape(n).astype(np.float64)
+    return probs / probs.sum()  # float32 probabilities sum to 1 within 1e-7 only
 
 
 def _bayesian_score(

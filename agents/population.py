@@ -169,8 +169,15 @@ def current_mixes(
 
 
 def initial_action(policy: Any, entry: Any, env_kwargs: dict[str, Any]) -> int:
-    """The pure strategy of a policy: its deterministic action at the initial state."""
+    """The pure strategy of a policy: its deterministic action at the initial state.
+
+    In the sequential format (a subset built one sensor per decision) it is the index of the
+    subset the policy builds in the first round, played deterministically from ``reset(seed=0)``.
+    """
     with entry.make(**env_kwargs) as env:
+        view = env.unwrapped
+        if hasattr(view, "subset_strategy"):
+            return int(np.argmax(view.subset_strategy(policy, seed=0, deterministic=True)))
         obs, _ = env.reset(seed=0)
     return int(policy.predict(obs, deterministic=True)[0])
 
@@ -210,13 +217,20 @@ def grow_meta(
     attacker_entry: Any,
     env_kwargs: dict[str, Any],
     seed: int,
+    actions: dict[str, list[int]] | None = None,
 ) -> np.ndarray:
     """Extend the empirical meta-payoff (defender rows, attacker columns) to the new policies.
 
     Only the new row and column are played (one episode per pair: the payoff of two
     deterministic policies in the expected-dynamics game is exact; sampled dynamics would
-    need more).
+    need more). In the sequential format the opponent of a view plays subsets, so the
+    defender is played as its pure strategy (``actions["defender"]``, the subset its policy
+    builds) against the attacker's learned policy.
     """
+    if env_kwargs.get("action") == "sequential":
+        if actions is None:
+            raise ValueError("the sequential format's meta-game needs the defenders' actions")
+        policies = {**policies, "defender": [ConstantPolicy(a) for a in actions["defender"]]}
     m, k = len(policies["defender"]), len(policies["attacker"])
     out = np.zeros((m, k))
     out[: meta.shape[0], : meta.shape[1]] = meta
@@ -338,7 +352,12 @@ def run_population(
         gap_def = float((L @ y)[state.actions["defender"][-1]] - (L @ y).min())
         if method == "psro":
             state.meta = grow_meta(
-                state.meta, state.policies, game.entries["attacker"], game.env_kwargs, seed
+                state.meta,
+                state.policies,
+                game.entries["attacker"],
+                game.env_kwargs,
+                seed,
+                state.actions,
             )
         state.x, state.y = current_mixes(method, state.actions, n, state.meta)
         e = exploitability(L, state.x, state.y, value)

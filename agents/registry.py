@@ -25,6 +25,7 @@ import gymnasium as gym
 import numpy as np
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
+from agents.config import GRID_PRESETS, SCENARIO_DEFAULTS
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.sequential import SequentialSetEnv
 from fdia_env.registration import get_env
@@ -199,18 +200,43 @@ def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference |
 
     The policy is ``agent``'s equilibrium mix; for the defender the value is its own return −v.
     """
-    from baselines.game import MixedStrategyPolicy, payoff_matrix, solve_zero_sum
+    from baselines.game import MixedStrategyPolicy
 
     if env.spec.horizon != 1:
         return None  # repeated rounds: no exact matrix-game reference here
     if getattr(env.attack, "types", None) is not None:
         return bayesian_reference(env, agent)
-    L = payoff_matrix(env.scenario, env.attack.power, env.attack.allocation)
-    x, y, value = solve_zero_sum(L)
+    L, x, y, value = _solved_game(env.scenario, env.attack.power, env.attack.allocation)
     if agent == "defender":
         policy = MixedStrategyPolicy(x, seed=0)
         return Reference(-value, "game value (LP)", "trace", True, L, policy)
     return Reference(value, "game value (LP)", "trace", True, L, MixedStrategyPolicy(y, seed=0))
+
+
+_GAMES: dict[tuple[int, float, str], tuple[Any, tuple]] = {}
+_MAX_GAMES = 8
+
+
+def _solved_game(scenario: Any, power: float, allocation: str) -> tuple:
+    """``(L, x, y, value)`` of the sensor game, kept for the last few scenarios solved.
+
+    A grid preset's game (596 × 595 on grid-ieee14) takes seconds to build and solve, and a
+    run asks for it for every view it scores. Keyed by the scenario object (presets are
+    built once per process), which the cache holds so its id is not reused.
+    """
+    from baselines.game import payoff_matrix, solve_zero_sum
+
+    key = (id(scenario), float(power), str(allocation))
+    hit = _GAMES.get(key)
+    if hit is not None and hit[0] is scenario:
+        return hit[1]
+    L = payoff_matrix(scenario, power, allocation)
+    L.setflags(write=False)
+    solved = (L, *solve_zero_sum(L))
+    if len(_GAMES) >= _MAX_GAMES:
+        _GAMES.pop(next(iter(_GAMES)))
+    _GAMES[key] = (scenario, solved)
+    return solved
 
 
 def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference:
@@ -338,7 +364,9 @@ class Trainable:
                 f"unknown scenario {scenario!r} for {self.env} ({self.agent}); "
                 f"valid scenarios: {', '.join(self.scenarios)}"
             )
-        return {"scenario": scenario, **self.scenarios[scenario], **overrides}
+        table = SCENARIO_DEFAULTS.get((self.env, scenario))
+        preset = {} if table is None else table.env_kwargs
+        return {"scenario": scenario, **self.scenarios[scenario], **preset, **overrides}
 
     def algorithm(self, name: str | None) -> str:
         """Canonical algorithm name (case and ``_``/``-`` insensitive); None gives the default.
@@ -442,12 +470,15 @@ def by_gym_id(gym_id: str) -> Trainable | None:
     return next((e for e in REGISTRY.values() if e.gym_id == gym_id), None)
 
 
+# the grid presets keep their own budget and horizon (c = 6; N = 6, 4, 3, 3) and take the
+# sequential format from agents.config.SCENARIO_DEFAULTS
 _SPARSE_SCENARIOS = {
     "ch4-position": {"budget": 5, "horizon": 6},
     "ch4-pv-case1": {"budget": 5, "horizon": 6, "objective": "logdet"},
     "ch4-pv-case2": {"budget": 5, "horizon": 6, "objective": "logdet"},
     "ch4-pv-case3": {"budget": 5, "horizon": 6, "objective": "logdet"},
     "ch4-random": {"budget": 10, "horizon": 6},
+    **{name: {} for name in GRID_PRESETS},
 }
 _COVARIANCE_SCENARIOS = {
     "ch2-position": {"power": 3000.0},
@@ -482,7 +513,7 @@ for _agent in ("attacker", "defender"):
             "sensor_game_v0",
             _agent,
             _GAME_SCENARIOS,
-            DISCRETE_ALGORITHMS,
+            (*DISCRETE_ALGORITHMS, "MaskablePPO"),  # MaskablePPO: action="sequential" only
             game_reference,
             game=True,
         )

@@ -45,10 +45,9 @@ from agents.checkpoint import (
 from agents.config import (
     TORCH_PPO,
     GameConfig,
+    Hyperparameters,
     algo_kwargs,
     check_device_available,
-    is_torch_ppo,
-    parse_env_kwargs,
     resolve_device,
     resolved_hyperparameters,
 )
@@ -72,7 +71,7 @@ from agents.population import (
 from agents.registry import Reference, Trainable, game_names, get
 from agents.runs import run_prefix, write_json
 from agents.seeding import derived_seed, seed_everything
-from agents.training import check_env_kwargs, env_thunk, make_env
+from agents.training import RunSetup, check_env_kwargs, env_thunk, make_env, run_setup
 from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
 
@@ -124,11 +123,13 @@ def learn_best_response(
     device: str = "cpu",
     tb_dir: Path | None = None,
     callback: BaseCallback | None = None,
+    reward_scale: float | None = None,
 ) -> tuple[BaseAlgorithm, int]:
     """A fresh ``algo`` learner trained against the fixed mix ``opponent``, and its action.
 
     The learner plays ``entry``'s side; the action is its pure strategy (:func:`initial_action`).
     ``callback`` may end training early (as :class:`~agents.interrupt.StopTrainingCallback`).
+    ``reward_scale``: train on the rewards divided by it (e.g. the game value's size).
     """
     seed_everything(seed)
     make = env_thunk(
@@ -136,6 +137,7 @@ def learn_best_response(
         env_kwargs,
         lambda: FixedMix(opponent, seed=derived_seed(seed, 1)),
         monitor=True,
+        reward=None if reward_scale is None else (0.0, reward_scale),
     )
     vec_env = DummyVecEnv([make])
     model = build_model(algo, vec_env, kwargs, seed, device)
@@ -156,9 +158,15 @@ def game_algo(cfg: GameConfig) -> str:
     """
     if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT:
         return EXACT
-    if is_torch_ppo(cfg.algo):
-        return TORCH_PPO
-    return get(cfg.env, "attacker").algorithm(cfg.algo)
+    return game_setup(cfg).algo
+
+
+def game_setup(cfg: GameConfig) -> RunSetup:
+    """The game's options resolved with its scenario's defaults (:func:`run_setup`)."""
+    algo = None if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT else cfg.algo
+    return run_setup(
+        cfg.env, "attacker", cfg.scenario, cfg.env_kwargs, algo, cfg.hp, cfg.normalize_reward
+    )
 
 
 def game_prefix(cfg: GameConfig) -> str:
@@ -262,18 +270,22 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
     check_device_available(cfg.run.device)
     entries = {side: get(cfg.env, side) for side in SIDES}
     algo = game_algo(cfg)
-    kwargs, hyperparameters, torch_config = _learner_options(cfg, algo)
-    env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    setup = game_setup(cfg)
+    kwargs, hyperparameters, torch_config = _learner_options(cfg, algo, setup.hp)
+    env_kwargs = setup.env_kwargs
     check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
     env = make_env(lambda: entries["attacker"].make(**env_kwargs), entries["attacker"].gym_id)
     with env:
         reference = entries["attacker"].reference_of(env)
-        n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
         if algo not in (EXACT, TORCH_PPO):  # SB3 checks the options when it builds a model
             build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     L, value = reference.matrix_game(), reference.value  # the uninformed Bayesian game: L̄
+    # each side's pure strategies: the subsets (also in the sequential format, whose actions
+    # are single sensors)
+    n = {"defender": int(L.shape[0]), "attacker": int(L.shape[1])}
+    scale = abs(value) if setup.normalize_reward and algo not in (EXACT, TORCH_PPO) else None
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
@@ -304,6 +316,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                 "algo": algo,
                 "env_kwargs": env_kwargs,
                 "hyperparameters": hyperparameters,
+                "reward_scale": scale,
                 "reference": {"name": reference.name, "value": value},
             },
         )
@@ -317,7 +330,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             oracle = TorchPPOOracle(cfg, run_dir, entries, env_kwargs, torch_config, stop)
         else:
             oracle = SB3Oracle(
-                cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop
+                cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop, scale
             )
         loop = _population_state(state, names, models, n)
         history = _iterate(cfg, run_dir, loop, oracle, game, stop, report)
@@ -365,7 +378,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
 
 
 def _learner_options(
-    cfg: GameConfig, algo: str
+    cfg: GameConfig, algo: str, hp: Hyperparameters
 ) -> tuple[dict[str, Any], dict[str, Any], TorchPPOConfig | None]:
     """The SB3 kwargs, the resolved hyperparameters and torch-ppo's config of ``algo``.
 
@@ -384,7 +397,7 @@ def _learner_options(
     if algo == TORCH_PPO:
         from agents.torch_ppo import TorchPPOConfig
 
-        hyperparameters = resolved_hyperparameters(TORCH_PPO, cfg.hp)
+        hyperparameters = resolved_hyperparameters(TORCH_PPO, hp)
         num_envs = min(GAME_NUM_ENVS, cfg.steps_per_iteration)
         try:
             config = TorchPPOConfig.from_hyperparameters(
@@ -393,7 +406,7 @@ def _learner_options(
         except (TypeError, ValueError) as exc:
             raise ValueError(f"--algo torch-ppo: {exc}") from None
         return {}, hyperparameters, config
-    return algo_kwargs(algo, cfg.hp), resolved_hyperparameters(algo, cfg.hp), None
+    return algo_kwargs(algo, hp), resolved_hyperparameters(algo, hp), None
 
 
 def _load_torch_policies(
@@ -484,10 +497,12 @@ class SB3Oracle:
         kwargs: dict[str, Any],
         hyperparameters: dict[str, Any],
         stop: StopRequest,
+        reward_scale: float | None = None,
     ) -> None:
         self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
         self.algo, self.kwargs, self.hyperparameters = algo, kwargs, hyperparameters
         self.stop = stop
+        self.reward_scale = reward_scale
         self.callback = StopTrainingCallback(stop)
 
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
@@ -503,6 +518,7 @@ class SB3Oracle:
             self.cfg.run.device,
             self.run_dir / "tb" / f"{side}_br_{iteration:03d}",
             self.callback,
+            self.reward_scale,
         )
         return None if self.stop.requested else BestResponse(model, action)
 

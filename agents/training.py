@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import math
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
@@ -55,6 +57,7 @@ from agents.checkpoint import (
 )
 from agents.config import (
     TORCH_PPO,
+    Hyperparameters,
     TrainConfig,
     algo_kwargs,
     check_device_available,
@@ -62,6 +65,8 @@ from agents.config import (
     is_torch_ppo,
     parse_env_kwargs,
     resolved_hyperparameters,
+    scenario_defaults,
+    with_defaults,
 )
 from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import StopTrainingCallback
@@ -96,15 +101,22 @@ def env_thunk(
     env_kwargs: dict[str, Any],
     opponent: Callable[[], Any] | None = None,
     monitor: bool = False,
+    reward: tuple[float, float] | None = None,
 ) -> Callable[[], gym.Env]:
-    """A zero-argument factory of the env (a fresh ``opponent()`` each call, if given)."""
+    """A zero-argument factory of the env (a fresh ``opponent()`` each call, if given).
+
+    ``reward``: ``(shift, scale)`` of :class:`NormalizedReward` for training (the monitor,
+    outside it, logs the raw returns).
+    """
 
     def thunk() -> gym.Env:
         kwargs = dict(env_kwargs)
         if opponent is not None:
             kwargs["opponent"] = opponent()
         env = gym.make(gym_id, **kwargs)
-        return Monitor(env) if monitor else env
+        if monitor:
+            env = Monitor(env)
+        return env if reward is None else NormalizedReward(env, *reward)
 
     return thunk
 
@@ -433,11 +445,122 @@ class TrainResult:
     interrupted: int | None = None
 
 
+@dataclass(frozen=True)
+class RunSetup:
+    """A run's env, algorithm and options, with its scenario's defaults applied.
+
+    Attributes:
+        entry: The registry entry of the learning player.
+        algo: The algorithm (``--algo``, else the scenario's default, else the env's first).
+        env_kwargs: The env options (the preset's, the scenario table's, ``--env-kwargs``).
+        hp: ``--`` hyperparameters with the scenario table's filled in where unset.
+        normalize_reward: Whether the training env's rewards are rescaled
+            (:func:`reward_normalization`).
+    """
+
+    entry: Trainable
+    algo: str
+    env_kwargs: dict[str, Any]
+    hp: Hyperparameters
+    normalize_reward: bool
+
+
+def run_setup(
+    env: str,
+    agent: str,
+    scenario: str | None,
+    raw_env_kwargs: dict[str, str],
+    algo: str | None,
+    hp: Hyperparameters,
+    normalize_reward: bool | None = None,
+) -> RunSetup:
+    """Resolve a command's options against the registry and :data:`SCENARIO_DEFAULTS`.
+
+    Raises:
+        ValueError: For an unknown env, scenario or algorithm (listing the valid names).
+    """
+    entry = get(env, agent)
+    env_kwargs = entry.env_kwargs(scenario, **parse_env_kwargs(raw_env_kwargs))
+    defaults = scenario_defaults(entry.env, env_kwargs["scenario"], env_kwargs)
+    if is_torch_ppo(algo):
+        name = TORCH_PPO
+    else:
+        name = entry.algorithm(algo if algo is not None else defaults.algo)
+    normalize = defaults.normalize_reward if normalize_reward is None else normalize_reward
+    return RunSetup(entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize)
+
+
+def setup_of(cfg: TrainConfig) -> RunSetup:
+    """:func:`run_setup` of the attacker or defender command."""
+    return run_setup(
+        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward
+    )
+
+
 def train_prefix(cfg: TrainConfig) -> str:
     """Run folder name without its time: ``<env>[-defender]-<algo>-s<seed>`` (also torch-ppo's)."""
-    entry = get(cfg.env, cfg.agent)
-    algo = TORCH_PPO if is_torch_ppo(cfg.algo) else entry.algorithm(cfg.algo)
-    return run_prefix(run_name(entry.env, cfg.agent), algo, cfg.run.seed)
+    setup = setup_of(cfg)
+    return run_prefix(run_name(setup.entry.env, cfg.agent), setup.algo, cfg.run.seed)
+
+
+class NormalizedReward(gym.Wrapper):
+    """Training rewards ``(r − shift) / scale``, the shift paid once, at the episode's end.
+
+    So an episode's return ``G`` becomes ``(G − shift) / scale``: with ``shift`` the return of
+    doing nothing and ``scale`` the reference's distance from it, 0 is doing nothing and 1 the
+    reference. A fixed affine map (nothing to save in a checkpoint, the same after a resume);
+    the ranking of policies, and so the optimum, is unchanged.
+    """
+
+    def __init__(self, env: gym.Env, shift: float, scale: float) -> None:
+        super().__init__(env)
+        if not (math.isfinite(shift) and math.isfinite(scale) and scale > 0):
+            raise ValueError(
+                f"reward normalisation needs a finite shift and a scale > 0, got {shift}, {scale}"
+            )
+        self.shift, self.scale = float(shift), float(scale)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        """One step with the rescaled reward (raw in ``info["raw_reward"]``)."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        scaled = float(reward) - (self.shift if terminated or truncated else 0.0)
+        return obs, scaled / self.scale, terminated, truncated, {**info, "raw_reward": reward}
+
+
+def null_return(entry: Trainable, env: gym.Env) -> float:
+    """The return of doing nothing: the sparse attacker attacking no sensor (else 0).
+
+    Played in ``env`` (its own format: the stop action, the empty bitmask or zeros).
+    """
+    if entry.env != "sparse_attack_v0":
+        return 0.0
+    space = env.action_space
+    nothing = np.zeros(space.shape, space.dtype) if space.shape else 0
+    env.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        _, reward, terminated, truncated, _ = env.step(nothing)
+        total += float(reward)
+        done = terminated or truncated
+    return total
+
+
+def reward_normalization(
+    entry: Trainable, env: gym.Env, reference: Reference | None
+) -> tuple[float, float] | None:
+    """``(shift, scale)`` of :class:`NormalizedReward` for ``env``, or None where none applies.
+
+    The shift is :func:`null_return`; the scale is the reference's distance from it (for a
+    game: the size of the game value). None without a reference, or when the reference is no
+    better than doing nothing.
+    """
+    if reference is None:
+        return None
+    shift = null_return(entry, env)
+    scale = abs(reference.value - shift)
+    if not math.isfinite(scale) or scale <= 1e-12 * max(1.0, abs(reference.value)):
+        return None
+    return shift, scale
 
 
 def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> TrainResult:
@@ -465,11 +588,10 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     """
     say = report or (lambda line: None)
     check_device_available(cfg.run.device)
-    entry = get(cfg.env, cfg.agent)
-    algo = entry.algorithm(cfg.algo)
-    kwargs = algo_kwargs(algo, cfg.hp)
-    hyperparameters = resolved_hyperparameters(algo, cfg.hp)
-    env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    setup = setup_of(cfg)
+    entry, algo, env_kwargs = setup.entry, setup.algo, setup.env_kwargs
+    kwargs = algo_kwargs(algo, setup.hp)
+    hyperparameters = resolved_hyperparameters(algo, setup.hp)
     check_env_kwargs(entry.gym_id, env_kwargs)
     opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
     trusted = cfg.run.trust_checkpoint
@@ -485,8 +607,13 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
             run.check_not_shorter("total_timesteps", cfg.total_timesteps, checkpoint.timesteps)
             best_model_file(run.path, trusted)  # refuse an unsafe one now, not after training
 
+        normalization = (
+            reward_normalization(entry, eval_env, reference) if setup.normalize_reward else None
+        )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        vec_env = DummyVecEnv([env_thunk(entry.gym_id, env_kwargs, opponent, monitor=True)])
+        vec_env = DummyVecEnv(
+            [env_thunk(entry.gym_id, env_kwargs, opponent, monitor=True, reward=normalization)]
+        )
         stack.callback(vec_env.close)
         if checkpoint is not None:
             model = load_checkpoint(
@@ -510,6 +637,9 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
                 "algo": algo,
                 "env_kwargs": env_kwargs,
                 "hyperparameters": hyperparameters,
+                "reward_normalization": None
+                if normalization is None
+                else {"shift": normalization[0], "scale": normalization[1]},
                 "reference": reference_record(reference),
             },
         )

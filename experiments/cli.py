@@ -12,6 +12,7 @@ from collections.abc import Sequence
 COMMANDS: dict[str, tuple[str, str]] = {
     "results": ("experiments.results.cli", "learned-against-analytic result tables"),
     "reproduce": ("experiments.reproduce.cli", "the literature's tables and figures, by chapter"),
+    "bench": ("experiments.bench.cli", "train and score learners on the benchmark tasks"),
 }
 
 

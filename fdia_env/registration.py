@@ -353,5 +353,18 @@ for _entry in (
         vector_views=("attacker",),  # the defender's view: copies in SyncVectorEnv
         view_kwargs={"defender": {"defender": "threshold"}},
     ),
+    EnvEntry(
+        "stealth_dynamic_v0",
+        "fdia_env.stealth.stealth_dynamic_v0",
+        {
+            "attacker": "fdia_env/StealthDynamic-v0",
+            "defender": "fdia_env/StealthDynamicDefender-v0",
+        },
+        backends=("numpy",),
+        kalman=False,
+        vector="fdia_env.stealth.dynamic_vector:make_vector",
+        vector_views=("attacker",),  # the defender's view: copies in SyncVectorEnv
+        view_kwargs={"defender": {"defender": "threshold"}},
+    ),
 ):
     register_env(_entry)

@@ -10,8 +10,11 @@ out.
 Specs come from the env's Gymnasium spaces, with the batch (B,) in front:
 
 - ``"observation"``: ``Bounded`` float32 (B, d), the single env's features;
-- ``"action_mask"`` (masked players only: the sparse attack): bool (B, A), True where legal,
-  the key TorchRL's ``ActionMask`` transform and ``MaskedCategorical`` read;
+- ``"action_mask"`` (masked players only: the sparse attack, also in its sequential format
+  ``action="sequential"``, whose native vector env
+  :class:`~fdia_env.vector.sequential.SequentialVectorEnv` this serves the same way): bool
+  (B, A), True where legal, the key TorchRL's ``ActionMask`` transform and
+  ``MaskedCategorical`` read;
 - ``"phi"``: float64 (B,), the estimation-error measure Φ after the step;
 - ``"action"``: ``Categorical`` int64 (B,) for a ``Discrete`` space (index encoding),
   ``Bounded`` (B, k) for a ``Box``, ``Binary`` / ``MultiCategorical`` for ``MultiBinary`` /
@@ -46,6 +49,7 @@ except ImportError as exc:  # pragma: no cover - the [clients] extra is installe
     ) from exc
 
 from fdia_env.vector.env import FdiaVectorEnv
+from fdia_env.vector.sequential import SequentialVectorEnv
 
 __all__ = ["FdiaTorchRLEnv", "action_spec_of"]
 
@@ -221,9 +225,9 @@ class FdiaTorchRLEnv(EnvBase):
 
 def _vector_env(
     env: Any, num_envs: int, backend: str, device: Any, kwargs: dict[str, Any]
-) -> FdiaVectorEnv:
+) -> FdiaVectorEnv | SequentialVectorEnv:
     """The SAME_STEP native vector env of an id, or the given one after its checks."""
-    if isinstance(env, FdiaVectorEnv):
+    if isinstance(env, FdiaVectorEnv | SequentialVectorEnv):
         if kwargs or num_envs != 1 or backend != "torch" or device is not None:
             raise ValueError(
                 "num_envs, backend, device and env options apply to an id only; got them with "
@@ -246,6 +250,14 @@ def _vector_env(
     ids = sorted(registration.GYM_IDS)
     if env_id not in ids:
         raise ValueError(f"env must be one of {', '.join(ids)}, got {env!r}")
+    module, agent = registration.GYM_IDS[env_id]
+    entry = next(e for e in registration.ENVS.values() if e.module == module)
+    if entry.vector != registration.VECTOR_ENTRY_POINT or not entry.has_vector(agent):
+        raise ValueError(
+            f"env {env_id!r} has no native vector env of the Kalman-filter engine, which "
+            "FdiaTorchRLEnv wraps; use TorchRL's GymEnv (or GymWrapper on gymnasium.make_vec) "
+            f"for it. FdiaTorchRLEnv serves {', '.join(_engine_ids(registration))}"
+        )
     if "autoreset_mode" in kwargs or "vectorization_mode" in kwargs:
         raise ValueError(
             "autoreset_mode and vectorization_mode are set by FdiaTorchRLEnv (SAME_STEP, the "
@@ -260,9 +272,20 @@ def _vector_env(
         device=device,
         **kwargs,
     )
-    if not isinstance(venv, FdiaVectorEnv):  # an env without a batched implementation
+    if not isinstance(venv, FdiaVectorEnv | SequentialVectorEnv):  # no batched implementation
         raise ValueError(f"{env_id} has no native vector env; TorchRL's GymEnv serves it")
     return venv
+
+
+def _engine_ids(registration: Any) -> list[str]:
+    """The Gymnasium ids whose view has the engine's native vector env (what this wraps)."""
+    return [
+        env_id
+        for e in registration.ENVS.values()
+        if e.vector == registration.VECTOR_ENTRY_POINT
+        for agent, env_id in e.views.items()
+        if e.has_vector(agent)
+    ]
 
 
 def _final_obs(info: dict[str, Any], venv: FdiaVectorEnv) -> Any:

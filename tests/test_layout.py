@@ -256,7 +256,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("fdia_env.attacks", "fdia_env.defenses", "fdia_env.detection"),
     ("fdia_env.envs", "fdia_env.vector", "fdia_env.stealth"),
     tuple(entry.module for entry in ENVS.values()),  # the env modules, from the table
-    ("fdia_env.wrappers", "fdia_env.torchrl"),
+    ("fdia_env.wrappers", "fdia_env.torchrl", "fdia_env.tasks"),
     ("fdia_env",),
     ("baselines",),
     ("agents",),

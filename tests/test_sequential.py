@@ -176,18 +176,18 @@ def test_illegal_actions():
         )
     with pytest.raises(ValueError, match="not an attack model format"):
         SparseAttack(3, action="sequential")
-    with pytest.raises(ValueError, match="not available in the native vector env"):
-        gym.make_vec(
-            "fdia_env/SparseAttack-v0",
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            action="sequential",
-        )
     from agents.evaluate import evaluate
 
-    view = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", action="sequential")
-    with pytest.raises(TypeError, match="not available in the native vector env"):
-        evaluate("random", view, n_episodes=2, num_envs=2)  # the batched evaluation path
+    # the batched evaluation path plays the native vector env of the format: same returns
+    kwargs = dict(scenario="ch4-position", budget=3, horizon=5, action="sequential")
+    view = gym.make("fdia_env/SparseAttack-v0", **kwargs)
+    result = sfs("ch4-position", 3, 5)
+    one = evaluate(result.policy("sequential"), view, n_episodes=2, reference=result.value)
+    batched = evaluate(
+        result.policy("sequential"), view, n_episodes=3, num_envs=3, reference=result.value
+    )
+    assert one.returns.tolist() == pytest.approx([result.value] * 2, rel=1e-12)
+    assert batched.returns.tolist() == pytest.approx([result.value] * 3, rel=1e-12)
     with pytest.raises(RuntimeError, match="before reset"):
         sparse_attack_v0.parallel_env(scenario="ch4-position", action="sequential").step(
             {"attacker": 0}
@@ -612,3 +612,81 @@ def test_sensor_game_sequential_evaluation_plays_subset_mixes_and_scores_learned
     assert sorted(learned["strategy"]) == [0.0] * 6 + [1.0]  # one subset: its pure strategy
     assert learned["score"] >= 0 and scores["game value (LP)"]["score"] < 1e-9
     assert sum(scores["random"]["strategy"]) == pytest.approx(1.0)
+
+
+def test_wrappers_pass_pettingzoo_api_tests_without_the_reset_options_warning():
+    """PettingZoo's api tests reset with options={"options": 1}: no warning for that probe."""
+    import warnings
+
+    from fdia_env import sensor_game_v0
+    from fdia_env.envs.sequential import SequentialBase, SequentialSubsetEnv
+
+    envs = [
+        lambda: sparse_attack_v0.parallel_env(scenario="ch4-position", action="sequential"),
+        lambda: sensor_game_v0.parallel_env(rounds=2, action="sequential"),
+    ]
+    for make in envs:
+        assert isinstance(make(), SequentialBase)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            parallel_api_test(make(), num_cycles=10)
+        assert not [w for w in caught if "reset options" in str(w.message)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        api_test(sensor_game_v0.env(rounds=2, action="sequential"), num_cycles=10)
+    assert not [w for w in caught if "reset options" in str(w.message)]
+    # a setting passed to reset by mistake still warns once, naming the caller's line
+    for env in (envs[0](), envs[1]()):
+        with pytest.warns(UserWarning, match=r"reset options \['budget'\] are ignored") as rec:
+            env.reset(seed=0, options={"budget": 2})
+        assert len(rec) == 1 and rec[0].filename == __file__
+    view = envs[1]().gymnasium_view("defender")
+    with pytest.warns(UserWarning, match=r"reset options \['budget'\] are ignored") as rec:
+        view.reset(seed=0, options={"budget": 2})
+    assert len(rec) == 1 and rec[0].filename == __file__  # once, not again by the wrapper
+    # the shared base: max_cycles is the wrapper's (decisions), the wrapped env has none
+    game = envs[1]()
+    assert isinstance(game, SequentialSubsetEnv)
+    game.max_cycles = 1
+    assert game.inner.max_cycles is None and game.max_cycles == 1
+    assert game.spec is game.inner.spec and game.system is game.inner.system
+
+
+class SequentialModule:
+    """A PettingZoo env module whose envs are ``module``'s in the sequential format."""
+
+    def __init__(self, module, **kwargs):
+        self.module, self.kwargs = module, kwargs
+
+    def parallel_env(self, **kwargs):
+        return self.module.parallel_env(action="sequential", **self.kwargs, **kwargs)
+
+    def env(self, **kwargs):
+        return self.module.env(action="sequential", **self.kwargs, **kwargs)
+
+
+@pytest.mark.parametrize("game", [False, True], ids=["sparse", "sensor-game"])
+def test_pettingzoo_seed_max_cycles_and_render_tests_pass_in_the_sequential_format(game):
+    from pettingzoo.test import max_cycles_test, parallel_seed_test, seed_test
+
+    from fdia_env import sensor_game_v0
+
+    mod = (
+        SequentialModule(sensor_game_v0, rounds=3)
+        if game
+        else SequentialModule(sparse_attack_v0, scenario="ch4-position", horizon=6)
+    )
+    seed_test(mod.env, num_cycles=20)
+    parallel_seed_test(mod.parallel_env, num_cycles=20)
+    max_cycles_test(mod)  # max_cycles counts decisions, as PettingZoo's test expects
+    # rendering is the wrapped env's (PettingZoo's render_test runs on it in test_clients.py)
+    aec = mod.env(render_mode="ansi")
+    aec.reset(seed=0)
+    assert "step 0/" in aec.render() and aec.render_mode == "ansi"
+    env = mod.parallel_env(max_cycles=2)
+    env.reset(seed=0)
+    env.step(dict.fromkeys(env.agents, 1))
+    truncs = env.step(dict.fromkeys(env.agents, 0 if not game else 2))[3]
+    assert all(truncs.values()) and env.agents == []
+    with pytest.raises(ValueError, match="max_cycles must be"):
+        env.max_cycles = 0

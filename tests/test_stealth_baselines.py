@@ -189,3 +189,15 @@ def test_budgeted_attack_equals_brute_force_on_random_small_H(seed):
 def test_bad_input_names_the_parameter(ieee14, call, match):
     with pytest.raises(ValueError, match=match):
         call(ieee14)
+
+
+def test_budgeted_attack_milp_prints_nothing(ieee14, capfd):
+    # HiGHS' MIP solver writes "HighsMipSolverData::transformNewIntegerFeasibleSolution
+    # tmpSolver.run();" from C++ to descriptor 1 on this solve (state 9, 6 meters)
+    print("before", flush=True)
+    attack = budgeted_attack(ieee14, budget=6, a_max=0.5, target=9)
+    print("after", flush=True)
+    out, err = capfd.readouterr()
+    assert out == "before\nafter\n" and err == ""
+    assert attack.meters == (5, 8, 10, 21, 24, 26)
+    assert attack.value == pytest.approx(0.05784778534923338, rel=1e-6)

@@ -347,3 +347,30 @@ def test_evaluate_with_num_envs_refuses_views_without_a_native_vector_env_by_nam
     with pytest.raises(ValueError, match=r"num_envs=2: .* made by gymnasium.make"):
         evaluate("random", SingleAgentEnv(direct), 4, num_envs=2)
     assert evaluate("random", DEFENDER_GYM_ID, 3, seed=0).returns.shape == (3,)  # one by one
+
+
+@pytest.mark.parametrize("env_id", [GYM_ID, DEFENDER_GYM_ID])
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_fdia_torchrl_env_refuses_the_stealth_ids_with_its_own_error(env_id, backend):
+    pytest.importorskip("torchrl")
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    # before: the attacker's id gave the stealth vector env's autoreset/backend complaint and
+    # the defender's id Gymnasium's "doesn't have a vector entry point defined"
+    with pytest.raises(ValueError, match=r"no native vector env of the Kalman-filter engine.*"):
+        FdiaTorchRLEnv(env_id, num_envs=2, backend=backend)
+
+
+def test_parallel_env_takes_the_options_of_the_env_class():
+    import inspect
+
+    from agents.training import env_option_names
+    from fdia_env.stealth.env import StealthAttackEnv
+
+    cls = inspect.signature(StealthAttackEnv).parameters
+    assert inspect.signature(stealth_attack_v0.parallel_env).parameters == cls
+    assert env_option_names(GYM_ID) == tuple(n for n in cls if n != "render_mode")
+    env = stealth_attack_v0.parallel_env("grid-ieee14", budget=2, alphas=[0.01, 0.1])
+    assert env.budget == 2 and env.alphas == (0.01, 0.1)
+    with pytest.raises(TypeError, match="budgett"):
+        stealth_attack_v0.parallel_env(budgett=2)

@@ -27,6 +27,7 @@ from scipy import linalg, optimize, sparse
 from baselines.stealth.common import (
     as_estimation,
     meter_indices,
+    milp,
     null_space,
     state_index,
     support,
@@ -235,7 +236,7 @@ def _budget_milp(
     options: dict[str, Any] = {"mip_rel_gap": 1e-9}
     if time_limit is not None:
         options["time_limit"] = float(time_limit)
-    res = optimize.milp(
+    res = milp(
         cost,
         constraints=optimize.LinearConstraint(A, -np.inf, upper),
         integrality=np.concatenate([np.zeros(n), np.ones(m)]),

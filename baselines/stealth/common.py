@@ -2,6 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import ctypes.util
+import functools
+import os
+import sys
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -10,6 +17,50 @@ from fdia_env.stealth import StaticEstimation, static_estimation
 
 ZERO_RTOL = 1e-9
 """A measurement of an attack counts as untouched when ``|a_i| <= ZERO_RTOL · max |a|``."""
+
+
+@functools.cache
+def _libc() -> Any:
+    name = ctypes.util.find_library("c")
+    try:
+        return ctypes.CDLL(name) if name else None
+    except OSError:  # pragma: no cover - no C library to flush (the redirect still works)
+        return None
+
+
+def _flush_c_stdout() -> None:
+    libc = _libc()
+    if libc is not None:
+        libc.fflush(None)
+
+
+@contextlib.contextmanager
+def quiet_solver() -> Iterator[None]:
+    """Send file descriptor 1 to the null device while a HiGHS MILP runs.
+
+    HiGHS' MIP solver prints debugging lines (``HighsMipSolverData::
+    transformNewIntegerFeasibleSolution tmpSolver.run();``) from C++ straight to the process's
+    standard output, and scipy's ``milp`` has no option that silences them; so the descriptor
+    itself is redirected for the solve and restored after it (C's buffer is flushed both
+    times, so nothing written before or after is lost or misplaced). Output that another thread
+    writes to descriptor 1 during the solve is dropped too.
+    """
+    sys.stdout.flush()
+    _flush_c_stdout()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no descriptor 1 (a detached process): nothing to silence
+        yield
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        _flush_c_stdout()
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
 
 
 def as_estimation(source: Any, param: str = "estimation") -> StaticEstimation:
@@ -71,3 +122,11 @@ def attack_on_state(
     a = est.H @ c
     a[zero] = 0.0
     return c, a
+
+
+def milp(*args: Any, **kwargs: Any) -> Any:
+    """``scipy.optimize.milp`` with HiGHS' debugging lines silenced (:func:`quiet_solver`)."""
+    from scipy import optimize
+
+    with quiet_solver():
+        return optimize.milp(*args, **kwargs)

@@ -57,3 +57,62 @@ class StealthPolicy:
         if obs.ndim == 2:
             return np.tile(self.action, (obs.shape[0], 1)), state
         return self.action.copy(), state
+
+
+class MixedActionPolicy:
+    """Plays row ``i`` of a fixed action table with probability ``probs[i]``, every step anew.
+
+    An equilibrium's mixed strategy as a policy (the protection game's attacker over its
+    attacks, its defender over protected meter sets). Sampling is by
+    :class:`~fdia_env.envs.opponents.FixedMix` (own seeded generator, ``reset(seed)``,
+    ``deterministic`` ignored on purpose: a mixed equilibrium is one only when sampled).
+
+    Args:
+        actions: (K, d) the actions (one per pure strategy).
+        probs: (K,) probabilities ≥ 0 summing to 1.
+        seed: Seed of the policy's generator.
+        dtype: The actions' dtype (the action space's: float32 for a ``Box``, int8 for a
+            ``MultiBinary``).
+
+    Example:
+        >>> policy = MixedActionPolicy([[1, 0], [0, 1]], [0.0, 1.0], seed=0, dtype=np.int8)
+        >>> policy.predict(np.zeros(3))[0].tolist()
+        [0, 1]
+    """
+
+    def __init__(
+        self, actions: Any, probs: Any, seed: int | None = None, dtype: Any = np.float32
+    ) -> None:
+        from fdia_env.envs.opponents import FixedMix
+
+        table = np.array(actions, dtype=np.float64)
+        if table.ndim != 2 or 0 in table.shape or not np.all(np.isfinite(table)):
+            raise ValueError(f"actions must be a finite (K, d) table, got shape {table.shape}")
+        table = table.astype(dtype)
+        self.mix = FixedMix(probs, seed)
+        if self.mix.n_actions != table.shape[0]:
+            raise ValueError(
+                f"probs must have one entry per action ({table.shape[0]}), got {self.mix.n_actions}"
+            )
+        table.setflags(write=False)
+        self.actions = table
+
+    @property
+    def probs(self) -> np.ndarray:
+        """(K,) the mix's probabilities."""
+        return self.mix.probs
+
+    def reset(self, seed: int | None = None) -> None:
+        """Restart the generator from ``seed`` (nothing happens without one)."""
+        self.mix.reset(seed)
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, Any]:
+        """Return ``(action, state)``: a drawn row, or (B, d) rows for a (B, ...) batch."""
+        index, state = self.mix.predict(observation, state, episode_start, deterministic)
+        return self.actions[np.asarray(index)].copy(), state

@@ -42,6 +42,7 @@ from baselines.stealth.common import (
     as_estimation,
     attack_on_state,
     meter_indices,
+    milp,
     null_space,
     state_index,
     support,
@@ -221,7 +222,7 @@ def _milp(
     options = {"mip_rel_gap": 0.0}
     if time_limit is not None:
         options["time_limit"] = time_limit
-    res = optimize.milp(
+    res = milp(
         cost,
         constraints=cons,
         integrality=integrality,

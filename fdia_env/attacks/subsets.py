@@ -194,8 +194,16 @@ class SubsetChoice:
             self.b_opponent[where] = 0.0
 
     def batch_observe_opponent(self, other: Any) -> None:
-        """Every member's opponent subset (from the opponent's own subset list)."""
+        """Every member's opponent subset (from the opponent's own subset list).
+
+        An opponent that picks no subset (e.g. a sparse or covariance attack against sensor
+        selection)
+        leaves the indicators at zero, as :meth:`observe_opponent` does.
+        """
         xp = getattr(self, "xp", NUMPY)
+        if not isinstance(other, SubsetChoice):
+            self.b_opponent = xp.zeros((self._batch, self.M))
+            return
         self.b_opponent = xp.astype(other._masks[other.b_last], xp.float64)
 
     def batch_features(self) -> np.ndarray:

@@ -280,8 +280,9 @@ def check_reset_args(seed: Any, options: Any, known: tuple[str, ...] = ()) -> No
     """``reset``'s arguments: a seed in [0, 2**64) or None; options the env reads (``known``).
 
     Only the typed sensor game reads an option (``attacker_type``, which forces nature's draw).
-    Other options are not an error, because PettingZoo's own ``parallel_api_test`` resets with
-    ``options={"options": 1}``; keys outside ``known`` draw a ``UserWarning`` naming them, so a
+    Other options are not an error, because PettingZoo's own ``api_test`` and
+    ``parallel_api_test`` reset with ``options={"options": 1}`` (that probe key, ``"options"``,
+    is accepted silently); other keys outside ``known`` draw a ``UserWarning`` naming them, so a
     setting passed there by mistake (instead of to the constructor) is not silently lost.
     """
     if seed is not None:
@@ -291,7 +292,7 @@ def check_reset_args(seed: Any, options: Any, known: tuple[str, ...] = ()) -> No
             raise ValueError(f"seed must be in [0, 2**64), got {seed}")
     if options is not None and not isinstance(options, dict):
         raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
-    unknown = sorted(str(k) for k in (options or {}) if k not in known)
+    unknown = sorted(str(k) for k in (options or {}) if k not in known and k != "options")
     if unknown:
         reads = f"this env reads only {list(known)}" if known else "this env reads none"
         warnings.warn(

@@ -46,11 +46,11 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_choice
+from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.attacks.subsets import SubsetChoice, game_sizes
 from fdia_env.envs.actions import check_action
-from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -59,45 +59,25 @@ STOP = 0
 """The stop action: commit the set built so far and take the window step."""
 
 
-class SequentialSetEnv(ParallelEnv):
-    """Sparse attacker's sequential format over a ``"multibinary"`` sparse-attack env.
+class SequentialBase(ParallelEnv):
+    """What the sequential wrappers share: the wrapped env's delegation and the checks.
 
-    See the module docstring for the action, mask, observation and reward contract.
+    A subclass builds its ``Dict(observation, action_mask)`` spaces per player into
+    ``self._obs_spaces`` and calls :meth:`_reset_inner` from its ``reset``.
 
     Args:
-        inner: A single-player :class:`FdiaParallelEnv` whose attack model is a
-            :class:`SparseAttack` in the ``"multibinary"`` format (any over-budget rule: the
-            wrapper sends only sets that fit the budget left).
-        illegal_action: ``"trim"`` (default), ``"noop"`` (an action outside the mask stops) or
-            ``"error"`` (it raises ``ValueError``).
-        skip_forced: Play the decisions whose only legal action is stop (default True).
+        inner: The wrapped :class:`FdiaParallelEnv` (the subclass checks its attack model).
+        illegal_action: ``"trim"``, ``"noop"`` or ``"error"``.
+        skip_forced: Play the decisions whose only legal action is stop.
 
     Raises:
-        TypeError: If ``inner`` is not such an env.
-        ValueError: For a budget of 0 (there would be no decision to make) or a bad
-            ``illegal_action``.
+        TypeError: If ``skip_forced`` is not a bool.
+        ValueError: For a bad ``illegal_action``.
     """
 
     metadata: ClassVar[dict[str, Any]] = dict(FdiaParallelEnv.metadata)
 
-    def __init__(
-        self, inner: FdiaParallelEnv, illegal_action: str = "trim", skip_forced: bool = True
-    ) -> None:
-        if not isinstance(inner, FdiaParallelEnv) or not isinstance(inner.attack, SparseAttack):
-            raise TypeError(
-                "inner must be a sparse-attack FdiaParallelEnv (sparse_attack_v0.parallel_env), "
-                f"got {type(inner).__name__}"
-            )
-        if inner.attack.format != "multibinary" or inner.possible_agents != ["attacker"]:
-            raise TypeError(
-                "inner must be a single-player sparse attack in the 'multibinary' format, got "
-                f"format {inner.attack.format!r} with agents {inner.possible_agents}"
-            )
-        if inner.attack.budget < 1:
-            raise ValueError(
-                "budget must be >= 1 for action='sequential' (with budget 0 there is no "
-                "decision to make; use another format), got 0"
-            )
+    def __init__(self, inner: FdiaParallelEnv, illegal_action: str, skip_forced: bool) -> None:
         if not isinstance(skip_forced, bool):
             raise TypeError(f"skip_forced must be a bool, got {type(skip_forced).__name__}")
         self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
@@ -110,9 +90,16 @@ class SequentialSetEnv(ParallelEnv):
         self.possible_agents = list(inner.possible_agents)
         self.agents: list[str] = []
         self.state_space = inner.state_space
-        box = inner.observation_space("attacker")
-        extra = self.M + 1
-        self._obs_space = spaces.Dict(
+        self._action_space = spaces.Discrete(self.M + 1)
+        self._obs_spaces: dict[str, spaces.Dict] = {}
+        self._box: Any = None
+        self._max_cycles = inner.max_cycles  # counted in decisions here, not in the inner env
+        inner.max_cycles = None
+        self._decisions = 0
+
+    def _masked_space(self, box: spaces.Box, extra: int) -> spaces.Dict:
+        """``Dict(observation, action_mask)``: ``box`` followed by ``extra`` entries in [0, 1]."""
+        return spaces.Dict(
             {
                 "observation": spaces.Box(
                     low=np.concatenate([box.low, np.zeros(extra, np.float32)]),
@@ -122,20 +109,26 @@ class SequentialSetEnv(ParallelEnv):
                 "action_mask": spaces.Box(0, 1, shape=(self.M + 1,), dtype=np.int8),
             }
         )
-        self._action_space = spaces.Discrete(self.M + 1)
-        self._chosen = np.zeros(self.M, dtype=np.int8)
-        self._box: np.ndarray | None = None
-        self._info: dict[str, Any] = {}
 
     # --- PettingZoo API ------------------------------------------------------------------
     @property
     def max_cycles(self) -> int | None:
-        """The wrapped env's ``max_cycles`` (counted in window steps, not decisions)."""
-        return self.inner.max_cycles
+        """PettingZoo's episode-length limit, counted in decisions (None: no limit).
+
+        An episode still running after this many decisions is truncated (as PettingZoo's
+        ``max_cycles`` counts a parallel env's steps); the wrapped env has no limit of its own.
+        """
+        return self._max_cycles
 
     @max_cycles.setter
     def max_cycles(self, value: int | None) -> None:
-        self.inner.max_cycles = value
+        self._max_cycles = None if value is None else check_int("max_cycles", value, minimum=1)
+
+    def _limit(self, ended: bool) -> bool:
+        """Count a decision; whether it truncates an episode that has not ``ended``."""
+        self._decisions += 1
+        limit = self._max_cycles
+        return not ended and limit is not None and self._decisions >= limit
 
     @property
     def spec(self) -> EpisodeSpec:
@@ -155,10 +148,10 @@ class SequentialSetEnv(ParallelEnv):
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
         self._check_agent(agent)
-        return self._obs_space
+        return self._obs_spaces[agent]
 
     def action_space(self, agent: str) -> spaces.Space:
-        """``Discrete(M + 1)``: 0 = stop, j = add sensor j (the same object on every call)."""
+        """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call)."""
         self._check_agent(agent)
         return self._action_space
 
@@ -167,13 +160,108 @@ class SequentialSetEnv(ParallelEnv):
             raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        """Reset the wrapped env; the first decision is the first pick of window step K+1."""
-        obs, infos = self.inner.reset(seed=seed, options=options)
+        """Reset the wrapped env; the first decision is the first pick of its first step.
+
+        Options the env does not read draw one ``UserWarning`` naming the caller's line (see
+        :func:`~fdia_env.envs.parallel.check_reset_args`).
+
+        Raises:
+            ValueError: For a bad seed or a bad value of an option the env reads.
+        """
+        check_reset_args(seed, options, self.attack.reset_options)
+        return self._reset(seed, options)
+
+    def _reset(self, seed: int | None, options: dict | None) -> tuple[dict, dict]:
+        """Reset with arguments already checked: the wrapped env gets the options it reads."""
+        known = self.attack.reset_options
+        kept = None if options is None else {k: v for k, v in options.items() if k in known}
+        obs, infos = self.inner.reset(seed=seed, options=kept)
         self.np_random = self.inner.np_random
+        self.agents = list(self.inner.agents)
+        self._decisions = 0
+        return self._start(obs, infos)
+
+    def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
+        """Start the first decision from the wrapped env's reset; the wrapper's obs and infos."""
+        raise NotImplementedError
+
+    def _check_step(self, actions: Any) -> None:
+        """Raise for a step before reset, after the episode, or without one action per agent."""
+        if self._box is None:
+            raise RuntimeError("step() called before reset(): call reset() first")
+        if not self.agents:
+            raise RuntimeError(
+                "step() called after the episode ended: call reset() to start a new one"
+            )
+        if not isinstance(actions, dict) or set(actions) != set(self.agents):
+            raise ValueError(
+                f"actions must be a dict with exactly one entry per live agent {self.agents}, "
+                f"got {actions!r}"
+            )
+
+    def render(self, mode: str | None = None) -> str | np.ndarray | None:
+        """The wrapped env's rendering of its last step."""
+        return self.inner.render(mode)
+
+    def state(self) -> np.ndarray:
+        """Global state: the wrapped env's."""
+        return self.inner.state()
+
+    def close(self) -> None:
+        """Close the wrapped env."""
+        self.inner.close()
+
+
+class SequentialSetEnv(SequentialBase):
+    """Sparse attacker's sequential format over a ``"multibinary"`` sparse-attack env.
+
+    See the module docstring for the action, mask, observation and reward contract.
+
+    Args:
+        inner: A single-player :class:`FdiaParallelEnv` whose attack model is a
+            :class:`SparseAttack` in the ``"multibinary"`` format (any over-budget rule: the
+            wrapper sends only sets that fit the budget left).
+        illegal_action: ``"trim"`` (default), ``"noop"`` (an action outside the mask stops) or
+            ``"error"`` (it raises ``ValueError``).
+        skip_forced: Play the decisions whose only legal action is stop (default True).
+
+    Raises:
+        TypeError: If ``inner`` is not such an env.
+        ValueError: For a budget of 0 (there would be no decision to make) or a bad
+            ``illegal_action``.
+    """
+
+    def __init__(
+        self, inner: FdiaParallelEnv, illegal_action: str = "trim", skip_forced: bool = True
+    ) -> None:
+        if not isinstance(inner, FdiaParallelEnv) or not isinstance(inner.attack, SparseAttack):
+            raise TypeError(
+                "inner must be a sparse-attack FdiaParallelEnv (sparse_attack_v0.parallel_env), "
+                f"got {type(inner).__name__}"
+            )
+        if inner.attack.format != "multibinary" or inner.possible_agents != ["attacker"]:
+            raise TypeError(
+                "inner must be a single-player sparse attack in the 'multibinary' format, got "
+                f"format {inner.attack.format!r} with agents {inner.possible_agents}"
+            )
+        if inner.attack.budget < 1:
+            raise ValueError(
+                "budget must be >= 1 for action='sequential' (with budget 0 there is no "
+                "decision to make; use another format), got 0"
+            )
+        super().__init__(inner, illegal_action, skip_forced)
+        self._obs_spaces = {
+            "attacker": self._masked_space(inner.observation_space("attacker"), self.M + 1)
+        }
+        self._chosen = np.zeros(self.M, dtype=np.int8)
+        self._box: np.ndarray | None = None
+        self._info: dict[str, Any] = {}
+
+    def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
+        """The first decision is the first pick of window step K+1."""
         self._chosen[:] = 0
         self._box = obs["attacker"]
         self._info = infos["attacker"]
-        self.agents = list(self.inner.agents)
         return {"attacker": self._observe()}, {"attacker": dict(self._info)}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -184,17 +272,7 @@ class SequentialSetEnv(ParallelEnv):
             ValueError: For a missing or unknown agent's action, an action outside
                 ``Discrete(M + 1)``, or (with ``illegal_action="error"``) outside the mask.
         """
-        if self._box is None:
-            raise RuntimeError("step() called before reset(): call reset() first")
-        if not self.agents:
-            raise RuntimeError(
-                "step() called after the episode ended: call reset() to start a new one"
-            )
-        if not isinstance(actions, dict) or set(actions) != {"attacker"}:
-            raise ValueError(
-                "actions must be a dict with exactly one entry per live agent ['attacker'], "
-                f"got {actions!r}"
-            )
+        self._check_step(actions)
         action = actions["attacker"]
         check_action(self._action_space, action, "attacker")
         j = int(action)
@@ -220,6 +298,7 @@ class SequentialSetEnv(ParallelEnv):
             while self.skip_forced and not (term or trunc) and self._forced():
                 r, term, trunc = self._commit()
                 reward += r
+        trunc = trunc or self._limit(term)
         obs = {"attacker": self._observe()}
         infos = {"attacker": dict(self._info)}
         if term or trunc:
@@ -261,18 +340,6 @@ class SequentialSetEnv(ParallelEnv):
         ).astype(np.float32)
         return {"observation": box, "action_mask": self.action_mask()}
 
-    def render(self, mode: str | None = None) -> str | np.ndarray | None:
-        """The wrapped env's rendering of its last window step."""
-        return self.inner.render(mode)
-
-    def state(self) -> np.ndarray:
-        """Global state: the wrapped env's."""
-        return self.inner.state()
-
-    def close(self) -> None:
-        """Close the wrapped env."""
-        self.inner.close()
-
 
 def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = None) -> float:
     """Play ``plan`` (per window step, the 1-based sensors) in ``env``; return the return.
@@ -309,7 +376,7 @@ def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = N
 # --- The sensor game: both players build their subset one sensor per decision ----------------
 
 
-class SequentialSubsetEnv(ParallelEnv):
+class SequentialSubsetEnv(SequentialBase):
     """Sensor game (``sensor_game_v0``) with both players' subsets built one sensor per decision.
 
     ``sensor_game_v0.parallel_env(action="sequential")`` builds it; its AEC view
@@ -356,8 +423,6 @@ class SequentialSubsetEnv(ParallelEnv):
         ValueError: For a bad ``illegal_action``.
     """
 
-    metadata: ClassVar[dict[str, Any]] = dict(FdiaParallelEnv.metadata)
-
     def __init__(
         self, inner: FdiaParallelEnv, illegal_action: str = "trim", skip_forced: bool = True
     ) -> None:
@@ -370,19 +435,9 @@ class SequentialSubsetEnv(ParallelEnv):
                 "inner must be a sensor-game FdiaParallelEnv (sensor_game_v0.parallel_env), "
                 f"got {type(inner).__name__}"
             )
-        if not isinstance(skip_forced, bool):
-            raise TypeError(f"skip_forced must be a bool, got {type(skip_forced).__name__}")
-        self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
-        self.skip_forced = skip_forced
-        self.inner = inner
-        self.attack = inner.attack
+        super().__init__(inner, illegal_action, skip_forced)
         self.defense = inner.defense
-        self.M = M = inner.system.M
-        self.metadata = dict(inner.metadata)
-        self.render_mode = inner.render_mode
-        self.possible_agents = list(inner.possible_agents)
-        self.agents: list[str] = []
-        self.state_space = inner.state_space
+        M = self.M
         self.models = {"attacker": inner.attack, "defender": inner.defense}
         self.drops = {"attacker": False, "defender": True}
         k = inner.attack.max_subset_size
@@ -392,20 +447,9 @@ class SequentialSubsetEnv(ParallelEnv):
         self.index = {
             p: {s: j for j, s in enumerate(m.subsets)} for p, m in self.models.items()
         }  # fmt: skip
-        self._obs_spaces = {}
-        for p in self.possible_agents:
-            box = inner.observation_space(p)
-            self._obs_spaces[p] = spaces.Dict(
-                {
-                    "observation": spaces.Box(
-                        low=np.concatenate([box.low, np.zeros(M, np.float32)]),
-                        high=np.concatenate([box.high, np.ones(M, np.float32)]),
-                        dtype=np.float32,
-                    ),
-                    "action_mask": spaces.Box(0, 1, shape=(M + 1,), dtype=np.int8),
-                }
-            )
-        self._action_space = spaces.Discrete(M + 1)
+        self._obs_spaces = {
+            p: self._masked_space(inner.observation_space(p), M) for p in self.possible_agents
+        }
         self._chosen = {p: np.zeros(M, dtype=np.int8) for p in self.possible_agents}
         self._stopped = dict.fromkeys(self.possible_agents, False)
         self._box: dict[str, np.ndarray] | None = None
@@ -415,51 +459,9 @@ class SequentialSubsetEnv(ParallelEnv):
         self.rounds_started = 0
         """Rounds started since the env was made (never reset: identifies a round)."""
 
-    # --- PettingZoo API ------------------------------------------------------------------
-    @property
-    def max_cycles(self) -> int | None:
-        """The wrapped env's ``max_cycles`` (counted in rounds, not decisions)."""
-        return self.inner.max_cycles
-
-    @max_cycles.setter
-    def max_cycles(self, value: int | None) -> None:
-        self.inner.max_cycles = value
-
-    @property
-    def spec(self) -> EpisodeSpec:
-        """The wrapped env's episode spec."""
-        return self.inner.spec
-
-    @property
-    def scenario(self) -> Scenario:
-        """The wrapped env's scenario."""
-        return self.inner.scenario
-
-    @property
-    def system(self) -> LinearSystem:
-        """The wrapped env's system."""
-        return self.inner.system
-
-    def observation_space(self, agent: str) -> spaces.Space:
-        """The observation space of ``agent`` (the same object on every call)."""
-        self._check_agent(agent)
-        return self._obs_spaces[agent]
-
-    def action_space(self, agent: str) -> spaces.Space:
-        """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call)."""
-        self._check_agent(agent)
-        return self._action_space
-
-    def _check_agent(self, agent: str) -> None:
-        if agent not in self.possible_agents:
-            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
-
-    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        """Reset the wrapped env; the first decision is the first pick of round 1."""
-        obs, infos = self.inner.reset(seed=seed, options=options)
-        self.np_random = self.inner.np_random
+    def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
+        """The first decision is the first pick of round 1."""
         self._new_round(obs, infos)
-        self.agents = list(self.inner.agents)
         return self._observe_all(), {p: dict(self._infos[p]) for p in self.agents}
 
     def _new_round(self, obs: dict, infos: dict) -> None:
@@ -479,17 +481,7 @@ class SequentialSubsetEnv(ParallelEnv):
             ValueError: For a missing or unknown agent's action, an action outside
                 ``Discrete(M + 1)``, or (with ``illegal_action="error"``) outside the mask.
         """
-        if self._box is None:
-            raise RuntimeError("step() called before reset(): call reset() first")
-        if not self.agents:
-            raise RuntimeError(
-                "step() called after the episode ended: call reset() to start a new one"
-            )
-        if not isinstance(actions, dict) or set(actions) != set(self.agents):
-            raise ValueError(
-                f"actions must be a dict with exactly one entry per live agent {self.agents}, "
-                f"got {actions!r}"
-            )
+        self._check_step(actions)
         moves = {}
         for p in self.agents:
             check_action(self._action_space, actions[p], p)
@@ -516,6 +508,8 @@ class SequentialSubsetEnv(ParallelEnv):
             obs, rewards, terms, truncs, infos = self.inner.step(played)
             rewards = {p: float(r) for p, r in rewards.items()}
             self._new_round(obs, infos)
+        if self._limit(any(terms.values()) or any(truncs.values())):
+            truncs = dict.fromkeys(truncs, True)
         out = (
             self._observe_all(),
             rewards,
@@ -586,18 +580,6 @@ class SequentialSubsetEnv(ParallelEnv):
             for p in self.agents or self.possible_agents
         }
 
-    def render(self, mode: str | None = None) -> str | np.ndarray | None:
-        """The wrapped env's rendering of its last round."""
-        return self.inner.render(mode)
-
-    def state(self) -> np.ndarray:
-        """Global state: the wrapped env's."""
-        return self.inner.state()
-
-    def close(self) -> None:
-        """Close the wrapped env."""
-        self.inner.close()
-
 
 def subset_actions(env: SequentialSubsetEnv, agent: str, subset: tuple[int, ...]) -> list[int]:
     """The picks (1-based, increasing) that make ``agent`` play the 0-based ``subset``."""
@@ -660,11 +642,9 @@ class SequentialGameView(gym.Env):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
         """Reset the sequential game; ``seed`` seeds every draw (the opponent's too)."""
-        from fdia_env.envs.parallel import check_reset_args
-
         check_reset_args(seed, options, self.parallel.attack.reset_options)
         super().reset(seed=None if seed is None else int(seed))
-        obs, infos = self.parallel.reset(seed=seed, options=options)
+        obs, infos = self.parallel._reset(seed, options)  # checked: one warning, naming the caller
         if seed is not None and hasattr(self.opponent, "reset"):
             self.opponent.reset(seed=int(seed) + 1)  # as the subset format's view
         self._plan_round()

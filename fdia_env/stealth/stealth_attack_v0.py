@@ -81,6 +81,7 @@ Infos (the same keys at reset and every step): ``phi`` (the last damage), ``step
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
@@ -91,45 +92,19 @@ from fdia_env.stealth.env import StealthAttackEnv
 NAME = "stealth_attack_v0"
 
 
-def parallel_env(
-    scenario: Any = "grid-ieee14",
-    budget: int = 6,
-    horizon: int | None = None,
-    action: str = "shift",
-    magnitude: float = 0.05,
-    a_max: float = 0.5,
-    dynamics: str = "sampled",
-    test: str = "chi2",
-    alpha: float | None = None,
-    on_detect: str = "zero",
-    penalty: float = 1.0,
-    protected: Any = None,
-    render_mode: str | None = None,
-    max_cycles: int | None = None,
-    defender: str | None = None,
-    alphas: Any = None,
-    false_alarm_cost: float = 1.0,
-) -> StealthAttackEnv:
-    """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
-    return StealthAttackEnv(
-        scenario,
-        budget=budget,
-        horizon=horizon,
-        action=action,
-        magnitude=magnitude,
-        a_max=a_max,
-        dynamics=dynamics,
-        test=test,
-        alpha=alpha,
-        on_detect=on_detect,
-        penalty=penalty,
-        protected=protected,
-        render_mode=render_mode,
-        max_cycles=max_cycles,
-        defender=defender,
-        alphas=alphas,
-        false_alarm_cost=false_alarm_cost,
-    )
+def parallel_env(scenario: Any = "grid-ieee14", **kwargs: Any) -> StealthAttackEnv:
+    """The PettingZoo ``ParallelEnv`` (see the module docstring).
+
+    Its options are :class:`~fdia_env.stealth.env.StealthAttackEnv`'s, listed once there: this
+    function's signature is the class's (``inspect.signature`` and ``train.py --env-kwargs``
+    read them).
+    """
+    return StealthAttackEnv(scenario, **kwargs)
+
+
+parallel_env.__signature__ = inspect.signature(StealthAttackEnv).replace(  # type: ignore[attr-defined]
+    return_annotation=StealthAttackEnv
+)
 
 
 class _Fixed:

@@ -36,6 +36,7 @@ game's exact expected errors are integrated on the host (see :mod:`fdia_env.dete
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -48,17 +49,22 @@ from gymnasium.vector.utils import batch_space
 from fdia_env._validation import check_int
 from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
+from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, attacker_reward, check_reset_args
 from fdia_env.envs.single_agent import Policy, check_agent, check_no_opponent, check_opponent
 from fdia_env.registration import ENVS, torch_ids
-from fdia_env.vector.simulation import BatchedSimulation
 
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
 # sparse attack, a (2**M,) action mask; a larger batch is a typo (10**9), not a workload
 MAX_NUM_ENVS = 2**20
 # on torch (a GPU's memory) the batch may be larger: benchmarks/gpu.py measures up to B = 2**24
 MAX_NUM_ENVS_TORCH = 2**24
+
+FORMAT_VECTOR_ENVS: dict[tuple[str, Any], Callable[..., gym.vector.VectorEnv]] = {}
+"""(module, ``action``) → the maker of that action format's own native vector env, called by
+:func:`make_vector` with its arguments (:mod:`fdia_env.vector.sequential` adds the sparse
+attacker's ``"sequential"``)."""
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
@@ -95,8 +101,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         if not isinstance(parallel, FdiaParallelEnv):  # e.g. the sparse attack's "sequential"
             raise TypeError(
                 f"parallel must be an FdiaParallelEnv, got {type(parallel).__name__} (the sparse "
-                "attack's action='sequential' is not available in the native vector env; use "
-                "gymnasium.make_vec(..., vectorization_mode='sync'))"
+                "attack's action='sequential' has its own native vector env, "
+                "fdia_env.vector.sequential.SequentialVectorEnv)"
             )
         self.xp = xp = get_backend(backend, device)
         self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
@@ -447,8 +453,16 @@ def make_vector(
     """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B.
 
     ``backend`` and ``device`` choose numpy (default) or torch on a device (see
-    :class:`FdiaVectorEnv`); they are checked before the env is built.
+    :class:`FdiaVectorEnv`); they are checked before the env is built. The sparse attacker's
+    ``action="sequential"`` gets :class:`fdia_env.vector.sequential.SequentialVectorEnv`
+    (through :data:`FORMAT_VECTOR_ENVS`).
     """
+    fmt = FORMAT_VECTOR_ENVS.get((module, kwargs.get("action")))
+    if fmt is not None:  # a format with a native vector env of its own (e.g. "sequential")
+        return fmt(
+            module, num_envs, agent, opponent, autoreset_mode, max_episode_steps, backend, device,
+            **kwargs
+        )  # fmt: skip
     xp = get_backend(backend, device)  # an unknown backend or a missing GPU fails first
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")

@@ -1,0 +1,408 @@
+"""Load the agent a benchmark task is scored on, from whatever the user has.
+
+:func:`load_agent` accepts, as ``agent``:
+
+- a ``train.py`` run folder (stable-baselines3, torch-ppo or RLlib backend: the folder's
+  ``config.json`` says which, and which env and options the agent was trained on);
+- a model file: a stable-baselines3 model description ``.json`` (tensors-only, written by
+  ``train.py``), a torch-ppo policy ``.json`` (:func:`agents.torch_ppo.save_policy`), or a
+  stable-baselines3 ``.zip``, which is unpickled when loaded and so is refused unless the user
+  trusts it (``trust_checkpoint=True``, ``--trust-checkpoint``);
+- an RLlib run's state (``rllib_state.json`` of a run folder; tensors only, never RLlib's own
+  pickled ``checkpoint/`` folder);
+- ``"module:function"``: a Python callable that returns an action for an observation (it is
+  given ``action_masks=`` too when it takes that keyword), or that names an object with SB3's
+  ``predict``;
+- ``"random"``: uniformly random legal actions.
+
+A checkpoint that records the env it was trained on (a run folder's ``config.json``) must have
+been trained on the task's env id and options; one whose spaces differ from the task env's is
+refused too. Every error names the parameter (``agent``, ``algo`` or ``trust_checkpoint``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+CALLABLE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
+SB3_FORMAT = "fdia_env-sb3-state-v1"
+TORCH_PPO_FORMAT = "fdia_env-torch-ppo-v1"
+
+
+@dataclass(frozen=True)
+class LoadedAgent:
+    """An agent ready to play: a policy with stable-baselines3's ``predict``.
+
+    Attributes:
+        policy: The policy (``predict(obs, deterministic=..., action_masks=...)``), or the
+            string ``"random"``.
+        kind: ``"random"``, ``"callable"``, ``"sb3"``, ``"sb3-zip"``, ``"torch-ppo"`` or
+            ``"rllib"``.
+        source: What the user gave.
+        description: One line for the report (kind, algorithm, steps trained).
+    """
+
+    policy: Any
+    kind: str
+    source: str
+    description: str
+
+
+class CallablePolicy:
+    """A function ``f(observation) -> action`` behind SB3's ``predict``.
+
+    ``f`` receives ``action_masks=`` as well when its signature takes that keyword (or
+    ``**kwargs``) and the env has masks.
+    """
+
+    def __init__(self, function: Any, name: str) -> None:
+        self.function = function
+        self.name = name
+        try:
+            params = inspect.signature(function).parameters
+        except (TypeError, ValueError):
+            params = {}
+        self.takes_masks = "action_masks" in params or any(
+            p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()
+        )
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+        action_masks: Any = None,
+    ) -> tuple[Any, Any]:
+        """The function's action for ``observation``."""
+        if self.takes_masks:
+            return self.function(observation, action_masks=action_masks), state
+        return self.function(observation), state
+
+
+# ------------------------------------------------------------------------------ task checks
+
+
+def _plain(value: Any) -> Any:
+    """A value as JSON would give it back (tuples as lists), for comparisons."""
+    return json.loads(json.dumps(value, default=str))
+
+
+def _defaults(task: Any) -> dict[str, Any]:
+    """The task env constructor's default options (the PettingZoo module's ``parallel_env``)."""
+    if not task.module:
+        return {}
+    name = task.module if "." in task.module else f"fdia_env.{task.module}"
+    try:
+        params = inspect.signature(importlib.import_module(name).parallel_env).parameters
+    except (ImportError, AttributeError, TypeError, ValueError):
+        return {}
+    return {
+        k: p.default
+        for k, p in params.items()
+        if p.default is not inspect.Parameter.empty and p.default is not None
+    }
+
+
+def check_trained_on(
+    source: str, env_id: str | None, env_kwargs: dict[str, Any], task: Any
+) -> None:
+    """Raise unless a checkpoint trained on ``env_id`` with ``env_kwargs`` fits ``task``.
+
+    An option given on one side only is compared with the env's default; an option left at
+    None (the scenario's default) on either side is not compared.
+
+    Raises:
+        ValueError: Naming ``agent``, the env id or the options that differ.
+    """
+    if env_id is not None and env_id != task.env_id:
+        raise ValueError(
+            f"agent {source} was trained on {env_id}, but task {task.name} is played on "
+            f"{task.env_id}: score it on a task of its env"
+        )
+    defaults = _defaults(task)
+    theirs, ours = _plain(dict(env_kwargs)), _plain(dict(task.env_kwargs))
+    differ = []
+    for key in sorted(set(theirs) | set(ours)):
+        a = theirs.get(key, _plain(defaults.get(key)))
+        b = ours.get(key, _plain(defaults.get(key)))
+        if a is None or b is None or a == b:
+            continue
+        differ.append(f"{key}={a!r} (task: {b!r})")
+    if differ:
+        raise ValueError(
+            f"agent {source} was trained with other env options than task {task.name}: "
+            + ", ".join(differ)
+        )
+
+
+def check_spaces(source: str, observation_space: Any, action_space: Any, env: gym.Env) -> None:
+    """Raise unless the policy's spaces are the task env's.
+
+    Raises:
+        ValueError: Naming ``agent`` and both spaces.
+    """
+    for what, theirs, ours in (
+        ("observation", observation_space, env.observation_space),
+        ("action", action_space, env.action_space),
+    ):
+        if theirs is not None and theirs != ours:
+            raise ValueError(
+                f"agent {source} has the {what} space {theirs}, the task env {ours}: it was "
+                "trained on another task"
+            )
+
+
+# ------------------------------------------------------------------------------ loaders
+
+
+def _callable(source: str, env: gym.Env) -> LoadedAgent:
+    module_name, _, attr = source.partition(":")
+    try:
+        obj: Any = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ValueError(
+            f"agent {source!r}: cannot import module {module_name!r} ({exc}); give "
+            "'module:function' with the module on the Python path, a run folder or a model file"
+        ) from None
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise ValueError(f"agent {source!r}: module {module_name!r} has no {attr!r}")
+        obj = getattr(obj, part)
+    if callable(getattr(obj, "predict", None)):
+        return LoadedAgent(obj, "callable", source, f"{source} (a policy with predict)")
+    if not callable(obj):
+        raise ValueError(f"agent {source!r}: {attr} is neither callable nor a policy")
+    return LoadedAgent(CallablePolicy(obj, source), "callable", source, f"{source} (a function)")
+
+
+def _read_json(path: Path, what: str) -> dict[str, Any]:
+    from agents.checkpoint import read_json
+
+    return read_json(path, what)
+
+
+def _sb3(path: Path, root: Path, env: gym.Env, source: str, algo: str | None) -> LoadedAgent:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.checkpoint import load_model
+
+    vec = DummyVecEnv([lambda: env])
+    model = load_model(path, vec, root, algo=algo)
+    meta = _read_json(path, "model description")
+    return LoadedAgent(
+        model,
+        "sb3",
+        source,
+        f"stable-baselines3 {meta['algo']}, {int(meta.get('num_timesteps', 0)):,} steps",
+    )
+
+
+def _sb3_zip(path: Path, env: gym.Env, source: str, algo: str | None, trusted: bool) -> LoadedAgent:
+    from agents.algos import ALGO_CLASSES
+    from agents.checkpoint import UntrustedCheckpointError, require_trusted
+
+    try:
+        require_trusted(path, trusted)
+    except UntrustedCheckpointError as exc:
+        raise UntrustedCheckpointError(
+            f"agent {source}: {exc} (trust_checkpoint=True, --trust-checkpoint)"
+        ) from None
+    if algo is None:
+        raise ValueError(
+            f"algo is needed to load the stable-baselines3 .zip {source}: one of "
+            f"{', '.join(ALGO_CLASSES)} (--algo)"
+        )
+    if algo not in ALGO_CLASSES:
+        raise ValueError(f"algo must be one of {', '.join(ALGO_CLASSES)}, got {algo!r}")
+    model = ALGO_CLASSES[algo].load(path, device="cpu")
+    check_spaces(source, model.observation_space, model.action_space, env)
+    return LoadedAgent(
+        model, "sb3-zip", source, f"stable-baselines3 {algo} (.zip), {model.num_timesteps:,} steps"
+    )
+
+
+def _torch_ppo(path: Path, root: Path, env: gym.Env, source: str) -> LoadedAgent:
+    from gymnasium import spaces
+
+    from agents.torch_ppo import PolicySpec, load_policy
+
+    policy = load_policy(path, root)
+    meta = _read_json(path, "model description")
+    try:
+        expected = PolicySpec.of(env.observation_space, env.action_space)
+    except ValueError:
+        expected = None
+    got = policy.spec
+    if expected is not None and (
+        (got.obs_dim, got.kind, got.n, got.low, got.high)
+        != (expected.obs_dim, expected.kind, expected.n, expected.low, expected.high)
+    ):
+        raise ValueError(
+            f"agent {source} is a torch-ppo policy for {got.obs_dim} observations and "
+            f"{got.n} {got.kind} actions; the task env has {expected.obs_dim} and "
+            f"{expected.n} {expected.kind}: it was trained on another task"
+        )
+    if isinstance(env.action_space, spaces.Discrete) and expected is None:
+        raise ValueError(f"agent {source}: the task env's actions do not fit torch-ppo")
+    steps = int(meta.get("num_timesteps", 0))
+    return LoadedAgent(policy, "torch-ppo", source, f"torch-ppo, {steps:,} steps")
+
+
+def _rllib(run_dir: Path, env: gym.Env, config: dict[str, Any], source: str) -> LoadedAgent:
+    from agents.rllib import require_ray
+
+    require_ray()
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
+    from agents.config import Hyperparameters
+    from agents.rllib.config import ppo_config
+    from agents.rllib.envs import is_masked, make_view
+    from agents.rllib.policy import RLlibPolicy
+    from agents.rllib.state import read_state
+
+    resolved = config.get("resolved", {})
+    gym_id, env_kwargs = resolved.get("env"), dict(resolved.get("env_kwargs", {}))
+    net = resolved.get("hyperparameters", {}).get("net_arch")
+    meta, payload = read_state(run_dir)
+    key = f"rl_module/{DEFAULT_MODULE_ID}"
+    if key not in payload["state_dicts"]:
+        raise ValueError(
+            f"agent {source}: its RLlib state holds the modules {meta['modules']}, not the "
+            "single-agent module of a train.py attacker/defender run"
+        )
+    hp = Hyperparameters(net_arch=tuple(net)) if net else None
+    rl_config = ppo_config(gym_id, env_kwargs, hp=hp, total_timesteps=1)
+    with make_view(gym_id, env_kwargs) as view:
+        spec = rl_config.get_rl_module_spec(env=view, inference_only=False)
+        masked = is_masked(view.observation_space)
+    module = spec.build()
+    try:
+        module.load_state_dict(payload["state_dicts"][key], strict=True)
+    except (RuntimeError, TypeError) as exc:
+        first = str(exc).strip().splitlines()[0]
+        raise ValueError(
+            f"agent {source}: its RLlib state does not fit the network: {first}"
+        ) from None
+    module.eval()
+    steps = int(meta.get("timesteps", 0))
+    return LoadedAgent(
+        RLlibPolicy(module, env.action_space, masked, seed=0),
+        "rllib",
+        source,
+        f"RLlib PPO, {steps:,} steps",
+    )
+
+
+def _run_folder(
+    folder: Path, env: gym.Env, task: Any, source: str, algo: str | None, trusted: bool
+) -> LoadedAgent:
+    config = _read_json(folder / "config.json", "run config")
+    resolved = config.get("resolved", {})
+    if not isinstance(resolved, dict):
+        raise ValueError(f"agent {source}: {folder / 'config.json'} is corrupt (no 'resolved')")
+    if config.get("command") not in ("attacker", "defender"):
+        raise ValueError(
+            f"agent {source} is a train.py {config.get('command')!r} run; score an attacker or "
+            "defender run (one player's policy)"
+        )
+    if resolved.get("backend") == "rllib":
+        check_trained_on(source, resolved.get("env"), resolved.get("env_kwargs", {}), task)
+        if not (folder / "rllib_state.json").is_file():
+            raise ValueError(f"agent {source}: the RLlib run holds no rllib_state.json")
+        return _rllib(folder, env, config, source)
+    check_trained_on(source, resolved.get("gym_id"), resolved.get("env_kwargs", {}), task)
+    model = folder / "model.json"
+    if not model.is_file():
+        raise ValueError(
+            f"agent {source}: the run folder holds no model.json (training did not finish; "
+            "resume it with train.py --resume)"
+        )
+    run_algo = resolved.get("algo")
+    if algo is not None and algo != run_algo:
+        raise ValueError(f"algo {algo!r} was given, but the run {source} trained {run_algo}")
+    if resolved.get("backend") == "torch":
+        return _torch_ppo(model, folder, env, source)
+    return _sb3(model, folder, env, source, run_algo)
+
+
+def _model_file(
+    path: Path, env: gym.Env, task: Any, source: str, algo: str | None, trusted: bool
+) -> LoadedAgent:
+    folder = path.parent
+    config_path = folder / "config.json"
+    if config_path.is_file():  # a model of a run folder: check what the run was trained on
+        resolved = _read_json(config_path, "run config").get("resolved", {})
+        if isinstance(resolved, dict):
+            check_trained_on(
+                source, resolved.get("gym_id") or resolved.get("env"),
+                resolved.get("env_kwargs", {}), task,
+            )  # fmt: skip
+    if path.suffix == ".zip":
+        return _sb3_zip(path, env, source, algo, trusted)
+    if path.suffix != ".json":
+        raise ValueError(
+            f"agent {source}: expected a run folder, a model .json (with its .pt), an RLlib "
+            "rllib_state.json, a stable-baselines3 .zip or 'module:function'"
+        )
+    meta = _read_json(path, "model description")
+    fmt = meta.get("format")
+    if fmt == SB3_FORMAT:
+        return _sb3(path, folder, env, source, algo)
+    if fmt == TORCH_PPO_FORMAT:
+        return _torch_ppo(path, folder, env, source)
+    if fmt == "fdia_env-rllib-state-v1":
+        config = _read_json(config_path, "run config") if config_path.is_file() else None
+        if config is None:
+            raise ValueError(f"agent {source}: an RLlib state needs its run folder's config.json")
+        return _rllib(folder, env, config, source)
+    raise ValueError(f"agent {source}: {path.name} is no model description (format {fmt!r})")
+
+
+def load_agent(
+    agent: str | Path,
+    task: Any,
+    env: gym.Env,
+    algo: str | None = None,
+    trust_checkpoint: bool = False,
+) -> LoadedAgent:
+    """The policy ``agent`` names, checked against ``task`` (see the module docstring).
+
+    Args:
+        agent: A run folder, a model file, ``"module:function"`` or ``"random"``.
+        task: The :class:`fdia_env.tasks.Task` it will be scored on.
+        env: The task's env (for the spaces and SB3's model rebuild).
+        algo: The stable-baselines3 algorithm of a bare ``.zip`` (checked against a run's).
+        trust_checkpoint: Allow a stable-baselines3 ``.zip``, which is unpickled and can run
+            code: only for files the user made or trusts.
+
+    Raises:
+        ValueError: For an agent that does not exist or cannot be read, one trained on another
+            task, or a ``.zip`` without ``algo``.
+        agents.checkpoint.UntrustedCheckpointError: For a ``.zip`` without
+            ``trust_checkpoint`` (a ValueError too).
+    """
+    source = str(agent)
+    if source == "random":
+        return LoadedAgent("random", "random", source, "uniformly random legal actions")
+    path = Path(source)
+    if not path.exists():
+        if CALLABLE.match(source):
+            return _callable(source, env)
+        raise ValueError(
+            f"agent {source!r} is neither an existing run folder or model file nor "
+            "'module:function' nor 'random'"
+        )
+    if path.is_dir():
+        if (path / "config.json").is_file():
+            return _run_folder(path, env, task, source, algo, trust_checkpoint)
+        raise ValueError(f"agent {source}: the folder holds no config.json (no train.py run)")
+    return _model_file(path, env, task, source, algo, trust_checkpoint)

@@ -1,0 +1,395 @@
+"""Compute the reference values of a benchmark task with the project's solvers.
+
+:func:`compute` returns a task's :class:`~fdia_env.tasks.task.References`: random play (played in
+the task's env with :func:`agents.evaluate.evaluate`, or exact for games), the polynomial
+heuristics, the certified optimum (EXS, branch and bound, closed forms, LP equilibria) and the
+game value, with the solver versions and the date. ``python -m agents.bench compute`` writes
+them to ``fdia_env/tasks/references.json``; ``verify`` recomputes and compares
+(:mod:`agents.bench.verify`).
+
+Heuristics and optima are scored by playing their policy in the task's env where the solver
+gives one (expected dynamics: the return is exact), so a stored number is a return the env pays.
+"""
+
+from __future__ import annotations
+
+import datetime
+import importlib.metadata
+import math
+from typing import Any
+
+import numpy as np
+
+from fdia_env.tasks.catalog import TaskSpec
+from fdia_env.tasks.task import GAP_HARD, Optimum, RandomReference, References
+
+RANDOM_EPISODES = 200
+RANDOM_SEED = 0
+BNB_TIME_LIMIT = 120.0
+EXS_MAX_SETS = 20_000_000
+PACKAGES = ("fdia_env", "numpy", "scipy", "highspy")
+
+
+def solver_versions() -> dict[str, str]:
+    """Package → installed version of the packages the references depend on."""
+    out = {}
+    for name in PACKAGES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def _stamp() -> dict[str, Any]:
+    return {"solvers": solver_versions(), "date": datetime.date.today().isoformat()}
+
+
+def _random(spec: TaskSpec, episodes: int = RANDOM_EPISODES) -> RandomReference:
+    from agents.evaluate import evaluate
+
+    env = make(spec)
+    try:
+        try:  # the native vector env plays the same seeded episodes, batched
+            result = evaluate(
+                "random", env, episodes, RANDOM_SEED, reference=1.0, num_envs=episodes
+            )
+        except (TypeError, ValueError):  # no native vector env for this view or options
+            result = evaluate("random", env, episodes, RANDOM_SEED, reference=1.0)
+    finally:
+        env.close()
+    return RandomReference(float(result.mean), float(result.ci95), episodes, RANDOM_SEED)
+
+
+def _play(spec: TaskSpec, policy: Any, episodes: int = 1) -> float:
+    """The mean return of ``policy`` played in the task's env."""
+    from agents.evaluate import evaluate
+
+    env = make(spec)
+    try:
+        return float(evaluate(policy, env, n_episodes=episodes, seed=0, reference=1.0).mean)
+    finally:
+        env.close()
+
+
+def make(spec: TaskSpec, **overrides: Any) -> Any:
+    """The task's env (as :meth:`fdia_env.tasks.task.Task.make_env` builds it)."""
+    import gymnasium
+
+    kwargs = {**spec.env_kwargs, **overrides}
+    if spec.entry_point is None:
+        return gymnasium.make(spec.env_id, **kwargs)
+    env_spec = gymnasium.envs.registration.EnvSpec(spec.env_id, entry_point=spec.entry_point)
+    return gymnasium.make(env_spec, **kwargs)
+
+
+def _ratio(objective: str, value: float, to: float) -> float:
+    if objective == "logdet":
+        return math.exp(value - to)
+    if objective == "cost":
+        return to / value
+    return value / to
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+def sparse(spec: TaskSpec, time_limit: float = BNB_TIME_LIMIT) -> References:
+    """EXS (or branch and bound) for the optimum; SFS and SFS with swaps as heuristics."""
+    from baselines.sparse import branch_and_bound, exhaustive, sfs, sfs_ss
+    from fdia_env import scenarios
+
+    kw = spec.env_kwargs
+    objective = kw.get("objective", "trace")
+    scenario = kw["scenario"]
+    args = (scenario, kw["budget"], kw["horizon"], objective)
+    action = kw.get("action", "auto")
+    M = scenarios.resolve(scenario).system.M
+    if math.comb(M * kw["horizon"], kw["budget"]) <= EXS_MAX_SETS:
+        best = exhaustive(*args)
+        name, bound = "EXS", best.value
+        certified = True
+    else:
+        best = branch_and_bound(*args, time_limit=time_limit)
+        certified = bool(best.proved_optimal)
+        name = "B&B (certified optimum)" if certified else "B&B incumbent (certified bound)"
+        bound = best.value if certified else float(best.upper_bound)
+    fmt = "sequential" if action == "sequential" else None
+    value = _play(spec, best.policy(fmt) if fmt else best.policy())
+    heuristics = {}
+    for label, solver in (("SFS", sfs), ("SFS-SS", sfs_ss)):
+        result = solver(*args)
+        heuristics[label] = _play(spec, result.policy(fmt) if fmt else result.policy())
+    gap = 0.0 if certified else 1.0 - _ratio(objective, value, bound)
+    return References(
+        objective=objective,
+        metric="return",
+        random=_random(spec),
+        heuristics=heuristics,
+        optimum=Optimum(value, name, certified, bound, gap),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def covariance(spec: TaskSpec) -> References:
+    """The closed-form optimum, with heuristics.
+
+    The heuristics are the independent-bias optimum and, for log det, the trace-optimal attack.
+    """
+    from baselines.covariance import det_optimal, trace_optimal
+
+    kw = spec.env_kwargs
+    objective = kw.get("objective", "trace")
+    env = make(spec)
+    try:
+        if objective == "trace":
+            best, name = trace_optimal(kw["scenario"], kw["power"]), "trace-optimal"
+        else:
+            best, name = det_optimal(kw["scenario"], kw["power"]), "det-optimal (water-filling)"
+        policies = {"independent biases": trace_optimal(kw["scenario"], kw["power"], "diagonal")}
+        if objective == "logdet":
+            policies["trace-optimal"] = trace_optimal(kw["scenario"], kw["power"])
+        value = _play(spec, best.policy(env.unwrapped.parallel))
+        heuristics = {k: _play(spec, r.policy(env.unwrapped.parallel)) for k, r in policies.items()}
+    finally:
+        env.close()
+    return References(
+        objective=objective,
+        metric="return",
+        random=_random(spec),
+        heuristics=heuristics,
+        optimum=Optimum(value, name, True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def _game_objective(player: str) -> str:
+    """The attacker's payoff is a value (ratio raw / v), the defender's a cost (ratio v / raw)."""
+    return "value" if player == "attacker" else "cost"
+
+
+def _worst_case_matrix(L: np.ndarray, player: str, mix: np.ndarray) -> float:
+    """The player's return against a best response.
+
+    The attacker's is ``min_D (L y)_D``, the defender's ``−max_A (x'L)_A``.
+    """
+    return float((L @ mix).min()) if player == "attacker" else -float((mix @ L).max())
+
+
+def sensor_game(spec: TaskSpec) -> References:
+    """The LP game value; uniform play and the best pure strategy, each at its worst case."""
+    from baselines.game import payoff_matrix, solve_zero_sum
+
+    kw = spec.env_kwargs
+    env = make(spec)
+    try:
+        parallel = env.unwrapped.parallel
+        attack = parallel.attack
+        L = payoff_matrix(
+            parallel.scenario, attack.power, attack.allocation, attack.max_subset_size
+        )
+    finally:
+        env.close()
+    _, _, value = solve_zero_sum(L)
+    player = spec.player
+    n = L.shape[1] if player == "attacker" else L.shape[0]
+    own = value if player == "attacker" else -value
+    uniform = _worst_case_matrix(L, player, np.full(n, 1.0 / n))
+    pure = max(_worst_case_matrix(L, player, row) for row in np.eye(n))
+    del kw
+    return References(
+        objective=_game_objective(player),
+        metric="worst-case return",
+        random=RandomReference(uniform, 0.0, 0, RANDOM_SEED),
+        heuristics={"best pure strategy": pure},
+        optimum=Optimum(own, "game value (LP)", True, own, 0.0),
+        game_value=own,
+        **_stamp(),
+    )
+
+
+def incomplete_information(spec: TaskSpec) -> References:
+    """The Bayesian game's LP value; uniform play and the best pure strategy at worst case."""
+    from baselines.game import bayesian_game
+
+    env = make(spec)
+    try:
+        attack = env.unwrapped.parallel.attack
+        game = bayesian_game(
+            env.unwrapped.parallel.scenario,
+            attack.types,
+            attack.priors,
+            attack.attacker_model,
+            attack.power,
+            attack.max_subset_size,
+        )
+    finally:
+        env.close()
+    m, n = game.matrices.shape[1:]
+    value = game.value
+    if spec.player == "attacker":
+        own = value
+        uniform = game.attacker_worst_case(np.full(n, 1.0 / n))
+        pure = max(game.attacker_worst_case(e) for e in np.eye(n))
+    else:
+        own = -value
+        uniform = -game.defender_worst_case(np.full(m, 1.0 / m))
+        pure = max(-game.defender_worst_case(e) for e in np.eye(m))
+    return References(
+        objective=_game_objective(spec.player),
+        metric="worst-case return",
+        random=RandomReference(float(uniform), 0.0, 0, RANDOM_SEED),
+        heuristics={"best pure strategy": float(pure)},
+        optimum=Optimum(float(own), "Bayesian equilibrium (LP)", True, float(own), 0.0),
+        game_value=float(own),
+        **_stamp(),
+    )
+
+
+def detection_game(spec: TaskSpec) -> References:
+    """OBDD's threshold (the Bayes-cost optimum), with the χ² test at 5 % false alarms.
+
+    The optimum is played in the env as a fixed threshold; the χ² test's Bayes cost is computed.
+    """
+    from agents.registry import parallel_of
+    from baselines.detection import bayes_cost, csd, obdd, static_problem, tracking_problem
+    from fdia_env.detection_game_v0 import FixedAction, _is_static
+
+    kw = spec.env_kwargs
+    env = make(spec)
+    try:
+        parallel = parallel_of(env)
+        det = parallel.defense
+        static = _is_static(parallel.system)
+        problem = (static_problem if static else tracking_problem)(
+            kw["scenario"], power=kw["power"]
+        )
+        best = obdd(problem)
+        chi2 = csd(problem)
+        action_of = det.threshold_to_action
+    finally:
+        env.close()
+    value = _play(spec, FixedAction(action_of(best.threshold)))
+    if not math.isclose(value, -bayes_cost(best).value, rel_tol=1e-6):
+        raise RuntimeError(f"{spec.name}: OBDD played in the env gives {value}, not its Bayes cost")
+    heuristics = {"chi2 test (5 % false alarms)": -bayes_cost(chi2).value}
+    return References(
+        objective="cost",
+        metric="return",
+        random=_random(spec),
+        heuristics=heuristics,
+        optimum=Optimum(value, f"{best.name} threshold (Bayes cost)", True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def _play_seeded(env: Any, policy: Any, options: dict[str, Any]) -> float:
+    """One episode of ``policy`` in ``env`` reset with ``options``: its return."""
+    obs, _ = env.reset(seed=0, options=options)
+    total, done = 0.0, False
+    while not done:
+        action, _ = policy.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total += float(reward)
+        done = terminated or truncated
+    return total
+
+
+def system_family(spec: TaskSpec) -> References:
+    """The family's expected optimum, with SFS as the heuristic.
+
+    EXS on every system of ``system_seeds`` (each drawn with equal probability), played in the
+    env with the system pinned; SFS likewise.
+    """
+    from baselines.sparse import exhaustive, sfs
+
+    env = make(spec)
+    try:
+        view = env.unwrapped
+        family, seeds, objective = view.family, view.system_seeds, view.objective
+        best, greedy = [], []
+        for k in seeds:
+            scenario = family.scenario(k)
+            args = (scenario, family.budget, family.horizon, objective)
+            options = {"system_seed": k}
+            best.append(_play_seeded(env, exhaustive(*args).policy(), options))
+            greedy.append(_play_seeded(env, sfs(*args).policy(), options))
+    finally:
+        env.close()
+    value = float(np.mean(best))
+    return References(
+        objective="trace" if objective == "trace" else "logdet",
+        metric="return",
+        random=_random(spec),
+        heuristics={"SFS": float(np.mean(greedy))},
+        optimum=Optimum(value, f"EXS on each of the {len(seeds)} systems", True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def stealth(spec: TaskSpec) -> References:
+    """The optimum over every shift pattern, with the best single-state shift as heuristic.
+
+    All patterns of the ``action="shift"`` space are played at once in the native vector env
+    (expected dynamics: exact returns).
+    """
+    import gymnasium
+
+    env = make(spec)
+    try:
+        n = int(env.action_space.n)
+    finally:
+        env.close()
+    if n > 16:
+        raise ValueError(f"{spec.name}: 2^{n} shift patterns are too many to enumerate")
+    bits = ((np.arange(2**n)[:, None] >> np.arange(n)) & 1).astype(np.int8)
+    venv = gymnasium.make_vec(
+        spec.env_id, num_envs=2**n, vectorization_mode="vector_entry_point", **spec.env_kwargs
+    )
+    try:
+        venv.reset(seed=0)
+        _, rewards, *_ = venv.step(bits)
+    finally:
+        venv.close()
+    horizon = int(spec.env_kwargs.get("horizon", 1))
+    returns = np.asarray(rewards, dtype=np.float64) * horizon  # the same snapshot every step
+    value = float(returns.max())
+    single = float(returns[[1 << j for j in range(n)]].max())
+    return References(
+        objective="trace",
+        metric="return",
+        random=_random(spec),
+        heuristics={"best single-state shift": single},
+        optimum=Optimum(value, f"exhaustive over the 2^{n} shift patterns", True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+FAMILIES = {
+    "sparse": sparse,
+    "covariance": covariance,
+    "sensor-game": sensor_game,
+    "incomplete-information": incomplete_information,
+    "detection-game": detection_game,
+    "system-family": system_family,
+    "stealth": stealth,
+}
+
+
+def compute(spec: TaskSpec) -> References:
+    """The references of the task ``spec`` (its family's function above).
+
+    Raises:
+        ValueError: For a family without a reference computation here.
+    """
+    if spec.family not in FAMILIES:
+        raise ValueError(f"no reference computation for family {spec.family!r} ({spec.name})")
+    refs = FAMILIES[spec.family](spec)
+    if refs.optimum.gap > GAP_HARD and refs.optimum.certified:
+        raise RuntimeError(f"{spec.name}: a certified optimum with a gap")
+    return refs

@@ -1,0 +1,372 @@
+"""The dynamic stealthy-attack environment (PettingZoo parallel); see ``stealth_dynamic_v0``."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from fdia_env._validation import check_choice, check_int, check_positive
+from fdia_env.envs.actions import check_step_actions
+from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+from fdia_env.scenarios import resolve
+from fdia_env.stealth.dynamic_model import ACTIONS, DynamicModel
+from fdia_env.stealth.env import DEFAULT_ALPHAS, DYNAMICS, ON_DETECT, _check_alphas
+from fdia_env.stealth.static import check_alpha
+
+MAX_RATIO = 10.0
+"""Cap of the observed window statistic, in units of the threshold."""
+MAX_LOG_ERROR = 30.0
+"""Cap of the observed ``ln(phi / tr P_f)``."""
+DEFAULT_HORIZON = 20
+DEFENDERS = (None, "threshold", "protect")
+"""The defender: none (passive), the detector's false-alarm rate, or the sensors it protects."""
+
+
+class _NoResetOptions:
+    """What the single-agent view asks of an env's attack model: the reset options it reads."""
+
+    reset_options: tuple[str, ...] = ()
+
+
+class StealthDynamicEnv(ParallelEnv):
+    """An attacker against a Kalman filter with a windowed χ² detector (``stealth_dynamic_v0``).
+
+    Args: as :func:`fdia_env.stealth.stealth_dynamic_v0.parallel_env`.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "stealth_dynamic_v0",
+        "render_modes": list(RENDER_MODES),
+        "render_fps": RENDER_FPS,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        scenario: Any = "ch4-position",
+        *,
+        sensors: Any = None,
+        horizon: int | None = None,
+        window: int = 5,
+        action: str = "bias",
+        a_max: float = 5.0,
+        t_max: float = 4.0,
+        b_max: float = 2.0,
+        dynamics: str = "sampled",
+        alpha: float = 0.05,
+        on_detect: str = "zero",
+        penalty: float = 1.0,
+        protected: Any = None,
+        render_mode: str | None = None,
+        max_cycles: int | None = None,
+        defender: str | None = None,
+        alphas: Any = None,
+        false_alarm_cost: float = 1.0,
+        protect_budget: int = 1,
+    ) -> None:
+        sc = resolve(scenario)
+        system = sc.system
+        self.scenario = sc
+        self.sensors = _sensor_positions(system, sensors, "sensors", default_all=True)
+        if self.sensors.size == 0:
+            raise ValueError("sensors must name at least one sensor to attack, got none")
+        self.protected = _sensor_positions(system, protected, "protected", default_all=False)
+        self.max_cycles = (
+            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
+        )
+        if horizon is None:
+            horizon = DEFAULT_HORIZON if self.max_cycles is None else self.max_cycles
+        self.horizon = check_int("horizon", horizon, minimum=1)
+        window = check_int("window", window, minimum=1, maximum=1000)
+        self.action_kind = check_choice("action", action, ACTIONS)
+        self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
+        self.alpha = check_alpha(alpha)
+        self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
+        self.penalty = _check_cost("penalty", penalty)
+        if render_mode is not None:
+            check_choice("render_mode", render_mode, RENDER_MODES)
+        self.render_mode = render_mode
+        if defender not in DEFENDERS:
+            raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
+        self.defender = defender
+        self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
+        self.false_alarm_cost = _check_cost("false_alarm_cost", false_alarm_cost)
+        self.protect_budget = check_int(
+            "protect_budget", protect_budget, minimum=1, maximum=system.M
+        )
+        row_sensor = np.asarray(system.row_sensor)
+        rows = np.flatnonzero(np.isin(row_sensor, self.sensors))
+        free = ~np.isin(row_sensor[rows], self.protected)
+        self._row_sensor = row_sensor[rows]
+        self.model = DynamicModel(
+            system=system,
+            rows=rows,
+            free=free,
+            action=self.action_kind,
+            window=window,
+            a_max=check_positive("a_max", a_max),
+            t_max=check_positive("t_max", t_max),
+            b_max=check_positive("b_max", b_max),
+        )
+        self.window = window
+        # the attacker alone faces alpha; with a defender, the rate it picks among alphas
+        self._rates = self.alphas if defender == "threshold" else (self.alpha,)
+        self._tau = self.model.thresholds(self._rates)
+        self.attack = _NoResetOptions()
+        self.possible_agents = ["attacker"] if defender is None else ["attacker", "defender"]
+        self.agents: list[str] = []
+        act = spaces.Box(-1.0, 1.0, shape=self.model.action_shape, dtype=np.float32)
+        guard = (
+            spaces.MultiBinary(system.M)
+            if defender == "protect"
+            else spaces.Discrete(len(self.alphas))
+        )
+        self._action_spaces = {"attacker": act, "defender": guard}
+        low = np.zeros(4, dtype=np.float32)
+        high = np.array([1.0, 1.0, MAX_RATIO, MAX_LOG_ERROR], dtype=np.float32)
+        self._observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.state_space = self._observation_space
+        self.np_random, self.np_random_seed = seeding.np_random(None)
+        self._reset_called = False
+        self._done = True
+        self._clear()
+
+    # --- spaces -------------------------------------------------------------------------
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent`` (the same object on every call)."""
+        self._check_agent(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The action space of ``agent`` (the same object on every call)."""
+        return self._action_spaces[self._check_agent(agent)]
+
+    def _check_agent(self, agent: str) -> str:
+        if agent not in self.possible_agents:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
+        return agent
+
+    def action_masks(self, agent: str = "attacker") -> None:
+        """No action mask (every action is legal)."""
+        self._check_agent(agent)
+        return None
+
+    # --- episode ------------------------------------------------------------------------
+    def _clear(self) -> None:
+        self._state = self.model.new_state(1)
+        self._k = 0
+        self._last = {
+            "phi": self.model.clean,
+            "error": self.model.clean,
+            "detected": False,
+            "detection_probability": 0.0,
+            "statistic": 0.0,
+            "threshold": float(self._tau[self._default_rate(), 0]),
+            "kl": 0.0,
+            "alpha": float(self._rates[self._default_rate()]),
+            "protected": self._protected_indicator(self.protected),
+        }
+        self._history: list[tuple[float, float]] = []
+
+    def _default_rate(self) -> int:
+        return int(np.argmin(np.abs(np.asarray(self._rates) - self.alpha)))
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """Start an episode; ``seed`` makes every noise draw reproducible."""
+        check_reset_args(seed, options)
+        if seed is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(int(seed))
+        self.agents = list(self.possible_agents)
+        self._clear()
+        sampled = self.dynamics == "sampled"
+        self.model.restart(self._state, np.ones(1, dtype=bool), self.np_random, sampled)
+        self._done = False
+        self._reset_called = True
+        return self._per_agent(self._observe()), self._per_agent(self._info())
+
+    def _per_agent(self, value: Any) -> dict[str, Any]:
+        return {a: (dict(value) if isinstance(value, dict) else value.copy()) for a in self.agents}
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """One filter step under the attacker's injection and the defender's threshold.
+
+        Raises:
+            RuntimeError: Before :meth:`reset` or after the episode ended.
+            ValueError: For a missing or unknown agent's action, or one outside its space.
+        """
+        check_step_actions(
+            actions, self.agents, self._action_spaces, self._reset_called, self._done
+        )
+        rate, free, guarded = self._default_rate(), None, self.protected
+        if self.defender == "threshold":
+            rate = int(np.asarray(actions["defender"]).reshape(()))
+        elif self.defender == "protect":
+            guarded = self.protection(actions["defender"])
+            free = ~np.isin(self._row_sensor, guarded)[None]
+        act = np.asarray(actions["attacker"], dtype=np.float64).reshape(self.model.action_shape)
+        alpha = self._rates[rate]
+        out = self.model.step(
+            self._state,
+            act[None],
+            np.array([alpha]),
+            self._tau[[rate]],
+            self.dynamics == "sampled",
+            self.np_random,
+            free,
+        )
+        o = {key: value[0] for key, value in out.items()}
+        caught = -self.penalty if self.on_detect == "penalty" else 0.0
+        detected = bool(o["detected"])
+        p = float(o["p"])
+        if self.dynamics == "sampled":
+            reward = caught if detected else float(o["error"])
+        else:
+            reward = (1.0 - p) * float(o["phi"]) + p * caught
+        self._k += 1
+        self._last = {
+            "phi": float(o["phi"]),
+            "error": float(o["error"]),
+            "detected": detected,
+            "detection_probability": p,
+            "statistic": float(o["statistic"]),
+            "threshold": float(o["threshold"]),
+            "kl": float(o["kl"]),
+            "alpha": float(alpha),
+            "protected": self._protected_indicator(guarded),
+        }
+        self._history.append((self._last["phi"], self._last["statistic"] / self._last["threshold"]))
+        done = self._k >= self.horizon or (detected and self.on_detect == "end")
+        truncated = not done and self.max_cycles is not None and self._k >= self.max_cycles
+        agents = self.agents
+        obs = self._per_agent(self._observe())
+        infos = self._per_agent(self._info())
+        rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * alpha}
+        rewards = {a: rewards[a] for a in agents}
+        terms = dict.fromkeys(agents, done)
+        truncs = dict.fromkeys(agents, truncated)
+        if done or truncated:
+            self._done = True
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terms, truncs, infos
+
+    def _observe(self) -> np.ndarray:
+        last = self._last
+        ratio = min(last["statistic"] / last["threshold"], MAX_RATIO)
+        grown = min(float(np.log(max(last["phi"] / self.model.clean, 1.0))), MAX_LOG_ERROR)
+        return np.array(
+            [(self.horizon - self._k) / self.horizon, float(last["detected"]), ratio, grown],
+            dtype=np.float32,
+        )
+
+    def _info(self) -> dict[str, Any]:
+        info = {"step": int(self._k), **self._last}
+        info["protected"] = self._last["protected"].copy()
+        return info
+
+    def protection(self, action: Any) -> np.ndarray:
+        """Sensors protected this step (sorted positions).
+
+        The fixed ``protected`` ones and, with ``defender="protect"``, the first
+        ``protect_budget`` sensors the action's bits select (lowest positions first; bits
+        beyond the budget are ignored).
+        """
+        bits = np.flatnonzero(np.asarray(action).reshape(-1))[: self.protect_budget]
+        return np.union1d(self.protected, bits)
+
+    def _protected_indicator(self, sensors: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.scenario.system.M, dtype=np.int8)
+        out[np.asarray(sensors, dtype=np.int64)] = 1
+        return out
+
+    def state(self) -> np.ndarray:
+        """Global state: the attacker's observation (the defender sees the same)."""
+        return self._observe()
+
+    def render(self, mode: str | None = None) -> str | np.ndarray | None:
+        """``"ansi"``: a line for the last step; ``"rgb_array"``: error trace and statistic."""
+        mode = self.render_mode if mode is None else check_choice("mode", mode, RENDER_MODES)
+        if mode is None:
+            return None
+        if mode == "rgb_array":
+            return self._render_rgb()
+        last = self._last
+        line = (
+            f"step {self._k}/{self.horizon}  tr error cov = {last['phi']:.6g}  "
+            f"g/τ = {last['statistic'] / last['threshold']:.3f}  detected: {last['detected']}\n"
+        )
+        if mode == "human":
+            sys.stdout.write(line)
+            return None
+        return line
+
+    def _render_rgb(self) -> np.ndarray:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(8, 3.2), dpi=80)
+        canvas = FigureCanvasAgg(fig)
+        left, right = fig.subplots(1, 2)
+        steps = np.arange(1, len(self._history) + 1)
+        hist = np.array(self._history).reshape(-1, 2)
+        left.plot(steps, hist[:, 0], marker="o")
+        left.axhline(self.model.clean, color="grey", linestyle="--", label="no attack")
+        left.set_xlabel("step")
+        left.set_ylabel("tr error covariance")
+        left.legend(loc="upper left")
+        right.bar(steps, hist[:, 1])
+        right.axhline(1.0, color="red", linestyle="--", label="threshold")
+        right.set_xlabel("step")
+        right.set_ylabel("g / τ")
+        right.legend(loc="upper left")
+        fig.suptitle(f"step {self._k}/{self.horizon}, detected: {self._last['detected']}")
+        fig.tight_layout()
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def _check_cost(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+    if not (np.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+    return float(value)
+
+
+def _sensor_positions(system: Any, sensors: Any, param: str, *, default_all: bool) -> np.ndarray:
+    """Sorted unique positions of the system's sensors named by ``sensors`` (positions/names)."""
+    M = system.M
+    if sensors is None:
+        return np.arange(M) if default_all else np.zeros(0, dtype=np.int64)
+    if isinstance(sensors, (str, int, np.integer)):
+        sensors = [sensors]
+    names = {s.name: i for i, s in enumerate(system.sensors) if s.name}
+    try:
+        items = list(sensors)
+    except TypeError as exc:
+        raise ValueError(f"{param} must be a collection of sensors, got {sensors!r}") from exc
+    out = []
+    for item in items:
+        if isinstance(item, str) and item in names:
+            out.append(names[item])
+        elif (
+            isinstance(item, (int, np.integer))
+            and not isinstance(item, bool)
+            and 0 <= int(item) < M
+        ):
+            out.append(int(item))
+        else:
+            raise ValueError(
+                f"{param} holds an unknown sensor {item!r}: sensors are positions 0..{M - 1} "
+                f"or names such as {list(names)[:4]}"
+            )
+    return np.unique(np.array(out, dtype=np.int64))

@@ -1,0 +1,335 @@
+"""The model of ``stealth_dynamic_v0``: a Kalman filter with a windowed χ² innovation detector.
+
+System ``x[k+1] = F x[k] + w``, ``y[k] = H x[k] + v`` (``w ~ N(0, Q)``, ``v ~ N(0, R)``, the
+stacked rows of the scenario's sensors), the steady-state Kalman filter
+``x̂[k+1] = F x̂[k] + K z[k+1]`` on the innovation ``z[k+1] = y[k+1] − H F x̂[k]`` (covariance
+``Σ = H P H' + R``, P the predicted steady state), and the windowed χ² detector of Mo &
+Sinopoli (2010), ``g[k] = Σ_{j=k−w+1..k} z̃[j]' Σ⁻¹ z̃[j]`` over the last w
+innovations the estimator receives, alarm when ``g[k] > τ``, τ the upper-α quantile of χ² with
+``m · min(k, w)`` degrees of freedom (m rows): without attack the alarm rate is α at every step.
+
+The attacker holds the rows S of some sensors. Its attack changes the estimate by
+``d = x̂_clean − x̂`` (the change of the error ``x − x̂``), so the error is ``e + d`` with e the
+clean filter's error (covariance ``P_f``, the filtered steady state, orthogonal to d):
+
+- ``"bias"`` (Mo & Sinopoli: the readings are corrupted): ``y + Γ a`` with ``a`` on S, so
+  ``z̃ = z + Δz``, ``Δz = H F d + Γ a`` and ``d ← (F − K H F) d − K Γ a``. d is deterministic
+  given the injections; the window's statistic is non-central χ² with non-centrality
+  ``Σ_j Δz[j]' Σ⁻¹ Δz[j]``, so the detection probability is exact;
+- ``"linear"`` (Guo et al.: the sensor sends its innovations, the attacker replaces them):
+  ``z̃ = T z + b`` on S (identity elsewhere), ``b ~ N(0, Σ_b)``, so ``d ← F d + K ((I − T) z − b)``
+  and d's covariance ``D ← F D F' + K M K'``, ``M = (I − T) Σ (I − T)' + Σ_b``; the window's
+  statistic is a weighted sum of χ²₁ variables (the eigenvalues of ``Σ^{-1/2} Σ̃ Σ^{-1/2}``,
+  ``Σ̃ = T Σ T' + Σ_b``), its tail computed by Imhof's integral.
+
+Everything is batched over B members (arrays with a leading batch axis): the single env is a
+batch of one. See docs/guide/stealth.md ("Dynamic").
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import integrate, stats
+
+from fdia_env.kalman import steady_state
+from fdia_env.systems import LinearSystem
+
+ACTIONS = ("bias", "linear")
+
+
+@dataclass(frozen=True, eq=False)
+class DynamicModel:
+    """The filter, the detector's statistics and the attacker's rows (see the module docstring).
+
+    Attributes:
+        system: The linear Gaussian system.
+        rows: Positions of the attacked rows (of the stacked measurement), protected ones kept.
+        free: (len(rows),) bool, the attacked rows that are not protected.
+        action: ``"bias"`` or ``"linear"``.
+        window: w, the detector's window length.
+        a_max: Largest bias per row, in units of that row's innovation standard deviation.
+        t_max: Largest change of an entry of T from the identity.
+        b_max: Largest standard deviation of b per row, in innovation standard deviations.
+    """
+
+    system: LinearSystem
+    rows: np.ndarray
+    free: np.ndarray
+    action: str
+    window: int
+    a_max: float
+    t_max: float
+    b_max: float
+
+    def __post_init__(self) -> None:
+        sys = self.system
+        P, Pf, K = (np.asarray(a, dtype=np.float64) for a in steady_state(sys))
+        F, H = np.asarray(sys.F, dtype=np.float64), np.asarray(sys.H, dtype=np.float64)
+        Pz = H @ P @ H.T + sys.R
+        Pz = (Pz + Pz.T) / 2.0
+        Lz = np.linalg.cholesky(Pz)
+        Wz = np.linalg.inv(Lz)  # whitening: |Wz z|² = z' Σ⁻¹ z
+        values = {
+            "F": F,
+            "H": H,
+            "K": K,
+            "P": P,
+            "Pf": Pf,
+            "Pz": Pz,
+            "Wz": Wz,
+            "HF": H @ F,
+            "Abar": F - K @ H @ F,
+            "sigma": np.sqrt(np.diag(Pz))[self.rows],
+            "Qh": _psd_sqrt(sys.Q),
+            "Rh": np.linalg.cholesky(sys.R),
+            "Pfh": _psd_sqrt(Pf),
+            "clean": float(np.trace(Pf)),
+        }
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
+
+    @property
+    def n(self) -> int:
+        """States."""
+        return self.system.n
+
+    @property
+    def m(self) -> int:
+        """Rows of the stacked measurement."""
+        return self.system.nz
+
+    @property
+    def action_shape(self) -> tuple[int, ...]:
+        """Shape of one action: (|S|,) for a bias, (|S|, |S| + 1) for (T, b)."""
+        r = len(self.rows)
+        return (r,) if self.action == "bias" else (r, r + 1)
+
+    def thresholds(self, alphas: tuple[float, ...]) -> np.ndarray:
+        """(len(alphas), w) τ for each rate and each number of innovations in the window."""
+        dof = self.m * np.arange(1, self.window + 1)
+        return np.array([stats.chi2.isf(a, dof) for a in alphas])
+
+    def new_state(self, batch: int) -> dict[str, np.ndarray]:
+        """Zero attack effect for ``batch`` members (clean errors drawn by :meth:`restart`)."""
+        n, m, w = self.n, self.m, self.window
+        return {
+            "k": np.zeros(batch, dtype=np.int64),
+            "e": np.zeros((batch, n)),
+            "d": np.zeros((batch, n)),
+            "D": np.zeros((batch, n, n)) if self.action == "linear" else np.zeros((batch, 0, 0)),
+            "nc": np.zeros((batch, w)),
+            "mu": np.zeros((batch, w, m)) if self.action == "linear" else np.zeros((batch, w, 0)),
+            "q": np.zeros((batch, w)),
+        }
+
+    def restart(
+        self, state: dict[str, np.ndarray], members: np.ndarray, rng: Any, sampled: bool
+    ) -> None:
+        """Start ``members`` (bool (B,)) afresh with no attack effect.
+
+        In sampled dynamics the clean error is drawn from N(0, P_f) (the filter in steady state).
+        """
+        idx = np.flatnonzero(members)
+        if idx.size == 0:
+            return
+        for key in ("k", "e", "d", "D", "nc", "mu", "q"):
+            state[key][idx] = 0
+        if sampled:
+            state["e"][idx] = rng.standard_normal((idx.size, self.n)) @ self.Pfh.T
+
+    def step(
+        self,
+        state: dict[str, np.ndarray],
+        actions: np.ndarray,
+        alpha: np.ndarray,
+        tau: np.ndarray,
+        sampled: bool,
+        rng: Any,
+        free: np.ndarray | None = None,
+    ) -> dict[str, np.ndarray]:
+        """Advance every member one step (in place) and return what it saw.
+
+        Args:
+            state: From :meth:`new_state`.
+            actions: (B, *action_shape) in [−1, 1].
+            alpha: (B,) each member's false-alarm rate.
+            tau: (B, w) each member's thresholds (:meth:`thresholds` rows).
+            sampled: Draw the noises (else the expected dynamics: no draw).
+            rng: numpy Generator for the draws.
+            free: (B, |S|) bool, the attacked rows each member's attacker may write this step
+                (default :attr:`free`; a defender's protection clears some).
+
+        Returns:
+            Arrays (B,): ``phi`` (trace of the error covariance given the attack), ``error``
+            (realised squared error; ``phi`` in expected dynamics), ``statistic`` (g; its mean
+            in expected dynamics), ``threshold``, ``detected``, ``p`` (detection probability),
+            ``kl`` (KL divergence of this step's innovation law from the clean one).
+        """
+        B = actions.shape[0]
+        acts = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        k = state["k"] + 1
+        slot = (k - 1) % self.window
+        rows_b = np.arange(B)
+        d = state["d"]
+        if sampled:
+            w = rng.standard_normal((B, self.n)) @ self.Qh.T
+            v = rng.standard_normal((B, self.m)) @ self.Rh.T
+            z = (state["e"] @ self.F.T + w) @ self.H.T + v
+            state["e"] = state["e"] @ self.F.T + w - z @ self.K.T
+        if self.action == "bias":
+            inj = self.injections(acts, free)
+            dz = d @ self.HF.T + inj
+            nc = np.sum((dz @ self.Wz.T) ** 2, axis=1)
+            state["d"] = d @ self.Abar.T - inj @ self.K.T
+            state["nc"][rows_b, slot] = nc
+            kl = 0.5 * nc
+            zt = z + dz if sampled else None
+            phi = self.clean + np.sum(state["d"] ** 2, axis=1)
+        else:
+            T, Sb = self._linear(acts, free)
+            eye = np.eye(self.m)
+            ImT = eye - T
+            M = ImT @ self.Pz @ ImT.transpose(0, 2, 1) + Sb
+            D = state["D"]
+            state["D"] = self.F @ D @ self.F.T + self.K @ M @ self.K.T
+            St = T @ self.Pz @ T.transpose(0, 2, 1) + Sb
+            G = self.Wz @ St @ self.Wz.T
+            mu = np.clip(np.linalg.eigvalsh((G + G.transpose(0, 2, 1)) / 2.0), 0.0, None)
+            state["mu"][rows_b, slot] = mu
+            with np.errstate(divide="ignore"):
+                kl = 0.5 * np.sum(mu - 1.0 - np.log(mu), axis=1)
+            if sampled:
+                b = np.sqrt(np.diagonal(Sb, axis1=1, axis2=2)) * rng.standard_normal((B, self.m))
+                zt = np.einsum("bij,bj->bi", T, z) + b
+                state["d"] = d @ self.F.T + (z - zt) @ self.K.T
+            else:
+                zt = None
+            phi = self.clean + np.trace(state["D"], axis1=1, axis2=2)
+        state["k"] = k
+        filled = np.minimum(k, self.window)
+        threshold = tau[rows_b, filled - 1]
+        dof = self.m * filled
+        if self.action == "bias":
+            total = state["nc"].sum(axis=1)
+            p = np.where(
+                total > 0.0, stats.ncx2.sf(threshold, dof, np.maximum(total, 1e-300)), alpha
+            )
+            mean = dof + total
+        else:
+            weights = state["mu"].reshape(B, -1)
+            p = np.array([_chi2_mix_sf(weights[i], threshold[i], alpha[i]) for i in range(B)])
+            mean = weights.sum(axis=1)
+        if sampled:
+            state["q"][rows_b, slot] = np.sum((zt @ self.Wz.T) ** 2, axis=1)
+            statistic = state["q"].sum(axis=1)
+            detected = statistic > threshold
+            error = np.sum((state["e"] + state["d"]) ** 2, axis=1)
+        else:
+            statistic = mean
+            detected = np.zeros(B, dtype=bool)
+            error = phi.copy()
+        return {
+            "phi": phi,
+            "error": error,
+            "statistic": statistic,
+            "threshold": threshold,
+            "detected": detected,
+            "p": np.clip(p, 0.0, 1.0),
+            "kl": kl,
+        }
+
+    def _free(self, batch: int, free: np.ndarray | None) -> np.ndarray:
+        """(B, |S|) float 0/1: the rows each member's attacker may write."""
+        if free is None:
+            return np.broadcast_to(self.free.astype(np.float64), (batch, len(self.rows)))
+        return np.asarray(free, dtype=np.float64) * self.free
+
+    def _linear(
+        self, acts: np.ndarray, free: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(B, m, m) T and Σ_b of (B, |S|, |S| + 1) actions (protected rows pass unchanged)."""
+        B, r = acts.shape[0], len(self.rows)
+        free = self._free(B, free)
+        T = np.broadcast_to(np.eye(self.m), (B, self.m, self.m)).copy()
+        TS = np.eye(r) + self.t_max * acts[:, :, :r] * free[:, :, None]
+        T[:, self.rows[:, None], self.rows[None, :]] = TS
+        Sb = np.zeros((B, self.m, self.m))
+        sb = self.b_max * np.abs(acts[:, :, r]) * self.sigma * free
+        Sb[:, self.rows, self.rows] = sb**2
+        return T, Sb
+
+    def injections(self, actions: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
+        """(B, m) the bias injections ``Γ a`` of (B, |S|) actions (``action="bias"``)."""
+        acts = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        inj = np.zeros((acts.shape[0], self.m))
+        inj[:, self.rows] = self.a_max * self.sigma * acts * self._free(acts.shape[0], free)
+        return inj
+
+
+def chi2_mix_sf(weights: Any, x: float) -> float:
+    """``P[Σ_i w_i χ²₁ > x]`` for weights ``w_i ≥ 0`` (independent χ²₁; Imhof's integral).
+
+    Example:
+        >>> round(chi2_mix_sf([1.0, 2.0, 3.0], 10.0), 6)  # 0.173 in 2,000,000 draws
+        0.173205
+    """
+    lam = np.asarray(weights, dtype=np.float64).ravel()
+    lam = lam[lam > 0.0]
+    if lam.size == 0:
+        return float(x < 0.0)
+    if np.allclose(lam, lam[0], rtol=1e-13, atol=0.0):
+        return float(stats.chi2.sf(x / lam[0], lam.size))
+
+    scale = float(lam.max())
+    lam, x = lam / scale, x / scale  # the same probability at unit largest weight
+
+    def phase(u: float) -> float:
+        return 0.5 * float(np.sum(np.arctan(lam * u)))
+
+    def decay(u: float) -> float:
+        return float(u * np.exp(0.25 * np.sum(np.log1p((lam * u) ** 2))))
+
+    def integrand(u: float) -> float:
+        return np.sin(phase(u) - 0.5 * x * u) / decay(u)
+
+    # sin(φ − ωu) = sin φ cos ωu − cos φ sin ωu: past u = 1 the slowly varying parts are
+    # integrated against cos ωu and sin ωu by QUADPACK's Fourier integrator (QAWF)
+    omega, cut = 0.5 * x, 1.0
+    value = integrate.quad(integrand, 0.0, cut, limit=200, epsabs=1e-13)[0]
+    if omega > 0.0:
+        value += integrate.quad(
+            lambda u: np.sin(phase(u)) / decay(u), cut, np.inf, weight="cos", wvar=omega
+        )[0]
+        value -= integrate.quad(
+            lambda u: np.cos(phase(u)) / decay(u), cut, np.inf, weight="sin", wvar=omega
+        )[0]
+    else:
+        value += integrate.quad(integrand, cut, np.inf, limit=200)[0]
+    return float(np.clip(0.5 + value / np.pi, 0.0, 1.0))
+
+
+def _chi2_mix_sf(weights: np.ndarray, x: float, alpha: float) -> float:
+    """:func:`chi2_mix_sf`, with α where every weight is 1 or 0 (no attack: τ's own rate).
+
+    Results are cached by the sorted weights and x: a stationary attack (the same T every
+    step, or every member) costs one integral.
+    """
+    used = np.sort(weights[weights > 0.0])
+    if np.all(np.abs(used - 1.0) <= 1e-12):
+        return float(alpha)
+    return _cached_sf(used.tobytes(), float(x))
+
+
+@functools.lru_cache(maxsize=4096)
+def _cached_sf(key: bytes, x: float) -> float:
+    return chi2_mix_sf(np.frombuffer(key, dtype=np.float64), x)
+
+
+def _psd_sqrt(M: np.ndarray) -> np.ndarray:
+    """A square root ``S`` with ``S S' = M`` of a symmetric PSD matrix (eigenvalues clipped)."""
+    vals, vecs = np.linalg.eigh((M + M.T) / 2.0)
+    return vecs * np.sqrt(np.clip(vals, 0.0, None))

@@ -1,0 +1,409 @@
+"""The sparse attacker's sequential, masked action format in the native vector env.
+
+``gymnasium.make_vec("fdia_env/SparseAttack-v0", num_envs=B,
+vectorization_mode="vector_entry_point", action="sequential")`` returns
+:class:`SequentialVectorEnv`: B members of the single env's sequential format
+(:class:`fdia_env.envs.sequential.SequentialSetEnv`, its Gymnasium view) stepped as one array
+computation, on numpy or on torch (``backend="torch", device=...``).
+
+Each member decides on its own: at a decision it adds a sensor to the set of its current window
+step (action ``j`` in 1..M) or stops (action 0), which takes that member's window step. Members
+therefore finish a set, and an episode, at different decisions: a window step is computed for
+the members that commit at this decision only; the others keep their filter, budget and infos
+unchanged. With ``skip_forced=True`` (default, as the single env) a member whose only legal
+action is stop has it played by the env in the same decision (its rewards summed), so a member's
+episode takes at most ``N + c`` decisions.
+
+Member ``i`` follows the single env's Gymnasium view seeded ``seed + i`` exactly on numpy
+(observations, rewards, terminations, truncations, infos and masks, expected and sampled
+dynamics: each member draws from its own generator in the single env's order); on torch,
+expected dynamics match to rounding and sampled dynamics in distribution (one device generator).
+
+Observations are the view's ``Box`` (the wrapped env's features, the M entries of the set being
+built, the budget left after it as a fraction of ``budget``); the (B, M + 1) masks are in
+``infos["action_mask"]`` and :meth:`SequentialVectorEnv.action_masks` (1 = legal: stop always,
+sensor j while it is not in the set and the set is smaller than the budget left). Autoreset
+and ``max_episode_steps`` (counted in decisions, as Gymnasium's ``TimeLimit`` over the view)
+follow :mod:`fdia_env.vector.env`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from fdia_env._validation import check_int
+from fdia_env.backend import NUMPY
+from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
+from fdia_env.envs.parallel import attacker_reward
+from fdia_env.envs.sequential import STOP, SequentialSetEnv
+from fdia_env.vector import env as vector_env
+
+SEQUENTIAL_MODULES = ("fdia_env.sparse_attack_v0",)
+"""The modules whose ``action="sequential"`` has a native vector env."""
+
+# the engine's per-member state, held for the members that do not commit at a decision
+_SIM_STATE = ("_comp", "_P", "_M", "consistent", "k", "nis", "phi", "x", "x_hat")
+
+
+class SequentialVectorEnv(gym.vector.VectorEnv):
+    """B members of the sparse attacker's sequential format, as batched numpy or torch.
+
+    Args:
+        parallel: The single env's sequential format (``sparse_attack_v0.parallel_env(
+            action="sequential")``); its spaces, budget and ``illegal_action`` are used.
+        num_envs: B.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP``.
+        max_episode_steps: Truncate each member's episode after this many decisions, or None.
+        backend: ``"numpy"`` (default) or ``"torch"``.
+        device: torch only: ``"cpu"`` (default) or ``"cuda"``.
+
+    Raises:
+        TypeError: If ``parallel`` is not a :class:`SequentialSetEnv`.
+        ValueError: For a bad ``num_envs``, ``autoreset_mode``, ``max_episode_steps``,
+            ``backend`` or ``device``.
+    """
+
+    def __init__(
+        self,
+        parallel: SequentialSetEnv,
+        num_envs: int,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        max_episode_steps: int | None = None,
+        backend: str = "numpy",
+        device: Any = None,
+    ) -> None:
+        if not isinstance(parallel, SequentialSetEnv):
+            raise TypeError(
+                "parallel must be a SequentialSetEnv (sparse_attack_v0.parallel_env("
+                f"action='sequential')), got {type(parallel).__name__}"
+            )
+        # the engine of the wrapped "multibinary" env; its own autoreset is never used
+        self.inner = vector_env.FdiaVectorEnv(
+            parallel.inner, num_envs, backend=backend, device=device
+        )
+        self.xp = xp = self.inner.xp
+        self.num_envs = B = self.inner.num_envs
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError as exc:
+            raise ValueError(
+                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
+                f"got {autoreset_mode!r}"
+            ) from exc
+        if mode == AutoresetMode.DISABLED:
+            raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP, got DISABLED")
+        self.max_episode_steps = (
+            None
+            if max_episode_steps is None
+            else check_int("max_episode_steps", max_episode_steps, minimum=1)
+        )
+        self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
+        self.render_mode = None
+        self.parallel = parallel
+        self.agent = "attacker"
+        self.illegal_action = parallel.illegal_action
+        self.skip_forced = parallel.skip_forced
+        self.backend, self.device = self.inner.backend, self.inner.device
+        self.attack, self.defense = self.inner.attack, self.inner.defense
+        self.spec_episode = parallel.spec
+        self.M = M = parallel.M
+        self.budget = int(self.attack.budget)
+        self.single_observation_space = parallel.observation_space("attacker")["observation"]
+        self.single_action_space = parallel.action_space("attacker")
+        self.observation_space = batch_space(self.single_observation_space, B)
+        self.action_space = batch_space(self.single_action_space, B)
+        self._arange = xp.asarray(np.arange(1, M + 1, dtype=np.int64))
+        self._chosen = xp.zeros((B, M), dtype=xp.bool)
+        self._decisions = xp.zeros(B, dtype=xp.int64)
+        self._prev_done = xp.zeros(B, dtype=xp.bool)
+        self._started = False
+
+    @property
+    def autoreset_mode(self) -> AutoresetMode:
+        """Gymnasium's autoreset mode of this env (also in ``metadata["autoreset_mode"]``)."""
+        return self.metadata["autoreset_mode"]
+
+    # --- reset ---------------------------------------------------------------------------------
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        """Reset every member (an int ``seed`` seeds member i with ``seed + i``, as the engine)."""
+        self.inner.reset(seed=seed, options=options)
+        if seed is not None and not isinstance(seed, list | tuple):
+            super().reset(seed=int(seed))
+        xp, B = self.xp, self.num_envs
+        self._chosen = xp.zeros((B, self.M), dtype=xp.bool)
+        self._decisions = xp.zeros(B, dtype=xp.int64)
+        self._prev_done = xp.zeros(B, dtype=xp.bool)
+        self._started = True
+        return self._observe(), self._infos()
+
+    def _reset_members(self, where: Any) -> None:
+        self.inner._reset_members(where)
+        self._chosen = self._chosen & ~where[:, None]
+        self._decisions = self.xp.where(where, 0, self._decisions)
+
+    # --- masks ---------------------------------------------------------------------------------
+    def _left(self) -> Any:
+        """(B,) budget left after each member's set being built."""
+        return self.attack.b_remaining - self.xp.sum(self.xp.astype(self._chosen, self.xp.int64), 1)
+
+    def action_masks(self) -> Any:
+        """(B, M + 1) bool: legal actions now (stop always; a new sensor within the budget)."""
+        xp = self.xp
+        mask = xp.empty((self.num_envs, self.M + 1), dtype=xp.bool)
+        mask[:, STOP] = True
+        mask[:, 1:] = ~self._chosen & (self._left() > 0)[:, None]
+        return mask
+
+    def _forced(self) -> Any:
+        """(B,) members whose only legal action is stop."""
+        return (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
+
+    # --- step ----------------------------------------------------------------------------------
+    def step(self, actions: Any):
+        """One decision of every member (NEXT_STEP: members that ended last step restart).
+
+        Raises:
+            RuntimeError: Before :meth:`reset`.
+            ValueError: For actions that are not one integer in [0, M] per member, or (with
+                ``illegal_action="error"``) an action outside a member's mask.
+        """
+        if not self._started:
+            raise RuntimeError("step() called before reset(): call reset() first")
+        xp, B = self.xp, self.num_envs
+        if xp is NUMPY:
+            actions = check_batch_actions(self.single_action_space, actions, B, "attacker")
+        else:
+            check_batch_tensor_actions(self.single_action_space, actions, B, "attacker", xp)
+            actions = xp.astype(actions, xp.int64)
+        resetting = self._prev_done
+        if xp.any(resetting):  # NEXT_STEP: their action is ignored; they start a new episode
+            self._reset_members(resetting)
+        live = ~resetting
+        onehot = (actions[:, None] == self._arange) & live[:, None]  # (B, M): the picks
+        legal = ~_any1(xp, onehot & (self._chosen | (self._left() <= 0)[:, None]))
+        if not xp.all(legal):
+            if self.illegal_action == "error":
+                self._raise_illegal(actions, legal)
+            onehot = onehot & legal[:, None]  # "trim" / "noop": an illegal pick stops
+        pick = _any1(xp, onehot)
+        self._chosen = self._chosen | onehot
+        commit = live & ~pick
+        if self.skip_forced:
+            commit = commit | (pick & self._forced())
+        reward = xp.zeros(B)
+        done = xp.zeros(B, dtype=xp.bool)
+        truncated = xp.zeros(B, dtype=xp.bool)
+        stepping = commit
+        while xp.any(stepping):  # the committed sets, then the stops the env plays itself
+            r, d, t = self._window_step(stepping)
+            reward = reward + r
+            done = done | d
+            truncated = truncated | t
+            if not self.skip_forced:
+                break
+            stepping = commit & ~(done | truncated) & self._forced()
+        self._decisions = self._decisions + xp.astype(live, xp.int64)
+        if self.parallel.max_cycles is not None:  # PettingZoo's limit, counted in decisions
+            truncated = truncated | (live & ~done & (self._decisions >= self.parallel.max_cycles))
+        if self.max_episode_steps is not None:  # Gymnasium's TimeLimit, counted in decisions
+            truncated = truncated | (live & (self._decisions >= self.max_episode_steps))
+        infos: dict[str, Any] = {}
+        ended = done | truncated
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._prev_done = ended
+            obs = self._observe()
+        else:
+            obs = self._observe()
+            if xp.any(ended):
+                if xp is NUMPY:
+                    final = np.full(B, None, dtype=object)
+                    for i in np.flatnonzero(ended):
+                        final[i] = obs[i].copy()
+                else:
+                    final = xp.where(ended[:, None], obs, 0.0)
+                infos = {
+                    "final_obs": final,
+                    "_final_obs": xp.copy(ended),
+                    "final_info": vector_env._masked(self._infos(), ended, xp),
+                    "_final_info": xp.copy(ended),
+                }
+                self._reset_members(xp.copy(ended))
+                obs = self._observe()
+        infos.update(self._infos())
+        return obs, reward, done, truncated, infos
+
+    def _raise_illegal(self, actions: Any, legal: Any) -> None:
+        i = int(self.xp.to_numpy(self.xp.flatnonzero(~legal))[0])
+        j = int(actions[i])
+        why = (
+            f"sensor {j} is already in this step's set"
+            if bool(self._chosen[i, j - 1])
+            else f"the step's set already uses the budget left ({int(self._left()[i])})"
+        )
+        allowed = np.flatnonzero(self.xp.to_numpy(self.action_masks()[i])).tolist()
+        raise ValueError(
+            f"attacker action {j} (add sensor {j}) of member {i} is illegal: {why}; legal "
+            f"actions are those with action_mask[a] = 1: {allowed}"
+        )
+
+    def _window_step(self, stepping: Any) -> tuple[Any, Any, Any]:
+        """The window step of the members ``stepping`` with their sets; the others hold.
+
+        Returns:
+            (B,) rewards, terminations and truncations (zero / False for the held members).
+        """
+        xp, inner = self.xp, self.inner
+        sim = inner.sim
+        held = ~stepping
+        hold = bool(xp.any(held))
+        if hold:
+            saved = self._save(sim)
+        sets = xp.astype(self._chosen & stepping[:, None], xp.int8)
+        attacked, sigma = self.attack.batch_apply(sets)
+        used, leak, present, steady = self.defense.batch_apply(None, attacked, sigma)
+        phi_prev = sim.phi
+        sim.step(
+            used,
+            leak,
+            present,
+            steady,
+            active=stepping,
+            detection=self.defense.batch_detection(),
+            probability=getattr(self.attack, "b_probability", None),
+        )
+        if inner._det_defaults:
+            for key, values in sim.detection_info.items():
+                inner._det_info[key] = xp.where(held, inner._det_info[key], values)
+        if hold:
+            self._restore(sim, saved, held)
+        k = sim.k
+        done = stepping & (k >= self.spec_episode.horizon)
+        truncated = xp.zeros(self.num_envs, dtype=xp.bool)
+        reward = attacker_reward(self.spec_episode.reward_mode, sim.phi, phi_prev, done, xp)
+        reward = xp.where(stepping, reward, 0.0)
+        self._chosen = self._chosen & held[:, None]
+        return reward, done, truncated
+
+    def _save(self, sim: Any) -> dict[str, Any]:
+        """Copies of the engine's and the models' per-member state (before a partial step)."""
+        xp = self.xp
+        if getattr(sim, "_lr_on", False):  # the low-rank form is shared by the batch: off
+            sim._lr_on = False
+        state = {name: getattr(sim, name, None) for name in _SIM_STATE}
+        if state["_M"] is None:  # M is P while no bias leaked
+            state["_M"] = sim.P
+        saved = {name: None if v is None else xp.copy(v) for name, v in state.items()}
+        saved["_clean"] = sim._clean
+        for who, model in (("attack", self.attack), ("defense", self.defense)):
+            for name, value in vars(model).items():
+                if name.startswith("b_") and _batched(value, self.num_envs):
+                    saved[f"{who}.{name}"] = xp.copy(value)
+        return saved
+
+    def _restore(self, sim: Any, saved: dict[str, Any], held: Any) -> None:
+        """Put the held members' state back (the stepping members keep the new one)."""
+        xp = self.xp
+        for name in _SIM_STATE:
+            old, new = saved[name], getattr(sim, name, None)
+            if old is None or new is None:
+                continue
+            if name == "_comp":  # (3, B) components
+                setattr(sim, name, xp.where(held[None, :], old, new))
+            else:
+                setattr(sim, name, xp.where(_expand(held, new.ndim), old, new))
+        sim._clean = bool(saved["_clean"] and sim._clean)
+        for key, old in saved.items():
+            if "." in key:
+                who, name = key.split(".", 1)
+                model = self.attack if who == "attack" else self.defense
+                new = getattr(model, name)
+                setattr(model, name, xp.where(_expand(held, new.ndim), old, new))
+
+    # --- observations --------------------------------------------------------------------------
+    def _observe(self) -> Any:
+        """(B, d + M + 1) float32: the engine's features, the set, the budget left after it."""
+        xp = self.xp
+        box = self.inner._observe("attacker")
+        d = box.shape[1]
+        out = xp.empty((self.num_envs, d + self.M + 1), dtype=xp.float32)
+        out[:, :d] = box
+        out[:, d:-1] = xp.astype(self._chosen, xp.float32)
+        out[:, -1] = xp.astype(xp.maximum(self._left(), 0), xp.float64) / self.budget
+        return out
+
+    def _infos(self) -> dict[str, Any]:
+        infos = self.inner._infos()
+        infos["action_mask"] = self.xp.astype(self.action_masks(), self.xp.int8)
+        infos["_action_mask"] = self.inner._all
+        return infos
+
+
+def _any1(xp: Any, x: Any) -> Any:
+    """(B,) whether each row of the (B, M) boolean ``x`` has a True entry."""
+    return xp.sum(xp.astype(x, xp.int64), 1) > 0
+
+
+def _batched(value: Any, batch: int) -> bool:
+    return hasattr(value, "shape") and len(value.shape) >= 1 and value.shape[0] == batch
+
+
+def _expand(where: Any, ndim: int) -> Any:
+    return where.reshape(-1, *[1] * (ndim - 1))
+
+
+def make_vector(
+    module: str,
+    num_envs: int,
+    agent: str = "attacker",
+    opponent: Any = None,
+    autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+    max_episode_steps: int | None = None,
+    backend: str = "numpy",
+    device: Any = None,
+    **kwargs: Any,
+) -> gym.vector.VectorEnv:
+    """The native vector env of ``action="sequential"`` (what ``make_vec`` gives for it).
+
+    :func:`fdia_env.vector.env.make_vector`, the table's ``vector_entry_point``, hands the
+    sequential format of a module of :data:`SEQUENTIAL_MODULES` here (this module registers it
+    in :data:`fdia_env.vector.env.FORMAT_VECTOR_ENVS`).
+
+    Raises:
+        ValueError: For a module without the format's native vector env, a render mode, an
+            agent other than the attacker, an opponent, or a bad option of the env.
+    """
+    if module not in SEQUENTIAL_MODULES:
+        raise ValueError(
+            f"action='sequential' has a native vector env for {list(SEQUENTIAL_MODULES)} only, "
+            f"got module {module!r}; use gymnasium.make_vec(..., vectorization_mode='sync')"
+        )
+    from fdia_env.backend import get_backend
+
+    get_backend(backend, device)  # an unknown backend or a missing GPU fails first
+    if kwargs.get("render_mode") is not None:
+        raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
+    kwargs.pop("render_mode", None)
+    if agent != "attacker":
+        raise ValueError(f"agent must be 'attacker' for {module}, got {agent!r}")
+    if opponent is not None:
+        raise ValueError(f"opponent must be None: {module} has a single player")
+    import importlib
+
+    parallel = importlib.import_module(module).parallel_env(**kwargs)
+    return SequentialVectorEnv(
+        parallel,
+        num_envs,
+        autoreset_mode=autoreset_mode,
+        max_episode_steps=max_episode_steps,
+        backend=backend,
+        device=device,
+    )
+
+
+for _module in SEQUENTIAL_MODULES:
+    vector_env.FORMAT_VECTOR_ENVS[(_module, "sequential")] = make_vector

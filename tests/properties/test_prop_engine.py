@@ -1,0 +1,311 @@
+"""Property: one engine behind every face.
+
+Random configurations of every Kalman-filter env (every scenario family incl. a grid preset, both
+dynamics, every action format, every attack × defense pair of ``fdia_v0``, random actions,
+batch sizes and seeds): the single env (through Gymnasium's ``SyncVectorEnv``), the native vector
+env on numpy and on torch (CPU) give the same observations, rewards, terminations, truncations
+and infos. numpy equals the single env bit for bit; torch equals numpy to 1e-10 in expected
+dynamics and in distribution in sampled dynamics (its own device generator).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fdia_env.envs.opponents import FixedMix
+from fdia_env.envs.single_agent import make_single_agent
+from fdia_env.vector.env import make_vector
+
+pytestmark = pytest.mark.filterwarnings("ignore")
+
+SMALL = ["ch4-position", "ch2-pv-2", "ch3-tracking", "ch4-pv-case1"]
+GRID = "grid-ieee14"
+
+
+def _sparse(draw, window):
+    scenario = draw(st.sampled_from([*SMALL, GRID]))
+    formats = ["auto", "multibinary", "single"] + (["bitmask"] if scenario != GRID else [])
+    return (
+        "fdia_env.sparse_attack_v0",
+        "attacker",
+        {
+            "scenario": scenario,
+            "action": draw(st.sampled_from(formats)),
+            "budget": draw(st.integers(0, window)),
+            "objective": draw(st.sampled_from(["trace", "logdet"])),
+            "horizon": window,
+        },
+    )
+
+
+def _covariance(draw, window):
+    return (
+        "fdia_env.covariance_attack_v0",
+        "attacker",
+        {
+            "scenario": draw(st.sampled_from(["ch4-position", "ch2-pv-2", "ch4-pv-case1"])),
+            "power": draw(st.sampled_from([1.0, 25.0, 1e6])),
+            "power_mode": draw(st.sampled_from(["per_step", "budget"])),
+            "structure": draw(st.sampled_from(["full", "diagonal"])),
+            "objective": draw(st.sampled_from(["trace", "logdet"])),
+            "horizon": window,
+        },
+    )
+
+
+def _sensor_game(draw, window):
+    kwargs = {
+        "scenario": draw(st.sampled_from(["ch4-position", "ch5-game"])),
+        "power": draw(st.sampled_from([1.0, 25.0])),
+        "rounds": window,
+    }
+    if draw(st.booleans()):
+        kwargs["allocation"] = draw(st.sampled_from(["independent", "dependent"]))
+    else:  # incomplete information: nature draws the attacker's type
+        kwargs["types"] = ("independent", "dependent")
+    return "fdia_env.sensor_game_v0", draw(st.sampled_from(["attacker", "defender"])), kwargs
+
+
+def _detection_game(draw, window):
+    scenario = draw(st.sampled_from(["ch3-tracking", "ch3-static", "ch2-pv-2"]))
+    return (
+        "fdia_env.detection_game_v0",
+        draw(st.sampled_from(["attacker", "defender"])),
+        {
+            "scenario": scenario,
+            "power": draw(st.sampled_from([1.0, 25.0])),
+            "statistic": draw(st.sampled_from(["quadratic", "chi2"])),
+            "on_detect": draw(st.sampled_from(["discard", "incorporate"])),
+            "criterion": draw(st.sampled_from(["mse", "bayes_cost"])),
+            "horizon": window,
+        },
+    )
+
+
+def _composed(draw, window):
+    attack = draw(st.sampled_from(["sparse", "covariance", "subset", "probabilistic"]))
+    defense = draw(st.sampled_from(["perfect_detection", "unaware", "sensor_selection"]))
+    if attack == "sparse":
+        attack_kwargs = {"budget": draw(st.integers(0, window))}
+    else:
+        attack_kwargs = {"power": draw(st.sampled_from([1.0, 25.0]))}
+    # the subset models need scalar sensors; a learning defender needs a discrete opponent
+    scalar = attack == "subset" or defense == "sensor_selection"
+    players = ["attacker"]
+    if defense == "sensor_selection" and attack in ("sparse", "subset"):
+        players.append("defender")
+    scenarios = ["ch4-position"] if scalar else ["ch4-position", "ch2-pv-2"]
+    return (
+        "fdia_env.fdia_v0",
+        draw(st.sampled_from(players)),
+        {
+            "scenario": draw(st.sampled_from(scenarios)),
+            "attack": attack,
+            "defense": defense,
+            "attack_kwargs": attack_kwargs,
+            "horizon": window,
+        },
+    )
+
+
+FAMILIES = {
+    "sparse": _sparse,
+    "covariance": _covariance,
+    "sensor_game": _sensor_game,
+    "detection_game": _detection_game,
+    "fdia": _composed,
+}
+
+
+@st.composite
+def configs(draw, family: str):
+    """(module, agent, kwargs, B, seed, pure opponent) of one random env of ``family``."""
+    window = draw(st.integers(1, 4))
+    module, agent, kwargs = FAMILIES[family](draw, window)
+    kwargs["dynamics"] = draw(st.sampled_from(["expected", "sampled"]))
+    if kwargs["dynamics"] == "sampled" and "objective" in kwargs:
+        kwargs["objective"] = "trace"  # a sampled error has no log-determinant
+    kwargs["reward_mode"] = draw(st.sampled_from(["terminal", "shaped", "per_step"]))
+    if family != "sensor_game" and kwargs["scenario"] != GRID:
+        static = kwargs["scenario"] == "ch3-static"  # no steady state: F = I, Q = 0
+        kwargs["warmup"] = draw(st.sampled_from([None, 0, 2] + ([] if static else ["steady"])))
+    if family == "detection_game" and kwargs["dynamics"] == "expected":
+        if kwargs["scenario"] != "ch3-static":  # a moving state: one step keeps it Gaussian
+            kwargs["horizon"] = 1
+    grid = kwargs["scenario"] == GRID  # 34 sensors: one member, a short window
+    if grid:
+        kwargs["horizon"] = min(kwargs["horizon"], 2)
+    return (
+        module,
+        agent,
+        kwargs,
+        draw(st.integers(1, 1 if grid else 3)),
+        draw(st.integers(0, 2**16)),
+    )
+
+
+def _opponent(module, agent, kwargs, pure):
+    """A fixed opponent for a two-player env: a pure action (deterministic) or the uniform mix.
+
+    Each call gives a new policy (each single env draws from its own).
+    """
+    parallel = __import__(module, fromlist=["parallel_env"]).parallel_env(**kwargs)
+    others = [a for a in parallel.possible_agents if a != agent]
+    if not others or not isinstance(parallel.action_space(others[0]), gym.spaces.Discrete):
+        return None  # none, or the module's default (a fixed action)
+    n = int(parallel.action_space(others[0]).n)
+    if not pure:
+        return FixedMix.uniform(n)
+    probs = np.zeros(n)
+    probs[(n - 1) // 2] = 1.0
+    return FixedMix(probs)
+
+
+def _actions(space, rng, B, mask):
+    if isinstance(space, gym.spaces.Discrete):
+        if mask is None:
+            return rng.integers(space.n, size=B)
+        return np.array([rng.choice(np.flatnonzero(m)) for m in mask])
+    if isinstance(space, gym.spaces.MultiBinary):
+        return rng.integers(0, 2, size=(B, *space.shape)).astype(space.dtype)
+    return rng.uniform(-1, 1, size=(B, *space.shape)).astype(np.float32)
+
+
+def assert_same_infos(native, sync, where, exact):
+    """Vector infos equal key by key: values (bit for bit when ``exact``), dtypes, masks."""
+    assert sorted(native) == sorted(sync), f"{where}: keys {sorted(native)} != {sorted(sync)}"
+    for key in sync:
+        n, s = native[key], sync[key]
+        if isinstance(s, dict):
+            assert_same_infos(n, s, f"{where}/{key}", exact)
+            continue
+        if s.dtype == object:  # final_obs / final_info: None or the member's value
+            for a, b in zip(n, s, strict=True):
+                assert (a is None) == (b is None), f"{where}/{key}"
+            continue
+        assert n.dtype == s.dtype, f"{where}/{key}: dtype {n.dtype} != {s.dtype}"
+        assert n.shape == s.shape, f"{where}/{key}: shape {n.shape} != {s.shape}"
+        if exact or not np.issubdtype(s.dtype, np.floating):
+            np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
+        else:
+            np.testing.assert_allclose(n, s, rtol=1e-9, atol=1e-9, err_msg=f"{where}/{key}")
+
+
+# numpy native vs the single env: bit for bit (the one engine); set False to see the round-off
+EXACT = False
+
+
+def _check_native_equals_single(module, agent, kwargs, B, seed, pure):
+    opp = _opponent(module, agent, kwargs, pure)
+    sync = SyncVectorEnv(
+        [
+            lambda: make_single_agent(
+                module, agent, opponent=_opponent(module, agent, kwargs, pure), **kwargs
+            )
+            for _ in range(B)
+        ],
+        autoreset_mode=AutoresetMode.NEXT_STEP,
+    )
+    native = make_vector(module, B, agent=agent, opponent=opp, **kwargs)
+    obs_s, info_s = sync.reset(seed=seed)
+    obs_n, info_n = native.reset(seed=seed)
+    np.testing.assert_array_equal(obs_n, obs_s) if EXACT else np.testing.assert_allclose(
+        obs_n, obs_s, rtol=1e-6, atol=1e-7
+    )
+    assert_same_infos(info_n, info_s, "reset", EXACT)
+    rng = np.random.default_rng(seed)
+    window = kwargs.get("horizon", kwargs.get("rounds", 1))
+    trace = []
+    for t in range(2 * window + 1):  # through an autoreset
+        actions = _actions(sync.single_action_space, rng, B, info_s.get("action_mask"))
+        out_s = sync.step(actions)
+        out_n = native.step(actions)
+        where = f"step {t}"
+        if EXACT:
+            np.testing.assert_array_equal(out_n[0], out_s[0], err_msg=where)
+            np.testing.assert_array_equal(out_n[1], out_s[1], err_msg=where)
+        else:
+            np.testing.assert_allclose(out_n[0], out_s[0], rtol=1e-6, atol=1e-6, err_msg=where)
+            np.testing.assert_allclose(out_n[1], out_s[1], rtol=1e-9, atol=1e-12, err_msg=where)
+        np.testing.assert_array_equal(out_n[2], out_s[2], err_msg=where)
+        np.testing.assert_array_equal(out_n[3], out_s[3], err_msg=where)
+        assert_same_infos(out_n[4], out_s[4], where, EXACT)
+        info_s = out_s[4]
+        trace.append((actions, out_n))
+    return opp, trace
+
+
+def _check_torch_equals_numpy(module, agent, kwargs, B, seed, opp, trace):
+    torch = pytest.importorskip("torch")
+    on_torch = make_vector(module, B, agent=agent, opponent=opp, backend="torch", **kwargs)
+    on_torch.reset(seed=seed)
+    for t, (actions, out_n) in enumerate(trace):
+        out_t = on_torch.step(torch.as_tensor(actions))
+        where = f"torch step {t}"
+        np.testing.assert_array_equal(out_t[2].numpy(), out_n[2], err_msg=where)
+        np.testing.assert_array_equal(out_t[3].numpy(), out_n[3], err_msg=where)
+        np.testing.assert_allclose(out_t[0].numpy(), out_n[0], rtol=1e-5, atol=1e-6, err_msg=where)
+        np.testing.assert_allclose(
+            out_t[1].numpy(), out_n[1], rtol=1e-10, atol=1e-10, err_msg=where
+        )
+
+
+def _torch_capable(module, kwargs):
+    return not (module.endswith("sensor_game_v0") and "types" in kwargs)
+
+
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+@settings(max_examples=6, deadline=None)
+@given(data=st.data())
+def test_single_native_numpy_and_torch_are_one_engine(family, data):
+    module, agent, kwargs, B, seed = data.draw(configs(family), label="config")
+    pure = data.draw(st.booleans(), label="pure opponent")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        opp, trace = _check_native_equals_single(module, agent, kwargs, B, seed, pure)
+        # torch draws from its own generator: member by member only where nothing is drawn
+        deterministic = kwargs["dynamics"] == "expected" and (opp is None or pure)
+        if deterministic and _torch_capable(module, kwargs):
+            _check_torch_equals_numpy(module, agent, kwargs, B, seed, opp, trace)
+
+
+# --- sampled dynamics on torch: equal to numpy in distribution ----------------------------------
+DISTRIBUTION_CASES = {
+    "sparse": ("fdia_env.sparse_attack_v0", {"scenario": "ch4-position", "budget": 2}),
+    "covariance": ("fdia_env.covariance_attack_v0", {"scenario": "ch2-pv-2", "power": 25.0}),
+    "detection": ("fdia_env.detection_game_v0", {"scenario": "ch3-static", "power": 25.0}),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DISTRIBUTION_CASES))
+def test_torch_sampled_dynamics_equal_numpy_in_distribution(case):
+    # the same fixed action for every member over a 3-step window; the per-step mean reward of
+    # B members on torch lies within 5 standard errors of numpy's (both are unbiased estimates)
+    torch = pytest.importorskip("torch")
+    module, kwargs = DISTRIBUTION_CASES[case]
+    kwargs = {**kwargs, "dynamics": "sampled", "reward_mode": "per_step", "horizon": 3}
+    B = 2000
+    envs = {
+        backend: make_vector(module, B, backend=backend, **kwargs) for backend in ("numpy", "torch")
+    }
+    space = envs["numpy"].single_action_space
+    action = space.n - 1 if isinstance(space, gym.spaces.Discrete) else np.full(space.shape, 0.5)
+    rewards = {}
+    for backend, env in envs.items():
+        env.reset(seed=3)
+        batch = np.repeat(np.asarray(action)[None], B, axis=0)
+        if backend == "torch":
+            batch = torch.as_tensor(batch)
+        rewards[backend] = [np.asarray(env.step(batch)[1], dtype=float) for _ in range(3)]
+    for t in range(3):
+        a, b = rewards["numpy"][t], rewards["torch"][t]
+        se = np.sqrt(a.var() / B + b.var() / B)
+        assert se > 0, f"{case} step {t}: no spread in the sampled rewards"
+        assert abs(a.mean() - b.mean()) < 5 * se, (case, t, a.mean(), b.mean(), se)

@@ -1,0 +1,336 @@
+"""``python -m agents.bench score``: every kind of agent input, the leaderboard, the errors."""
+
+import json
+import shutil
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.bench.agents import load_agent
+from agents.bench.score import main, score, score_policy
+from agents.checkpoint import UntrustedCheckpointError
+from agents.evaluate import evaluate
+from fdia_env.tasks import get
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # train.py lives at the root
+TASK = "sparse/ch4-position-v0"  # train.py's default attacker settings: budget 5, horizon 6
+TINY = ["--no-progress-bar", "--final-eval-episodes", "2", "--eval-freq", "0"]
+
+
+@pytest.fixture(scope="module")
+def task():
+    return get(TASK)
+
+
+@pytest.fixture(scope="module")
+def sb3_run(tmp_path_factory):
+    """A finished 128-step MaskablePPO train.py run on the task's settings."""
+    import train
+
+    root = tmp_path_factory.mktemp("runs")
+    result = train.main(
+        ["attacker", "--total-timesteps", "128", "--n-steps", "64", "--batch-size", "32",
+         "--n-epochs", "1", *TINY, "--runs-root", str(root)]
+    )  # fmt: skip
+    return result.run_dir
+
+
+def direct_mean(policy, task, seed=0, episodes=None):
+    with task.make_env() as env:
+        return evaluate(policy, env, episodes or task.episodes, seed=seed).mean
+
+
+def test_random_play_on_the_reference_episodes_scores_zero(task):
+    rand = task.references.random
+    if rand.episodes == 0:
+        pytest.skip("this task's random reference is exact, not played")
+    result = score(task, "random", seeds=(rand.seed // 100_000,), episodes=rand.episodes)
+    if rand.seed % 100_000:
+        pytest.skip("the stored random reference is played from another first seed")
+    assert result.mean == pytest.approx(rand.mean, rel=1e-12)
+    assert abs(result.normalised) < 1e-9
+
+
+def test_the_optimal_plan_as_a_callable_scores_one_exactly(task, tmp_path, monkeypatch):
+    module = tmp_path / "my_exs_agent.py"
+    module.write_text(
+        textwrap.dedent(
+            """
+            from baselines.sparse import exhaustive
+
+            PLAN = exhaustive("ch4-position", budget=5, horizon=6).policy()
+
+
+            def act(observation, action_masks=None):
+                return PLAN.predict(observation)[0]
+            """
+        )
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for agent in ("my_exs_agent:act", "my_exs_agent:PLAN"):
+        result = score(task, agent, seeds=(0, 1), episodes=2)
+        assert result.returns.shape == (2, 2)
+        assert result.mean == pytest.approx(task.references.optimum.value, rel=1e-12)
+        assert result.normalised == pytest.approx(1.0, abs=1e-12)
+        assert result.per_seed == pytest.approx((1.0, 1.0), abs=1e-12)
+
+
+def test_an_sb3_run_folder_scores_as_its_model_plays(task, sb3_run):
+    result = score(task, sb3_run, seeds=(0,), episodes=3)
+    from agents.bench.agents import load_agent as load
+
+    with task.make_env() as env:
+        model = load(sb3_run, task, env).policy
+    assert result.description.startswith("stable-baselines3 MaskablePPO, 128 steps")
+    assert result.mean == pytest.approx(direct_mean(model, task, episodes=3), rel=1e-12)
+    assert result.normalised == pytest.approx(task.normalise(result.mean), rel=1e-12)
+    # the model file alone (its run's config.json beside it is checked too)
+    alone = score(task, sb3_run / "model.json", seeds=(0,), episodes=3)
+    assert alone.mean == pytest.approx(result.mean, rel=1e-12)
+
+
+def test_an_sb3_zip_needs_trust_and_its_algorithm(task, sb3_run, tmp_path):
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.checkpoint import load_model
+
+    with task.make_env() as env:
+        model = load_model(sb3_run / "model.json", DummyVecEnv([lambda: env]), sb3_run)
+    zip_path = tmp_path / "agent.zip"
+    model.save(zip_path)
+    with pytest.raises(UntrustedCheckpointError, match="trust_checkpoint"):
+        score(task, zip_path)
+    with pytest.raises(ValueError, match="algo is needed"):
+        score(task, zip_path, trust_checkpoint=True)
+    result = score(task, zip_path, seeds=(0,), episodes=3, algo="MaskablePPO",
+                   trust_checkpoint=True)  # fmt: skip
+    assert result.mean == pytest.approx(direct_mean(model, task, episodes=3), rel=1e-12)
+    code = main(["--task", TASK, "--agent", str(zip_path), "--algo", "MaskablePPO"])
+    assert code == 2
+
+
+def test_a_torch_ppo_policy_file_scores_as_it_plays(task, tmp_path):
+    import torch
+
+    from agents.torch_ppo import ActorCritic, PolicySpec, TorchPolicy, save_policy
+
+    torch.manual_seed(0)
+    with task.make_env() as env:
+        policy = TorchPolicy(ActorCritic(PolicySpec.of(env.observation_space, env.action_space)))
+    path = save_policy(policy, tmp_path / "policy.json", num_timesteps=7)
+    result = score(task, path, seeds=(0,), episodes=3)
+    assert result.description == "torch-ppo, 7 steps"
+    assert result.mean == pytest.approx(direct_mean(policy, task, episodes=3), rel=1e-12)
+
+
+def test_a_checkpoint_of_another_task_is_refused_naming_the_agent(task, sb3_run, tmp_path):
+    other = tmp_path / "other"
+    shutil.copytree(sb3_run, other)
+    (other / ".lock").unlink(missing_ok=True)
+    config = json.loads((other / "config.json").read_text())
+    config["resolved"]["env_kwargs"]["budget"] = 4
+    (other / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match=r"agent .*other env options.*budget=4 \(task: 5\)"):
+        score(task, other)
+    with pytest.raises(ValueError, match=r"agent .*budget=4"):
+        score(task, other / "model.json")
+    config["resolved"]["gym_id"] = "fdia_env/CovarianceAttack-v0"
+    (other / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match="trained on fdia_env/CovarianceAttack-v0"):
+        score(task, other)
+
+
+def test_a_policy_of_other_spaces_is_refused(task, tmp_path):
+    from gymnasium import spaces
+
+    from agents.torch_ppo import ActorCritic, PolicySpec, TorchPolicy, save_policy
+
+    wrong = PolicySpec.of(spaces.Box(-1, 1, (3,)), spaces.Discrete(4))
+    path = save_policy(TorchPolicy(ActorCritic(wrong)), tmp_path / "p.json")
+    with pytest.raises(ValueError, match=r"agent .* trained on another task"):
+        score(task, path)
+
+
+def test_bad_task_agent_and_seeds_are_clear_errors(task, capsys):
+    with pytest.raises(ValueError, match="task"):
+        score("sparse/no-such-task-v0", "random")
+    with pytest.raises(ValueError, match="agent 'nowhere/at/all' is neither"):
+        score(task, "nowhere/at/all")
+    with pytest.raises(ValueError, match="cannot import module 'no_such_module_x'"):
+        score(task, "no_such_module_x:act")
+    with pytest.raises(ValueError, match="seeds must be"):
+        score(task, "random", seeds=())
+    with pytest.raises(ValueError, match="episodes must be"):
+        score(task, "random", episodes=0)
+    assert main(["--task", "sparse/no-such-task-v0", "--agent", "random"]) == 2
+    assert "task" in capsys.readouterr().err
+
+
+def test_the_command_prints_raw_normalised_and_references(task, capsys, tmp_path):
+    out_json = tmp_path / "score.json"
+    code = main(["--task", TASK, "--agent", "random", "--seeds", "2", "--episodes", "3",
+                 "--json", str(out_json)])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    data = json.loads(out_json.read_text())
+    assert data["seeds"] == [0, 1] and data["episodes"] == 3
+    assert f"normalised  {data['normalised']:.4f}" in text
+    assert "raw return" in text and "per seed" in text
+    best = task.references.optimum
+    assert best.name in text and "1.0000" in text  # the optimum beside the score
+    assert "random" in text.split("references", 1)[1]
+    assert data["normalised_ci"][0] <= data["normalised"] <= data["normalised_ci"][1]
+
+
+def test_a_game_task_is_scored_by_exploitability():
+    from fdia_env.tasks import names
+
+    games = [n for n in names() if get(n).is_game]
+    if not games:
+        pytest.skip("no game task")
+    game = get(games[0])
+    with game.make_env() as env:
+        from agents.registry import by_gym_id
+
+        ref = by_gym_id(game.env_id).reference_of(env)
+    result = score_policy(game, ref.policy, seeds=(0,), episodes=game.episodes)
+    assert result.raw_name == "worst-case return"
+    assert result.extras["exploitability"] == pytest.approx(0.0, abs=1e-6)
+    assert result.normalised == pytest.approx(1.0, abs=1e-6)
+    uniform = score_policy(game, "random", seeds=(0,), episodes=game.episodes)
+    # the stored random reference is the uniform mix's exact worst-case return
+    assert uniform.raw == pytest.approx(game.references.random.mean, rel=1e-9)
+    assert uniform.normalised == pytest.approx(0.0, abs=1e-9)
+
+
+def test_learned_rows_render_as_mean_and_ci_over_seeds(task, tmp_path):
+    from experiments.bench.render import END, START, leaderboard, write_section
+
+    rows = [
+        {"task": TASK, "method": "PPO", "seed": s, "normalised": v, "mean": m, "timesteps": 100,
+         "train_seconds": 1.0}
+        for s, v, m in ((0, 0.5, 1.0), (1, 0.7, 2.0), (2, 0.6, 3.0))
+    ]  # fmt: skip
+    text = leaderboard([task], rows, tmp_path, "header")
+    # mean 0.6, 95 % t interval 4.303 * 0.1 / sqrt(3) = 0.248
+    assert "| PPO | 0.600 ± 0.248 | 2 | 3 seeds, 100 steps, 1 s per seed |" in text
+    assert f"| {task.references.optimum.name} | 1.000 |" in text
+    assert "| random | 0.000 |" in text
+    assert (tmp_path / "benchmark_sparse.png").stat().st_size > 1000
+    page = tmp_path / "board.txt"
+    page.write_text(f"# B\n\n{START}\nold\n{END}\n\ntail\n")
+    write_section(page, "new")
+    assert page.read_text() == f"# B\n\n{START}\n\nnew\n\n{END}\n\ntail\n"
+    page.write_text("# no markers\n")
+    with pytest.raises(ValueError, match="markers"):
+        write_section(page, "new")
+
+
+def test_the_runner_trains_scores_and_renders(tmp_path, capsys):
+    from experiments.cli import main as experiments
+
+    page = tmp_path / "board.txt"
+    page.write_text("# Benchmark\n\n<!-- leaderboard:start -->\n<!-- leaderboard:end -->\n")
+    out = tmp_path / "rows.json"
+    code = experiments(
+        ["bench", "--tasks", TASK, "--algo", "PPO", "--seeds", "1", "--timesteps", "64",
+         "--episodes", "2", "--hp", "n_steps", "64", "--hp", "batch_size", "32", "--hp",
+         "n_epochs", "1", "--out", str(out), "--page", str(page),
+         "--figures", str(tmp_path / "fig")]
+    )  # fmt: skip
+    assert code == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["task"], r["method"], r["seed"], r["timesteps"]) for r in rows] == [
+        (TASK, "PPO", 0, 64)
+    ]
+    assert np.isfinite(rows[0]["normalised"])
+    assert rows[0]["hyperparameters"] == {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
+    assert f"| PPO | {rows[0]['normalised']:.3f} |" in page.read_text()
+    assert (tmp_path / "fig" / "benchmark_sparse.png").is_file()
+
+
+def test_load_agent_gives_the_random_policy(task):
+    with task.make_env() as env:
+        loaded = load_agent("random", task, env)
+    assert loaded.policy == "random" and loaded.kind == "random"
+
+
+def test_an_rllib_run_state_scores_as_its_module_plays(task, tmp_path):
+    pytest.importorskip("ray.rllib")
+    import torch
+
+    from agents.checkpoint import save_pair
+    from agents.rllib.config import ppo_config
+    from agents.rllib.envs import make_view
+    from agents.rllib.policy import RLlibPolicy
+    from agents.rllib.state import FORMAT, STATE, TENSORS
+
+    kwargs = dict(task.env_kwargs)
+    config = ppo_config(task.env_id, kwargs, total_timesteps=1)
+    with make_view(task.env_id, kwargs) as view:
+        module = config.get_rl_module_spec(env=view, inference_only=False).build()
+    torch.manual_seed(1)
+    with torch.no_grad():  # weights of its own, so the scores below depend on them
+        for p in module.parameters():
+            p.normal_()
+    run = tmp_path / "rllib-run"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps({
+        "command": "attacker",
+        "resolved": {"backend": "rllib", "env": task.env_id, "algo": "PPO", "env_kwargs": kwargs,
+                     "hyperparameters": {"net_arch": [64, 64]}},
+    }))  # fmt: skip
+    weights = {k: v.detach().clone() for k, v in module.state_dict().items()}
+    meta = {"format": FORMAT, "iteration": 1, "modules": ["default_policy"], "optimizers": {},
+            "timesteps": 200}  # fmt: skip
+    save_pair(run / STATE, run / TENSORS, {"state_dicts": {"rl_module/default_policy": weights},
+                                           "variables": {}}, meta)  # fmt: skip
+    result = score(task, run, seeds=(0,), episodes=3)
+    assert result.description == "RLlib PPO, 200 steps"
+    with task.make_env() as env:
+        direct = RLlibPolicy(module.eval(), env.action_space, masked=True)
+    assert result.mean == pytest.approx(direct_mean(direct, task, episodes=3), rel=1e-12)
+    alone = score(task, run / STATE, seeds=(0,), episodes=3)
+    assert alone.mean == result.mean
+
+
+def test_the_runner_refuses_bad_options(capsys):
+    from experiments.cli import main as experiments
+
+    for argv, needle in (
+        (["--hp", "no_such", "1"], "unknown hyperparameters ['no_such']"),
+        (["--algo", "Nope"], "--algo must name learners"),
+        (["--tasks", "sparse/none-v0"], "tasks must be 'all'"),
+    ):
+        with pytest.raises(SystemExit):
+            experiments(["bench", *argv, "--no-render"])
+        assert needle in capsys.readouterr().err
+
+
+def test_an_sb3_model_in_a_game_is_scored_on_its_action_distribution():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.algos import build_model
+    from agents.config import Hyperparameters, algo_kwargs
+
+    game = get("sensor-game/ch5-game-attacker-v0")
+    with game.make_env() as env:
+        model = build_model(
+            "PPO", DummyVecEnv([lambda: env]), algo_kwargs("PPO", Hyperparameters()), 3
+        )
+        import torch
+
+        obs, _ = env.reset(seed=0)
+        obs_t, _ = model.policy.obs_to_tensor(obs)
+        with torch.no_grad():
+            probs = model.policy.get_distribution(obs_t).distribution.probs.numpy().ravel()
+    # float32 probabilities: their sum misses 1 by more than the game solver's 1e-9 tolerance
+    assert abs(probs.astype(np.float64).sum() - 1.0) > 1e-9
+    result = score_policy(game, model, seeds=(0,), episodes=2)
+    # an untrained network plays close to the uniform mix: close to random play's score, 0
+    assert result.description == "" and abs(result.normalised) < 0.5
+    assert result.extras["exploitability"] > 0

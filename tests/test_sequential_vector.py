@@ -1,0 +1,287 @@
+"""The sparse attacker's sequential format in the native vector env (vector/sequential.py)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+from fdia_env.vector.sequential import SequentialVectorEnv
+
+ID = "fdia_env/SparseAttack-v0"
+
+
+def assert_infos_equal(native, sync, where=""):
+    """Gymnasium vector infos equal key by key (dtypes, shapes, `_key` masks; floats to 1e-9)."""
+    assert sorted(native) == sorted(sync), f"{where}: keys {sorted(native)} != {sorted(sync)}"
+    for key in sync:
+        n, s = native[key], sync[key]
+        if isinstance(s, dict):
+            assert_infos_equal(n, s, f"{where}/{key}")
+        elif s.dtype == object:  # final_obs: None or the member's observation
+            for a, b in zip(n, s, strict=True):
+                assert (a is None) == (b is None), f"{where}/{key}"
+                if b is not None:
+                    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
+        else:
+            assert n.dtype == s.dtype, f"{where}/{key}: dtype {n.dtype} != {s.dtype}"
+            assert n.shape == s.shape, f"{where}/{key}: shape {n.shape} != {s.shape}"
+            if np.issubdtype(s.dtype, np.floating):
+                np.testing.assert_allclose(n, s, rtol=1e-9, atol=1e-15, err_msg=f"{where}/{key}")
+            else:
+                np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
+
+
+def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, stop_p=0.3):
+    """Masked random decisions in the native vector env and in SyncVectorEnv of single views.
+
+    Returns the number of episodes that ended and of decisions at which members both committed
+    a window step and held theirs (so the test sees members finishing sets at different times).
+    """
+    native = gym.make_vec(
+        ID,
+        num_envs=B,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=autoreset,
+        action="sequential",
+        **kwargs,
+    )
+    assert isinstance(native, SequentialVectorEnv) and native.autoreset_mode == autoreset
+    sync = SyncVectorEnv(
+        [lambda: gym.make(ID, action="sequential", **kwargs) for _ in range(B)],
+        autoreset_mode=autoreset,
+    )
+    assert native.single_observation_space == sync.single_observation_space
+    assert native.single_action_space == sync.single_action_space
+    obs_n, info_n = native.reset(seed=11)
+    obs_s, info_s = sync.reset(seed=11)
+    np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-6)
+    assert_infos_equal(info_n, info_s, "reset")
+    rng = np.random.default_rng(0)
+    ended = mixed = 0
+    for t in range(steps):
+        mask = info_s["action_mask"]
+        np.testing.assert_array_equal(native.action_masks(), mask.astype(bool))
+        actions = np.array(
+            [0 if rng.random() < stop_p else int(rng.choice(np.flatnonzero(m))) for m in mask]
+        )
+        k_before = info_s["step"].copy()
+        obs_n, r_n, te_n, tr_n, info_n = native.step(actions)
+        obs_s, r_s, te_s, tr_s, info_s = sync.step(actions)
+        np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-6, err_msg=f"step {t}")
+        np.testing.assert_allclose(r_n, r_s, rtol=1e-9, atol=1e-15, err_msg=f"step {t}")
+        np.testing.assert_array_equal(te_n, te_s)
+        np.testing.assert_array_equal(tr_n, tr_s)
+        assert_infos_equal(info_n, info_s, f"step {t}")
+        moved = info_s["step"] != k_before
+        mixed += bool(moved.any() and not moved.all())
+        ended += int((te_s | tr_s).sum())
+    return ended, mixed
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"scenario": "ch4-position", "budget": 3, "horizon": 5},
+        {"scenario": "ch4-position", "budget": 2, "horizon": 4, "dynamics": "sampled"},
+        {"scenario": "ch4-position", "budget": 3, "horizon": 5, "reward_mode": "shaped"},
+        {"scenario": "ch4-position", "budget": 4, "objective": "logdet", "reward_mode": "per_step"},
+        {"scenario": "grid-ieee14"},
+    ],
+)
+def test_native_vector_env_matches_sync_vector_env_of_single_views(kwargs):
+    grid = "grid" in kwargs["scenario"]
+    ended, mixed = compare_with_sync(kwargs, B=3 if grid else 4, steps=12 if grid else 30)
+    assert ended >= (3 if grid else 4) and mixed >= 3
+
+
+@pytest.mark.parametrize("autoreset", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_episode_steps": 4},
+        {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_cycles": 3},
+    ],
+)
+def test_truncation_and_autoreset_match_sync(kwargs, autoreset):
+    ended, _ = compare_with_sync(kwargs, B=3, steps=16, autoreset=autoreset)
+    assert ended >= 3
+
+
+def test_skip_forced_and_members_finishing_at_different_decisions():
+    env = gym.make_vec(
+        ID,
+        num_envs=3,
+        vectorization_mode="vector_entry_point",
+        action="sequential",
+        scenario="ch4-position",
+        budget=2,
+        horizon=4,
+        illegal_action="error",
+    )
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (3, 5 + 4) and info["action_mask"].tolist() == [[1, 1, 1, 1]] * 3
+    # member 0 picks 2, member 1 stops (window step 1 with nothing), member 2 picks 1
+    obs, r, term, _, info = env.step(np.array([2, 0, 1]))
+    assert info["step"].tolist() == [0, 1, 0]
+    assert info["action_mask"].tolist() == [[1, 1, 0, 1], [1, 1, 1, 1], [1, 0, 1, 1]]
+    assert obs[0, -4:].tolist() == [0.0, 1.0, 0.0, 0.5]  # the set {2}, half the budget left
+    # member 0 picks 3: its set uses the budget, the env plays the rest of its episode
+    obs, r, term, _, info = env.step(np.array([3, 0, 0]))
+    assert term.tolist() == [True, False, False] and info["step"].tolist() == [4, 2, 1]
+    assert r[0] == pytest.approx(info["phi"][0], rel=1e-12) and r[1] == r[2] == 0.0
+    assert info["attacked"].tolist() == [[0, 0, 0], [0, 0, 0], [1, 0, 0]]
+    assert info["budget_left"].tolist() == [0, 2, 1]
+    # member 0 restarts (NEXT_STEP, its action ignored); member 1 picks 2; member 2 picks 2,
+    # which spends its budget: the env plays its last window steps
+    obs, r, term, _, info = env.step(np.array([3, 2, 2]))
+    assert term.tolist() == [False, False, True] and info["step"].tolist() == [0, 2, 4]
+    assert info["budget_left"].tolist() == [2, 2, 0] and obs[0, -4:].tolist() == [0, 0, 0, 1]
+    with pytest.raises(ValueError, match=r"member 1 is illegal: sensor 2 is already in"):
+        env.step(np.array([0, 2, 0]))
+    # the check raised before any change: the same decision with a legal action goes on
+    obs, r, term, _, info = env.step(np.array([0, 0, 0]))
+    assert info["step"].tolist() == [1, 3, 0] and info["attacked"][1].tolist() == [0, 1, 0]
+
+
+def test_illegal_actions_and_bad_input():
+    def make(rule, **kwargs):
+        env = gym.make_vec(
+            ID,
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            action="sequential",
+            scenario="ch4-position",
+            budget=2,
+            horizon=3,
+            illegal_action=rule,
+            **kwargs,
+        )
+        env.reset(seed=0)
+        env.step(np.array([1, 2]))  # both pick a sensor: one pair of the budget left
+        return env
+
+    with pytest.raises(ValueError, match=r"member 1 is illegal: sensor 2 is already in"):
+        make("error").step(np.array([3, 2]))
+    for rule in ("trim", "noop"):  # an illegal pick stops: member 1's set {2} is committed
+        env = make(rule, autoreset_mode=AutoresetMode.SAME_STEP)
+        _, _, term, _, info = env.step(np.array([3, 2]))
+        assert term.tolist() == [True, False] and info["final_info"]["step"][0] == 3
+        assert info["step"].tolist() == [0, 1]  # member 0 restarted in the same step
+        assert info["attacked"][1].tolist() == [0, 1, 0] and info["budget_left"].tolist() == [2, 1]
+    with pytest.raises(ValueError, match=r"integers in \[0, 4\); member 1 has 4"):
+        env.step(np.array([0, 4]))
+    with pytest.raises(ValueError, match="budget must be >= 1"):
+        gym.make_vec(
+            ID,
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            action="sequential",
+            budget=0,
+        )
+    with pytest.raises(ValueError, match="num_envs"):
+        gym.make_vec(ID, num_envs=0, vectorization_mode="vector_entry_point", action="sequential")
+    with pytest.raises(RuntimeError, match="before reset"):
+        gym.make_vec(
+            ID, num_envs=2, vectorization_mode="vector_entry_point", action="sequential"
+        ).step(np.array([0, 0]))
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+def test_torch_backend_matches_numpy(dynamics):
+    torch = pytest.importorskip("torch")
+    kwargs = dict(
+        num_envs=6,
+        vectorization_mode="vector_entry_point",
+        action="sequential",
+        scenario="ch4-position",
+        budget=3,
+        horizon=5,
+        dynamics=dynamics,
+    )
+    tv = gym.make_vec(ID, backend="torch", device="cpu", **kwargs)
+    nv = gym.make_vec(ID, **kwargs)
+    obs_t, info_t = tv.reset(seed=1)
+    obs_n, info_n = nv.reset(seed=1)
+    rng = np.random.default_rng(2)
+    steps = ended = 0
+    for _ in range(20):
+        mask = info_n["action_mask"]
+        assert np.array_equal(info_t["action_mask"].numpy(), mask)
+        a = np.array([0 if rng.random() < 0.3 else rng.choice(np.flatnonzero(m)) for m in mask])
+        obs_t, r_t, te_t, _, info_t = tv.step(torch.as_tensor(a))
+        obs_n, r_n, te_n, _, info_n = nv.step(a)
+        assert isinstance(obs_t, torch.Tensor) and obs_t.dtype == torch.float32
+        np.testing.assert_array_equal(te_t.numpy(), te_n)
+        np.testing.assert_array_equal(info_t["step"].numpy(), info_n["step"])
+        np.testing.assert_array_equal(info_t["attacked"].numpy(), info_n["attacked"])
+        if dynamics == "expected":
+            np.testing.assert_allclose(r_t.numpy(), r_n, rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(obs_t.numpy(), obs_n, rtol=1e-5, atol=1e-5)
+        else:  # one device generator: the same schedule, other draws (a finite reward)
+            assert torch.isfinite(r_t).all()
+        steps += 1
+        ended += int(te_n.sum())
+    assert ended >= 6
+    with pytest.raises(TypeError, match=r"torch\.Tensor"):
+        tv.step(np.zeros(6, dtype=np.int64))
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_torchrl_face_serves_the_sequential_format_with_its_action_mask(backend):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("torchrl")
+    from torchrl.envs import ActionMask, TransformedEnv
+    from torchrl.envs.utils import check_env_specs
+
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    def make(rule):
+        return FdiaTorchRLEnv(
+            ID,
+            num_envs=3,
+            backend=backend,
+            action="sequential",
+            scenario="ch4-position",
+            budget=2,
+            horizon=4,
+            illegal_action=rule,
+        )
+
+    env = make("trim")  # check_env_specs plays unmasked random actions
+    assert isinstance(env.venv, SequentialVectorEnv)
+    assert env.observation_spec["action_mask"].shape == (3, 4)
+    check_env_specs(env, seed=0)
+    env = make("error")
+    masked = TransformedEnv(env, ActionMask())  # random actions drawn within the mask
+    masked.set_seed(0)
+    rollout = masked.rollout(12, break_when_any_done=False)
+    assert tuple(rollout.batch_size) == (3, 12)
+    mask, action = rollout["action_mask"], rollout["action"]
+    assert bool(mask.gather(-1, action.unsqueeze(-1)).all())  # "error": none was illegal
+    assert int(rollout["next", "done"].sum()) >= 3  # every member ended at least once
+    assert bool(torch.isfinite(rollout["next", "reward"]).all())
+
+
+@pytest.mark.parametrize("action", ["sequential", "multibinary"])
+def test_sb3_ppo_and_a2c_train_on_grid_ieee14_in_the_native_vector_env(action):
+    from stable_baselines3 import A2C, PPO
+
+    from fdia_env.vector.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(ID, num_envs=8, scenario="grid-ieee14", action=action)
+    assert isinstance(venv.venv, SequentialVectorEnv) == (action == "sequential")
+    for algo, kwargs in ((PPO, {"n_epochs": 1, "batch_size": 128}), (A2C, {})):
+        model = algo("MlpPolicy", venv, n_steps=16, seed=0, device="cpu", **kwargs)
+        model.learn(total_timesteps=256)  # float actions of MultiBinary, ints of Discrete
+        assert model.num_timesteps >= 256
+    if action == "sequential":
+        sb3_contrib = pytest.importorskip("sb3_contrib")
+        masks = np.stack(venv.env_method("action_masks"))
+        assert masks.shape == (8, 35) and masks[:, 0].all()
+        model = sb3_contrib.MaskablePPO(
+            "MlpPolicy", venv, n_steps=16, batch_size=128, n_epochs=1, seed=0, device="cpu"
+        )
+        model.learn(total_timesteps=256)
+        assert model.num_timesteps >= 256

@@ -1,0 +1,165 @@
+"""The benchmark tasks: registry, stored references, normalised score, grading."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents.bench.verify import CHEAP_SECONDS, compare, stored_seconds
+from agents.evaluate import evaluate
+from fdia_env import tasks
+from fdia_env.tasks.task import GAP_HARD, HEURISTIC_HARD, RANDOM_HARD
+
+ALL = list(tasks.TASKS)
+
+
+def test_every_defined_task_has_stored_references():
+    assert tasks.pending() == []
+    assert len(ALL) == len(tasks.SPECS)
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_every_task_builds_and_steps(name):
+    task = tasks.get(name)
+    env = task.make_env()
+    try:
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+        masks = getattr(env.unwrapped, "action_masks", None)
+        rng = np.random.default_rng(0)
+        if masks is not None and isinstance(env.action_space, gym.spaces.Discrete):
+            action = int(rng.choice(np.flatnonzero(masks())))
+        else:
+            env.action_space.seed(0)
+            action = env.action_space.sample()
+        _, reward, _, _, _ = env.step(action)
+        assert math.isfinite(float(reward))
+    finally:
+        env.close()
+
+
+def test_get_names_the_parameter_and_close_names():
+    with pytest.raises(
+        ValueError,
+        match=r"task must be .*'sparse/ch4-positon-v0'.*close names: "
+        r"sparse/ch4-position-v0",
+    ):
+        tasks.get("sparse/ch4-positon-v0")
+    with pytest.raises(ValueError, match="task must be"):
+        tasks.get(["not", "a", "name"])
+
+
+def test_names_filters_and_refuses_unknown_filters():
+    sparse = tasks.names(family="sparse")
+    assert sparse and all(tasks.get(n).family == "sparse" for n in sparse)
+    hard = tasks.names(difficulty="hard")
+    assert all(tasks.get(n).difficulty == "hard" for n in hard)
+    assert set(tasks.names()) == set(ALL)
+    with pytest.raises(ValueError, match="difficulty must be one of"):
+        tasks.names(difficulty="extreme")
+    with pytest.raises(ValueError, match="family must be one of"):
+        tasks.names(family="sparse-attack")
+
+
+def test_normalise_refuses_non_numbers():
+    task = tasks.get("sparse/ch4-position-v0")
+    with pytest.raises(TypeError, match="raw must be a real number"):
+        task.normalise("0.1")
+    with pytest.raises(ValueError, match="raw must be finite"):
+        task.normalise(float("nan"))
+    with pytest.raises(ValueError, match="is not a game"):
+        task.normalise_exploitability(0.0)
+
+
+def test_the_exs_policy_played_in_the_env_scores_one_exactly():
+    from baselines.sparse import exhaustive
+
+    task = tasks.get("sparse/ch4-position-v0")
+    kw = task.env_kwargs
+    best = exhaustive(kw["scenario"], kw["budget"], kw["horizon"], kw["objective"])
+    env = task.make_env()
+    result = evaluate(best.policy(), env, n_episodes=2, reference=1.0)
+    env.close()
+    assert task.normalise(result.mean) == 1.0
+
+
+def test_random_play_scores_zero_within_its_ci():
+    task = tasks.get("sparse/ch4-position-v0")
+    env = task.make_env()
+    fresh = evaluate("random", env, n_episodes=200, seed=10_000, reference=1.0, num_envs=200)
+    env.close()
+    refs = task.references
+    span = refs.optimum.value - refs.random.mean
+    ci = (refs.random.ci95 + fresh.ci95) / span  # both means' CIs, in normalised units
+    score = task.normalise(fresh.mean)
+    assert score != 0.0  # other episodes than the stored ones
+    assert abs(score) <= ci
+
+
+def test_game_score_is_one_at_equilibrium_and_zero_for_uniform_play():
+    from baselines.game import exploitability, payoff_matrix, solve_zero_sum
+
+    task = tasks.get("sensor-game/ch5-game-attacker-v0")
+    L = payoff_matrix("ch5-game", 100.0)
+    x, y, v = solve_zero_sum(L)
+    assert task.normalise_exploitability(exploitability(L, x, y, v).attacker) == pytest.approx(
+        1.0, abs=1e-12
+    )
+    uniform = np.full(L.shape[1], 1.0 / L.shape[1])
+    assert task.normalise_exploitability(
+        exploitability(L, x, uniform, v).attacker
+    ) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_hard_tasks_meet_the_criteria_on_their_stored_references():
+    hard = tasks.names(difficulty="hard")
+    for name in hard:
+        refs = tasks.get(name).references
+        assert refs.random_ratio <= RANDOM_HARD, name
+        assert refs.heuristic_score is not None and refs.heuristic_score <= HEURISTIC_HARD, name
+        assert refs.optimum.certified or refs.optimum.gap <= GAP_HARD, name
+
+
+CHEAP = [n for n in ALL if stored_seconds(n) < CHEAP_SECONDS]
+
+
+@pytest.mark.parametrize("name", CHEAP)
+def test_cheap_references_recompute_equal(name):
+    from agents.bench.references import compute
+
+    assert compare(tasks.get(name).references, compute(tasks.spec(name))) == []
+
+
+def test_command_line_refuses_an_unknown_task_and_reports_a_missing_score_module(
+    monkeypatch, capsys
+):
+    import sys
+
+    from agents.bench.__main__ import main
+
+    assert main(["verify", "--task", "sparse/nope-v0"]) == 2
+    assert "task must be a task name" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "agents.bench.score", None)  # as if it were not installed
+    assert main(["score", "--task", "sparse/ch4-position-v0"]) == 2
+    assert "agents.bench.score is not installed" in capsys.readouterr().err
+
+
+def test_command_line_verify_runs_on_one_task(capsys):
+    from agents.bench.__main__ import main
+
+    assert main(["verify", "--task", "sensor-game/ch5-game-attacker-v0"]) == 0
+    out = capsys.readouterr().out
+    assert "sensor-game/ch5-game-attacker-v0" in out and "1/1 tasks match" in out
+
+
+def test_the_benchmark_page_shows_the_stored_references():
+    from pathlib import Path
+
+    from agents.bench.verify import tasks_table
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "benchmark.md").read_text("utf-8")
+    assert tasks_table() in page  # rewrite it with: python -m agents.bench table
+    assert page.count("| `") >= len(ALL)
