@@ -644,9 +644,49 @@ def test_wrappers_pass_pettingzoo_api_tests_without_the_reset_options_warning():
     with pytest.warns(UserWarning, match=r"reset options \['budget'\] are ignored") as rec:
         view.reset(seed=0, options={"budget": 2})
     assert len(rec) == 1 and rec[0].filename == __file__  # once, not again by the wrapper
-    # the delegation of the shared base: max_cycles reaches the wrapped env
+    # the shared base: max_cycles is the wrapper's (decisions), the wrapped env has none
     game = envs[1]()
     assert isinstance(game, SequentialSubsetEnv)
     game.max_cycles = 1
-    assert game.inner.max_cycles == 1 and game.max_cycles == 1
+    assert game.inner.max_cycles is None and game.max_cycles == 1
     assert game.spec is game.inner.spec and game.system is game.inner.system
+
+
+class SequentialModule:
+    """A PettingZoo env module whose envs are ``module``'s in the sequential format."""
+
+    def __init__(self, module, **kwargs):
+        self.module, self.kwargs = module, kwargs
+
+    def parallel_env(self, **kwargs):
+        return self.module.parallel_env(action="sequential", **self.kwargs, **kwargs)
+
+    def env(self, **kwargs):
+        return self.module.env(action="sequential", **self.kwargs, **kwargs)
+
+
+@pytest.mark.parametrize("game", [False, True], ids=["sparse", "sensor-game"])
+def test_pettingzoo_seed_max_cycles_and_render_tests_pass_in_the_sequential_format(game):
+    from pettingzoo.test import max_cycles_test, parallel_seed_test, seed_test
+
+    from fdia_env import sensor_game_v0
+
+    mod = (
+        SequentialModule(sensor_game_v0, rounds=3)
+        if game
+        else SequentialModule(sparse_attack_v0, scenario="ch4-position", horizon=6)
+    )
+    seed_test(mod.env, num_cycles=20)
+    parallel_seed_test(mod.parallel_env, num_cycles=20)
+    max_cycles_test(mod)  # max_cycles counts decisions, as PettingZoo's test expects
+    # rendering is the wrapped env's (PettingZoo's render_test runs on it in test_clients.py)
+    aec = mod.env(render_mode="ansi")
+    aec.reset(seed=0)
+    assert "step 0/" in aec.render() and aec.render_mode == "ansi"
+    env = mod.parallel_env(max_cycles=2)
+    env.reset(seed=0)
+    env.step(dict.fromkeys(env.agents, 1))
+    truncs = env.step(dict.fromkeys(env.agents, 0 if not game else 2))[3]
+    assert all(truncs.values()) and env.agents == []
+    with pytest.raises(ValueError, match="max_cycles must be"):
+        env.max_cycles = 0

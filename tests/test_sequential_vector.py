@@ -262,3 +262,26 @@ def test_torchrl_face_serves_the_sequential_format_with_its_action_mask(backend)
     assert bool(mask.gather(-1, action.unsqueeze(-1)).all())  # "error": none was illegal
     assert int(rollout["next", "done"].sum()) >= 3  # every member ended at least once
     assert bool(torch.isfinite(rollout["next", "reward"]).all())
+
+
+@pytest.mark.parametrize("action", ["sequential", "multibinary"])
+def test_sb3_ppo_and_a2c_train_on_grid_ieee14_in_the_native_vector_env(action):
+    from stable_baselines3 import A2C, PPO
+
+    from fdia_env.vector.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(ID, num_envs=8, scenario="grid-ieee14", action=action)
+    assert isinstance(venv.venv, SequentialVectorEnv) == (action == "sequential")
+    for algo, kwargs in ((PPO, {"n_epochs": 1, "batch_size": 128}), (A2C, {})):
+        model = algo("MlpPolicy", venv, n_steps=16, seed=0, device="cpu", **kwargs)
+        model.learn(total_timesteps=256)  # float actions of MultiBinary, ints of Discrete
+        assert model.num_timesteps >= 256
+    if action == "sequential":
+        sb3_contrib = pytest.importorskip("sb3_contrib")
+        masks = np.stack(venv.env_method("action_masks"))
+        assert masks.shape == (8, 35) and masks[:, 0].all()
+        model = sb3_contrib.MaskablePPO(
+            "MlpPolicy", venv, n_steps=16, batch_size=128, n_epochs=1, seed=0, device="cpu"
+        )
+        model.learn(total_timesteps=256)
+        assert model.num_timesteps >= 256

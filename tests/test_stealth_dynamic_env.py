@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from baselines.stealth.dynamic import attack_effect, mo_sinopoli
-from baselines.stealth.linear import optimal_linear_attack
+from baselines.stealth.dynamic import attack_effect, kalman_model, mo_sinopoli
+from baselines.stealth.linear import attack_value, optimal_linear_attack
 from fdia_env.stealth import stealth_dynamic_v0
 from fdia_env.stealth.dynamic_model import chi2_mix_sf
+from fdia_env.stealth.dynamic_policy import ScheduledPolicy, bias_actions, linear_action
 from fdia_env.systems import LinearSystem, Sensor
 
 GYM_ID = "fdia_env/StealthDynamic-v0"
@@ -30,15 +31,6 @@ def stable_system() -> LinearSystem:
     )
 
 
-def linear_action(env, T):
-    """The ``action="linear"`` action playing ``T`` on every attacked row, b = 0."""
-    r = len(env.model.rows)
-    act = np.zeros((r, r + 1))
-    act[:, :r] = (T - np.eye(r)) / env.model.t_max
-    assert np.abs(act).max() <= 1.0
-    return act
-
-
 # --- Mo & Sinopoli: an unbounded stealthy attack -------------------------------------------
 def mo_sinopoli_setup(scale, **kwargs):
     env = stealth_dynamic_v0.parallel_env(a_max=1e6, **kwargs)  # ch4-position, all 3 sensors
@@ -53,10 +45,11 @@ def test_mo_sinopoli_attack_grows_the_error_without_bound_at_bounded_detection()
     env, attack = mo_sinopoli_setup(scale, dynamics="expected", horizon=horizon)
     model = env.model
     inj = attack.attack(horizon, scale)
+    actions = bias_actions(model, inj)
     env.reset(seed=0)
     phi, p = [], []
     for k in range(horizon):
-        info = env.step({"attacker": inj[k, model.rows] / (model.a_max * model.sigma)})[4]
+        info = env.step({"attacker": actions[k]})[4]
         phi.append(info["attacker"]["phi"])
         p.append(info["attacker"]["detection_probability"])
     phi, p = np.array(phi), np.array(p)
@@ -82,7 +75,7 @@ def test_mo_sinopoli_attack_in_sampled_dynamics_alarms_at_the_exact_rate():
         GYM_ID, num_envs=B, vectorization_mode="vector_entry_point", a_max=1e6, horizon=steps
     )
     venv.reset(seed=1)
-    inj = attack.attack(steps, scale)[:, model.rows] / (model.a_max * model.sigma)
+    inj = bias_actions(model, attack.attack(steps, scale))
     alarms, p, errors = [], [], []
     for k in range(steps):
         _, _, _, _, info = venv.step(np.repeat(inj[k][None], B, axis=0).astype(np.float32))
@@ -103,6 +96,32 @@ def test_mo_sinopoli_attack_in_sampled_dynamics_alarms_at_the_exact_rate():
     assert np.mean(errors[-1]) > 3 * np.mean(errors[49])
 
 
+def test_on_the_grid_the_minimum_meter_attack_meters_admit_an_unbounded_stealthy_attack():
+    """grid-ieee14 (random walk, A = I): the 3 meters of bus 7's undetectable static attack."""
+    from baselines.stealth import minimum_meter_attack
+
+    meters = np.flatnonzero(minimum_meter_attack("ieee14", method="mincut").a).tolist()
+    assert meters == [6, 7, 32]
+    steps = 520  # 40 reach phases of n = 13 steps
+    env = stealth_dynamic_v0.parallel_env(
+        "grid-ieee14", sensors=meters, dynamics="expected", horizon=steps, a_max=1e6
+    )
+    model, s = env.model, env.model.system
+    attack = mo_sinopoli(s.F, s.H, s.Q, s.R, model.rows)
+    assert attack.vulnerable and not mo_sinopoli(s.F, s.H, s.Q, s.R, model.rows[:2]).vulnerable
+    actions = bias_actions(model, attack.attack(steps, 1.645e-4))  # window non-centrality ≤ 0.05
+    env.reset(seed=0)
+    phi, p = [], []
+    for k in range(steps):
+        info = env.step({"attacker": actions[k]})[4]["attacker"]
+        phi.append(info["phi"])
+        p.append(info["detection_probability"])
+    excess = np.array(phi) - model.clean
+    assert excess[-1] > 3 * model.clean  # the trace 4.4 times the clean one, and growing
+    assert excess[-1] / excess[steps // 2 - 1] == pytest.approx(4.0, rel=0.03)  # like k²
+    assert 0.05 < max(p[5:]) < 0.0504
+
+
 def test_a_sensor_set_the_test_rejects_gets_no_unbounded_attack_from_the_same_play():
     # the position mode is seen by all three sensors: attacking two of them is not enough
     env = stealth_dynamic_v0.parallel_env(sensors=[0, 1])
@@ -119,7 +138,7 @@ def test_guo_linear_attack_in_the_env_gives_the_closed_form_error_covariance(del
         system, action="linear", dynamics="expected", horizon=150, window=1
     )
     attack = optimal_linear_attack(system.F, system.H, system.Q, system.R, delta)
-    act = linear_action(env, attack.T)
+    act = linear_action(env.model, attack.T)
     env.reset(seed=0)
     for _ in range(150):  # D converges like 0.81^k (F's spectral radius 0.9, squared)
         _, rewards, _, _, infos = env.step({"attacker": act})
@@ -146,7 +165,7 @@ def test_guo_attack_sampled_in_the_vector_env_realises_its_error_and_alarm_rate(
     kwargs = {"action": "linear", "horizon": steps}
     env = stealth_dynamic_v0.parallel_env(system, dynamics="expected", **kwargs)
     np.testing.assert_allclose(attack.T, -np.eye(2), atol=1e-12)  # strict stealth: T = −I
-    act = linear_action(env, -np.eye(2)).astype(np.float32)  # the action −I/2, exact
+    act = linear_action(env.model, -np.eye(2)).astype(np.float32)  # the action −I/2, exact
     env.reset(seed=0)
     for _ in range(steps):
         phi = env.step({"attacker": act})[4]["attacker"]["phi"]
@@ -172,6 +191,54 @@ def test_chi2_mixture_tail_matches_closed_forms_and_sampling():
     draws = np.random.default_rng(0).standard_normal((400_000, lam.size)) ** 2 @ lam
     se = np.sqrt(0.15 * 0.85 / draws.size)
     assert abs(chi2_mix_sf(lam, x) - np.mean(draws > x)) < 4.5 * se
+
+
+def test_baseline_attacks_as_policies_reproduce_their_values_through_the_gymnasium_view():
+    # Mo & Sinopoli, open loop: the view's phi is the baseline's tr P_f + |Δe|² of what it played
+    env, attack = mo_sinopoli_setup(2e-3)
+    model = env.model
+    policy = ScheduledPolicy(bias_actions(model, attack.attack(200, 2e-3)))
+    view = gym.make(GYM_ID, dynamics="expected", a_max=1e6, horizon=200)
+    obs, _ = view.reset(seed=0)
+    done = False
+    while not done:
+        obs, _, term, trunc, info = view.step(policy.predict(obs)[0])
+        done = term or trunc
+    played = np.zeros((200, model.m))
+    played[:, model.rows] = policy.actions.astype(np.float64) * model.a_max * model.sigma
+    de, _ = attack_effect(attack.model, played)
+    assert info["step"] == 200 and info["phi"] == pytest.approx(model.clean + de[-1] @ de[-1])
+    assert info["phi"] == pytest.approx(model.clean + (2e-3 * 200 / 2) ** 2, rel=0.01)
+    # Guo et al. at δ = 0.5: the closed form's value of the (float32) T the view played
+    system = stable_system()
+    best = optimal_linear_attack(system.F, system.H, system.Q, system.R, 0.5)
+    kwargs = {"action": "linear", "dynamics": "expected", "horizon": 120, "window": 1}
+    view = gym.make(GYM_ID, scenario=system, **kwargs)
+    model = view.unwrapped.parallel.model
+    policy = ScheduledPolicy(np.repeat(linear_action(model, best.T)[None], 120, axis=0))
+    obs, _ = view.reset(seed=0)
+    for _ in range(120):
+        obs, reward, _, _, info = view.step(policy.predict(obs)[0])
+    T = np.eye(2) + model.t_max * policy.actions[0, :, :2].astype(np.float64)
+    value, kl = attack_value(kalman_model(system.F, system.H, system.Q, system.R), T, 0 * T)
+    assert info["phi"] == pytest.approx(value, rel=1e-10) and info["kl"] == pytest.approx(kl)
+    assert value == pytest.approx(best.value, rel=1e-6)
+    assert reward == pytest.approx((1 - info["detection_probability"]) * value)
+
+
+def test_policy_helpers_refuse_attacks_outside_the_action_range():
+    env = stealth_dynamic_v0.parallel_env()  # a_max = 5, t_max = 4
+    model = env.model
+    with pytest.raises(ValueError, match="a_max"):
+        bias_actions(model, np.full((2, 3), 100.0))
+    with pytest.raises(ValueError, match="injections must be a finite"):
+        bias_actions(model, np.full((2, 4), 0.1))
+    with pytest.raises(ValueError, match="t_max"):
+        linear_action(model, -9.0 * np.eye(3))
+    with pytest.raises(ValueError, match="T must be"):
+        linear_action(model, np.eye(2))
+    with pytest.raises(ValueError, match="actions must lie"):
+        ScheduledPolicy([[2.0]])
 
 
 # --- the env's own conventions ------------------------------------------------------------

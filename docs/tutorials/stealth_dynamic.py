@@ -9,6 +9,7 @@ import numpy as np
 import fdia_env  # noqa: F401  (registers the Gymnasium ids)
 from baselines.stealth import mo_sinopoli, optimal_linear_attack
 from fdia_env.stealth import stealth_dynamic_v0
+from fdia_env.stealth.dynamic_policy import bias_actions, linear_action
 from fdia_env.systems import LinearSystem, Sensor
 
 # 1. Which sensor sets admit an unbounded stealthy attack (ch4-position: 3 position sensors)
@@ -20,12 +21,11 @@ for sensors in ([0], [0, 1], [0, 1, 2]):
 
 # 2. The attack played in the env: the error grows without bound, detection stays near α
 attack = mo_sinopoli(s.F, s.H, s.Q, s.R, model.rows)
-injections = attack.attack(800, scale=2e-3)
+actions = bias_actions(model, attack.attack(800, scale=2e-3))  # over a_max · σ per row
 env.reset(seed=0)
 p_max = 0.0
 for k in range(800):
-    action = injections[k, model.rows] / (model.a_max * model.sigma)
-    _, rewards, _, _, infos = env.step({"attacker": action})
+    _, rewards, _, _, infos = env.step({"attacker": actions[k]})
     info = infos["attacker"]
     p_max = max(p_max, info["detection_probability"])
     if k + 1 in (100, 200, 400, 800):
@@ -44,9 +44,7 @@ venv = gym.make_vec(
 venv.reset(seed=1)
 alarms, exact = [], []
 for k in range(steps):
-    _, _, _, _, info = venv.step(
-        np.repeat(injections[k, model.rows][None], B, axis=0) / (model.a_max * model.sigma)
-    )
+    _, _, _, _, info = venv.step(np.repeat(actions[k][None], B, axis=0))
     alarms.append(info["detected"].mean())
     exact.append(info["detection_probability"].mean())
 print(f"alarm rate {np.mean(alarms[4:]):.3f}, exact {np.mean(exact[4:]):.4f}")
@@ -63,8 +61,7 @@ for delta in (0.0, 0.5):
     env = stealth_dynamic_v0.parallel_env(
         system, action="linear", dynamics="expected", horizon=150, window=1
     )
-    action = np.zeros((2, 3))
-    action[:, :2] = (best.T - np.eye(2)) / env.model.t_max  # T = I + t_max · action
+    action = linear_action(env.model, best.T)  # T = I + t_max · action[:, :2], b = 0
     env.reset(seed=0)
     for _ in range(150):
         _, _, _, _, infos = env.step({"attacker": action})

@@ -46,7 +46,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_choice
+from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.attacks.subsets import SubsetChoice, game_sizes
 from fdia_env.envs.actions import check_action
@@ -93,6 +93,9 @@ class SequentialBase(ParallelEnv):
         self._action_space = spaces.Discrete(self.M + 1)
         self._obs_spaces: dict[str, spaces.Dict] = {}
         self._box: Any = None
+        self._max_cycles = inner.max_cycles  # counted in decisions here, not in the inner env
+        inner.max_cycles = None
+        self._decisions = 0
 
     def _masked_space(self, box: spaces.Box, extra: int) -> spaces.Dict:
         """``Dict(observation, action_mask)``: ``box`` followed by ``extra`` entries in [0, 1]."""
@@ -110,12 +113,22 @@ class SequentialBase(ParallelEnv):
     # --- PettingZoo API ------------------------------------------------------------------
     @property
     def max_cycles(self) -> int | None:
-        """The wrapped env's ``max_cycles`` (counted in its steps, not in decisions)."""
-        return self.inner.max_cycles
+        """PettingZoo's episode-length limit, counted in decisions (None: no limit).
+
+        An episode still running after this many decisions is truncated (as PettingZoo's
+        ``max_cycles`` counts a parallel env's steps); the wrapped env has no limit of its own.
+        """
+        return self._max_cycles
 
     @max_cycles.setter
     def max_cycles(self, value: int | None) -> None:
-        self.inner.max_cycles = value
+        self._max_cycles = None if value is None else check_int("max_cycles", value, minimum=1)
+
+    def _limit(self, ended: bool) -> bool:
+        """Count a decision; whether it truncates an episode that has not ``ended``."""
+        self._decisions += 1
+        limit = self._max_cycles
+        return not ended and limit is not None and self._decisions >= limit
 
     @property
     def spec(self) -> EpisodeSpec:
@@ -165,6 +178,7 @@ class SequentialBase(ParallelEnv):
         obs, infos = self.inner.reset(seed=seed, options=kept)
         self.np_random = self.inner.np_random
         self.agents = list(self.inner.agents)
+        self._decisions = 0
         return self._start(obs, infos)
 
     def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
@@ -284,6 +298,7 @@ class SequentialSetEnv(SequentialBase):
             while self.skip_forced and not (term or trunc) and self._forced():
                 r, term, trunc = self._commit()
                 reward += r
+        trunc = trunc or self._limit(term)
         obs = {"attacker": self._observe()}
         infos = {"attacker": dict(self._info)}
         if term or trunc:
@@ -493,6 +508,8 @@ class SequentialSubsetEnv(SequentialBase):
             obs, rewards, terms, truncs, infos = self.inner.step(played)
             rewards = {p: float(r) for p, r in rewards.items()}
             self._new_round(obs, infos)
+        if self._limit(any(terms.values()) or any(truncs.values())):
+            truncs = dict.fromkeys(truncs, True)
         out = (
             self._observe_all(),
             rewards,

@@ -28,6 +28,7 @@ batch of one. See docs/guide/stealth.md ("Dynamic").
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -312,11 +313,20 @@ def chi2_mix_sf(weights: Any, x: float) -> float:
 
 
 def _chi2_mix_sf(weights: np.ndarray, x: float, alpha: float) -> float:
-    """:func:`chi2_mix_sf`, with α where every weight is 1 or 0 (no attack: τ's own rate)."""
-    used = weights[weights > 0.0]
+    """:func:`chi2_mix_sf`, with α where every weight is 1 or 0 (no attack: τ's own rate).
+
+    Results are cached by the sorted weights and x: a stationary attack (the same T every
+    step, or every member) costs one integral.
+    """
+    used = np.sort(weights[weights > 0.0])
     if np.all(np.abs(used - 1.0) <= 1e-12):
         return float(alpha)
-    return chi2_mix_sf(weights, x)
+    return _cached_sf(used.tobytes(), float(x))
+
+
+@functools.lru_cache(maxsize=4096)
+def _cached_sf(key: bytes, x: float) -> float:
+    return chi2_mix_sf(np.frombuffer(key, dtype=np.float64), x)
 
 
 def _psd_sqrt(M: np.ndarray) -> np.ndarray:

@@ -208,6 +208,8 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
                 break
             stepping = commit & ~(done | truncated) & self._forced()
         self._decisions = self._decisions + xp.astype(live, xp.int64)
+        if self.parallel.max_cycles is not None:  # PettingZoo's limit, counted in decisions
+            truncated = truncated | (live & ~done & (self._decisions >= self.parallel.max_cycles))
         if self.max_episode_steps is not None:  # Gymnasium's TimeLimit, counted in decisions
             truncated = truncated | (live & (self._decisions >= self.max_episode_steps))
         infos: dict[str, Any] = {}
@@ -282,8 +284,6 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         k = sim.k
         done = stepping & (k >= self.spec_episode.horizon)
         truncated = xp.zeros(self.num_envs, dtype=xp.bool)
-        if self.parallel.max_cycles is not None:
-            truncated = stepping & ~done & (k >= self.parallel.max_cycles)
         reward = attacker_reward(self.spec_episode.reward_mode, sim.phi, phi_prev, done, xp)
         reward = xp.where(stepping, reward, 0.0)
         self._chosen = self._chosen & held[:, None]
