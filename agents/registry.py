@@ -206,18 +206,23 @@ def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference |
         return None  # repeated rounds: no exact matrix-game reference here
     if getattr(env.attack, "types", None) is not None:
         return bayesian_reference(env, agent)
-    L, x, y, value = _solved_game(env.scenario, env.attack.power, env.attack.allocation)
+    attack = env.attack
+    L, x, y, value = _solved_game(
+        env.scenario, attack.power, attack.allocation, attack.max_subset_size
+    )
     if agent == "defender":
         policy = MixedStrategyPolicy(x, seed=0)
         return Reference(-value, "game value (LP)", "trace", True, L, policy)
     return Reference(value, "game value (LP)", "trace", True, L, MixedStrategyPolicy(y, seed=0))
 
 
-_GAMES: dict[tuple[int, float, str], tuple[Any, tuple]] = {}
+_GAMES: dict[tuple[int, float, str, int | None], tuple[Any, tuple]] = {}
 _MAX_GAMES = 8
 
 
-def _solved_game(scenario: Any, power: float, allocation: str) -> tuple:
+def _solved_game(
+    scenario: Any, power: float, allocation: str, max_subset_size: int | None = None
+) -> tuple:
     """``(L, x, y, value)`` of the sensor game, kept for the last few scenarios solved.
 
     A grid preset's game (596 × 595 on grid-ieee14) takes seconds to build and solve, and a
@@ -226,11 +231,11 @@ def _solved_game(scenario: Any, power: float, allocation: str) -> tuple:
     """
     from baselines.game import payoff_matrix, solve_zero_sum
 
-    key = (id(scenario), float(power), str(allocation))
+    key = (id(scenario), float(power), str(allocation), max_subset_size)
     hit = _GAMES.get(key)
     if hit is not None and hit[0] is scenario:
         return hit[1]
-    L = payoff_matrix(scenario, power, allocation)
+    L = payoff_matrix(scenario, power, allocation, max_subset_size)
     L.setflags(write=False)
     solved = (L, *solve_zero_sum(L))
     if len(_GAMES) >= _MAX_GAMES:

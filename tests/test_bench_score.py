@@ -334,3 +334,17 @@ def test_an_sb3_model_in_a_game_is_scored_on_its_action_distribution():
     # an untrained network plays close to the uniform mix: close to random play's score, 0
     assert result.description == "" and abs(result.normalised) < 0.5
     assert result.extras["exploitability"] > 0
+
+
+def test_a_game_with_a_subset_size_limit_scores_its_equilibrium_one_and_random_zero():
+    from agents.registry import by_gym_id
+
+    game = get("sensor-game/m10-strong-k3-defender-v0")  # defender subsets of at most 3 sensors
+    with game.make_env() as env:
+        ref = by_gym_id(game.env_id).reference_of(env)
+        n = env.action_space.n
+    assert ref.payoff.shape[0] == n == 176  # the game matrix has the env actions only
+    expl = score_policy(game, ref.policy, seeds=(0,), episodes=2)
+    assert expl.normalised == pytest.approx(1.0, abs=1e-9)
+    rand = score_policy(game, "random", seeds=(0,), episodes=2)
+    assert rand.normalised == pytest.approx(0.0, abs=1e-9)

@@ -55,7 +55,8 @@ def learner_entries(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         raw = float(np.mean([r.get("raw", r["mean"]) for r in group]))
         steps = sorted({r["timesteps"] for r in group})
         note = (
-            f"{len(group)} seeds, {', '.join(f'{s:,}' for s in steps)} steps, "
+            f"{len(group)} seed{'s' * (len(group) != 1)}, "
+            f"{', '.join(f'{s:,}' for s in steps)} steps, "
             f"{np.mean([r['train_seconds'] for r in group]):.0f} s per seed"
         )
         out.append(
