@@ -1,4 +1,4 @@
-"""``sparse_attack_v1``: ``sparse_attack_v0``, sequential format the default above 16 sensors.
+"""``sparse_attack_v1``: sparse sensor-time attacks, sequential format by default above 16 sensors.
 
 The environment, its options and every action format are those of
 :mod:`fdia_env.sparse_attack_v0` (read its documentation); only the default format changes.
@@ -58,7 +58,7 @@ from __future__ import annotations
 
 from fdia_env import sparse_attack_v0
 from fdia_env.attacks.sparse import MAX_SENSORS
-from fdia_env.envs.factory import aec_views
+from fdia_env.envs.factory import aec_views, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.sequential import SequentialSetEnv
 from fdia_env.scenarios import Scenario, resolve
@@ -83,11 +83,12 @@ def parallel_env(
     """The PettingZoo ``ParallelEnv``: ``sparse_attack_v0``'s, sequential above 16 sensors.
 
     Arguments as :func:`fdia_env.sparse_attack_v0.parallel_env`; ``action="auto"`` resolves
-    to ``"sequential"`` for more than 16 sensors (see the module docstring).
+    to ``"sequential"`` for more than 16 sensors and a budget of at least 1 (see the module
+    docstring).
     """
     sc = resolve(scenario)
-    if action == "auto" and sc.system.M > MAX_SENSORS:
-        action = "sequential"
+    if action == "auto" and sc.system.M > MAX_SENSORS and scenario_default(sc, "budget", budget):
+        action = "sequential"  # (a budget of 0 has no decision to make: v0's format)
     env = sparse_attack_v0.parallel_env(
         sc, budget, horizon, objective, reward_mode, dynamics, warmup, render_mode, max_cycles,
         illegal_action, action,
