@@ -25,7 +25,7 @@ import numpy as np
 
 from agents.config import GameConfig, Hyperparameters, RunSettings
 from agents.plots import exploitability_curve
-from agents.selfplay import run_selfplay
+from agents.selfplay import game_algo, game_setup, run_selfplay
 from baselines.game import exploitability, payoff_matrix, solve_double_oracle, solve_zero_sum
 from experiments.results.common import write_rows
 from fdia_env._validation import check_int
@@ -43,21 +43,27 @@ class PsroSetting:
             ``grid-ieee14``).
         iterations: PSRO iterations (each trains one attacker and one defender best response).
         steps: Environment steps per learned best response.
-        algo: SB3 learner of the best responses (``PPO``, ``A2C`` or ``DQN``).
+        algo: SB3 learner of the best responses (``PPO``, ``A2C``, ``DQN`` or
+            ``MaskablePPO``); None: ``train.py``'s default for the scenario
+            (:data:`agents.config.SCENARIO_DEFAULTS`: MaskablePPO in the sequential format on
+            grid-ieee14, PPO on the subset format elsewhere).
     """
 
     scenario: str
     iterations: int
     steps: int
-    algo: str = "PPO"
+    algo: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.scenario, str):
             raise TypeError(f"scenario must be a preset name, got {type(self.scenario).__name__}")
         check_int("iterations", self.iterations, minimum=1)
         check_int("steps", self.steps, minimum=1)
-        if self.algo not in ("PPO", "A2C", "DQN"):
-            raise ValueError(f"algo must be one of PPO, A2C, DQN, got {self.algo!r}")
+        if self.algo not in (None, "PPO", "A2C", "DQN", "MaskablePPO"):
+            raise ValueError(
+                f"algo must be one of PPO, A2C, DQN, MaskablePPO (or None: train.py's default "
+                f"for the scenario), got {self.algo!r}"
+            )
 
 
 FULL = (PsroSetting("game-m10", 10, 16384), PsroSetting("grid-ieee14", 24, 4096))
@@ -164,7 +170,8 @@ def psro_against_exact(
     reached = [h["iteration"] for h in history if h["relative_nash_conv"] <= TARGET]
     return {
         "scenario": setting.scenario,
-        "algo": setting.algo,
+        "algo": game_algo(cfg),
+        "action": game_setup(cfg).env_kwargs.get("action", "subset"),
         "iterations": setting.iterations,
         "steps_per_br": setting.steps,
         "seed": seed,

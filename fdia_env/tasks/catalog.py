@@ -40,7 +40,7 @@ class TaskSpec:
 
 def _sparse(
     instance: str,
-    scenario: str,
+    scenario: Any,
     budget: int,
     horizon: int,
     objective: str = "trace",
@@ -48,6 +48,7 @@ def _sparse(
     **kwargs: Any,
 ) -> TaskSpec:
     what = "log det" if objective == "logdet" else "trace"
+    label = getattr(scenario, "description", scenario)
     return TaskSpec(
         f"sparse/{instance}-v0",
         "sparse",
@@ -61,10 +62,17 @@ def _sparse(
             **kwargs,
         },
         "fdia_env.sparse_attack_v0",
-        f"{scenario}: drop at most {budget} sensor-time pairs over {horizon} steps under perfect "
+        f"{label}: drop at most {budget} sensor-time pairs over {horizon} steps under perfect "
         f"detection, maximise the {what} of the error covariance at the window's end",
         episodes,
     )
+
+
+def _tracking(seed: int) -> Any:
+    """System ``seed`` of the random tracking family with 6 sensors (a fixed Scenario)."""
+    from fdia_env.envs.system_family import TrackingFamily
+
+    return TrackingFamily(num_sensors=6, budget=4, horizon=4).scenario(seed)
 
 
 def _covariance(instance: str, scenario: str, power: float, objective: str) -> TaskSpec:
@@ -175,6 +183,10 @@ SPECS: tuple[TaskSpec, ...] = (
     _sparse("ch4-pv-case3-logdet", "ch4-pv-case3", 5, 6, "logdet"),
     _sparse("ch4-random", "ch4-random", 10, 6),
     _sparse("ch4-random-logdet", "ch4-random", 5, 6, "logdet"),
+    _sparse("tracking-m6-1000004", _tracking(1_000_004), 4, 4),
+    _sparse("tracking-m6-1000006", _tracking(1_000_006), 4, 4),
+    _sparse("tracking-m6-1000007", _tracking(1_000_007), 4, 4),
+    _sparse("tracking-m6-1000037", _tracking(1_000_037), 4, 4),
     _sparse("ieee14-logdet", "grid-ieee14", 5, 1, "logdet", action="sequential"),
     _sparse("ieee14-logdet-window", "grid-ieee14", 4, 3, "logdet", action="sequential"),
     _sparse("ieee14", "grid-ieee14", 3, 2, action="sequential"),
@@ -201,6 +213,8 @@ SPECS: tuple[TaskSpec, ...] = (
     ),
     _game("ieee14", "grid-ieee14", "attacker"),
     _game("ieee14", "grid-ieee14", "defender"),
+    _game("ieee118", "grid-ieee118", "attacker"),
+    _game("ieee118", "grid-ieee118", "defender"),
     _bayes("ch5-game-informed", "ch5-game", "attacker", "informed", power=100.0),
     _bayes("ch5-game-informed", "ch5-game", "defender", "informed", power=100.0),
     _bayes("ch5-game-uninformed", "ch5-game", "attacker", "uninformed", power=100.0),
