@@ -31,9 +31,7 @@ demo: $(STAMP)
 	$(BIN)/python -m agents.demo
 
 bench: $(STAMP)
-	$(BIN)/python benchmarks/env_step.py
-	$(BIN)/python benchmarks/sparse.py
-	$(BIN)/python benchmarks/game.py
+	$(BIN)/python benchmarks/report.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache docs/_build

@@ -87,6 +87,7 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
         "clip_range": 0.2,
         "lr_schedule": "linear",
         "net_arch": (64, 64),
+        "stop_prob": None,
     },
 }
 
@@ -227,7 +228,7 @@ class Hyperparameters:
     net_arch: tuple[int, ...] | None = None
     """Hidden layer sizes of the policy and value networks (default: 64 64)."""
     stop_prob: float | None = None
-    """PPO/MaskablePPO/A2C: initial probability of action 0 (the sequential format's stop)
+    """PPO/MaskablePPO/A2C/torch-ppo: initial probability of action 0 (the sequential format's stop)
     when every action is legal, set through the policy's output bias (default: none, uniform;
     the grid presets' sparse attack: 0.9, so that early episodes keep budget for late steps)."""
 

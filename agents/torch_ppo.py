@@ -73,6 +73,8 @@ class TorchPPOConfig:
         norm_reward: Scale rewards by the running std of the return.
         hidden: Hidden layer sizes of the actor and of the critic (tanh).
         init_log_std: Initial log std of the Gaussian policy (Box actions, normalised space).
+        stop_prob: Discrete actions: initial probability of action 0 (the sequential format's
+            stop) when every action is legal, through the actor's output bias (None: uniform).
     """
 
     total_timesteps: int = 1_000_000
@@ -93,9 +95,12 @@ class TorchPPOConfig:
     norm_reward: bool = True
     hidden: tuple[int, ...] = (64, 64)
     init_log_std: float = -0.5
+    stop_prob: float | None = None
 
     def __post_init__(self) -> None:
         check_int("total_timesteps", self.total_timesteps, 1)
+        if self.stop_prob is not None:
+            check_real("stop_prob", self.stop_prob, lambda v: 0 < v < 1, "in (0, 1)")
         check_int("num_envs", self.num_envs, 1, MAX_NUM_ENVS)
         check_int("num_steps", self.num_steps, 1)
         check_int("num_minibatches", self.num_minibatches, 1)
@@ -145,6 +150,7 @@ class TorchPPOConfig:
             ent_coef=hp["ent_coef"],
             hidden=tuple(hp["net_arch"]),
             num_minibatches=min(4, num_envs * hp["n_steps"]),
+            stop_prob=hp.get("stop_prob"),
         )
 
     @property
@@ -509,6 +515,13 @@ def train_torch_ppo(
         init_log_std=config.init_log_std,
     )
     model = ActorCritic(spec).to(device)
+    if config.stop_prob is not None and resume is None:
+        if spec.kind != "discrete" or spec.n < 2:
+            raise ValueError("stop_prob applies to Discrete actions (2 or more)")
+        with torch.no_grad():  # the output layer's weights are tiny: the logits start at it
+            bias = model.actor[-1].bias
+            bias.zero_()
+            bias[0] = math.log(config.stop_prob / (1 - config.stop_prob) * (spec.n - 1))
     gen = torch.Generator(device=device).manual_seed(seed)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=1e-5)
     masked = spec.kind == "discrete"

@@ -13,9 +13,9 @@ from gymnasium.vector import SyncVectorEnv
 
 from fdia_env import scenarios
 from fdia_env.defenses.base import FilterInput
+from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
-from fdia_env.vector.simulation import BatchedSimulation
 
 
 def _masks(rng: np.random.Generator, B: int, M: int, most: int) -> np.ndarray:

@@ -96,6 +96,32 @@ def test_mo_sinopoli_attack_in_sampled_dynamics_alarms_at_the_exact_rate():
     assert np.mean(errors[-1]) > 3 * np.mean(errors[49])
 
 
+def test_on_the_grid_the_minimum_meter_attack_meters_admit_an_unbounded_stealthy_attack():
+    """grid-ieee14 (random walk, A = I): the 3 meters of bus 7's undetectable static attack."""
+    from baselines.stealth import minimum_meter_attack
+
+    meters = np.flatnonzero(minimum_meter_attack("ieee14", method="mincut").a).tolist()
+    assert meters == [6, 7, 32]
+    steps = 520  # 40 reach phases of n = 13 steps
+    env = stealth_dynamic_v0.parallel_env(
+        "grid-ieee14", sensors=meters, dynamics="expected", horizon=steps, a_max=1e6
+    )
+    model, s = env.model, env.model.system
+    attack = mo_sinopoli(s.F, s.H, s.Q, s.R, model.rows)
+    assert attack.vulnerable and not mo_sinopoli(s.F, s.H, s.Q, s.R, model.rows[:2]).vulnerable
+    actions = bias_actions(model, attack.attack(steps, 1.645e-4))  # window non-centrality ≤ 0.05
+    env.reset(seed=0)
+    phi, p = [], []
+    for k in range(steps):
+        info = env.step({"attacker": actions[k]})[4]["attacker"]
+        phi.append(info["phi"])
+        p.append(info["detection_probability"])
+    excess = np.array(phi) - model.clean
+    assert excess[-1] > 3 * model.clean  # the trace 4.4 times the clean one, and growing
+    assert excess[-1] / excess[steps // 2 - 1] == pytest.approx(4.0, rel=0.03)  # like k²
+    assert 0.05 < max(p[5:]) < 0.0504
+
+
 def test_a_sensor_set_the_test_rejects_gets_no_unbounded_attack_from_the_same_play():
     # the position mode is seen by all three sensors: attacking two of them is not enough
     env = stealth_dynamic_v0.parallel_env(sensors=[0, 1])

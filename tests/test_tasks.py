@@ -191,7 +191,7 @@ def test_the_readme_tasks_example_prints_the_output_shown():
     from pathlib import Path
 
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text("utf-8")
-    section = readme.split("## Benchmark tasks", 1)[1].split("\n## ", 1)[0]
+    section = readme.split("### The tasks and their references", 1)[1].split("\n## ", 1)[0]
     code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
     shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
     out = io.StringIO()

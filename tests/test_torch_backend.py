@@ -472,7 +472,7 @@ def test_illegal_action_error_names_the_budget_on_torch():
 def test_engine_partial_resets_equal_numpy(scenario, options):
     """Members reset at different times (the engine's masked reset), covariance attack leaks."""
     from fdia_env import covariance_attack_v0
-    from fdia_env.vector.simulation import BatchedSimulation
+    from fdia_env.envs.engine import BatchedSimulation
 
     single = covariance_attack_v0.parallel_env(scenario=scenario, **options).sim
     system, B = single.system, 5

@@ -152,3 +152,24 @@ def test_stop_prob_sets_the_initial_probability_of_stop():
     assert "stop_prob" not in dqn
     with pytest.raises(ValueError, match="stop_prob does not apply to DQN"):
         algo_kwargs("DQN", Hyperparameters(stop_prob=0.5))
+
+
+def test_torch_ppo_takes_stop_prob_from_the_hyperparameters():
+    import torch
+
+    from agents.config import ALGO_DEFAULTS, TORCH_PPO
+    from agents.torch_ppo import TorchPPOConfig, make_torch_env, train_torch_ppo
+
+    hp = {**ALGO_DEFAULTS[TORCH_PPO], "stop_prob": 0.9, "learning_rate": 1e-12}
+    config = TorchPPOConfig.from_hyperparameters(hp, 8, 4)
+    assert config.stop_prob == 0.9
+    with pytest.raises(ValueError, match="stop_prob"):
+        TorchPPOConfig(stop_prob=0.0)
+    venv = make_torch_env(
+        "fdia_env/SparseAttack-v0", 4, "cpu", scenario="ch4-position", action="sequential"
+    )
+    result = train_torch_ppo(venv, config, seed=0)  # one iteration at a step size of 1e-12
+    venv.close()
+    logits = result.policy.model.actor[-1].bias.detach()
+    probs = torch.softmax(logits, 0)
+    assert float(probs[0]) == pytest.approx(0.9, abs=1e-6)  # the bias: 0.9 to stop

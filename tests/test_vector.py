@@ -259,8 +259,8 @@ def test_vector_step_before_reset_and_bad_actions_raise():
 def test_closed_form_2x2_update_equals_the_generic_information_update(seed):
     # the one-division closed form of the 2-state kernel against (P_pred⁻¹ + J)⁻¹ by inverses,
     # over random SPD covariances, PSD information sums (J = 0 included) and F with F[1,0] != 0
+    from fdia_env.envs.engine import info_update2_stacked
     from fdia_env.kalman import information_update, predict_cov, small
-    from fdia_env.vector.simulation import info_update2_stacked
 
     rng = np.random.default_rng(seed)
     B = 200
@@ -322,12 +322,12 @@ def test_vector_infos_handed_out_never_change_afterwards(autoreset):
 @pytest.mark.parametrize("on_detect", ["discard", "incorporate"])
 @pytest.mark.parametrize("sampled", [False, True])
 def test_single_detection_step_is_the_batched_step_of_one(statistic, on_detect, sampled):
-    # one detection step: the single env's detection_step runs batched_detection_step with
-    # B = 1; each member of a batch (own threshold, covariance, Σ, p) equals its single step
+    # one detection step: the single env runs batched_detection_step with B = 1; each member of
+    # a batch (own threshold, covariance, Σ, p) equals its own step as a batch of one
     from fdia_env import scenarios
     from fdia_env.backend import NUMPY
-    from fdia_env.defenses.base import BatchDetection, Detection
-    from fdia_env.detection.step import SystemArrays, batched_detection_step, detection_step
+    from fdia_env.defenses.base import BatchDetection
+    from fdia_env.detection.step import SystemArrays, batched_detection_step
     from fdia_env.kalman import psd_sqrt
 
     system = scenarios.get("ch4-position").system
@@ -358,21 +358,41 @@ def test_single_detection_step_is_the_batched_step_of_one(statistic, on_detect, 
                 noise[i, :count] = g.standard_normal(count)
             return attacked, noise
 
+    def one_draw(seed):
+        def draw_one(prob):
+            g = np.random.default_rng(seed)
+            attacked = g.random() < prob[0]
+            noise = np.zeros((1, n + 2 * nz))
+            count = n + nz + (nz if attacked else 0)
+            noise[0, :count] = g.standard_normal(count)
+            return np.array([attacked]), noise
+
+        return draw_one
+
+    def _first(value):
+        if value is None:
+            return None
+        if isinstance(value, dict):
+            return {k: (bool(v[0]) if v.dtype == bool else float(v[0])) for k, v in value.items()}
+        return value[0]
+
     batch = batched_detection_step(
         NUMPY, system, arrays, rule, sigma, p, P, draw=draw, x=x, x_hat=x_hat
     )
-    for i in range(B):
-        one = detection_step(
+    for i in range(B):  # member i alone: a batch of one (the single env's step)
+        one = batched_detection_step(
+            NUMPY,
             system,
-            Detection(statistic, float(thresholds[i]), on_detect, assumed),
-            sigma[i],
-            float(p[i]),
-            P[i],
-            rng=np.random.default_rng(seeds[i]) if sampled else None,
-            x=None if x is None else x[i],
-            x_hat=None if x_hat is None else x_hat[i],
-            arrays=arrays,
+            arrays,
+            BatchDetection(statistic, thresholds[i : i + 1], on_detect, assumed, False, "mse"),
+            sigma[i : i + 1],
+            p[i : i + 1],
+            P[i : i + 1],
+            draw=None if not sampled else one_draw(seeds[i]),
+            x=None if x is None else x[i : i + 1],
+            x_hat=None if x_hat is None else x_hat[i : i + 1],
         )
+        one = type(one)(**{f: _first(getattr(one, f)) for f in one.__dataclass_fields__})
         np.testing.assert_allclose(one.P, batch.P[i], rtol=1e-12, atol=1e-14)
         if sampled:
             np.testing.assert_allclose(one.x_hat, batch.x_hat[i], rtol=1e-12, atol=1e-14)

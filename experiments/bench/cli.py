@@ -162,7 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         f"(raw {row['raw']:.6g}, {row['train_seconds']} s)",
                         flush=True,
                     )
-                    rows = merge_rows(rows, [row])
+                    rows = merge_rows(read_rows(args.out), [row])  # another run may have added
                     write_rows(args.out, rows)
     if not args.no_render:
         from fdia_env.tasks import get, names

@@ -104,24 +104,36 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
     from agents.runs import atomic_write
 
     per_task = {t.name: reference_entries(t) + learner_entries(rows.get(t.name, [])) for t in tasks}
+    optimum_names = {t.references.optimum.name for t in tasks}
+
+    def label(method: str) -> str:  # one colour for the certified reference of every task
+        return "certified reference" if method in optimum_names else method
+
     methods: list[str] = []
     for entries in per_task.values():
         for e in entries:
-            if e["normalised"] is not None and e["method"] not in methods:
-                methods.append(e["method"])
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.6 * len(tasks) + 2), 3.6))
-    width = 0.8 / max(1, len(methods))
-    for j, method in enumerate(methods):
-        xs, ys, errs = [], [], []
-        for i, t in enumerate(tasks):
-            e = next((e for e in per_task[t.name] if e["method"] == method), None)
-            if e is None or e["normalised"] is None:
-                continue
-            xs.append(i + (j - (len(methods) - 1) / 2) * width)
-            ys.append(e["normalised"])
+            if label(e["method"]) not in methods:
+                methods.append(label(e["method"]))
+    colours = {m: f"C{j % 10}" for j, m in enumerate(methods)}
+    widest = max(len(entries) for entries in per_task.values())
+    width = 0.8 / max(1, widest)
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(tasks) + 2), 3.8))
+    shown: set[str] = set()
+    for i, t in enumerate(tasks):
+        entries = per_task[t.name]
+        for k, e in enumerate(entries):
+            name = label(e["method"])
             ci = e["ci95"]
-            errs.append(0.0 if ci is None or not math.isfinite(ci) else ci)
-        ax.bar(xs, ys, width, yerr=errs, capsize=2, label=method)
+            ax.bar(
+                i + (k - (len(entries) - 1) / 2) * width,
+                e["normalised"],
+                width,
+                yerr=0.0 if ci is None or not math.isfinite(ci) else ci,
+                capsize=2,
+                color=colours[name],
+                label=None if name in shown else name,
+            )
+            shown.add(name)
     ax.axhline(0.0, color="k", lw=0.6)
     ax.axhline(1.0, color="k", lw=0.6, ls="--")
     ax.set_xticks(range(len(tasks)))

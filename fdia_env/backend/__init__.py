@@ -1,6 +1,6 @@
 """Array backends: one namespace of the array operations the simulation engine needs.
 
-The engine (:mod:`fdia_env.vector.simulation`) and the Kalman primitives it calls are written
+The engine (:mod:`fdia_env.envs.engine`) and the Kalman primitives it calls are written
 once against a :class:`~fdia_env.backend.base.Backend`; :data:`NUMPY` runs them on numpy arrays,
 :func:`get_backend` ``("torch", device)`` on torch tensors of one device (CPU or CUDA). torch is
 imported only when a torch backend is asked for, so numpy users never pay its import.

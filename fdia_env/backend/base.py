@@ -103,7 +103,10 @@ class Backend(ABC):
 
     @abstractmethod
     def log_into(self, x: Any, out: Any) -> None:
-        """``out[...] = log(x)`` with ``out`` float32 (numpy computes it in float32)."""
+        """``out[...] = log(x)``, numpy computing it in ``out``'s precision.
+
+        float32 for the rows of an observation, float64 for the single env's features.
+        """
 
     @abstractmethod
     def sqrt(self, x: Any) -> Any:

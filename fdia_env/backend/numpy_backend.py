@@ -82,8 +82,8 @@ class NumpyBackend(Backend):
         return x
 
     def log_into(self, x: np.ndarray, out: np.ndarray) -> None:
-        """``out[...] = log(x)`` computed in float32 (the observation's precision)."""
-        np.log(x, dtype=np.float32, out=out)
+        """``out[...] = log(x)`` computed in ``out``'s precision (float32 for an observation)."""
+        np.log(x, dtype=out.dtype, out=out)
 
     def divide(self, a: Any, b: Any, out: Any = None) -> np.ndarray:
         """``a / b``, into ``out`` (a narrower float dtype allowed) when given."""

@@ -1,8 +1,8 @@
 """One filter step with a detector on the innovation (the detection game, docs/math.md §3).
 
 One step for a batch of B filters, written against the engine's array backend (numpy or torch):
-the native vector env runs it on its batch, the single env as the batch of one
-(:func:`detection_step`). Sampled dynamics draw through a :data:`Draw` callable, which keeps
+the engine (:mod:`fdia_env.envs.engine`) runs it for the native vector env's batch and for the
+single env's batch of one. Sampled dynamics draw through a :data:`Draw` callable, which keeps
 each caller's draw order (one generator per member on numpy, the single env's own generator, or
 the torch device generator). Expected dynamics: the exact error covariance (numerical
 integration, on the host in numpy) is computed once per distinct member state
@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.backend import NUMPY, Backend
-from fdia_env.defenses.base import BatchDetection, Detection
+from fdia_env.backend import Backend
+from fdia_env.defenses.base import BatchDetection
 from fdia_env.detection.expected import (
     bayes_cost_covariance,
     case_covariance,
@@ -187,79 +187,6 @@ def batched_detection_step(
         C = Pzz0 + sigma * attacked[:, None, None]
         value = xp.trace(case_covariance(P_pred, Pxz, C, K))
     return DetectionStep(P, None, x_next, x_hat_new, info, value)
-
-
-def detection_step(
-    system: LinearSystem,
-    rule: Detection,
-    sigma: np.ndarray | None,
-    probability: float,
-    P_prev: np.ndarray,
-    *,
-    rng: np.random.Generator | None = None,
-    x: np.ndarray | None = None,
-    x_hat: np.ndarray | None = None,
-    factors: tuple[np.ndarray, np.ndarray] | None = None,
-    arrays: SystemArrays | None = None,
-) -> DetectionStep:
-    """:func:`batched_detection_step` for one filter (the single env's step), numpy.
-
-    Sampled dynamics (``rng`` given) draw, in this order: with a fresh prior the state (n),
-    then H1 with probability ``probability`` (one uniform), the process noise (n), the
-    measurement noise (nz), and under H1 the bias (nz). ``factors`` are ``psd_sqrt(Q)`` and
-    ``psd_sqrt(R)`` (sampled dynamics); ``arrays`` may pass the system's arrays built once.
-
-    Returns:
-        The step with (n, n) and (n,) arrays and Python scalars in ``info`` (``value`` a float
-        or None).
-    """
-    sys = system
-    if arrays is None:
-        Q_factor, R_factor = factors if factors is not None else (psd_sqrt(sys.Q), psd_sqrt(sys.R))
-        arrays = SystemArrays.of(sys, NUMPY, Q_factor, R_factor)
-    batch_rule = BatchDetection(
-        rule.statistic,
-        np.array([float(rule.threshold)]),
-        rule.on_detect,
-        rule.assumed_sigma,
-        rule.fresh_prior,
-        rule.criterion,
-    )
-    sigma_b = (np.zeros((sys.nz, sys.nz)) if sigma is None else np.asarray(sigma))[None]
-    draw = prior = None
-    if rng is not None:
-        if rule.fresh_prior:
-            prior = rng.standard_normal(sys.n)[None]
-
-        def draw(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            attacked = rng.random() < p[0]
-            count = sys.n + sys.nz + (sys.nz if attacked else 0)
-            noise = np.zeros((1, sys.n + 2 * sys.nz))
-            noise[0, :count] = rng.standard_normal(count)
-            return np.array([attacked]), noise
-
-    out = batched_detection_step(
-        NUMPY,
-        sys,
-        arrays,
-        batch_rule,
-        sigma_b,
-        np.array([float(probability)]),
-        np.asarray(P_prev)[None],
-        draw=draw,
-        prior=prior,
-        x=None if x is None else np.asarray(x)[None],
-        x_hat=None if x_hat is None else np.asarray(x_hat)[None],
-    )
-    info = {key: (bool(v[0]) if v.dtype == bool else float(v[0])) for key, v in out.info.items()}
-    return DetectionStep(
-        out.P[0],
-        None if out.error_cov is None else out.error_cov[0],
-        None if out.x is None else out.x[0],
-        None if out.x_hat is None else out.x_hat[0],
-        info,
-        None if out.value is None else float(out.value[0]),
-    )
 
 
 def _exact_on_host(

@@ -1,9 +1,11 @@
-"""The simulation engine for a batch of B environments, one array computation per step.
+"""The one simulation engine: B filters under attack, one array computation per step.
 
-Member ``i`` of the batch follows exactly the recursion of
-:class:`~fdia_env.envs.simulation.Simulation`: the 2-state case without a leaking bias runs the
-same closed-form kernels (:mod:`fdia_env.kalman.small`) on component arrays, everything else the
-generic batched functions of :mod:`fdia_env.kalman`. Large systems (n >= 40) that start at the
+Every face runs it: the native vector env with its batch, the single env
+(:class:`~fdia_env.envs.simulation.Simulation`) as a batch of one. The 2-state case without a
+leaking bias runs a closed-form kernel on (3, B) component arrays
+(:func:`info_update2_stacked`; the single env's scalar copy of it is
+:mod:`fdia_env.kalman.small`), everything else the generic batched functions of
+:mod:`fdia_env.kalman`. Large systems (n >= 40) that start at the
 steady state keep each expected covariance as the steady state plus a low-rank term in the
 sensor rows dropped so far (numpy backend; see :meth:`BatchedSimulation._init_low_rank`): an
 O(n² r) step instead of an n × n solve per member.
@@ -29,7 +31,6 @@ from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits
 from fdia_env.backend import NUMPY, Backend
 from fdia_env.defenses.base import BatchDetection
 from fdia_env.detection.step import SystemArrays, batched_detection_step
-from fdia_env.envs.simulation import start_covariance
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
     information_update,
@@ -44,6 +45,16 @@ from fdia_env.kalman import (
     sym,
 )
 from fdia_env.systems import LinearSystem
+
+
+def start_covariance(system: LinearSystem, spec: EpisodeSpec) -> np.ndarray:
+    """P at the window start: steady state, or the prior after ``spec.warmup`` clean steps."""
+    if spec.warmup == "steady":
+        return steady_state(system)[1]
+    P = np.array(system.P0)
+    for _ in range(int(spec.warmup)):
+        P = information_update(predict_cov(P, system.F, system.Q), system.J)
+    return P
 
 
 class BatchedSimulation:
@@ -69,7 +80,7 @@ class BatchedSimulation:
     ) -> None:
         self.system = system
         self.spec = spec
-        P_start = start_covariance(system, spec)
+        self.P_start = P_start = start_covariance(system, spec)
         self.B = batch
         self.xp = xp = backend
         self.sampled = spec.dynamics == "sampled"
@@ -618,7 +629,10 @@ class BatchedSimulation:
         return objective(self.M, self.spec.objective)
 
     def features(self, out: Any) -> int:
-        """Write the common features into the rows ``out[:f]`` of a (d, B) float32 buffer.
+        """Write the common features into the rows ``out[:f]`` of a (d, B) buffer.
+
+        The buffer is float32 (an observation's rows; logs computed in float32) or float64 (the
+        single env's features).
 
         Same features as :meth:`Simulation.features`, one row per feature (rows are contiguous,
         so the batch is written without strided stores); returns f.
