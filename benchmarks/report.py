@@ -38,7 +38,7 @@ class Bench:
     what: str
 
 
-BENCHES = (
+BENCHES_BY_NAME = (
     Bench(
         "env_step",
         "env_step.py",
@@ -100,6 +100,11 @@ BENCHES = (
 )
 
 
+# the figures the targets name first (a run stopped early keeps them)
+ORDER = ("single_view", "vector", "train_fps", "env_step", "backends", "grid", "sparse", "game")
+BENCHES = tuple(next(b for b in BENCHES_BY_NAME if b.name == name) for name in ORDER)
+
+
 def machine() -> str:
     """One line naming the processor, cores, Python and numpy."""
     cpu = platform.processor() or platform.machine()
@@ -140,8 +145,10 @@ def run(bench: Bench, quick: bool, timeout: float) -> tuple[str, str]:
     return " ".join(cmd), f"{out}\n({time.perf_counter() - start:.0f} s)"
 
 
-def section(results: list[tuple[Bench, str, str]], quick: bool) -> str:
-    """The generated Markdown section."""
+def section(
+    results: list[tuple[Bench, str, str]], quick: bool, pending: list[str] | None = None
+) -> str:
+    """The generated Markdown section (``pending``: benchmarks of the run not finished yet)."""
     lines = [
         BEGIN,
         "## Latest run of every benchmark",
@@ -151,6 +158,11 @@ def section(results: list[tuple[Bench, str, str]], quick: bool) -> str:
         "is the script's own output, reference rates measured in the same run.",
         "",
     ]
+    if pending:
+        lines += [
+            f"Not run yet in this run (it was still going or stopped): {', '.join(pending)}.",
+            "",
+        ]
     for bench, cmd, out in results:
         lines += [f"`{cmd}`: {bench.what}.", "", "```", out, "```", ""]
     lines.append(END)
@@ -181,13 +193,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--timeout", type=float, default=1800.0, help="seconds per benchmark")
     args = p.parse_args(argv)
     chosen = [b for b in BENCHES if not args.only or b.name in args.only]
-    results = []
+    results: list[tuple[Bench, str, str]] = []
     for bench in chosen:
         print(f"running {bench.name} ...", flush=True)
         cmd, out = run(bench, args.quick, args.timeout)
         print(out, flush=True)
         results.append((bench, cmd, out))
-    write_page(args.page, section(results, args.quick))
+        # after each benchmark, so an interrupted run keeps what finished (and says so)
+        pending = [b.name for b in chosen[len(results) :]]
+        write_page(args.page, section(results, args.quick, pending))
     print(f"wrote {args.page}")
     return int(any(out.startswith("(failed") or out.startswith("(did not") for *_, out in results))
 

@@ -54,6 +54,7 @@ class Simulation:
         self._rows = np.empty((rows, 1))  # float64: the features before the observation's cast
         self._p2: small.Sym2 | None = None
         self._engine_stale = False
+        self._features: list[float] | None = None  # of the current state (each player reads it)
         self.k = 0
         self.phi: list[float] = []
         self.last_detection: dict = {}
@@ -93,6 +94,7 @@ class Simulation:
         """Put the filter at the window start; draw the true state in sampled mode."""
         self.k = 0
         self.last_detection = {}
+        self._features = None
         if self._fast:  # the kernel's state; the engine is reset when it takes over
             self._p2 = self._start2
             self._engine_stale = True
@@ -114,6 +116,7 @@ class Simulation:
             estimation error).
         """
         fi = filter_input
+        self._features = None
         if self._p2 is not None and fi.leaked_sigma is None and not fi.steady:
             if fi.detection is None:  # the closed-form kernel on floats
                 self._p2 = small.info_update2(
@@ -189,18 +192,22 @@ class Simulation:
         return float(self.engine.phi[0])
 
     def features(self) -> list[float]:
-        """Common observation features, order one.
+        """Common observation features, order one (the same list until the state changes).
 
         ``[steps_left / horizon, log(M_ii / P_start_ii) for each i, correlations of M (i < j)]``,
         plus the last normalised innovation squared (NIS per measurement) in sampled mode.
         """
+        if self._features is not None:  # computed for the other player already
+            return self._features
         steps_left = (self.spec.horizon - self.k) / self.spec.horizon
         if self._p2 is not None:
-            return [steps_left, *small.shape_features2(self._p2, self._start2)]
-        self.engine.k[0] = self.k
-        count = self.engine.features(self._rows)
-        out = self._rows[:count, 0].tolist()
-        out[0] = steps_left  # in float64 (the engine looks up the observation's float32)
+            out = [steps_left, *small.shape_features2(self._p2, self._start2)]
+        else:
+            self.engine.k[0] = self.k
+            count = self.engine.features(self._rows)
+            out = self._rows[:count, 0].tolist()
+            out[0] = steps_left  # in float64 (the engine looks up the observation's float32)
+        self._features = out
         return out
 
     def feature_bounds(self) -> tuple[np.ndarray, np.ndarray]:
