@@ -343,6 +343,9 @@ for _entry in (
         {"defender": "fdia_env/DetectionDefender-v0", "attacker": "fdia_env/DetectionAttacker-v0"},
     ),
     EnvEntry("fdia_v0", "fdia_env.fdia_v0"),
+    EnvEntry(  # sparse_attack_v0 with the sequential format the default above 16 sensors
+        "sparse_attack_v1", "fdia_env.sparse_attack_v1", {"attacker": "fdia_env/SparseAttack-v1"}
+    ),
     EnvEntry(
         "stealth_attack_v0",
         "fdia_env.stealth.stealth_attack_v0",

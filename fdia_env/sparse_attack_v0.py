@@ -33,8 +33,10 @@ legal action are played by the env, so an episode takes at most N + c decisions.
 paid at the stops, so every attack set of the other formats is reachable and returns the same
 value. An action outside the mask acts as stop (``"trim"``, ``"noop"``) or raises
 (``"error"``). The observation ``Box`` adds M entries (1 = in the set being built) and the
-budget left after the set; see ``fdia_env.envs.sequential``. PettingZoo parallel, AEC and
-the Gymnasium view (``action_masks()``); not yet in the native vector env.
+budget left after the set; see ``fdia_env.envs.sequential``. PettingZoo parallel, AEC, the
+Gymnasium view (``action_masks()``) and the native vector env (``gymnasium.make_vec(...,
+vectorization_mode="vector_entry_point", action="sequential")``, numpy or torch); its
+``max_cycles`` counts decisions. ``sparse_attack_v1`` makes it the default above 16 sensors.
 
 ## Observation Space
 
@@ -77,7 +79,10 @@ Terminates after N steps. No truncation.
 ## Version History
 
 - v0: initial release. Infos with the same keys at reset and at every step, ``max_cycles``,
-  ``render_mode="human"``.
+  ``render_mode="human"``. The opt-in ``action="sequential"`` format (defaults unchanged): its
+  ``max_cycles`` counts decisions. Superseded by ``sparse_attack_v1`` (sequential by default
+  above 16 sensors); ``gymnasium.make("fdia_env/SparseAttack-v0")`` says so (Gymnasium's
+  out-of-date notice).
 
 ## Example
 

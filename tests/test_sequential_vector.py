@@ -285,3 +285,27 @@ def test_sb3_ppo_and_a2c_train_on_grid_ieee14_in_the_native_vector_env(action):
         )
         model.learn(total_timesteps=256)
         assert model.num_timesteps >= 256
+
+
+def test_sparse_attack_v1_defaults_to_the_sequential_format_above_16_sensors():
+    from fdia_env import sparse_attack_v0, sparse_attack_v1
+    from fdia_env.envs.sequential import SequentialSetEnv
+
+    grid = sparse_attack_v1.parallel_env(scenario="grid-ieee14")  # 34 meters
+    assert isinstance(grid, SequentialSetEnv) and grid.action_space("attacker").n == 35
+    assert grid.metadata["name"] == "sparse_attack_v1"
+    assert sparse_attack_v0.parallel_env(scenario="grid-ieee14").attack.format == "multibinary"
+    small = sparse_attack_v1.parallel_env(scenario="ch4-position")  # 3 sensors: the bitmask
+    assert small.attack.format == "bitmask" and small.action_space("attacker").n == 8
+    # a budget of 0 has no decision to make: v0's format; the old formats stay by name
+    assert sparse_attack_v1.parallel_env(scenario="grid-ieee14", budget=0).attack.format == (
+        "multibinary"
+    )
+    multi = sparse_attack_v1.parallel_env(scenario="grid-ieee14", action="multibinary")
+    assert multi.attack.format == "multibinary"
+    venv = gym.make_vec("fdia_env/SparseAttack-v1", num_envs=2, scenario="grid-ieee14")
+    assert isinstance(venv, SequentialVectorEnv) and venv.single_action_space.n == 35
+    venv = gym.make_vec("fdia_env/SparseAttack-v1", num_envs=2, vectorization_mode="sync")
+    assert venv.single_action_space.n == 8
+    with pytest.warns(DeprecationWarning, match="SparseAttack-v0 is out of date"):
+        gym.make("fdia_env/SparseAttack-v0")  # Gymnasium's notice for a superseded version

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import itertools
 
 import numpy as np
@@ -201,3 +202,45 @@ def test_budgeted_attack_milp_prints_nothing(ieee14, capfd):
     assert out == "before\nafter\n" and err == ""
     assert attack.meters == (5, 8, 10, 21, 24, 26)
     assert attack.value == pytest.approx(0.05784778534923338, rel=1e-6)
+
+
+def _stopped_at_time_limit(real, dual_shift):
+    """A ``milp`` that solves, then reports HiGHS' time-limit status with a weaker dual bound."""
+
+    def milp(*args, **kwargs):
+        res = real(*args, **kwargs)
+        res.status = 1
+        res.mip_dual_bound = res.fun - dual_shift
+        return res
+
+    return milp
+
+
+def test_security_index_stopped_at_time_limit_is_not_reported_as_proved(monkeypatch):
+    module = importlib.import_module("baselines.stealth.security_index")  # not the function
+
+    est = static_estimation(_random_sparse_H(0, 9, 4))
+    proved = security_index(est, method="milp")
+    assert proved.proved.all()
+    np.testing.assert_array_equal(proved.lower_bounds, proved.indices)
+    monkeypatch.setattr(module, "milp", _stopped_at_time_limit(module.milp, 1.5))
+    stopped = security_index(est, method="milp", time_limit=1.0)
+    assert stopped.indices.tolist() == proved.indices.tolist()  # the incumbent is kept
+    # the dual bound index - 1.5, rounded up: index - 1, so nothing is certified optimal
+    assert stopped.lower_bounds.tolist() == [max(1.0, i - 1) for i in proved.indices]
+    assert not stopped.proved[proved.indices > 1].any()
+
+
+def test_budgeted_attack_stopped_at_time_limit_reports_its_upper_bound(monkeypatch):
+    module = importlib.import_module("baselines.stealth.attack")
+
+    est = static_estimation(_random_sparse_H(1, 9, 4))
+    proved = budgeted_attack(est, budget=5, a_max=1.0, target=0)
+    assert proved.value == pytest.approx(0.4)
+    assert proved.proved and proved.bound == pytest.approx(proved.value)
+    # cost is -c_t: a dual bound 0.25 lower is an upper bound 0.25 above the shift found
+    monkeypatch.setattr(module, "milp", _stopped_at_time_limit(module.milp, 0.25))
+    stopped = budgeted_attack(est, budget=5, a_max=1.0, target=0, time_limit=1.0)
+    assert stopped.value == pytest.approx(proved.value)
+    assert stopped.bound == pytest.approx(proved.value + 0.25, rel=1e-6)
+    assert not stopped.proved

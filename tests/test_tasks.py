@@ -163,3 +163,38 @@ def test_the_benchmark_page_shows_the_stored_references():
     page = (Path(__file__).resolve().parents[1] / "docs" / "benchmark.md").read_text("utf-8")
     assert tasks_table() in page  # rewrite it with: python -m agents.bench table
     assert page.count("| `") >= len(ALL)
+
+
+@pytest.mark.parametrize("name", ["sparse/tracking-m6-1000007-v0", "covariance/ch2-pv-2-logdet-v0"])
+def test_the_optimal_policy_of_a_hard_task_scores_one(name):
+    from baselines.covariance import det_optimal
+    from baselines.sparse import exhaustive
+
+    task = tasks.get(name)
+    kw = task.env_kwargs
+    env = task.make_env()
+    if task.family == "sparse":
+        policy = exhaustive(kw["scenario"], kw["budget"], kw["horizon"], kw["objective"]).policy()
+    else:
+        policy = det_optimal(kw["scenario"], kw["power"]).policy(env.unwrapped.parallel)
+    result = evaluate(policy, env, n_episodes=2, reference=1.0)
+    env.close()
+    assert task.normalise(result.mean) == 1.0
+    heuristic = task.references.heuristic_score
+    assert heuristic is not None and heuristic <= 0.9  # the greedy answer is far below it
+
+
+def test_the_readme_tasks_example_prints_the_output_shown():
+    import contextlib
+    import io
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text("utf-8")
+    section = readme.split("### The tasks and their references", 1)[1].split("\n## ", 1)[0]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
+    shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "README benchmark tasks", "exec"), {})
+    assert out.getvalue() == shown

@@ -54,6 +54,10 @@ class StealthyAttack:
         objective: ``"meters"``, ``"shift"`` or ``"exists"``.
         budget: The meter budget (budgeted attacks), else ``None``.
         seconds: Wall time of the solve.
+        bound: The certified bound on the best achievable objective: an upper bound on the
+            shift for :func:`budgeted_attack` (equal to ``value`` unless a solve stopped at
+            ``time_limit``), a lower bound on the meters for :func:`minimum_meter_attack`;
+            ``None`` for :func:`undetectable_attack`, which optimises nothing.
     """
 
     a: np.ndarray
@@ -64,6 +68,14 @@ class StealthyAttack:
     objective: str
     budget: int | None = None
     seconds: float = 0.0
+    bound: float | None = None
+
+    @property
+    def proved(self) -> bool:
+        """Whether ``value`` is certified optimal (its bound is reached, to 1e-9 relative)."""
+        if self.bound is None:
+            return False
+        return abs(self.bound - self.value) <= 1e-9 * max(1.0, abs(self.value))
 
     def policy(self, a_max: float = 1.0) -> StealthPolicy:
         """This attack for ``stealth_attack_v0`` with ``action="free"`` and that ``a_max``.
@@ -123,6 +135,7 @@ def minimum_meter_attack(
         value=float(result.indices[k]),
         objective="meters",
         seconds=time.perf_counter() - start,
+        bound=float(result.lower_bounds[k]),
     )
 
 
@@ -164,11 +177,13 @@ def budgeted_attack(
         a_max: Largest injection per meter (per unit), one number or m of them.
         target: State whose estimate to move; ``None``: every state, the best one kept.
         protected: Meters the attacker cannot touch.
-        time_limit: HiGHS seconds per state.
+        time_limit: HiGHS seconds per state. A solve that stops there keeps its best attack
+            and certifies an upper bound (``bound``; ``proved`` is then False).
 
     Returns:
         The attack (``value`` = ``c_target``, the shift of the target's estimate; 0 when the
-        budget allows no undetectable attack, then ``a = 0``).
+        budget allows no undetectable attack, then ``a = 0``), with ``bound`` the certified
+        upper bound on the best shift.
 
     Raises:
         ValueError: Naming the parameter: a budget outside 1..m, a_max ≤ 0 or non-finite,
@@ -187,8 +202,10 @@ def budgeted_attack(
     targets = range(est.n) if target is None else [state_index(est, target, "target")]
     start = time.perf_counter()
     best: tuple[float, int, np.ndarray] | None = None
+    upper = 0.0
     for t in targets:
-        value, c = _budget_milp(est, t, budget, bound, prot, time_limit)
+        value, c, limit = _budget_milp(est, t, budget, bound, prot, time_limit)
+        upper = max(upper, limit)
         if best is None or value > best[0] + 1e-12:
             best = (value, t, c)
     value, t, c = best
@@ -203,6 +220,7 @@ def budgeted_attack(
         objective="shift",
         budget=budget,
         seconds=time.perf_counter() - start,
+        bound=max(float(upper), float(value)),
     )
 
 
@@ -213,7 +231,12 @@ def _budget_milp(
     bound: np.ndarray,
     prot: np.ndarray,
     time_limit: float | None,
-) -> tuple[float, np.ndarray]:
+) -> tuple[float, np.ndarray, float]:
+    """The best shift of state t found, its c, and the certified upper bound on the best shift.
+
+    The bound is the shift itself when proved, HiGHS' dual bound when the solve stopped at
+    ``time_limit``.
+    """
     m, n = est.m, est.n
     scale = np.max(np.abs(est.H), axis=1)
     scale[scale == 0.0] = 1.0  # a meter that sees no state: any a_i on it is detected
@@ -245,19 +268,24 @@ def _budget_milp(
     )
     if res.x is None:
         raise RuntimeError(f"HiGHS found no budgeted attack on state {t}: {res.message}")
+    dual = getattr(res, "mip_dual_bound", None)
+    limit = None if res.status == 0 or dual is None or not np.isfinite(dual) else -float(dual)
+    if res.status != 0 and limit is None:
+        limit = np.inf  # stopped early without a finite dual bound: nothing certified
     c = res.x[:n]
     # exact clean-up: zero the meters the MILP left off, re-solve c on the chosen meters' zeros
     used = np.flatnonzero(res.x[n:] > 0.5)
     zero = np.setdiff1d(np.arange(m), used)
     N = null_space(est.H[zero], n)
     if N.shape[1] == 0 or abs(c[t]) <= 1e-12:
-        return 0.0, np.zeros(n)
+        return 0.0, np.zeros(n), 0.0 if limit is None else max(limit, 0.0)
     c = N @ (N.T @ c)
     a = est.H @ c
     over = np.max(np.abs(a) / bound)
     if over > 1.0:  # rounding of the projection: scale back inside the box
         c = c / over
-    return float(c[t]), c
+    value = float(c[t])
+    return value, c, value if limit is None else max(limit, value)
 
 
 def basic_measurement_set(estimation: Any = "ieee14") -> tuple[int, ...]:

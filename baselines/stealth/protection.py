@@ -119,10 +119,14 @@ def _check_protection(est: Any, protection: Any) -> int:
 
 
 def _bounds(est: Any, budget: int, bound: np.ndarray, time_limit: float | None) -> np.ndarray:
-    """(n,) U_t: the largest shift of each state on the budget with nothing protected."""
+    """(n,) U_t: the largest shift of each state on the budget with nothing protected.
+
+    The certified upper bound of each solve (the shift itself unless it stopped at
+    ``time_limit``), so that pruning by U_t and the big-M ``u_j ≤ U_t z_j`` stay valid.
+    """
     none = np.zeros(0, dtype=np.int64)
     return np.array(
-        [_budget_milp(est, t, budget, bound, none, time_limit)[0] for t in range(est.n)]
+        [_budget_milp(est, t, budget, bound, none, time_limit)[2] for t in range(est.n)]
     )
 
 

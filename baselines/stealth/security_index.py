@@ -69,6 +69,11 @@ class SecurityIndex:
         protected: Positions of the protected meters.
         meters: Meter names.
         seconds: Wall time.
+        lower_bounds: (n,) float: a certified lower bound on each index: equal to ``indices``
+            where the index is proved (always, except for ``"milp"`` states whose solve stopped
+            at ``time_limit``: there ``indices`` is the best attack found and this is HiGHS'
+            dual bound, rounded up). ``"mincut"`` is exact only in the full-measurement case
+            (module docstring) and reports its own value as the bound.
     """
 
     indices: np.ndarray
@@ -78,6 +83,12 @@ class SecurityIndex:
     protected: tuple[int, ...]
     meters: tuple[str, ...]
     seconds: float
+    lower_bounds: np.ndarray
+
+    @property
+    def proved(self) -> np.ndarray:
+        """(n,) bool: where :attr:`indices` is certified (equal to its lower bound)."""
+        return self.indices == self.lower_bounds
 
     def meters_of(self, state: int) -> tuple[int, ...]:
         """Positions of the meters the attack on ``state`` corrupts."""
@@ -171,6 +182,7 @@ def security_index(
         )
     start = time.perf_counter()
     indices = np.full(est.n, np.nan)
+    lower = np.full(est.n, np.nan)
     attacks = np.zeros((est.n, est.m))
     shifts = np.zeros((est.n, est.n))
     graph = _lawler(est, prot) if method == "mincut" else None
@@ -185,13 +197,17 @@ def security_index(
     else:
         found = {k: solve[method](k) for k in todo}
     for k, hit in found.items():
+        bound = None
+        if method == "milp":
+            hit, bound = hit
         if hit is None:
-            indices[k] = np.inf
+            indices[k] = lower[k] = np.inf
             continue
         c, a = hit
         indices[k] = len(support(a))
+        lower[k] = indices[k] if bound is None else min(bound, indices[k])
         attacks[k], shifts[k] = a, c
-    for arr in (indices, attacks, shifts):
+    for arr in (indices, lower, attacks, shifts):
         arr.setflags(write=False)
     return SecurityIndex(
         indices=indices,
@@ -201,12 +217,18 @@ def security_index(
         protected=tuple(int(i) for i in prot),
         meters=est.meters,
         seconds=time.perf_counter() - start,
+        lower_bounds=lower,
     )
 
 
 def _milp(
     est: Any, k: int, prot: np.ndarray, c_max: float, time_limit: float | None
-) -> tuple[np.ndarray, np.ndarray] | None:
+) -> tuple[tuple[np.ndarray, np.ndarray] | None, float | None]:
+    """The attack found for state k and the lower bound certified where it is not proved.
+
+    The bound is None when the attack is proved optimal (the solve did not stop at
+    ``time_limit``).
+    """
     m, n = est.m, est.n
     scale = np.max(np.abs(est.H), axis=1, keepdims=True)
     Hn = est.H / np.where(scale == 0.0, 1.0, scale)
@@ -231,8 +253,17 @@ def _milp(
     )
     if res.x is None:
         if res.status == 2:  # infeasible: the protected meters shield state k
-            return None
+            return None, None
+        if res.status == 1:
+            raise RuntimeError(
+                f"time_limit={time_limit} s ran out before HiGHS found any attack on state {k}: "
+                "raise time_limit (or use method='mincut' on a grid model)"
+            )
         raise RuntimeError(f"HiGHS found no security index for state {k}: {res.message}")
+    bound = None
+    if res.status == 1:  # time limit: the incumbent is an upper bound, the dual bound a lower
+        dual = getattr(res, "mip_dual_bound", None)
+        bound = 1.0 if dual is None or not np.isfinite(dual) else max(1.0, np.ceil(dual - 1e-6))
     c = res.x[:n]
     a = Hn @ c
     zero = np.flatnonzero(np.abs(a) <= 1e-7 * max(float(np.max(np.abs(a))), 1e-300))
@@ -240,7 +271,7 @@ def _milp(
     hit = attack_on_state(est, k, zero)
     if hit is None:  # pragma: no cover - a tolerance artefact of the MILP
         raise RuntimeError(f"the MILP's attack on state {k} does not verify in exact arithmetic")
-    return hit
+    return hit, bound
 
 
 def _grid_layout(est: Any) -> tuple[np.ndarray, np.ndarray, int]:

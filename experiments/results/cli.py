@@ -16,6 +16,7 @@ TABLES: dict[str, str] = {
     "game": "experiments.results.game",
     "detection": "experiments.results.detection",
     "detection_learned": "experiments.results.detection_learned",
+    "stealth": "experiments.results.stealth",
 }
 
 

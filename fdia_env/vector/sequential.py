@@ -43,8 +43,9 @@ from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSetEnv
 from fdia_env.vector import env as vector_env
 
-SEQUENTIAL_MODULES = ("fdia_env.sparse_attack_v0",)
-"""The modules whose ``action="sequential"`` has a native vector env."""
+SEQUENTIAL_MODULES = ("fdia_env.sparse_attack_v0", "fdia_env.sparse_attack_v1")
+"""The modules whose ``action="sequential"`` has a native vector env (v1: also its default
+``"auto"``, which is the sequential format above 16 sensors)."""
 
 # the engine's per-member state, held for the members that do not commit at a decision
 _SIM_STATE = ("_comp", "_P", "_M", "consistent", "k", "nis", "phi", "x", "x_hat")
@@ -395,6 +396,12 @@ def make_vector(
     import importlib
 
     parallel = importlib.import_module(module).parallel_env(**kwargs)
+    if not isinstance(parallel, SequentialSetEnv):  # v1's "auto" up to 16 sensors: the bitmask
+        kwargs = {**kwargs, "scenario": parallel.scenario, "action": parallel.attack.format}
+        return vector_env.make_vector(
+            module, num_envs, agent=agent, opponent=opponent, autoreset_mode=autoreset_mode,
+            max_episode_steps=max_episode_steps, backend=backend, device=device, **kwargs
+        )  # fmt: skip
     return SequentialVectorEnv(
         parallel,
         num_envs,
@@ -407,3 +414,5 @@ def make_vector(
 
 for _module in SEQUENTIAL_MODULES:
     vector_env.FORMAT_VECTOR_ENVS[(_module, "sequential")] = make_vector
+for _action in (None, "auto"):  # sparse_attack_v1's default: sequential above 16 sensors
+    vector_env.FORMAT_VECTOR_ENVS[("fdia_env.sparse_attack_v1", _action)] = make_vector

@@ -52,6 +52,11 @@ PARAMS: dict[str, dict[str, st.SearchStrategy[Any]]] = {
         "budget": st.one_of(st.none(), st.integers(0, 12)),
         "illegal_action": st.sampled_from(["trim", "error", "noop"]),
     },
+    "sparse_attack_v1": {  # v0's options; "auto" is sequential above 16 sensors
+        **_pick(*COMMON),
+        "budget": st.one_of(st.none(), st.integers(0, 12)),
+        "illegal_action": st.sampled_from(["trim", "error", "noop"]),
+    },
     "covariance_attack_v0": {
         **_pick(*COMMON),
         "power": power_values,

@@ -1,0 +1,37 @@
+"""The ``stealth`` result table's fast core: the enumerated optimum and the table's layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from experiments.results import cli
+from experiments.results.stealth import format_rows, shift_payoffs
+
+
+def test_enumerated_optimum_of_the_shift_actions_is_bus_7():
+    payoffs = shift_payoffs(3)
+    assert payoffs.shape == (2**13 - 1,)
+    top = np.flatnonzero(payoffs >= payoffs.max() - 1e-12) + 1  # non-zero bit vectors, in order
+    shifted = [np.flatnonzero((t >> np.arange(13)) & 1).tolist() for t in top]
+    # state 6 (bus 7, radial) alone, or with four or five more states: 3 meters, undetectable
+    assert shifted == [[6], [4, 6, 9, 10, 11], [4, 6, 9, 10, 11, 12]]
+    assert payoffs.max() == pytest.approx((1 - 0.05) * 0.05, rel=1e-12)
+    # every other action needs more than 3 meters: trimmed, it is seen for sure (payoff ~0)
+    assert np.sort(payoffs)[-4] < 1e-12
+    assert cli.TABLES["stealth"] == "experiments.results.stealth"
+
+
+def test_the_table_shows_every_seed_and_the_game():
+    attacker = {
+        "budget": 3, "steps": 10, "learned": [0.0475, 0.0], "learned_mean": 0.02375,
+        "learned_ci95": 0.3, "random": 1.7e-5, "optimum": 0.0475, "score": [1.0, 0.0],
+    }  # fmt: skip
+    game = {
+        "budget": 5, "protection": 2, "value": 0.02996, "gap": 1e-17,
+        "protect_optimal_attack_concedes": 0.05, "protect_basic_concedes": 0.06,
+        "unprotected": 0.12,
+    }  # fmt: skip
+    table = format_rows([attacker], [game])
+    assert "| 3 | 10 | 0.0475, 0.0000 | 0.0238 ± 0.3 | 0.0000 | 0.0475 | 100.0%, 0.0% |" in table
+    assert "| 5 | 2 | 0.0300 (1.0e-17) | 0.0500 | 0.0600 | 0.1200 |" in table
