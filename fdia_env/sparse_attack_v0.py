@@ -98,7 +98,9 @@ Terminates after N steps. No truncation.
 
 from __future__ import annotations
 
+from fdia_env._validation import check_choice
 from fdia_env.attacks import SparseAttack
+from fdia_env.attacks.sparse import ACTION_FORMATS
 from fdia_env.defenses import PerfectDetection
 from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
@@ -127,6 +129,7 @@ def parallel_env(
     ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSetEnv``
     over the ``"multibinary"`` env (see the module docstring's Action Space).
     """
+    check_choice("action", action, (*ACTION_FORMATS, "sequential"))  # every format in the error
     if action == "sequential":
         inner = parallel_env(
             scenario,

@@ -309,3 +309,19 @@ def test_sparse_attack_v1_defaults_to_the_sequential_format_above_16_sensors():
     assert venv.single_action_space.n == 8
     with pytest.warns(DeprecationWarning, match="SparseAttack-v0 is out of date"):
         gym.make("fdia_env/SparseAttack-v0")  # Gymnasium's notice for a superseded version
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"agent": np.array([])}, "agent"),  # found by the constructor property test
+        ({"action": np.array([1])}, "action"),
+        ({"action": "seq"}, "action must be one of .*'sequential'"),
+    ],
+)
+def test_make_vec_of_v1_names_a_bad_agent_or_action(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        gym.make_vec(
+            "fdia_env/SparseAttack-v1", num_envs=2, vectorization_mode="vector_entry_point",
+            **kwargs,
+        )  # fmt: skip

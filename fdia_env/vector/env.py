@@ -457,7 +457,10 @@ def make_vector(
     ``action="sequential"`` gets :class:`fdia_env.vector.sequential.SequentialVectorEnv`
     (through :data:`FORMAT_VECTOR_ENVS`).
     """
-    fmt = FORMAT_VECTOR_ENVS.get((module, kwargs.get("action")))
+    action = kwargs.get("action")
+    # only a format name can select a native vector env of its own (anything else, e.g. an
+    # array, goes on to the env, whose own check names the parameter)
+    fmt = FORMAT_VECTOR_ENVS.get((module, action)) if isinstance(action, str | None) else None
     if fmt is not None:  # a format with a native vector env of its own (e.g. "sequential")
         return fmt(
             module, num_envs, agent, opponent, autoreset_mode, max_episode_steps, backend, device,

@@ -389,7 +389,7 @@ def make_vector(
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
     kwargs.pop("render_mode", None)
-    if agent != "attacker":
+    if not isinstance(agent, str) or agent != "attacker":
         raise ValueError(f"agent must be 'attacker' for {module}, got {agent!r}")
     if opponent is not None:
         raise ValueError(f"opponent must be None: {module} has a single player")
