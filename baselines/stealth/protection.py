@@ -279,7 +279,9 @@ def protection_game(
             ``a_max`` with ``action="free"``).
         tol: Stop when ``gap ≤ tol · upper`` (> 0).
         max_iter: Most restricted games to solve (≥ 1).
-        time_limit: HiGHS seconds per MILP (``None``: none).
+        time_limit: HiGHS seconds per MILP (``None``: none). An attacker best response that
+            stops at the limit is its best attack found, so ``upper`` and ``gap`` are then not
+            certified; leave it ``None`` for a certified value.
 
     Returns:
         A :class:`ProtectionGame`; if the gap does not close to ``tol`` within ``max_iter``, it
