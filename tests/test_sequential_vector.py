@@ -325,3 +325,21 @@ def test_make_vec_of_v1_names_a_bad_agent_or_action(kwargs, name):
             "fdia_env/SparseAttack-v1", num_envs=2, vectorization_mode="vector_entry_point",
             **kwargs,
         )  # fmt: skip
+
+
+@pytest.mark.parametrize("action", ["bitmask", "sequential"])  # FdiaVectorEnv, SequentialVectorEnv
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"autoreset_mode": "sometimes"}, "autoreset_mode must be one of"),
+        ({"autoreset_mode": AutoresetMode.DISABLED}, "autoreset_mode must be NEXT_STEP or SAME"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"max_episode_steps": 2.5}, "max_episode_steps"),
+    ],
+)
+def test_both_native_vector_envs_check_their_episode_options_alike(action, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make_vec(
+            "fdia_env/SparseAttack-v0", num_envs=2, vectorization_mode="vector_entry_point",
+            action=action, **kwargs,
+        )  # fmt: skip

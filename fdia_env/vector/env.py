@@ -107,20 +107,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.xp = xp = get_backend(backend, device)
         self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=_max_envs(xp))
         check_agent(agent, parallel.possible_agents)
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError as exc:
-            raise ValueError(
-                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
-                f"got {autoreset_mode!r}"
-            ) from exc
-        if mode == AutoresetMode.DISABLED:
-            raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP, got DISABLED")
-        self.max_episode_steps = (
-            None
-            if max_episode_steps is None
-            else check_int("max_episode_steps", max_episode_steps, minimum=1)
-        )
+        mode, self.max_episode_steps = check_episode_options(autoreset_mode, max_episode_steps)
         self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
         self.render_mode = None
         self.parallel = parallel
@@ -402,6 +389,29 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             n = int(getattr(self.single_action_space, "n", 1))
             return xp.ones((self.num_envs, n), dtype=xp.bool)
         return xp.astype(mask, xp.bool)
+
+
+def check_episode_options(
+    autoreset_mode: AutoresetMode | str, max_episode_steps: int | None
+) -> tuple[AutoresetMode, int | None]:
+    """A native vector env's ``autoreset_mode`` (NEXT_STEP or SAME_STEP) and episode cap.
+
+    Raises:
+        ValueError: Naming ``autoreset_mode`` (unknown, or DISABLED) or ``max_episode_steps``
+            (not a positive integer).
+    """
+    try:
+        mode = AutoresetMode(autoreset_mode)
+    except ValueError as exc:
+        raise ValueError(
+            f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
+            f"got {autoreset_mode!r}"
+        ) from exc
+    if mode == AutoresetMode.DISABLED:
+        raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP, got DISABLED")
+    if max_episode_steps is not None:
+        max_episode_steps = check_int("max_episode_steps", max_episode_steps, minimum=1)
+    return mode, max_episode_steps
 
 
 def _masked(infos: dict[str, Any], where: Any, xp=NUMPY) -> dict[str, Any]:

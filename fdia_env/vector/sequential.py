@@ -36,7 +36,6 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from fdia_env._validation import check_int
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.parallel import attacker_reward
@@ -89,19 +88,8 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         )
         self.xp = xp = self.inner.xp
         self.num_envs = B = self.inner.num_envs
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError as exc:
-            raise ValueError(
-                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
-                f"got {autoreset_mode!r}"
-            ) from exc
-        if mode == AutoresetMode.DISABLED:
-            raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP, got DISABLED")
-        self.max_episode_steps = (
-            None
-            if max_episode_steps is None
-            else check_int("max_episode_steps", max_episode_steps, minimum=1)
+        mode, self.max_episode_steps = vector_env.check_episode_options(
+            autoreset_mode, max_episode_steps
         )
         self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
         self.render_mode = None
