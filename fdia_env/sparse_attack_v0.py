@@ -37,6 +37,10 @@ budget left after the set; see ``fdia_env.envs.sequential``. PettingZoo parallel
 Gymnasium view (``action_masks()``) and the native vector env (``gymnasium.make_vec(...,
 vectorization_mode="vector_entry_point", action="sequential")``, numpy or torch); its
 ``max_cycles`` counts decisions. ``sparse_attack_v1`` makes it the default above 16 sensors.
+``order="plan"`` (sequential only) changes the decision order: the (sensor, window step) pairs of
+the whole horizon are picked first (``Discrete(N·M + 1)``, action ``1 + k·M + j - 1`` = sensor
+j at window step k + 1, the ``(N·M + 1,)`` mask forbidding a pair in the plan and every pair
+once the plan uses the budget), then stop plays the plan out; same rewards and reachable sets.
 
 ## Observation Space
 
@@ -104,7 +108,7 @@ from fdia_env.attacks.sparse import ACTION_FORMATS
 from fdia_env.defenses import PerfectDetection
 from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
-from fdia_env.envs.sequential import SequentialSetEnv
+from fdia_env.envs.sequential import ORDERS, SequentialSetEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -123,13 +127,24 @@ def parallel_env(
     max_cycles: int | None = None,
     illegal_action: str = "trim",
     action: str = "auto",
+    order: str = "time",
 ) -> FdiaParallelEnv | SequentialSetEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring).
 
     ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSetEnv``
-    over the ``"multibinary"`` env (see the module docstring's Action Space).
+    over the ``"multibinary"`` env (see the module docstring's Action Space), its decisions in
+    ``order`` (``"time"``, or ``"plan"``: the pairs of the whole horizon first).
+
+    Raises:
+        ValueError: For ``order="plan"`` with another format than ``"sequential"`` (and for any
+            other bad option, naming it).
     """
     check_choice("action", action, (*ACTION_FORMATS, "sequential"))  # every format in the error
+    check_choice("order", order, ORDERS)
+    if order != "time" and action != "sequential":
+        raise ValueError(
+            f"order={order!r} applies to action='sequential' only, got action={action!r}"
+        )
     if action == "sequential":
         inner = parallel_env(
             scenario,
@@ -144,7 +159,7 @@ def parallel_env(
             illegal_action="error",
             action="multibinary",
         )
-        return SequentialSetEnv(inner, illegal_action=illegal_action)
+        return SequentialSetEnv(inner, illegal_action=illegal_action, order=order)
     sc, spec = episode_spec(
         scenario,
         horizon=horizon,

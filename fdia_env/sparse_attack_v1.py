@@ -79,6 +79,7 @@ def parallel_env(
     max_cycles: int | None = None,
     illegal_action: str = "trim",
     action: str = "auto",
+    order: str = "time",
 ) -> FdiaParallelEnv | SequentialSetEnv:
     """The PettingZoo ``ParallelEnv``: ``sparse_attack_v0``'s, sequential above 16 sensors.
 
@@ -91,7 +92,7 @@ def parallel_env(
         action = "sequential"  # (a budget of 0 has no decision to make: v0's format)
     env = sparse_attack_v0.parallel_env(
         sc, budget, horizon, objective, reward_mode, dynamics, warmup, render_mode, max_cycles,
-        illegal_action, action,
+        illegal_action, action, order,
     )  # fmt: skip
     env.metadata["name"] = NAME
     if isinstance(env, SequentialSetEnv):

@@ -13,7 +13,7 @@ from baselines.sparse import SparsePolicy, branch_and_bound, sfs
 from baselines.sparse.testbeds import mixed_tracking
 from fdia_env import sparse_attack_v0
 from fdia_env.attacks import SparseAttack
-from fdia_env.envs.sequential import STOP, SequentialSetEnv, play_plan
+from fdia_env.envs.sequential import STOP, SequentialSetEnv, plan_actions, play_plan
 
 
 def random_plan(rng: np.random.Generator, M: int, N: int, c: int) -> list[list[int]]:
@@ -690,3 +690,185 @@ def test_pettingzoo_seed_max_cycles_and_render_tests_pass_in_the_sequential_form
     assert all(truncs.values()) and env.agents == []
     with pytest.raises(ValueError, match="max_cycles must be"):
         env.max_cycles = 0
+
+
+# --- order="plan": the (sensor, window step) pairs of the whole horizon first ------------------
+
+
+def plan_rewards(plan: list[list[int]], seed: int = 0, **kwargs) -> list[float]:
+    """Per-window-step rewards of ``plan`` in the plan-first order, every stop played."""
+    parallel = sparse_attack_v0.parallel_env(action="multibinary", illegal_action="error", **kwargs)
+    env = SequentialSetEnv(parallel, illegal_action="error", skip_forced=False, order="plan")
+    env.reset(seed=seed)
+    *picks, stop = plan_actions(env, plan)
+    for a in picks:
+        assert env.step({"attacker": a})[1]["attacker"] == 0.0  # picks pay nothing
+    out = []
+    while env.agents:  # the plan plays out: one window step per stop, each paying its reward
+        out.append(env.step({"attacker": stop})[1]["attacker"])
+        assert env.action_mask()[1:].sum() == 0  # stop is the only legal action now
+    return out
+
+
+@pytest.mark.parametrize("reward_mode", ["terminal", "shaped", "per_step"])
+@pytest.mark.parametrize("objective", ["trace", "logdet"])
+def test_plan_order_same_rewards_as_bitmask_on_random_plans(reward_mode, objective):
+    kwargs = dict(
+        scenario=mixed_tracking(5),
+        budget=4,
+        horizon=5,
+        reward_mode=reward_mode,
+        objective=objective,
+    )
+    rng = np.random.default_rng(2)
+    for _ in range(6):
+        plan = random_plan(rng, 5, 5, 4)
+        expected = bitmask_rewards(plan, **kwargs)
+        assert plan_rewards(plan, **kwargs) == expected  # step by step, exactly
+        env = sparse_attack_v0.parallel_env(action="sequential", order="plan", **kwargs)
+        assert play_plan(env, plan, seed=0) == pytest.approx(sum(expected), rel=1e-12, abs=0)
+
+
+def test_plan_order_every_attack_set_reachable_and_only_those():
+    """M = 3, N = 2, c = 2: each of the 22 sets of <= 2 pairs, and no larger set, is played."""
+    kwargs = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
+    env = sparse_attack_v0.parallel_env(
+        action="sequential", order="plan", illegal_action="error", **kwargs
+    )
+    pairs = list(itertools.product(range(2), range(1, 4)))
+    played = 0
+    for size in range(3):
+        for chosen in itertools.combinations(pairs, size):
+            plan: list[list[int]] = [[], []]
+            for k, j in chosen:
+                plan[k].append(j)
+            expected = sum(bitmask_rewards(plan, **kwargs))
+            assert play_plan(env, plan, seed=0) == pytest.approx(expected, rel=1e-12, abs=0)
+            played += 1
+    assert played == 22
+    env.reset(seed=0)
+    env.step({"attacker": 1})
+    assert env.action_mask().tolist() == [1, 0, 1, 1, 1, 1, 1]
+    env.step({"attacker": 6})  # the budget is used: the env plays the plan out at once
+    assert env.agents == []
+
+
+def test_plan_order_solver_sets_replayed_return_their_value():
+    system = mixed_tracking(6)
+    bnb = branch_and_bound(system, 4, 5)
+    for result in (bnb, sfs(system, 4, 5)):
+        plan: list[list[int]] = [[] for _ in range(5)]
+        for k, i in result.attacks:
+            plan[k].append(i + 1)
+        env = sparse_attack_v0.parallel_env(
+            scenario=system, budget=4, horizon=5, action="sequential", order="plan"
+        )
+        assert play_plan(env, plan) == pytest.approx(result.value, rel=1e-12)
+    assert bnb.proved_optimal
+
+
+def test_plan_order_same_return_as_multibinary_on_grid_preset_and_masked_random_play():
+    kwargs = dict(scenario="grid-ieee14", objective="logdet")
+    M, N, c = 34, 6, 6
+    rng = np.random.default_rng(4)
+    env = sparse_attack_v0.parallel_env(
+        action="sequential", order="plan", illegal_action="error", **kwargs
+    )
+    assert env.action_space("attacker").n == N * M + 1
+    for _ in range(2):
+        plan = random_plan(rng, M, N, c)
+        multi = sparse_attack_v0.parallel_env(
+            action="multibinary", illegal_action="error", **kwargs
+        )
+        multi.reset(seed=0)
+        total = 0.0
+        for sensors in plan:
+            a = np.zeros(M, dtype=np.int8)
+            a[np.asarray(sensors, dtype=int) - 1] = 1
+            total += multi.step({"attacker": a})[1]["attacker"]
+        assert play_plan(env, plan, seed=0) == pytest.approx(total, rel=1e-12, abs=0)
+    for episode in range(3):  # a masked random policy never meets the "error" rule
+        obs, _ = env.reset(seed=episode)
+        decisions = 0
+        while env.agents:
+            mask = obs["attacker"]["action_mask"]
+            assert mask.shape == (N * M + 1,) and mask[STOP] == 1
+            obs, *_ = env.step({"attacker": int(rng.choice(np.flatnonzero(mask)))})
+            decisions += 1
+        assert decisions <= c + 1  # the plan's picks and one stop (skip_forced)
+
+
+def test_plan_order_mask_observation_and_illegal_actions():
+    def make(rule: str) -> SequentialSetEnv:
+        return sparse_attack_v0.parallel_env(
+            scenario="ch4-position",
+            budget=2,
+            horizon=3,
+            action="sequential",
+            order="plan",
+            illegal_action=rule,
+        )
+
+    env = make("error")
+    obs, _ = env.reset(seed=0)
+    assert obs["attacker"]["observation"].shape == (5 + 9 + 1,)
+    obs = env.step({"attacker": 5})[0]["attacker"]  # sensor 2 at window step 2
+    assert obs["action_mask"].tolist() == [1, 1, 1, 1, 1, 0, 1, 1, 1, 1]
+    assert obs["observation"][-10:].tolist() == [0, 0, 0, 0, 1, 0, 0, 0, 0, 0.5]
+    assert env.inner.sim.k == 0  # nothing played while planning
+    with pytest.raises(ValueError, match=r"sensor 2 at window step 2\) is illegal: this pair is"):
+        env.step({"attacker": 5})
+    with pytest.raises(ValueError, match=r"integer in \[0, 10\)"):
+        env.step({"attacker": 10})
+    for rule in ("trim", "noop"):  # an illegal pick stops: the plan plays out
+        env = make(rule)
+        env.reset(seed=0)
+        env.step({"attacker": 5})
+        _, _, term, _, info = env.step({"attacker": 5})
+        assert term["attacker"] and info["attacker"]["budget_left"] == 1
+    parallel = sparse_attack_v0.parallel_env(
+        action="multibinary", scenario="ch4-position", budget=2, horizon=3
+    )
+    slow = SequentialSetEnv(parallel, illegal_action="error", skip_forced=False, order="plan")
+    slow.reset(seed=0)
+    slow.step({"attacker": 0})
+    with pytest.raises(ValueError, match="the plan is committed and plays out"):
+        slow.step({"attacker": 1})
+    with pytest.raises(ValueError, match="order must be one of"):
+        sparse_attack_v0.parallel_env(action="sequential", order="random")
+    with pytest.raises(ValueError, match="order='plan' applies to action='sequential' only"):
+        sparse_attack_v0.parallel_env(action="bitmask", order="plan")
+    with pytest.raises(ValueError, match="must be in order='plan'"):
+        plan_actions(sparse_attack_v0.parallel_env(action="sequential"), [[1]])
+
+
+def test_plan_order_pettingzoo_and_gymnasium_conformance():
+    from gymnasium.utils.env_checker import check_env
+
+    parallel_api_test(
+        sparse_attack_v0.parallel_env(scenario="ch4-position", action="sequential", order="plan"),
+        num_cycles=30,
+    )
+    api_test(
+        sparse_attack_v0.env(scenario="ch4-position", action="sequential", order="plan"),
+        num_cycles=30,
+    )
+    mod = SequentialModule(sparse_attack_v0, scenario="ch4-position", horizon=6, order="plan")
+    from pettingzoo.test import parallel_seed_test, seed_test
+
+    seed_test(mod.env, num_cycles=20)
+    parallel_seed_test(mod.parallel_env, num_cycles=20)
+    env = mod.parallel_env(max_cycles=2)  # max_cycles counts decisions, the picks too
+    env.reset(seed=0)
+    assert not env.step({"attacker": 1})[3]["attacker"]
+    assert env.step({"attacker": 2})[3]["attacker"] and env.agents == []
+    view = gym.make(
+        "fdia_env/SparseAttack-v1",
+        scenario="ch4-position",
+        horizon=3,
+        action="sequential",
+        order="plan",
+    )
+    check_env(view.unwrapped, skip_render_check=True)
+    view.reset(seed=0)
+    assert view.unwrapped.action_masks().tolist() == [True] * 10

@@ -88,6 +88,15 @@ def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, 
         {"scenario": "ch4-position", "budget": 3, "horizon": 5, "reward_mode": "shaped"},
         {"scenario": "ch4-position", "budget": 4, "objective": "logdet", "reward_mode": "per_step"},
         {"scenario": "grid-ieee14"},
+        {"scenario": "ch4-position", "budget": 3, "horizon": 5, "order": "plan"},
+        {
+            "scenario": "ch4-position",
+            "budget": 2,
+            "horizon": 4,
+            "dynamics": "sampled",
+            "order": "plan",
+        },
+        {"scenario": "ch4-position", "budget": 4, "reward_mode": "per_step", "order": "plan"},
     ],
 )
 def test_native_vector_env_matches_sync_vector_env_of_single_views(kwargs):
@@ -102,6 +111,7 @@ def test_native_vector_env_matches_sync_vector_env_of_single_views(kwargs):
     [
         {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_episode_steps": 4},
         {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_cycles": 3},
+        {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_cycles": 3, "order": "plan"},
     ],
 )
 def test_truncation_and_autoreset_match_sync(kwargs, autoreset):
@@ -188,10 +198,12 @@ def test_illegal_actions_and_bad_input():
         ).step(np.array([0, 0]))
 
 
+@pytest.mark.parametrize("order", ["time", "plan"])
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
-def test_torch_backend_matches_numpy(dynamics):
+def test_torch_backend_matches_numpy(dynamics, order):
     torch = pytest.importorskip("torch")
     kwargs = dict(
+        order=order,
         num_envs=6,
         vectorization_mode="vector_entry_point",
         action="sequential",
@@ -343,3 +355,60 @@ def test_both_native_vector_envs_check_their_episode_options_alike(action, kwarg
             "fdia_env/SparseAttack-v0", num_envs=2, vectorization_mode="vector_entry_point",
             action=action, **kwargs,
         )  # fmt: skip
+
+
+def test_plan_order_members_plan_then_play_out_their_plans():
+    env = gym.make_vec(
+        ID,
+        num_envs=3,
+        vectorization_mode="vector_entry_point",
+        action="sequential",
+        order="plan",
+        scenario="ch4-position",
+        budget=2,
+        horizon=3,
+        illegal_action="error",
+    )
+    obs, info = env.reset(seed=0)
+    M = 3  # action 1 + k*M + (j - 1): sensor j at window step k + 1
+    assert obs.shape == (3, 5 + 3 * M + 1) and info["action_mask"].shape == (3, 3 * M + 1)
+    assert info["action_mask"].all()
+    # member 0 picks sensor 1 at step 3; member 1 stops (an empty plan: the episode plays out);
+    # member 2 picks sensor 2 at step 1
+    obs, r, term, _, info = env.step(np.array([1 + 2 * M, 0, 2]))
+    assert term.tolist() == [False, True, False] and info["step"].tolist() == [0, 3, 0]
+    assert obs[0, -(3 * M + 1) :].tolist() == [0] * 6 + [1, 0, 0, 0.5]
+    assert info["action_mask"][0].tolist() == [1] + [1] * 6 + [0, 1, 1]
+    with pytest.raises(ValueError, match=r"member 0 is illegal: this pair is already in the plan"):
+        env.step(np.array([1 + 2 * M, 0, 0]))
+    # member 0 picks sensor 3 at step 3: the budget is used, the plan plays out at once;
+    # member 2 stops: its plan plays out
+    obs, r, term, _, info = env.step(np.array([3 + 2 * M, 0, 0]))
+    assert term.tolist() == [True, False, True] and info["step"].tolist() == [3, 0, 3]
+    assert info["attacked"][0].tolist() == [1, 0, 1] and info["attacked"][2].tolist() == [0, 0, 0]
+    assert info["budget_left"].tolist() == [0, 2, 1]
+    assert r[0] == pytest.approx(info["phi"][0], rel=1e-12)
+
+
+def test_plan_order_playing_out_is_one_window_step_per_stop_without_skip_forced():
+    from fdia_env import sparse_attack_v0
+    from fdia_env.envs.sequential import SequentialSetEnv
+
+    parallel = sparse_attack_v0.parallel_env(
+        action="multibinary", scenario="ch4-position", budget=2, horizon=3, illegal_action="error"
+    )
+    env = SequentialSetEnv(parallel, illegal_action="error", skip_forced=False, order="plan")
+    vec = SequentialVectorEnv(env, 2)
+    vec.reset(seed=0)
+    steps = []
+    for a in ([4, 2], [0, 0], [0, 0], [0, 0]):
+        *_, term, _, info = vec.step(np.array(a))
+        steps.append(info["step"].tolist())
+        if a == [0, 0]:
+            assert info["action_mask"][:, 1:].sum() == 0  # playing out: stop only
+    assert steps == [[0, 0], [1, 1], [2, 2], [3, 3]] and term.all()
+    vec.reset(seed=0)
+    vec.step(np.array([4, 2]))
+    vec.step(np.array([0, 0]))
+    with pytest.raises(ValueError, match=r"member 0 is illegal: the plan is committed and plays"):
+        vec.step(np.array([1, 0]))

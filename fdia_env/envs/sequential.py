@@ -13,8 +13,13 @@ sensors attacked. The action mask (``(M + 1,)`` int8, in the observation dict an
 :meth:`SequentialSetEnv.action_masks`) allows stop always, and sensor j only while it is not yet
 in the step's set and the set is smaller than the budget left.
 
-Decision order: time-major, as the filter runs (all picks of window step K+1, stop, then K+2,
-...), so a decision sees the covariance it acts on. A decision whose only legal action is stop
+Decision order (``order``): ``"time"`` (default), time-major as the filter runs (all picks of
+window step K+1, stop, then K+2, ...), so a decision sees the covariance it acts on; or
+``"plan"``, plan-first: the attacker first picks (sensor, window step) pairs of the whole
+horizon, action ``1 + k·M + (j - 1)`` = sensor j at window step K+1+k (``Discrete(N·M + 1)``),
+then stops; the filter then plays the plan one window step per decision (stop is the only legal
+action there), each paying that step's reward. The mask of ``"plan"`` allows a pair while it is
+not in the plan and the plan is smaller than the budget. A decision whose only legal action is stop
 (the budget is spent, or every sensor is in the set) is played by the env itself
 (``skip_forced=True``, default): an episode takes at most ``N + c`` decisions, and once the
 budget is spent it ends at once. Pass ``skip_forced=False`` to take every stop yourself.
@@ -30,9 +35,11 @@ set, or any sensor once the set uses up the budget left) raises ``ValueError`` w
 either grows the set or advances the filter. An action outside ``Discrete(M + 1)`` is always a
 ``ValueError``.
 
-Observation: ``{"observation": Box, "action_mask": Box(0, 1, (M + 1,), int8)}``; the ``Box`` is
-the wrapped env's features (see ``sparse_attack_v0``) followed by M entries (1 = sensor in the
-set being built) and the budget that would be left after the set, as a fraction of ``budget``.
+Observation: ``{"observation": Box, "action_mask": Box(0, 1, (A,), int8)}`` (A = M + 1, or
+N·M + 1 with ``"plan"``); the ``Box`` is the wrapped env's features (see ``sparse_attack_v0``)
+followed by M entries (1 = sensor in the set being built; ``"plan"``: N·M entries, the plan,
+step-major) and the budget that would be left after the set (the plan's steps not yet played),
+as a fraction of ``budget``.
 Infos are the wrapped env's (of its last window step; at a pick, unchanged).
 """
 
@@ -57,6 +64,9 @@ from fdia_env.systems import LinearSystem
 
 STOP = 0
 """The stop action: commit the set built so far and take the window step."""
+
+ORDERS = ("time", "plan")
+"""Decision orders of the sparse attacker's sequential format (see the module docstring)."""
 
 
 class SequentialBase(ParallelEnv):
@@ -99,6 +109,7 @@ class SequentialBase(ParallelEnv):
 
     def _masked_space(self, box: spaces.Box, extra: int) -> spaces.Dict:
         """``Dict(observation, action_mask)``: ``box`` followed by ``extra`` entries in [0, 1]."""
+        n_actions = int(self._action_space.n)
         return spaces.Dict(
             {
                 "observation": spaces.Box(
@@ -106,7 +117,7 @@ class SequentialBase(ParallelEnv):
                     high=np.concatenate([box.high, np.ones(extra, np.float32)]),
                     dtype=np.float32,
                 ),
-                "action_mask": spaces.Box(0, 1, shape=(self.M + 1,), dtype=np.int8),
+                "action_mask": spaces.Box(0, 1, shape=(n_actions,), dtype=np.int8),
             }
         )
 
@@ -151,7 +162,11 @@ class SequentialBase(ParallelEnv):
         return self._obs_spaces[agent]
 
     def action_space(self, agent: str) -> spaces.Space:
-        """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call)."""
+        """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call).
+
+        The sparse attacker's ``order="plan"``: ``Discrete(N·M + 1)``, 0 = stop, 1 + k·M + j - 1
+        = sensor j at window step k + 1.
+        """
         self._check_agent(agent)
         return self._action_space
 
@@ -224,15 +239,21 @@ class SequentialSetEnv(SequentialBase):
         illegal_action: ``"trim"`` (default), ``"noop"`` (an action outside the mask stops) or
             ``"error"`` (it raises ``ValueError``).
         skip_forced: Play the decisions whose only legal action is stop (default True).
+        order: ``"time"`` (default: each window step's set, in the filter's order) or
+            ``"plan"`` (the (sensor, window step) pairs of the whole horizon first).
 
     Raises:
         TypeError: If ``inner`` is not such an env.
-        ValueError: For a budget of 0 (there would be no decision to make) or a bad
-            ``illegal_action``.
+        ValueError: For a budget of 0 (there would be no decision to make), a bad
+            ``illegal_action`` or ``order``.
     """
 
     def __init__(
-        self, inner: FdiaParallelEnv, illegal_action: str = "trim", skip_forced: bool = True
+        self,
+        inner: FdiaParallelEnv,
+        illegal_action: str = "trim",
+        skip_forced: bool = True,
+        order: str = "time",
     ) -> None:
         if not isinstance(inner, FdiaParallelEnv) or not isinstance(inner.attack, SparseAttack):
             raise TypeError(
@@ -249,28 +270,37 @@ class SequentialSetEnv(SequentialBase):
                 "budget must be >= 1 for action='sequential' (with budget 0 there is no "
                 "decision to make; use another format), got 0"
             )
+        self.order = check_choice("order", order, ORDERS)
         super().__init__(inner, illegal_action, skip_forced)
+        self.horizon = N = int(inner.spec.horizon)
+        self.plan_first = order == "plan"
+        slots = N * self.M if self.plan_first else self.M
+        self._action_space = spaces.Discrete(slots + 1)
         self._obs_spaces = {
-            "attacker": self._masked_space(inner.observation_space("attacker"), self.M + 1)
+            "attacker": self._masked_space(inner.observation_space("attacker"), slots + 1)
         }
-        self._chosen = np.zeros(self.M, dtype=np.int8)
+        # the pairs picked: (M,) for the current window step, or (N, M) for the plan
+        self._chosen = np.zeros((N, self.M) if self.plan_first else self.M, dtype=np.int8)
+        self._flat = self._chosen.reshape(-1)  # a view: slot j - 1 of action j
+        self._played = 0  # window steps played ("plan": > 0 once the plan is committed)
         self._box: np.ndarray | None = None
         self._info: dict[str, Any] = {}
 
     def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
-        """The first decision is the first pick of window step K+1."""
+        """The first decision is the first pick of window step K+1 (``"plan"``: of the plan)."""
         self._chosen[:] = 0
+        self._played = 0
         self._box = obs["attacker"]
         self._info = infos["attacker"]
         return {"attacker": self._observe()}, {"attacker": dict(self._info)}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
-        """Take one decision: add a sensor to the step's set, or stop and take the window step.
+        """Take one decision: add a sensor (pair) to the set, or stop and take the window step.
 
         Raises:
             RuntimeError: Before :meth:`reset` or after the episode ended.
-            ValueError: For a missing or unknown agent's action, an action outside
-                ``Discrete(M + 1)``, or (with ``illegal_action="error"``) outside the mask.
+            ValueError: For a missing or unknown agent's action, an action outside the action
+                space, or (with ``illegal_action="error"``) outside the mask.
         """
         self._check_step(actions)
         action = actions["attacker"]
@@ -279,20 +309,11 @@ class SequentialSetEnv(SequentialBase):
         mask = self.action_mask()
         if not mask[j]:
             if self.illegal_action == "error":
-                raise ValueError(
-                    f"attacker action {j} (add sensor {j}) is illegal: "
-                    + (
-                        f"sensor {j} is already in this step's set"
-                        if self._chosen[j - 1]
-                        else f"the step's set already uses the budget left ({self._left()})"
-                    )
-                    + f"; legal actions are those with action_mask[a] = 1: "
-                    f"{np.flatnonzero(mask).tolist()}"
-                )
+                raise ValueError(self._illegal_message(j, mask))
             j = STOP
         reward, term, trunc = 0.0, False, False
         if j != STOP:
-            self._chosen[j - 1] = 1
+            self._flat[j - 1] = 1
         if j == STOP or (self.skip_forced and self._forced()):
             reward, term, trunc = self._commit()
             while self.skip_forced and not (term or trunc) and self._forced():
@@ -305,27 +326,60 @@ class SequentialSetEnv(SequentialBase):
             self.agents = []
         return obs, {"attacker": reward}, {"attacker": term}, {"attacker": trunc}, infos
 
+    def _illegal_message(self, j: int, mask: np.ndarray) -> str:
+        legal = (
+            f"; legal actions are those with action_mask[a] = 1: {np.flatnonzero(mask).tolist()}"
+        )
+        if not self.plan_first:
+            why = (
+                f"sensor {j} is already in this step's set"
+                if self._chosen[j - 1]
+                else f"the step's set already uses the budget left ({self._left()})"
+            )
+            return f"attacker action {j} (add sensor {j}) is illegal: {why}" + legal
+        k, i = divmod(j - 1, self.M)
+        if self._played:
+            why = "the plan is committed and plays out: stop (0) is the only legal action"
+        elif self._flat[j - 1]:
+            why = "this pair is already in the plan"
+        else:
+            why = f"the plan already uses the budget ({self.attack.budget})"
+        return (
+            f"attacker action {j} (sensor {i + 1} at window step {k + 1}) is illegal: {why}" + legal
+        )
+
+    def _current(self) -> np.ndarray:
+        """The set of the window step to play: (M,) int8."""
+        return self._chosen[self._played] if self.plan_first else self._chosen
+
     def _commit(self) -> tuple[float, bool, bool]:
-        """Take the window step with the set built so far; start an empty set."""
-        obs, rewards, terms, truncs, infos = self.inner.step({"attacker": self._chosen.copy()})
-        self._chosen[:] = 0
+        """Take the window step with its set; (``"time"``) start an empty set."""
+        obs, rewards, terms, truncs, infos = self.inner.step({"attacker": self._current().copy()})
+        if not self.plan_first:
+            self._chosen[:] = 0
+        self._played += 1
         self._box = obs["attacker"]
         self._info = infos["attacker"]
         return float(rewards["attacker"]), bool(terms["attacker"]), bool(truncs["attacker"])
 
     def _left(self) -> int:
-        """Budget left after the set being built."""
-        return int(self.attack.remaining) - int(self._chosen.sum())
+        """Budget left after the set being built (``"plan"``: after its steps not yet played)."""
+        pending = self._chosen[self._played :] if self.plan_first else self._chosen
+        return int(self.attack.remaining) - int(pending.sum())
 
     def _forced(self) -> bool:
         """True when stop is the only legal action."""
+        if self.plan_first and self._played:
+            return True
         return self._left() <= 0 or bool(self._chosen.all())
 
     def action_mask(self) -> np.ndarray:
-        """(M + 1,) int8: 1 = legal now (stop always; sensor j if new and within budget)."""
-        mask = np.empty(self.M + 1, dtype=np.int8)
+        """(A,) int8: 1 = legal now (stop always; a new sensor or pair within the budget)."""
+        mask = np.empty(self._action_space.n, dtype=np.int8)
         mask[STOP] = 1
-        mask[1:] = (self._chosen == 0) & (self._left() > 0)
+        mask[1:] = (
+            (self._flat == 0) & (self._left() > 0) & (self._played == 0 or not self.plan_first)
+        )
         return mask
 
     def action_masks(self, agent: str = "attacker") -> np.ndarray:
@@ -336,22 +390,57 @@ class SequentialSetEnv(SequentialBase):
     def _observe(self) -> dict[str, np.ndarray]:
         budget = self.attack.budget
         box = np.concatenate(
-            [self._box, self._chosen.astype(np.float32), [max(self._left(), 0) / budget]]
+            [self._box, self._flat.astype(np.float32), [max(self._left(), 0) / budget]]
         ).astype(np.float32)
         return {"observation": box, "action_mask": self.action_mask()}
+
+
+def plan_actions(env: SequentialSetEnv, plan: list[list[int]]) -> list[int]:
+    """``"plan"`` order: the actions (pairs in increasing order, then stop) that play ``plan``.
+
+    Raises:
+        ValueError: If ``env`` is not in the ``"plan"`` order, or ``plan`` names a window step
+            beyond the horizon or a sensor outside 1..M.
+    """
+    if not env.plan_first:
+        raise ValueError(f"env must be in order='plan', got order={env.order!r}")
+    if len(plan) > env.horizon:
+        raise ValueError(f"plan has {len(plan)} window steps; the horizon is {env.horizon}")
+    actions = []
+    for k, sensors in enumerate(plan):
+        for j in sorted(int(s) for s in sensors):
+            if not 1 <= j <= env.M:
+                raise ValueError(
+                    f"plan names sensor {j} at window step {k + 1}: sensors are 1..{env.M}"
+                )
+            actions.append(1 + k * env.M + j - 1)
+    return [*actions, STOP]
 
 
 def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = None) -> float:
     """Play ``plan`` (per window step, the 1-based sensors) in ``env``; return the return.
 
-    Each step's sensors are picked in increasing order, then stop, skipping what the env plays
-    itself; the episode's rewards are summed.
+    ``"time"`` order: each step's sensors are picked in increasing order, then stop, skipping
+    what the env plays itself. ``"plan"`` order: the pairs of :func:`plan_actions`, then stop
+    until the episode ends. The episode's rewards are summed.
 
     Raises:
         ValueError: If ``plan`` spends more than the budget or is shorter than the episode.
     """
     env.reset(seed=seed)
     total = 0.0
+    if env.plan_first:
+        for a in plan_actions(env, plan):
+            if not env.agents:  # the env committed the plan when it used the budget
+                if a == STOP:
+                    break
+                raise ValueError("plan spends more than the budget (the episode ended)")
+            if a != STOP and not env.action_mask()[a]:
+                raise ValueError(f"plan is not legal: action {a} (action mask forbids it)")
+            total += env.step({"attacker": a})[1]["attacker"]
+        while env.agents:
+            total += env.step({"attacker": STOP})[1]["attacker"]
+        return total
     for k, sensors in enumerate(plan):
         if not env.agents:
             if any(len(s) for s in plan[k:]):

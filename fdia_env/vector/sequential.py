@@ -22,7 +22,9 @@ expected dynamics match to rounding and sampled dynamics in distribution (one de
 Observations are the view's ``Box`` (the wrapped env's features, the M entries of the set being
 built, the budget left after it as a fraction of ``budget``); the (B, M + 1) masks are in
 ``infos["action_mask"]`` and :meth:`SequentialVectorEnv.action_masks` (1 = legal: stop always,
-sensor j while it is not in the set and the set is smaller than the budget left). Autoreset
+sensor j while it is not in the set and the set is smaller than the budget left). The single
+env's ``order="plan"`` is served too: (B, N·M + 1) masks over the (sensor, window step) pairs,
+and each member plays its plan out once it stops (see :mod:`fdia_env.envs.sequential`). Autoreset
 and ``max_episode_steps`` (counted in decisions, as Gymnasium's ``TimeLimit`` over the view)
 follow :mod:`fdia_env.vector.env`.
 """
@@ -102,12 +104,17 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         self.spec_episode = parallel.spec
         self.M = M = parallel.M
         self.budget = int(self.attack.budget)
+        self.order, self.plan_first = parallel.order, parallel.plan_first
+        self.horizon = N = parallel.horizon
         self.single_observation_space = parallel.observation_space("attacker")["observation"]
         self.single_action_space = parallel.action_space("attacker")
         self.observation_space = batch_space(self.single_observation_space, B)
         self.action_space = batch_space(self.single_action_space, B)
-        self._arange = xp.asarray(np.arange(1, M + 1, dtype=np.int64))
-        self._chosen = xp.zeros((B, M), dtype=xp.bool)
+        self._slots = S = N * M if self.plan_first else M  # the pick actions 1..S
+        self._arange = xp.asarray(np.arange(1, S + 1, dtype=np.int64))
+        self._steps = xp.asarray(np.arange(N, dtype=np.int64))
+        self._chosen = xp.zeros((B, S), dtype=xp.bool)  # "plan": (B, N·M), step-major
+        self._playing = xp.zeros(B, dtype=xp.bool)  # "plan": the plan is committed
         self._decisions = xp.zeros(B, dtype=xp.int64)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._started = False
@@ -124,7 +131,8 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         if seed is not None and not isinstance(seed, list | tuple):
             super().reset(seed=int(seed))
         xp, B = self.xp, self.num_envs
-        self._chosen = xp.zeros((B, self.M), dtype=xp.bool)
+        self._chosen = xp.zeros((B, self._slots), dtype=xp.bool)
+        self._playing = xp.zeros(B, dtype=xp.bool)
         self._decisions = xp.zeros(B, dtype=xp.int64)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._started = True
@@ -133,24 +141,43 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
     def _reset_members(self, where: Any) -> None:
         self.inner._reset_members(where)
         self._chosen = self._chosen & ~where[:, None]
+        self._playing = self._playing & ~where
         self._decisions = self.xp.where(where, 0, self._decisions)
 
     # --- masks ---------------------------------------------------------------------------------
     def _left(self) -> Any:
-        """(B,) budget left after each member's set being built."""
-        return self.attack.b_remaining - self.xp.sum(self.xp.astype(self._chosen, self.xp.int64), 1)
+        """(B,) budget left after each member's set (``"plan"``: its steps not yet played)."""
+        xp = self.xp
+        pending = self._chosen
+        if self.plan_first:  # the rows of the steps not yet played
+            ahead = self._steps[None, :] >= self.inner.sim.k[:, None]  # (B, N)
+            pending = (self._chosen.reshape(self.num_envs, self.horizon, self.M)) & ahead[
+                :, :, None
+            ]
+            pending = pending.reshape(self.num_envs, self._slots)
+        return self.attack.b_remaining - xp.sum(xp.astype(pending, xp.int64), 1)
 
     def action_masks(self) -> Any:
-        """(B, M + 1) bool: legal actions now (stop always; a new sensor within the budget)."""
+        """(B, A) bool: legal actions now (stop always; a new sensor or pair within the budget)."""
         xp = self.xp
-        mask = xp.empty((self.num_envs, self.M + 1), dtype=xp.bool)
+        mask = xp.empty((self.num_envs, self._slots + 1), dtype=xp.bool)
         mask[:, STOP] = True
-        mask[:, 1:] = ~self._chosen & (self._left() > 0)[:, None]
+        open_ = (self._left() > 0) & ~self._playing
+        mask[:, 1:] = ~self._chosen & open_[:, None]
         return mask
 
     def _forced(self) -> Any:
         """(B,) members whose only legal action is stop."""
-        return (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
+        return self._playing | (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
+
+    def _current_sets(self) -> Any:
+        """(B, M) bool: each member's set of its next window step."""
+        if not self.plan_first:
+            return self._chosen
+        xp = self.xp
+        now = self._steps[None, :] == self.inner.sim.k[:, None]  # (B, N): the step to play
+        rows = self._chosen.reshape(self.num_envs, self.horizon, self.M) & now[:, :, None]
+        return xp.sum(xp.astype(rows, xp.int64), 1) > 0
 
     # --- step ----------------------------------------------------------------------------------
     def step(self, actions: Any):
@@ -174,7 +201,8 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
             self._reset_members(resetting)
         live = ~resetting
         onehot = (actions[:, None] == self._arange) & live[:, None]  # (B, M): the picks
-        legal = ~_any1(xp, onehot & (self._chosen | (self._left() <= 0)[:, None]))
+        closed = (self._left() <= 0) | self._playing
+        legal = ~_any1(xp, onehot & (self._chosen | closed[:, None]))
         if not xp.all(legal):
             if self.illegal_action == "error":
                 self._raise_illegal(actions, legal)
@@ -184,6 +212,8 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         commit = live & ~pick
         if self.skip_forced:
             commit = commit | (pick & self._forced())
+        if self.plan_first:
+            self._playing = self._playing | commit
         reward = xp.zeros(B)
         done = xp.zeros(B, dtype=xp.bool)
         truncated = xp.zeros(B, dtype=xp.bool)
@@ -229,14 +259,25 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
     def _raise_illegal(self, actions: Any, legal: Any) -> None:
         i = int(self.xp.to_numpy(self.xp.flatnonzero(~legal))[0])
         j = int(actions[i])
-        why = (
-            f"sensor {j} is already in this step's set"
-            if bool(self._chosen[i, j - 1])
-            else f"the step's set already uses the budget left ({int(self._left()[i])})"
-        )
         allowed = np.flatnonzero(self.xp.to_numpy(self.action_masks()[i])).tolist()
+        if self.plan_first:
+            k, s = divmod(j - 1, self.M)
+            what = f"sensor {s + 1} at window step {k + 1}"
+            if bool(self._playing[i]):
+                why = "the plan is committed and plays out: stop (0) is the only legal action"
+            elif bool(self._chosen[i, j - 1]):
+                why = "this pair is already in the plan"
+            else:
+                why = f"the plan already uses the budget ({self.budget})"
+        else:
+            what = f"add sensor {j}"
+            why = (
+                f"sensor {j} is already in this step's set"
+                if bool(self._chosen[i, j - 1])
+                else f"the step's set already uses the budget left ({int(self._left()[i])})"
+            )
         raise ValueError(
-            f"attacker action {j} (add sensor {j}) of member {i} is illegal: {why}; legal "
+            f"attacker action {j} ({what}) of member {i} is illegal: {why}; legal "
             f"actions are those with action_mask[a] = 1: {allowed}"
         )
 
@@ -252,7 +293,7 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         hold = bool(xp.any(held))
         if hold:
             saved = self._save(sim)
-        sets = xp.astype(self._chosen & stepping[:, None], xp.int8)
+        sets = xp.astype(self._current_sets() & stepping[:, None], xp.int8)
         attacked, sigma = self.attack.batch_apply(sets)
         used, leak, present, steady = self.defense.batch_apply(None, attacked, sigma)
         phi_prev = sim.phi
@@ -275,7 +316,8 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         truncated = xp.zeros(self.num_envs, dtype=xp.bool)
         reward = attacker_reward(self.spec_episode.reward_mode, sim.phi, phi_prev, done, xp)
         reward = xp.where(stepping, reward, 0.0)
-        self._chosen = self._chosen & held[:, None]
+        if not self.plan_first:  # "time": the next step's set starts empty
+            self._chosen = self._chosen & held[:, None]
         return reward, done, truncated
 
     def _save(self, sim: Any) -> dict[str, Any]:
@@ -315,11 +357,11 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
 
     # --- observations --------------------------------------------------------------------------
     def _observe(self) -> Any:
-        """(B, d + M + 1) float32: the engine's features, the set, the budget left after it."""
+        """(B, d + S + 1) float32: the engine's features, the set (plan), the budget left."""
         xp = self.xp
         box = self.inner._observe("attacker")
         d = box.shape[1]
-        out = xp.empty((self.num_envs, d + self.M + 1), dtype=xp.float32)
+        out = xp.empty((self.num_envs, d + self._slots + 1), dtype=xp.float32)
         out[:, :d] = box
         out[:, d:-1] = xp.astype(self._chosen, xp.float32)
         out[:, -1] = xp.astype(xp.maximum(self._left(), 0), xp.float64) / self.budget
