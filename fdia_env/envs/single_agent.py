@@ -83,12 +83,15 @@ class SingleAgentEnv(gym.Env):
         if self.other is not None:
             self._other_obs = obs[self.other]
         own, extra = self._split(obs[self.agent])
+        info = infos[self.agent]  # the agent's own dict (the parallel env makes one each)
+        if extra:
+            info.update(extra)
         return (
             own,
             float(rewards[self.agent]),
             bool(terms[self.agent]),
             bool(truncs[self.agent]),
-            {**infos[self.agent], **extra},
+            info,
         )
 
     def action_masks(self) -> np.ndarray:
