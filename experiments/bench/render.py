@@ -9,7 +9,6 @@ task family (normalised score per method, with the intervals) goes to ``docs/fig
 
 from __future__ import annotations
 
-import io
 import math
 import re
 from collections import defaultdict
@@ -102,7 +101,7 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from agents.runs import atomic_write
+    from agents.plots import save_figure
 
     per_task = {t.name: reference_entries(t) + learner_entries(rows.get(t.name, [])) for t in tasks}
     optimum_names = {t.references.optimum.name for t in tasks}
@@ -142,11 +141,7 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
     ax.set_ylabel("normalised score")
     ax.set_title(f"{family}: 0 = random play, 1 = certified optimum")
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+    return save_figure(fig, path, dpi=110)
 
 
 def leaderboard(
