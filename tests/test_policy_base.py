@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from agents.bench.agents import CallablePolicy
 from agents.evaluate import RandomPolicy
 from baselines.covariance.policy import CovariancePolicy
 from baselines.game.policy import MixedStrategyPolicy, TypedMixedStrategyPolicy
@@ -36,6 +37,7 @@ SHIPPED = (
     ScheduledPolicy,
     FixedAction,
     RandomPolicy,
+    CallablePolicy,
 )
 
 
