@@ -378,3 +378,14 @@ def test_the_runner_resumes_missing_runs_and_goes_on_after_a_failure(tmp_path, m
     calls.clear()
     assert experiments(argv) == 1  # without --missing every seed trains again
     assert calls == [0, 1, 2]
+
+
+def test_torch_ppo_makes_several_updates_on_a_short_budget():
+    from agents.torch_ppo import TorchPPOConfig
+    from experiments.bench.run import TORCH_MIN_ITERATIONS, torch_envs
+
+    for budget, members in ((2048, 21), (20_000, 208), (1_000_000, 256), (10, 1)):
+        assert torch_envs(budget) == members
+        config = TorchPPOConfig(total_timesteps=budget, num_envs=members)
+        if budget >= 96:  # a budget of at least one rollout of 8 members
+            assert config.iterations >= TORCH_MIN_ITERATIONS
