@@ -35,7 +35,7 @@ from baselines.game.lp import (
     ATTACKER_MODELS,
     BayesianSolution,
     Exploitability,
-    as_payoff,
+    as_payoffs,
     as_strategy,
     solve_bayesian,
 )
@@ -66,22 +66,10 @@ class BayesianGame:
             raise ValueError(
                 f"attacker must be one of {list(ATTACKER_MODELS)}, got {self.attacker!r}"
             )
-        mats = self.matrices
-        if isinstance(mats, np.ndarray) and mats.ndim == 3:
-            mats = list(mats)
-        if isinstance(mats, str) or not isinstance(mats, Sequence) or len(mats) == 0:
-            raise ValueError("matrices must be a non-empty sequence of payoff matrices")
-        Ls = [as_payoff(L, f"matrices[{s}]") for s, L in enumerate(mats)]
-        for s, L in enumerate(Ls):
-            if L.shape != Ls[0].shape:
-                raise ValueError(
-                    f"matrices must share one shape: matrices[0] is {Ls[0].shape}, "
-                    f"matrices[{s}] is {L.shape}"
-                )
-        stack = np.stack(Ls)
-        priors = as_strategy(self.priors, len(Ls), "priors")
-        if self.types is not None and len(self.types) != len(Ls):
-            raise ValueError(f"types must name the {len(Ls)} matrices, got {self.types!r}")
+        stack = as_payoffs(self.matrices)
+        priors = as_strategy(self.priors, len(stack), "priors")
+        if self.types is not None and len(self.types) != len(stack):
+            raise ValueError(f"types must name the {len(stack)} matrices, got {self.types!r}")
         for name, value in (("matrices", stack), ("priors", priors)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -201,3 +189,36 @@ def bayesian_game(
     sc = resolve_system(system_or_scenario)
     mats = [payoff_matrix(sc, power, t, max_subset_size) for t in types]
     return BayesianGame(np.stack(mats), p, attacker, types)
+
+
+def bayesian_game_of(parallel: Any) -> BayesianGame:
+    """The :class:`BayesianGame` a typed ``sensor_game_v0`` parallel env plays.
+
+    Args:
+        parallel: ``sensor_game_v0.parallel_env(types=..., ...)`` (its scenario and its typed
+            attack's types, priors, attacker model, power and largest subset).
+
+    Raises:
+        ValueError: For an env whose attack has no types (an untyped sensor game).
+
+    Example:
+        >>> from fdia_env import sensor_game_v0
+        >>> env = sensor_game_v0.parallel_env(types=("independent", "dependent"))
+        >>> game = bayesian_game_of(env)
+        >>> game.types, game.matrices.shape
+        (('independent', 'dependent'), (2, 7, 7))
+    """
+    attack = parallel.attack
+    if getattr(attack, "types", None) is None:
+        raise ValueError(
+            "parallel must be a sensor_game_v0 env with types=(...) (a typed attack), got one "
+            f"with a {type(attack).__name__}"
+        )
+    return bayesian_game(
+        parallel.scenario,
+        attack.types,
+        attack.priors,
+        attack.attacker_model,
+        attack.power,
+        attack.max_subset_size,
+    )
