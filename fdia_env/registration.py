@@ -350,7 +350,7 @@ for _entry in (
         "stealth_attack_v0",
         "fdia_env.stealth.stealth_attack_v0",
         {"attacker": "fdia_env/StealthAttack-v0", "defender": "fdia_env/StealthDefender-v0"},
-        backends=("numpy",),
+        backends=("numpy", "torch"),
         kalman=False,
         vector="fdia_env.stealth.vector:make_vector",
         vector_views=("attacker",),  # the defender's view: copies in SyncVectorEnv

@@ -148,7 +148,13 @@ def test_a_toy_env_registered_through_the_public_path_reaches_every_consumer(tmp
 def test_every_consumer_lists_the_table():
     views = {env_id for e in ENVS.values() for env_id in e.views.values()}
     assert set(GYM_IDS) == views
-    on_torch = [i for e in ENVS.values() if "torch" in e.backends for i in e.views.values()]
+    on_torch = [
+        i
+        for e in ENVS.values()
+        if "torch" in e.backends
+        for agent, i in e.views.items()
+        if e.has_vector(agent)
+    ]
     assert list(torch_ids()) == on_torch
     assert {"fdia_env/SparseAttack-v0", "fdia_env/DetectionDefender-v0"} <= set(on_torch)
     for name, agent in agents.registry.REGISTRY:
@@ -178,7 +184,8 @@ def test_the_kalman_flag_is_a_bool_and_splits_the_table():
     assert kalman_env_names() == [n for n, e in ENVS.items() if e.kalman]
     assert "stealth_attack_v0" in ENV_NAMES and "stealth_attack_v0" not in kalman_env_names()
     stealth_id = "fdia_env/StealthAttack-v0"
-    assert stealth_id in GYM_IDS and stealth_id in vector_ids() and stealth_id not in torch_ids()
+    assert stealth_id in GYM_IDS and stealth_id in vector_ids() and stealth_id in torch_ids()
+    assert "fdia_env/StealthDefender-v0" not in vector_ids("torch")  # copies in SyncVectorEnv
     assert ENVS["stealth_attack_v0"].vector == "fdia_env.stealth.vector:make_vector"
     with pytest.raises(ValueError, match="vector must read 'module:function'"):
         EnvEntry("toy_v0", "toy", vector="toy.make")

@@ -66,9 +66,104 @@ def test_sampled_alarm_rate_matches_the_exact_probability(est):
     np.testing.assert_array_equal(rewards == 0.0, infos["detected"])
 
 
-def test_torch_backend_is_refused(est):
-    with pytest.raises(ValueError, match="runs numpy on the CPU"):
-        _vec(est, 2, backend="torch")
+def _tensor(x, dtype=None):
+    torch = pytest.importorskip("torch")
+    return torch.as_tensor(np.asarray(x), dtype=dtype)
+
+
+def _np(x):
+    return x.detach().cpu().numpy() if hasattr(x, "detach") else np.asarray(x)
+
+
+@pytest.mark.parametrize("action", ["shift", "free"])
+def test_torch_backend_equals_numpy_in_expected_dynamics(est, action):
+    torch = pytest.importorskip("torch")
+    kwargs = {"budget": 5, "action": action, "dynamics": "expected", "protected": [3]}
+    kwargs |= {"horizon": 2, "on_detect": "penalty", "penalty": 0.3, "magnitude": 0.005}
+    vec, tvec = _vec(est, 64, **kwargs), _vec(est, 64, backend="torch", **kwargs)
+    assert tvec.unwrapped.backend == "torch"
+    obs, _ = vec.reset(seed=0)
+    tobs, _ = tvec.reset(seed=0)
+    np.testing.assert_array_equal(_np(tobs), obs)
+    vec.action_space.seed(2)
+    seen = []
+    for _ in range(3):  # the third step is the autoreset step
+        actions = vec.action_space.sample()
+        if action == "free":
+            actions[:8] *= 0.01  # small injections: detection probabilities inside (α, 1)
+        dtype = torch.int8 if action == "shift" else torch.float32
+        out = vec.step(actions)
+        tout = tvec.step(_tensor(actions, dtype))
+        for want, got in zip(out[:4], tout[:4], strict=True):
+            assert isinstance(got, torch.Tensor)
+            np.testing.assert_allclose(_np(got), want, rtol=0, atol=1e-10)
+        assert set(tout[4]) == set(out[4])
+        for key, want in out[4].items():
+            np.testing.assert_allclose(_np(tout[4][key]), want, rtol=1e-10, atol=1e-10)
+        seen.append(out[4]["detection_probability"])
+    p = np.concatenate(seen)
+    assert ((p > 0.05 + 1e-6) & (p < 1.0 - 1e-6)).sum() > 8  # the ncx2 series was exercised
+
+
+@pytest.mark.parametrize("test", ["chi2", "lnr"])
+def test_torch_backend_equals_numpy_given_the_same_noise(est, test, monkeypatch):
+    torch = pytest.importorskip("torch")
+    kwargs = {"budget": 2, "action": "free", "a_max": 0.05, "test": test, "on_detect": "end"}
+    vec = _vec(est, 256, **kwargs).unwrapped
+    tvec = _vec(est, 256, backend="torch", **kwargs).unwrapped
+    noise = np.random.default_rng(3).standard_normal((256, est.m))
+    monkeypatch.setattr(vec, "noise", lambda: noise.copy())
+    monkeypatch.setattr(tvec, "noise", lambda: torch.as_tensor(noise))
+    vec.reset(seed=0)
+    tvec.reset(seed=0)
+    actions = np.random.default_rng(4).uniform(-1, 1, (256, est.m)).astype(np.float32)
+    out, tout = vec.step(actions), tvec.step(torch.as_tensor(actions))
+    assert 0 < out[4]["detected"].sum() < 256
+    for want, got in zip(out[:4], tout[:4], strict=True):
+        np.testing.assert_allclose(_np(got), want, rtol=0, atol=1e-10)
+    for key, want in out[4].items():
+        np.testing.assert_allclose(_np(tout[4][key]), want, rtol=1e-10, atol=1e-10)
+
+
+def test_torch_sampled_alarm_rate_matches_the_exact_probability(est):
+    torch = pytest.importorskip("torch")
+    a = np.zeros(est.m)
+    a[0] = 0.06
+    p = float(est.detection_probability(a))
+    vec = _vec(est, 8000, budget=1, action="free", a_max=0.06, backend="torch")
+    vec.reset(seed=5)
+    actions = torch.as_tensor(np.tile((a / 0.06).astype(np.float32), (8000, 1)))
+    _, rewards, _, _, infos = vec.step(actions)
+    rate = float(infos["detected"].double().mean())
+    assert abs(rate - p) < 4 * np.sqrt(p * (1 - p) / 8000)
+    np.testing.assert_array_equal(_np(rewards) == 0.0, _np(infos["detected"]))
+
+
+def test_torch_backend_refuses_numpy_actions_and_a_float_seed(est):
+    torch = pytest.importorskip("torch")
+    vec = _vec(est, 2, backend="torch")
+    vec.reset()
+    with pytest.raises(TypeError, match=r"attacker actions must be a torch\.Tensor"):
+        vec.step(np.zeros((2, est.n), dtype=np.int8))
+    with pytest.raises(ValueError, match="seed must be an int or None"):
+        vec.reset(seed=1.5)
+    _, _, terms, _, _ = vec.step(torch.zeros((2, est.n), dtype=torch.int8))
+    assert terms.all()
+    with pytest.raises(ValueError, match="backend must be one of"):
+        _vec(est, 2, backend="jax")
+
+
+def test_torch_ncx2_tail_equals_scipy():
+    torch = pytest.importorskip("torch")
+    from scipy import stats
+
+    from fdia_env.stealth.torch_ops import ncx2_sf
+
+    lam = np.concatenate([[0.0, 1e-12], np.geomspace(1e-8, 7e3, 300)])
+    for dof in (1, 2, 21, 186):
+        x = float(stats.chi2.isf(0.05, dof))
+        got = ncx2_sf(x, dof, torch.as_tensor(lam)).numpy()
+        np.testing.assert_allclose(got, stats.ncx2.sf(x, dof, lam), rtol=0, atol=1e-12)
 
 
 def test_defender_is_refused_by_the_native_vector_env(est):

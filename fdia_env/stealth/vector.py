@@ -1,10 +1,17 @@
-"""Native vector env of ``stealth_attack_v0``'s Gymnasium view: B snapshots as one numpy batch.
+"""Native vector env of ``stealth_attack_v0``'s Gymnasium view: B snapshots as one batch.
 
 ``gymnasium.make_vec("fdia_env/StealthAttack-v0", num_envs=B,
 vectorization_mode="vector_entry_point", **options)`` (the options of
-:func:`fdia_env.stealth.stealth_attack_v0.parallel_env`, numpy only). Autoreset is Gymnasium's
-default ``NEXT_STEP``: the step after an episode's last one resets that member (its action is
-ignored, reward 0).
+:func:`fdia_env.stealth.stealth_attack_v0.parallel_env`). Autoreset is Gymnasium's default
+``NEXT_STEP``: the step after an episode's last one resets that member (its action is ignored,
+reward 0).
+
+``backend="torch", device="cpu" | "cuda"`` runs the same step on float64 tensors of that
+device: actions are tensors of the device, observations, rewards, flags and infos come back as
+tensors there. Expected dynamics equal the numpy backend to 1e-10 (the χ² detection
+probability is :func:`fdia_env.stealth.torch_ops.ncx2_sf`); sampled dynamics draw the meter
+noise from a ``torch.Generator`` of the device (``seed`` an int or None), so they equal numpy in
+distribution, and exactly given the same noise.
 """
 
 from __future__ import annotations
@@ -16,7 +23,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_int
-from fdia_env.envs.actions import check_batch_actions
+from fdia_env.backend import NUMPY, get_backend
+from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
 
 MAX_NUM_ENVS = 1 << 20
@@ -27,15 +35,21 @@ class StealthVectorEnv(VectorEnv):
 
     Args:
         num_envs: B, 1..2**20.
+        backend: ``"numpy"`` (default) or ``"torch"`` (see the module docstring).
+        device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
         **kwargs: Options of ``stealth_attack_v0.parallel_env`` (no ``render_mode``).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
 
-    def __init__(self, num_envs: int, **kwargs: Any) -> None:
+    def __init__(
+        self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
+    ) -> None:
         if kwargs.get("render_mode") is not None:
             raise ValueError("render_mode is not supported by the native vector env")
         kwargs.pop("render_mode", None)
+        self.xp = xp = get_backend(backend, device)
+        self.backend, self.device = xp.name, xp.device
         self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
         self.env = StealthAttackEnv(**kwargs)
         est = self.env.estimation
@@ -43,102 +57,175 @@ class StealthVectorEnv(VectorEnv):
         self.single_observation_space = self.env.observation_space("attacker")
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._HT = est.H.T * self.env.magnitude  # (n, m): bits @ HT = H c
-        self._KT = est.K.T
         L = np.linalg.cholesky(est.R)
-        self._diag_L = np.diag(L).copy() if not np.any(L - np.diag(np.diag(L))) else None
-        self._LT = L.T
-        self._rng = np.random.default_rng()
-        self._k = np.zeros(self.num_envs, dtype=np.int64)
-        self._needs_reset = np.zeros(self.num_envs, dtype=bool)
-        self._obs = np.zeros((self.num_envs, 3), dtype=np.float32)
+        diag_L = np.diag(L).copy() if not np.any(L - np.diag(np.diag(L))) else None
+        self._HT = xp.asarray(est.H.T * self.env.magnitude)  # (n, m): bits @ HT = H c
+        self._KT = xp.asarray(est.K.T)
+        self._diag_L = None if diag_L is None else xp.asarray(diag_L)
+        self._LT = xp.asarray(L.T)
+        self._protected = xp.asarray(self.env.protected)
+        if xp is not NUMPY:  # what the torch step computes itself (numpy: est's methods)
+            self._Q = xp.asarray(est._Q)
+            self._Linv = xp.asarray(est._Linv)
+            self._ST = xp.asarray(est.S.T)
+            self._lnr_scale = xp.asarray(est._lnr_scale)
+            self._critical = xp.asarray(est.critical)
+        self._rng = np.random.default_rng() if xp is NUMPY else xp.generator(None)
+        self._k = xp.zeros(self.num_envs, dtype=np.int64)
+        self._needs_reset = xp.zeros(self.num_envs, dtype=np.bool_)
 
-    def injections(self, actions: np.ndarray) -> np.ndarray:
+    def injections(self, actions: Any) -> Any:
         """(B, m) injections of (B, d) actions: as the single env's ``injection``, batched."""
-        env = self.env
-        acts = np.asarray(actions, dtype=np.float64)
+        env, xp = self.env, self.xp
+        acts = xp.asarray(actions, dtype=np.float64)
         if env.action_kind == "shift":
             a = acts @ self._HT
         else:
-            a = env.a_max * np.clip(acts, -1.0, 1.0)
-        a[:, env.protected] = 0.0
-        scale = np.max(np.abs(a), axis=1, keepdims=True)
-        a[np.abs(a) <= 1e-12 * np.maximum(scale, 1e-300)] = 0.0
+            a = env.a_max * xp.clip(acts, -1.0, 1.0)
+        a[:, self._protected] = 0.0
+        size = abs(a)
+        scale = size.max(1, keepdims=True) if xp is NUMPY else size.amax(1, keepdim=True)
+        a[size <= 1e-12 * xp.maximum(scale, 1e-300)] = 0.0
         if env.budget < a.shape[1]:
-            order = np.argsort(-np.abs(a), axis=1, kind="stable")
-            drop = order[:, env.budget :]
-            np.put_along_axis(a, drop, 0.0, axis=1)
+            if xp is NUMPY:
+                order = np.argsort(-np.abs(a), axis=1, kind="stable")
+                np.put_along_axis(a, order[:, env.budget :], 0.0, axis=1)
+            else:
+                import torch
+
+                order = torch.argsort(-abs(a), dim=1, stable=True)
+                a.scatter_(1, order[:, env.budget :], 0.0)
         return a
 
-    def reset(
-        self, *, seed: int | None = None, options: dict | None = None
-    ) -> tuple[np.ndarray, dict]:
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset every member; ``seed`` seeds the noise of the whole batch."""
+        xp = self.xp
         if seed is not None:
-            self._rng = np.random.default_rng(int(seed))
+            if xp is NUMPY:
+                self._rng = np.random.default_rng(int(seed))
+            elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+                self._rng = xp.generator(int(seed))
+            else:
+                raise ValueError(
+                    f"seed must be an int or None for backend='torch' (it seeds the device's "
+                    f"torch.Generator), got {seed!r}"
+                )
         self._k[:] = 0
         self._needs_reset[:] = False
-        self._obs = np.zeros((self.num_envs, 3), dtype=np.float32)
-        self._obs[:, 0] = 1.0
-        zero = np.zeros(self.num_envs)
-        return self._obs.copy(), self._infos(zero, zero.astype(bool), zero, zero, zero)
+        obs = xp.zeros((self.num_envs, 3), dtype=np.float32)
+        obs[:, 0] = 1.0
+        zero = xp.zeros(self.num_envs)
+        return obs, self._infos(zero, zero > 0, zero, zero, zero)
 
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+    def noise(self) -> Any:
+        """(B, m) standard normal draws of this step's meter noise (before R's factor)."""
+        if self.xp is NUMPY:
+            return self._rng.standard_normal((self.num_envs, self.env.estimation.m))
+        return self.xp.normal(self._rng, (self.num_envs, self.env.estimation.m))
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
         """One snapshot for every member (members that ended last step are reset instead)."""
-        check_batch_actions(self.single_action_space, actions, self.num_envs, "attacker")
-        env, est = self.env, self.env.estimation
-        a = self.injections(actions)
-        damage = np.max(np.abs(a @ self._KT), axis=1)
-        if env.test == "chi2":
-            p = np.asarray(est.detection_probability(a), dtype=np.float64)
+        env, est, xp, B = self.env, self.env.estimation, self.xp, self.num_envs
+        if xp is NUMPY:
+            check_batch_actions(self.single_action_space, actions, B, "attacker")
         else:
-            p = np.zeros(self.num_envs)
+            check_batch_tensor_actions(self.single_action_space, actions, B, "attacker", xp)
+        a = self.injections(actions)
+        damage = self._max_abs(a @ self._KT)
+        p = self._detection_probability(a) if env.test == "chi2" else xp.zeros(B)
         caught = -env.penalty if env.on_detect == "penalty" else 0.0
         if env.dynamics == "sampled":
-            e = self._rng.standard_normal((self.num_envs, est.m))
+            e = self.noise()
             z = (e * self._diag_L if self._diag_L is not None else e @ self._LT) + a
-            statistic = np.asarray(est.statistic(z))
-            if env.test == "chi2":
-                detected = statistic > est.threshold
-            else:
-                detected = np.asarray(est.alarm(z, "lnr"))
-            reward = np.where(detected, caught, damage)
+            statistic = self._statistic(z)
+            detected = statistic > est.threshold if env.test == "chi2" else self._lnr_alarm(z)
+            reward = xp.where(detected, caught, damage)
         else:
-            detected = np.zeros(self.num_envs, dtype=bool)
-            statistic = np.asarray(est.noncentrality(a)) + est.dof
+            detected = xp.zeros(B, dtype=np.bool_)
+            statistic = self._statistic(a) + est.dof
             reward = (1.0 - p) * damage + p * caught
-        resetting = self._needs_reset.copy()
-        self._k = np.where(resetting, 0, self._k + 1)
-        terminated = ~resetting & ((self._k >= env.horizon) | (detected & (env.on_detect == "end")))
-        truncated = ~resetting & ~terminated
-        truncated &= (env.max_cycles is not None) & (self._k >= (env.max_cycles or 0))
-        reward = np.where(resetting, 0.0, reward)
-        obs = np.empty((self.num_envs, 3), dtype=np.float32)
-        obs[:, 0] = (env.horizon - self._k) / env.horizon
-        obs[:, 1] = np.where(resetting, 0.0, detected)
-        obs[:, 2] = np.where(resetting, 0.0, np.minimum(statistic / est.threshold, MAX_RATIO))
-        self._needs_reset = terminated | truncated
-        self._obs = obs
+        resetting = xp.copy(self._needs_reset)
         live = ~resetting
+        self._k = xp.where(resetting, 0, self._k + 1)
+        ends = self._k >= env.horizon
+        if env.on_detect == "end":
+            ends = ends | detected
+        terminated = live & ends
+        truncated = live & ~terminated
+        if env.max_cycles is None:
+            truncated = xp.zeros(B, dtype=np.bool_)
+        else:
+            truncated = truncated & (self._k >= env.max_cycles)
+        reward = xp.where(resetting, 0.0, reward)
+        detected = detected & live
+        obs = xp.empty((B, 3), dtype=np.float32)
+        obs[:, 0] = (env.horizon - self._k) / env.horizon
+        obs[:, 1] = xp.astype(detected, np.float32)
+        obs[:, 2] = xp.where(live, xp.minimum(statistic / est.threshold, MAX_RATIO), 0.0)
+        self._needs_reset = terminated | truncated
+        used = (a != 0).sum(1)
         infos = self._infos(
-            np.where(live, damage, 0.0),
-            detected & live,
-            np.where(live, p, 0.0),
-            np.where(live, statistic, 0.0),
-            np.where(live, np.count_nonzero(a, axis=1), 0),
+            xp.where(live, damage, 0.0),
+            detected,
+            xp.where(live, p, 0.0),
+            xp.where(live, statistic, 0.0),
+            xp.where(live, used, 0),
         )
-        return obs.copy(), reward, terminated, truncated, infos
+        return obs, reward, terminated, truncated, infos
 
-    def _infos(self, phi, detected, p, statistic, used) -> dict[str, np.ndarray]:
+    # --- the estimator's functions on the batch (numpy: the model's own methods) ---------
+    def _max_abs(self, x: Any) -> Any:
+        return np.max(np.abs(x), axis=1) if self.xp is NUMPY else x.abs().amax(1)
+
+    def _statistic(self, z: Any) -> Any:
+        """(B,) the χ² statistic of (B, m) readings (the non-centrality of injections)."""
+        if self.xp is NUMPY:
+            return np.asarray(self.env.estimation.statistic(z))
+        est = self.env.estimation
+        w = z * self._Linv.diagonal() if est._diag_Linv is not None else z @ self._Linv.T
+        r = w - (w @ self._Q) @ self._Q.T
+        return (r * r).sum(1)
+
+    def _lnr_alarm(self, z: Any) -> Any:
+        """(B,) bool: the largest-normalised-residual test alarms."""
+        est = self.env.estimation
+        if self.xp is NUMPY:
+            return np.asarray(est.alarm(z, "lnr"))
+        r = self.xp.where(self._critical, 0.0, (z @ self._ST) / self._lnr_scale)
+        return r.abs().amax(1) > est.lnr_threshold
+
+    def _detection_probability(self, a: Any) -> Any:
+        """(B,) the exact χ² detection probability of (B, m) injections."""
+        est = self.env.estimation
+        if self.xp is NUMPY:
+            return np.asarray(est.detection_probability(a), dtype=np.float64)
+        import torch
+
+        from fdia_env.stealth.torch_ops import ncx2_sf
+
+        w = a * self._Linv.diagonal() if est._diag_Linv is not None else a @ self._Linv.T
+        r = w - (w @ self._Q) @ self._Q.T
+        lam, size = (r * r).sum(1), torch.linalg.vector_norm(w, dim=1)
+        # as StaticEstimation.detection_probability: α where stealthy, 1 where certain
+        stealthy = torch.sqrt(lam) <= 1e-9 * torch.clamp(size, min=1e-300)
+        certain = est.dof + lam - est.threshold >= 2.0 * torch.sqrt((est.dof + 2.0 * lam) * 750.0)
+        out = torch.where(stealthy, torch.full_like(lam, est.alpha), torch.ones_like(lam))
+        seen = torch.nonzero(~stealthy & ~certain).flatten()
+        if seen.numel():
+            out[seen] = ncx2_sf(est.threshold, est.dof, lam[seen])
+        return out
+
+    def _infos(self, phi, detected, p, statistic, used) -> dict[str, Any]:
+        xp = self.xp
         info = {
-            "phi": np.asarray(phi, dtype=np.float64),
-            "step": self._k.copy(),
-            "detected": np.asarray(detected, dtype=bool),
-            "detection_probability": np.asarray(p, dtype=np.float64),
-            "statistic": np.asarray(statistic, dtype=np.float64),
-            "meters_used": np.asarray(used, dtype=np.int64),
+            "phi": xp.astype(phi, np.float64),
+            "step": xp.copy(self._k),
+            "detected": xp.astype(detected, np.bool_),
+            "detection_probability": xp.astype(p, np.float64),
+            "statistic": xp.astype(statistic, np.float64),
+            "meters_used": xp.astype(used, np.int64),
         }
-        mask = np.ones(self.num_envs, dtype=bool)
+        mask = xp.ones(self.num_envs, dtype=np.bool_)
         info.update({f"_{k}": mask for k in list(info)})
         return info
 
@@ -147,7 +234,7 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
     """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthAttack-v0"``.
 
     Raises:
-        ValueError: For ``backend``/``device`` other than numpy on the CPU, or a bad option.
+        ValueError: For an unknown backend, a device it cannot use, or a bad option.
     """
     backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
     agent = kwargs.pop("agent", "attacker")
@@ -157,12 +244,7 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
             "the native vector env plays the attacker alone (defender=None); use "
             "vectorization_mode='sync' for the defender's view"
         )
-    if backend != "numpy" or device not in (None, "cpu"):
-        raise ValueError(
-            f"backend={backend!r}, device={device!r}: the stealth env's native vector env runs "
-            "numpy on the CPU (backend='numpy')"
-        )
     autoreset = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
     if autoreset not in (AutoresetMode.NEXT_STEP, "next_step", "NextStep"):
         raise ValueError(f"autoreset_mode must be NEXT_STEP here, got {autoreset!r}")
-    return StealthVectorEnv(num_envs, **kwargs)
+    return StealthVectorEnv(num_envs, backend=backend, device=device, **kwargs)
