@@ -260,17 +260,10 @@ def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Referen
     policy is ``agent``'s equilibrium strategy (an informed attacker's: one mix per type, read
     from its observation). ``payoff`` is ``L̄`` for an uninformed attacker, else None.
     """
-    from baselines.game import MixedStrategyPolicy, TypedMixedStrategyPolicy, bayesian_game
+    from baselines.game import MixedStrategyPolicy, TypedMixedStrategyPolicy, bayesian_game_of
 
     attack = env.attack
-    game = bayesian_game(
-        env.scenario,
-        attack.types,
-        attack.priors,
-        attack.attacker_model,
-        attack.power,
-        attack.max_subset_size,
-    )
+    game = bayesian_game_of(env)
     sol = game.solution
     name = f"Bayesian equilibrium (LP, {attack.attacker_model} attacker)"
     payoff = game.mean_payoff if game.attacker == "uninformed" else None

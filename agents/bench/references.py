@@ -212,19 +212,11 @@ def sensor_game(spec: TaskSpec) -> References:
 
 def incomplete_information(spec: TaskSpec) -> References:
     """The Bayesian game's LP value; uniform play and the best pure strategy at worst case."""
-    from baselines.game import bayesian_game
+    from baselines.game import bayesian_game_of
 
     env = make(spec)
     try:
-        attack = env.unwrapped.parallel.attack
-        game = bayesian_game(
-            env.unwrapped.parallel.scenario,
-            attack.types,
-            attack.priors,
-            attack.attacker_model,
-            attack.power,
-            attack.max_subset_size,
-        )
+        game = bayesian_game_of(env.unwrapped.parallel)
     finally:
         env.close()
     m, n = game.matrices.shape[1:]
