@@ -27,10 +27,10 @@ import scipy.stats
 from gymnasium import spaces
 
 from agents.registry import Reference, by_gym_id, parallel_of
-from fdia_env.envs.single_agent import Policy
+from fdia_env.envs.policy import MaskedPolicyBase, Policy, batch_size
 
 
-class RandomPolicy:
+class RandomPolicy(MaskedPolicyBase):
     """Uniformly random legal actions (SB3 ``predict`` signature, reads ``action_masks``).
 
     Reproducible per episode: :func:`play` and :func:`play_batched` call
@@ -68,26 +68,18 @@ class RandomPolicy:
             return (space.start + rng.integers(0, space.nvec)).astype(space.dtype)
         return rng.uniform(space.low, space.high, space.shape).astype(space.dtype)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = False,
-        action_masks: np.ndarray | None = None,
-    ) -> tuple[Any, Any]:
+    def act(self, observation: Any, deterministic: bool = False, action_masks: Any = None) -> Any:
         """A uniformly random action (among ``action_masks`` when given); batched for (B, d)."""
-        obs = np.asarray(observation) if observation is not None else np.zeros(0)
-        if obs.ndim < 2:
-            return self._draw(self.rngs[0], action_masks), state
-        batch = obs.shape[0]
+        batch = batch_size(observation)
+        if batch is None:
+            return self._draw(self.rngs[0], action_masks)
         if len(self.rngs) != batch:
             raise ValueError(
                 f"RandomPolicy has {len(self.rngs)} episode generators for a batch of {batch}: "
                 "call seed_episodes() with one seed per member first"
             )
         masks = [None] * batch if action_masks is None else list(action_masks)
-        return np.stack([self._draw(r, m) for r, m in zip(self.rngs, masks, strict=True)]), state
+        return np.stack([self._draw(r, m) for r, m in zip(self.rngs, masks, strict=True)])
 
 
 @dataclass(frozen=True)

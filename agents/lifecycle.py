@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from agents.checkpoint import read_json
 from agents.interrupt import StopRequest, stop_on_signals
 from agents.runs import (
@@ -134,6 +136,50 @@ class RunFolder:
                 "evaluations": {k: v.to_dict() for k, v in evaluations.items()},
             },
         )
+
+
+def game_scores(
+    method: str,
+    value: float,
+    x: Any,
+    y: Any,
+    history: list[dict[str, Any]],
+    timesteps: int,
+    train_seconds: float,
+    **fields: Any,
+) -> dict[str, Any]:
+    """The ``scores.json`` fields of a matrix-game run (self-play or a population loop).
+
+    Args:
+        method: ``"selfplay"``, ``"ibr"``, ``"fsp"`` or ``"psro"``.
+        value: The game's value.
+        x: The defender's final mix.
+        y: The attacker's final mix.
+        history: The iteration records (non-empty; the last one's exploitability is scored).
+        timesteps: The env steps trained.
+        train_seconds: The training time.
+        **fields: More fields (the backend, the populations), placed after ``y``.
+
+    Example:
+        >>> import numpy as np
+        >>> rec = {"defender": 1.0, "attacker": 1.5, "nash_conv": 0.5, "relative_nash_conv": 0.25}
+        >>> scores = game_scores("fsp", 2.0, np.ones(2) / 2, np.ones(3) / 3, [rec], 64, 1.5)
+        >>> scores["final"], scores["iterations"], list(scores)[-2:]
+        ({'defender': 1.0, 'attacker': 1.5, 'nash_conv': 0.5}, 1, ['timesteps', 'train_seconds'])
+    """
+    last = history[-1]
+    return {
+        "method": method,
+        "value": value,
+        "x": np.asarray(x).tolist(),
+        "y": np.asarray(y).tolist(),
+        **fields,
+        "final": {k: last[k] for k in ("defender", "attacker", "nash_conv")},
+        "relative_nash_conv": last["relative_nash_conv"],
+        "iterations": len(history),
+        "timesteps": timesteps,
+        "train_seconds": train_seconds,
+    }
 
 
 def run_name(env: str, agent: str) -> str:

@@ -53,7 +53,7 @@ from agents.config import (
 )
 from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import StopRequest, StopTrainingCallback
-from agents.lifecycle import open_run, tensorboard
+from agents.lifecycle import game_scores, open_run, tensorboard
 from agents.plots import exploitability_curve
 from agents.population import (
     METHODS,
@@ -344,17 +344,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         train_seconds = history[-1]["train_seconds"]
         evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
         run.write_scores(
-            {
-                "method": cfg.method,
-                "value": value,
-                "x": x.tolist(),
-                "y": y.tolist(),
-                "final": {k: history[-1][k] for k in ("defender", "attacker", "nash_conv")},
-                "relative_nash_conv": history[-1]["relative_nash_conv"],
-                "iterations": len(history),
-                "timesteps": history[-1]["timesteps"],
-                "train_seconds": train_seconds,
-            },
+            game_scores(cfg.method, value, x, y, history, history[-1]["timesteps"], train_seconds),
             evaluations,
         )
         exploitability_curve(

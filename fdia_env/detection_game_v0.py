@@ -78,6 +78,7 @@ from fdia_env.defenses.detector import ThresholdDetector
 from fdia_env.detection.attack import c2_optimal_pbb
 from fdia_env.envs.factory import aec_views, episode_spec
 from fdia_env.envs.parallel import FdiaParallelEnv
+from fdia_env.envs.policy import PolicyBase, repeat_action
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import predict_cov
@@ -143,24 +144,15 @@ def parallel_env(
 raw_env, env = aec_views(parallel_env)
 
 
-class FixedAction:
+class FixedAction(PolicyBase):
     """A policy that always plays ``action`` (SB3 ``predict`` signature)."""
 
     def __init__(self, action: np.ndarray) -> None:
         self.action = np.asarray(action, dtype=np.float32)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
         """The fixed action, batched when the observation is a batch."""
-        obs = np.asarray(observation) if observation is not None else np.zeros(0)
-        if obs.ndim >= 2:
-            return np.repeat(self.action[None], obs.shape[0], axis=0), state
-        return self.action.copy(), state
+        return repeat_action(self.action, observation)
 
 
 def default_opponent(parallel: FdiaParallelEnv, agent: str) -> FixedAction:

@@ -302,6 +302,34 @@ def get(name: str, **kwargs: Any) -> Scenario:
     return _PRESETS[name](**kwargs)
 
 
+def scenario_default(sc: Scenario, name: str, value: Any) -> Any:
+    """``value`` if given, else the preset's ``name`` (its attribute, else its ``extra`` entry).
+
+    Args:
+        sc: The scenario whose preset fills the default.
+        name: The parameter (``"budget"``, ``"horizon"``, ``"power"``, or a key of ``extra``
+            such as ``"p1"``).
+        value: The caller's value; None takes the preset's.
+
+    Raises:
+        ValueError: ``"<name> is required: ..."`` when ``value`` is None and the preset defines
+            none.
+
+    Example:
+        >>> scenario_default(get("ch4-position"), "budget", None), scenario_default(
+        ...     get("ch4-position"), "budget", 3)
+        (5, 3)
+    """
+    if value is not None:
+        return value
+    preset = getattr(sc, name, None)
+    if preset is None:
+        preset = sc.extra.get(name)
+    if preset is None:
+        raise ValueError(f"{name} is required: scenario {sc.name!r} does not define one")
+    return preset
+
+
 def resolve(scenario: str | Scenario | LinearSystem) -> Scenario:
     """Accept a preset name, a :class:`Scenario` or a bare :class:`LinearSystem`."""
     if isinstance(scenario, Scenario):

@@ -196,3 +196,25 @@ def test_cloned_systems_keep_read_only_arrays_and_their_values(clone):
     with pytest.raises(ValueError, match="read-only"):
         system.F[0, 0] = 5.0
     np.testing.assert_allclose(steady_state(system)[0], steady_state(original)[0], rtol=1e-12)
+
+
+def test_check_system_names_the_parameter_and_the_type_given():
+    from fdia_env.scenarios import get
+    from fdia_env.systems import check_system
+
+    system = get("ch4-position").system
+    assert check_system(system) is system
+    with pytest.raises(ValueError, match="system_or_x must be a LinearSystem, got dict"):
+        check_system({}, "system_or_x")
+
+
+def test_scenario_default_reads_the_attribute_then_extra_and_names_what_is_missing():
+    from baselines.detection.problem import static_problem
+    from fdia_env.scenarios import get, scenario_default
+
+    sc = get("ch3-static")
+    assert scenario_default(sc, "p1", None) == sc.extra["p1"] == 0.85
+    assert scenario_default(sc, "p1", 0.5) == 0.5
+    assert static_problem(sc).p1 == 0.85  # the detection baseline's p1 comes from extra
+    with pytest.raises(ValueError, match="budget is required: scenario 'ch3-static'"):
+        scenario_default(sc, "budget", None)

@@ -14,9 +14,10 @@ import numpy as np
 from gymnasium import spaces
 
 from agents.rllib.envs import MASK, OBS
+from fdia_env.envs.policy import MaskedPolicyBase
 
 
-class RLlibPolicy:
+class RLlibPolicy(MaskedPolicyBase):
     """Wrap an RLlib (torch) RL module trained with :func:`agents.rllib.config.ppo_config`.
 
     Args:
@@ -66,15 +67,8 @@ class RLlibPolicy:
         p /= p.sum(axis=1, keepdims=True)
         return p if np.asarray(observation).ndim == 2 else p[0]
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = False,
-        action_masks: np.ndarray | None = None,
-    ) -> tuple[Any, Any]:
-        """SB3's ``predict``: the most likely (``deterministic``) or a sampled action."""
+    def act(self, observation: Any, deterministic: bool = False, action_masks: Any = None) -> Any:
+        """The most likely (``deterministic``) or a sampled action (SB3's ``predict``)."""
         batched = np.asarray(observation).ndim == 2
         space = self.action_space
         if isinstance(space, spaces.Discrete):
@@ -85,7 +79,7 @@ class RLlibPolicy:
                 u = self.rng.random((p.shape[0], 1))
                 a = np.minimum((p.cumsum(axis=1) < u).sum(axis=1), p.shape[1] - 1)
             a = (a + int(space.start)).astype(np.int64)
-            return (a if batched else a[0]), state
+            return a if batched else a[0]
         inputs = self.distribution_inputs(observation)
         d = int(np.prod(space.shape))
         mean, log_std = inputs[:, :d], inputs[:, d:]
@@ -94,7 +88,7 @@ class RLlibPolicy:
         low, high = space.low.reshape(-1), space.high.reshape(-1)
         a = low + (np.clip(a, -1.0, 1.0) + 1.0) * (high - low) / 2.0
         a = a.reshape(-1, *space.shape).astype(space.dtype)
-        return (a if batched else a[0]), state
+        return a if batched else a[0]
 
 
 def policy_of(algorithm: Any, player: str | None, action_space: spaces.Space, masked: bool):

@@ -31,7 +31,7 @@ import numpy as np
 
 from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
 from agents.evaluate import Evaluation
-from agents.lifecycle import RunFolder, run_name
+from agents.lifecycle import RunFolder, game_scores, run_name
 from agents.lifecycle import open_run as open_folder
 from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
@@ -360,16 +360,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         rows = final_evaluations(policy, ALGO, eval_env, reference, cfg.final_eval_episodes, seed)
         evaluations = {f"learned (RLlib {ALGO})": rows.pop(f"learned ({ALGO})"), **rows}
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
-        run.folder.write_scores(
-            {
-                "timesteps": steps,
-                "train_seconds": seconds,
-                "iterations": len(history),
-                "agent_returns": history[-1]["agent_returns"] if history else {},
-                "resumed": run.resumed,
-            },
-            evaluations,
-        )
+        run.folder.write_scores(_run_scores(run, history, steps, seconds), evaluations)
         return RLlibTrainResult(
             run_dir, policy, evaluations, history, steps, seconds, run.resumed, stop.signum
         )
@@ -431,6 +422,52 @@ def _start(
     begin(run, algo)
     _write_config(run, command, cfg, env, env_kwargs, hyperparameters, reference)
     return algo, run.folder.watch_signals()
+
+
+def _start_selfplay(
+    cfg: GameConfig,
+    stack: ExitStack,
+    report: Callable[[str], None] | None,
+    env_kwargs: dict[str, Any],
+    hyperparameters: dict[str, Any],
+    reference: Any,
+) -> tuple[Session, int, Any, Any]:
+    """The self-play drivers' start: :func:`open_run`, one iteration's length, :func:`_start`.
+
+    Returns:
+        The session, the env steps of one iteration, the algorithm and the stop request.
+    """
+    run = open_run(cfg, stack, report)
+    per_iteration = _per_iteration(cfg, run, hyperparameters)
+    algo, stop = _start(
+        run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game", env_kwargs,
+        hyperparameters, reference,
+    )  # fmt: skip
+    return run, per_iteration, algo, stop
+
+
+def _iterate_selfplay(
+    cfg: GameConfig, algo: Any, run: Session, stop: Any, per_iteration: int, on_iteration: Any
+) -> tuple[list[dict[str, Any]], int, float]:
+    """:func:`_iterate` over the self-play drivers' ``cfg.iterations`` iterations."""
+    return _iterate(
+        algo, cfg.iterations * per_iteration, run, stop, on_iteration,
+        progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
+    )  # fmt: skip
+
+
+def _run_scores(
+    run: Session, history: list[dict[str, Any]], steps: int, seconds: float, **fields: Any
+) -> dict[str, Any]:
+    """``scores.json``'s fields of an RLlib run: ``fields``, then its length and returns."""
+    return {
+        **fields,
+        "agent_returns": history[-1]["agent_returns"] if history else {},
+        "iterations": len(history),
+        "timesteps": steps,
+        "train_seconds": seconds,
+        "resumed": run.resumed,
+    }
 
 
 def _per_iteration(cfg: GameConfig, run: Session, hyperparameters: dict[str, Any]) -> int:
@@ -495,14 +532,17 @@ def initial_mixes(policies: dict[str, Any], parallel: Any) -> dict[str, np.ndarr
     return out
 
 
-def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, dict[str, int]]:
-    """Check a matrix game's options; its registry entries, env kwargs, exact game, sizes.
+def _matrix_game(
+    cfg: GameConfig,
+) -> tuple[dict[str, Any], dict[str, Any], Any, dict[str, int], dict[str, Any]]:
+    """Check a matrix game's options; its entries, env kwargs, exact game, sizes, PPO settings.
 
     Raises:
         ValueError: For an unknown game, algorithm or env option, or an env that is not a
             one-shot matrix game.
     """
     from agents.population import SIDES
+    from agents.rllib.config import rllib_hyperparameters
     from agents.training import check_env_kwargs
 
     if cfg.env not in game_names():
@@ -518,7 +558,7 @@ def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, 
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     reference.matrix_game()  # raises for the informed-attacker Bayesian game
-    return entries, env_kwargs, reference, n
+    return entries, env_kwargs, reference, n, rllib_hyperparameters(cfg.hp)
 
 
 def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
@@ -541,7 +581,6 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         FileExistsError: When a new run's folder exists.
     """
     from agents.population import SIDES
-    from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.envs import make_multi_agent
     from agents.rllib.policy import policy_of
     from agents.selfplay import SelfPlayResult, _final_evaluations
@@ -552,18 +591,14 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
     if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries, env_kwargs, reference, n = _matrix_game(cfg)
-    hyperparameters = rllib_hyperparameters(cfg.hp)
+    entries, env_kwargs, reference, n, hyperparameters = _matrix_game(cfg)
     L, value = reference.payoff, reference.value
     parallel = make_multi_agent(cfg.env, env_kwargs).parallel
     with ExitStack() as stack:
-        run = open_run(cfg, stack, report)
+        run, per_iteration, algo, stop = _start_selfplay(
+            cfg, stack, report, env_kwargs, hyperparameters, reference
+        )
         run_dir = run.run_dir
-        per_iteration = _per_iteration(cfg, run, hyperparameters)
-        algo, stop = _start(
-            run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game",
-            env_kwargs, hyperparameters, reference,
-        )  # fmt: skip
         policies = {
             side: policy_of(algo, side, parallel.action_space(side), False) for side in SIDES
         }
@@ -593,14 +628,8 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
             if len(mixes["attacker"]) % (per_iteration // hyperparameters["n_steps"]) == 0:
                 say(_selfplay_line(rec, value))
 
-        history, steps, seconds = _iterate(
-            algo,
-            cfg.iterations * per_iteration,
-            run,
-            stop,
-            on_iteration,
-            progress=cfg.run.progress_bar,
-            desc=f"RLlib self-play on {cfg.env}",
+        history, steps, seconds = _iterate_selfplay(
+            cfg, algo, run, stop, per_iteration, on_iteration
         )
         if not history:
             return SelfPlayResult(
@@ -610,23 +639,15 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
         run.folder.write_scores(
-            {
-                "method": "selfplay",
-                "backend": "rllib",
-                "value": value,
-                "x": x.tolist(),
-                "y": y.tolist(),
-                "final": {k: history[-1][k] for k in ("defender", "attacker", "nash_conv")},
-                "relative_nash_conv": history[-1]["relative_nash_conv"],
-                "last_iterate_relative_nash_conv": history[-1]["last_relative_nash_conv"],
-                "agent_returns": history[-1]["agent_returns"],
-                "iterations": len(history),
-                "timesteps": steps,
-                "train_seconds": seconds,
-                "resumed": run.resumed,
-            },
+            game_scores(
+                "selfplay", value, x, y, history, steps, seconds,
+                backend="rllib",
+                last_iterate_relative_nash_conv=history[-1]["last_relative_nash_conv"],
+                agent_returns=history[-1]["agent_returns"],
+                resumed=run.resumed,
+            ),
             evaluations,
-        )
+        )  # fmt: skip
         return SelfPlayResult(
             run_dir,
             "selfplay",
@@ -750,7 +771,6 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         FileExistsError: When a new run's folder exists.
     """
     from agents.population import METHODS, MatrixGame, PopulationState, report_line, run_population
-    from agents.rllib.config import rllib_hyperparameters
     from agents.runs import write_jsonl
     from agents.selfplay import SelfPlayResult, _final_evaluations
 
@@ -759,8 +779,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
     if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries, env_kwargs, reference, n = _matrix_game(cfg)
-    hyperparameters = rllib_hyperparameters(cfg.hp)
+    entries, env_kwargs, reference, n, hyperparameters = _matrix_game(cfg)
     L, value = reference.payoff, reference.value
     with ExitStack() as stack:
         run = open_run(cfg, stack, report, with_algorithm=False)
@@ -792,23 +811,13 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         seconds = history[-1]["train_seconds"]
         evaluations = _final_evaluations(entries, env_kwargs, reference, x, y, cfg)
         run.folder.write_scores(
-            {
-                "method": cfg.method,
-                "backend": "rllib",
-                "value": value,
-                "x": x.tolist(),
-                "y": y.tolist(),
-                "populations": pops,
-                "meta_payoff": meta.tolist(),
-                "final": {k: history[-1][k] for k in ("defender", "attacker", "nash_conv")},
-                "relative_nash_conv": history[-1]["relative_nash_conv"],
-                "iterations": len(history),
-                "timesteps": history[-1]["timesteps"],
-                "train_seconds": seconds,
-                "resumed": run.resumed,
-            },
+            game_scores(
+                cfg.method, value, x, y, history, history[-1]["timesteps"], seconds,
+                backend="rllib", populations=pops, meta_payoff=meta.tolist(),
+                resumed=run.resumed,
+            ),
             evaluations,
-        )
+        )  # fmt: skip
         return SelfPlayResult(
             run_dir, cfg.method, x, y, value, history, evaluations, pops, seconds,
             interrupted=stop.signum,
@@ -891,23 +900,19 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     env_kwargs = first.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(first.gym_id, env_kwargs)
     with ExitStack() as stack:
-        run = open_run(cfg, stack, report)
+        run, per_iteration, algo, stop = _start_selfplay(
+            cfg, stack, report, env_kwargs, hyperparameters, None
+        )
         run_dir = run.run_dir
-        per_iteration = _per_iteration(cfg, run, hyperparameters)
-        algo, stop = _start(
-            run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game",
-            env_kwargs, hyperparameters, None,
-        )  # fmt: skip
 
         def on_iteration(rec: dict[str, Any]) -> None:
             if rec["timesteps"] % per_iteration == 0:
                 returns = "  ".join(f"{k} {v:+.4g}" for k, v in rec["agent_returns"].items())
                 say(f"iter {rec['iteration']:3d}  steps {rec['timesteps']:8d}  returns {returns}")
 
-        history, steps, seconds = _iterate(
-            algo, cfg.iterations * per_iteration, run, stop, on_iteration,
-            progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
-        )  # fmt: skip
+        history, steps, seconds = _iterate_selfplay(
+            cfg, algo, run, stop, per_iteration, on_iteration
+        )
         evaluations = {}
         seed = derived_seed(cfg.run.seed, 20_000)
         for side, entry in entries.items():
@@ -922,18 +927,8 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
                         reference.policy, env, cfg.final_eval_episodes, seed, reference
                     )
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
-        run.folder.write_scores(
-            {
-                "method": "selfplay",
-                "backend": "rllib",
-                "agent_returns": history[-1]["agent_returns"] if history else {},
-                "iterations": len(history),
-                "timesteps": steps,
-                "train_seconds": seconds,
-                "resumed": run.resumed,
-            },
-            evaluations,
-        )
+        scores = _run_scores(run, history, steps, seconds, method="selfplay", backend="rllib")
+        run.folder.write_scores(scores, evaluations)
         return SelfPlayResult(
             run_dir, "selfplay", np.zeros(0), np.zeros(0), math.nan, history, evaluations, {},
             seconds, interrupted=stop.signum,

@@ -10,6 +10,7 @@ import numpy as np
 from baselines.sparse.policy import SparsePolicy
 from fdia_env._validation import check_int, check_psd
 from fdia_env.attacks.covariance import CovarianceAttack
+from fdia_env.envs.policy import PolicyBase
 
 
 def bound_attack(source: Any) -> tuple[CovarianceAttack, int | None]:
@@ -35,7 +36,7 @@ def bound_attack(source: Any) -> tuple[CovarianceAttack, int | None]:
     return attack, getattr(spec, "horizon", None)
 
 
-class CovariancePolicy:
+class CovariancePolicy(PolicyBase):
     """Plays a fixed open-loop plan of bias covariances ``Σ[0], Σ[1], ...`` (one per step).
 
     Each Σ is turned into the env's action once, at construction, by
@@ -111,19 +112,11 @@ class CovariancePolicy:
         self.actions = np.stack(actions).astype(np.float32)
         self.actions.setflags(write=False)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
-        """Return ``(action, state)``: the planned action for the current step, ``state`` as given.
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
+        """The planned action for the current step (the plan is open loop).
 
         Args:
             observation: The env's Box observation, unbatched (d,) or batched (B, d).
-            state: Ignored (the plan is open loop); returned as given.
-            episode_start: Ignored.
             deterministic: Ignored (the policy is deterministic).
 
         Returns:
@@ -131,4 +124,4 @@ class CovariancePolicy:
             (the terminal observation) the last step's action.
         """
         step = self.step_of(observation)
-        return self.actions[np.clip(step, 0, self.horizon - 1)].copy(), state
+        return self.actions[np.clip(step, 0, self.horizon - 1)].copy()

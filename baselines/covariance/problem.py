@@ -20,8 +20,8 @@ import numpy as np
 from baselines._inputs import resolve_system
 from fdia_env._validation import as_matrix, check_positive, check_psd
 from fdia_env.kalman import steady_state
-from fdia_env.scenarios import Scenario
-from fdia_env.systems import LinearSystem, power_weight
+from fdia_env.scenarios import Scenario, scenario_default
+from fdia_env.systems import LinearSystem, check_system, power_weight
 
 
 def weight_roots(weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -46,11 +46,7 @@ def check_weight(weight: Any, nz: int) -> np.ndarray:
 
 def resolve_power(scenario: Scenario, power: Any) -> float:
     """``power`` (a² > 0) if given, else the scenario's; ``ValueError`` naming ``power``."""
-    if power is None:
-        if scenario.power is None:
-            raise ValueError(f"power is required: scenario {scenario.name!r} does not define one")
-        power = scenario.power
-    return check_positive("power", power)
+    return check_positive("power", scenario_default(scenario, "power", power))
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,8 +75,7 @@ class CovarianceProblem:
     W_tilde: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.system, LinearSystem):
-            raise ValueError(f"system must be a LinearSystem, got {type(self.system).__name__}")
+        check_system(self.system)
         power = check_positive("power", self.power)
         weight = check_weight(self.weight, self.system.nz)
         _, P, W = steady_state(self.system)

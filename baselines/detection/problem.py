@@ -39,7 +39,7 @@ from fdia_env.kalman import (
     spd_inv_sum,
     steady_state,
 )
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario, resolve, scenario_default
 
 
 def check_probability(name: str, value: Any) -> float:
@@ -184,11 +184,7 @@ def _sym(a: np.ndarray) -> np.ndarray:
 
 
 def _resolve_p1(scenario: Scenario, p1: Any) -> float:
-    if p1 is None:
-        if "p1" not in scenario.extra:
-            raise ValueError(f"p1 is required: scenario {scenario.name!r} does not define one")
-        p1 = scenario.extra["p1"]
-    return check_probability("p1", p1)
+    return check_probability("p1", scenario_default(scenario, "p1", p1))
 
 
 def static_problem(

@@ -44,8 +44,8 @@ from fdia_env.attacks.subset import (
 )
 from fdia_env.attacks.subsets import game_sizes, subset_count, subsets
 from fdia_env.kalman import steady_state, steady_state_iterate
-from fdia_env.scenarios import Scenario
-from fdia_env.systems import LinearSystem
+from fdia_env.scenarios import Scenario, scenario_default
+from fdia_env.systems import LinearSystem, check_system
 
 # The allocation rules live with the env's attack model (one implementation for both):
 attack_covariance = allocation_covariance
@@ -136,8 +136,7 @@ class SensorGame:
     U: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.system, LinearSystem):
-            raise ValueError(f"system must be a LinearSystem, got {type(self.system).__name__}")
+        check_system(self.system)
         power = check_positive("power", self.power)
         check_choice("allocation", self.allocation, ALLOCATIONS)
         sensor_sigmas(self.system)
@@ -211,10 +210,7 @@ def make_game(
     presets), else every subset.
     """
     sc = resolve_system(system_or_scenario)
-    if power is None:
-        if sc.power is None:
-            raise ValueError(f"power is required: scenario {sc.name!r} does not define one")
-        power = sc.power
+    power = scenario_default(sc, "power", power)
     if max_subset_size is None:
         max_subset_size = sc.extra.get("max_subset_size")
     return SensorGame(sc.system, power, allocation, max_subset_size)

@@ -11,6 +11,7 @@ from baselines.game.lp import as_strategy
 from fdia_env._validation import check_int
 from fdia_env.attacks.subsets import subsets
 from fdia_env.envs.opponents import FixedMix
+from fdia_env.envs.policy import SampledPolicyBase, observation_array
 
 
 class MixedStrategyPolicy(FixedMix):
@@ -66,7 +67,7 @@ class MixedStrategyPolicy(FixedMix):
         return cls(probs, seed)
 
 
-class TypedMixedStrategyPolicy:
+class TypedMixedStrategyPolicy(SampledPolicyBase):
     """An informed attacker's strategy: mix ``probs[s]`` when its type is s.
 
     The type is read from the observation of ``sensor_game_v0(types=..., attacker_model=
@@ -95,23 +96,11 @@ class TypedMixedStrategyPolicy:
         self.probs.setflags(write=False)
         self.n_types, self.n_actions = self.probs.shape
         self._cdf = np.cumsum(self.probs, axis=1)
-        self.rng = np.random.default_rng(seed)
+        super().__init__(seed)
 
-    def reset(self, seed: int | None = None) -> None:
-        """Restart the generator from ``seed`` (nothing happens without one)."""
-        if seed is not None:
-            self.rng = np.random.default_rng(seed)
-
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = False,
-    ) -> tuple[Any, Any]:
-        """Return ``(action, state)``: an action drawn from the observed type's mix."""
-        obs = observation["observation"] if isinstance(observation, Mapping) else observation
-        obs = np.asarray(obs, dtype=np.float64)
+    def act(self, observation: Any, deterministic: bool = False) -> Any:
+        """An action drawn from the observed type's mix (``deterministic`` is ignored)."""
+        obs = observation_array(observation, dtype=np.float64)
         if obs.ndim not in (1, 2) or obs.shape[-1] < self.n_types:
             raise ValueError(
                 f"observation must end with the {self.n_types}-entry type one-hot, got shape "
@@ -124,4 +113,4 @@ class TypedMixedStrategyPolicy:
             [np.searchsorted(self._cdf[k], ui, side="right") for k, ui in zip(s, u, strict=True)]
         )
         a = np.minimum(a, self.n_actions - 1).astype(np.int64)
-        return (np.int64(a[0]) if obs.ndim == 1 else a), state
+        return np.int64(a[0]) if obs.ndim == 1 else a

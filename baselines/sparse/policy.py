@@ -9,12 +9,13 @@ import numpy as np
 
 from fdia_env._validation import check_int
 from fdia_env.attacks.sparse import MAX_SENSORS
+from fdia_env.envs.policy import PolicyBase, observation_array
 
 if TYPE_CHECKING:  # a result builds its policy (SparseResult.policy): the import goes that way
     from baselines.sparse.result import SparseResult
 
 
-class SparsePolicy:
+class SparsePolicy(PolicyBase):
     """Plays a fixed open-loop plan: at window step k, attack the sensors of ``actions[k]``.
 
     The step is recovered from the observation: ``observation[0] = steps_left / N`` in
@@ -91,25 +92,16 @@ class SparsePolicy:
 
     def step_of(self, observation: Any) -> np.ndarray:
         """Window step(s) encoded in a (d,) or (B, d) observation (dict or plain Box)."""
-        obs = observation["observation"] if isinstance(observation, dict) else observation
-        obs = np.asarray(obs, dtype=np.float64)
+        obs = observation_array(observation, dtype=np.float64)
         steps_left = np.rint(obs[..., 0] * self.horizon).astype(np.int64)
         return self.horizon - steps_left
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[Any, Any]:
-        """Return ``(action, state)``: the bitmask for the current step and ``state`` unchanged.
+    def act(self, observation: Any, deterministic: bool = False) -> Any:
+        """The bitmask for the current step (the plan is open loop).
 
         Args:
             observation: The env's dict observation (``{"observation", "action_mask"}``) or the
                 Gymnasium view's Box, unbatched (d,) or batched (B, d).
-            state: Ignored (the plan is open loop); returned as given.
-            episode_start: Ignored.
             deterministic: Ignored (the policy is deterministic).
 
         Returns:
@@ -119,20 +111,17 @@ class SparsePolicy:
         step = self.step_of(observation)
         inside = (step >= 0) & (step < self.horizon)
         if self.sequential:
-            return self._sequential_action(observation, step, inside), state
+            return self._sequential_action(observation, step, inside)
         if self.actions.ndim == 2:  # MultiBinary rows; zeros outside the window
             rows = self.actions[np.clip(step, 0, self.horizon - 1)]
-            return np.where(np.asarray(inside)[..., None], rows, 0).astype(np.int8), state
+            return np.where(np.asarray(inside)[..., None], rows, 0).astype(np.int8)
         action = np.where(inside, self.actions[np.clip(step, 0, self.horizon - 1)], 0)
-        if action.ndim == 0:
-            return np.int64(action), state
-        return action, state
+        return np.int64(action) if action.ndim == 0 else action
 
     def _sequential_action(self, observation: Any, step: np.ndarray, inside: np.ndarray) -> Any:
         """Next sensor (1-based) of the step's row not yet in the set, else 0 (stop)."""
-        obs = observation["observation"] if isinstance(observation, dict) else observation
         M = self.actions.shape[1]
-        chosen = np.asarray(obs, dtype=np.float64)[..., -(M + 1) : -1] > 0.5
+        chosen = observation_array(observation, dtype=np.float64)[..., -(M + 1) : -1] > 0.5
         todo = (self.actions[np.clip(step, 0, self.horizon - 1)] == 1) & ~chosen
         todo &= np.asarray(inside)[..., None]
         action = np.where(todo.any(-1), todo.argmax(-1) + 1, 0).astype(np.int64)

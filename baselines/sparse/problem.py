@@ -20,8 +20,8 @@ import numpy as np
 from baselines._inputs import resolve_system
 from fdia_env._validation import check_choice, check_int
 from fdia_env.kalman import information_update, objective, predict_cov, steady_state
-from fdia_env.scenarios import Scenario
-from fdia_env.systems import LinearSystem
+from fdia_env.scenarios import Scenario, scenario_default
+from fdia_env.systems import LinearSystem, check_system
 
 MAX_HORIZON = 10_000  # longest attack window N a sparse problem accepts
 
@@ -53,8 +53,7 @@ class SparseProblem:
     size: int = field(init=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.system, LinearSystem):
-            raise ValueError(f"system must be a LinearSystem, got {type(self.system).__name__}")
+        check_system(self.system)
         # an attack window beyond MAX_HORIZON steps is no search problem (numpy would fail to
         # allocate its masks, naming nothing); the covariance multi-shot uses the same bound
         horizon = check_int("horizon", self.horizon, minimum=1, maximum=MAX_HORIZON)
@@ -133,12 +132,6 @@ def make_problem(
             than ``M·N``; a horizon below 1; an unknown objective or scenario.
     """
     sc = resolve_system(system_or_scenario)
-    if budget is None:
-        if sc.budget is None:
-            raise ValueError(f"budget is required: scenario {sc.name!r} does not define one")
-        budget = sc.budget
-    if horizon is None:
-        if sc.horizon is None:
-            raise ValueError(f"horizon is required: scenario {sc.name!r} does not define one")
-        horizon = sc.horizon
+    budget = scenario_default(sc, "budget", budget)
+    horizon = scenario_default(sc, "horizon", horizon)
     return SparseProblem(sc.system, budget, horizon, objective)

@@ -6,8 +6,11 @@ from typing import Any
 
 import numpy as np
 
+from fdia_env.envs.opponents import FixedMix
+from fdia_env.envs.policy import PolicyBase, repeat_action
 
-class StealthPolicy:
+
+class StealthPolicy(PolicyBase):
     """Plays one fixed action at every step (the static attack is the same on every snapshot).
 
     Args:
@@ -44,22 +47,12 @@ class StealthPolicy:
         self.kind = kind
         self.action.setflags(write=False)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
-        """Return ``(action, state)``: the fixed action, (B, d) for a (B, 3) batch."""
-        obs = observation["observation"] if isinstance(observation, dict) else observation
-        obs = np.asarray(obs)
-        if obs.ndim == 2:
-            return np.tile(self.action, (obs.shape[0], 1)), state
-        return self.action.copy(), state
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
+        """The fixed action, (B, d) for a (B, 3) batch."""
+        return repeat_action(self.action, observation)
 
 
-class MixedActionPolicy:
+class MixedActionPolicy(PolicyBase):
     """Plays row ``i`` of a fixed action table with probability ``probs[i]``, every step anew.
 
     An equilibrium's mixed strategy as a policy (the protection game's attacker over its
@@ -83,8 +76,6 @@ class MixedActionPolicy:
     def __init__(
         self, actions: Any, probs: Any, seed: int | None = None, dtype: Any = np.float32
     ) -> None:
-        from fdia_env.envs.opponents import FixedMix
-
         table = np.array(actions, dtype=np.float64)
         if table.ndim != 2 or 0 in table.shape or not np.all(np.isfinite(table)):
             raise ValueError(f"actions must be a finite (K, d) table, got shape {table.shape}")
@@ -106,13 +97,6 @@ class MixedActionPolicy:
         """Restart the generator from ``seed`` (nothing happens without one)."""
         self.mix.reset(seed)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = False,
-    ) -> tuple[np.ndarray, Any]:
-        """Return ``(action, state)``: a drawn row, or (B, d) rows for a (B, ...) batch."""
-        index, state = self.mix.predict(observation, state, episode_start, deterministic)
-        return self.actions[np.asarray(index)].copy(), state
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
+        """A drawn row, or (B, d) rows for a (B, ...) batch."""
+        return self.actions[np.asarray(self.mix.act(observation))].copy()

@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import numbers
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env.backend import NUMPY, Backend
+from fdia_env.backend import NUMPY, ONE, Backend
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
 
-@dataclass(frozen=True)
-class AttackEffect:
+class AttackEffect(NamedTuple):
     """What an attack does to one filter step.
 
     Attributes:
@@ -31,6 +29,8 @@ class AttackEffect:
     attacked: int
     sigma: np.ndarray | None = None
     probability: float = 1.0
+
+    # a NamedTuple (immutable, built every step: cheaper than a frozen dataclass)
 
 
 def bits_to_mask(bits: int, M: int) -> np.ndarray:
@@ -74,6 +74,21 @@ class AttackModel(ABC):
 
     Models are built with their own parameters only; the environment calls :meth:`bind`
     once with the system and episode spec, which builds the spaces.
+
+    **One implementation per model.** A model writes its logic once, in the ``batch_*`` methods
+    over (B, ...) arrays of the backend :attr:`xp` (numpy, or torch for the models that list it
+    in :attr:`batch_backends`); they are what the native vector envs (:mod:`fdia_env.vector`)
+    call. The single env (:class:`~fdia_env.envs.parallel.FdiaParallelEnv` and its views) is
+    the batch of one: :meth:`reset`, :meth:`features`, :meth:`action_mask`, :meth:`apply`,
+    :meth:`info`, :meth:`private_info`, :meth:`draw_nature` and :meth:`observe_opponent` below
+    run the ``batch_*`` methods on the backend :data:`~fdia_env.backend.ONE`, where the batch
+    axis is dropped: a (B,) array is member 0's Python scalar, a (B, ...) array member 0's
+    (...) numpy array (see :mod:`fdia_env.backend.one`). A subclass overrides none of them. So
+    that one code runs on every backend, a model indexes the batch axis only through
+    ``xp.col`` (``x[:, None]``) and ``xp.member`` (``x[i]``), and keeps lookup tables built
+    once (in :meth:`bind` or on first use) rather than per reset or step.
+    A model instance serves one env at a time (the native vector env built from a parallel
+    env takes over its models and resets them as a batch of B).
     """
 
     name: str = "attack"
@@ -84,24 +99,7 @@ class AttackModel(ABC):
 
     @abstractmethod
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
-        """Attach to a system and episode; build spaces here, once."""
-
-    @abstractmethod
-    def reset(self) -> None:
-        """Start an episode."""
-
-    @abstractmethod
-    def features(self) -> list[float]:
-        """Model-specific observation features, scaled to order one."""
-
-    def draw_nature(  # noqa: B027 - optional hook
-        self, rng: np.random.Generator, options: dict[str, Any]
-    ) -> None:
-        """Nature's draws of an episode (e.g. the attacker's type), at every reset.
-
-        Called after the simulation's own draws, with the env's generator and reset's
-        ``options`` (the keys in :attr:`reset_options`).
-        """
+        """Attach to a system and episode; build spaces (and lookup tables) here, once."""
 
     def check_reset_options(self, options: dict[str, Any]) -> None:  # noqa: B027 - optional
         """Raise ``ValueError`` for a bad value of one of :attr:`reset_options`.
@@ -109,20 +107,41 @@ class AttackModel(ABC):
         Called before reset changes anything.
         """
 
-    def private_info(self) -> dict[str, Any]:
-        """Information only the attacker receives (its infos, not the defender's)."""
-        return {}
+    # --- the single env: the batch of one ---------------------------------------------------
+    def reset(self) -> None:
+        """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
+        self.xp = ONE
+        self.batch_reset(1)
 
-    def observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
-        """Called after each step with the other player's model (repeated games use it)."""
+    def draw_nature(self, rng: np.random.Generator, options: dict[str, Any]) -> None:
+        """Nature's draws of an episode (e.g. the attacker's type), at every reset.
+
+        Called after the simulation's own draws, with the env's generator and reset's
+        ``options`` (the keys in :attr:`reset_options`).
+        """
+        self.batch_draw_nature([rng], None, options)
+
+    def features(self) -> list[float]:
+        """Model-specific observation features, scaled to order one."""
+        values = self.batch_features()
+        return values if type(values) is list else values.tolist()
 
     def action_mask(self) -> np.ndarray | None:
         """Legal discrete actions (int8, 1 = legal) or None when every action is legal."""
-        return None
+        return self.batch_action_mask()
 
-    @abstractmethod
     def apply(self, action: Any) -> AttackEffect:
-        """Validate ``action`` (raise ``ValueError`` if outside the space) and act."""
+        """Validate ``action`` (``ValueError`` if outside the space) and act."""
+        from fdia_env.envs.actions import check_action  # the envs' check (a higher layer)
+
+        check_action(self.action_space, action, "attacker")
+        return self.apply_checked(action)
+
+    def apply_checked(self, action: Any) -> AttackEffect:
+        """Act on an action already checked against :attr:`action_space` (the env's step)."""
+        bits, sigma = self.batch_apply(action)
+        probability = self.batch_probability()
+        return AttackEffect(int(bits), sigma, 1.0 if probability is None else probability)
 
     def info(self) -> dict[str, Any]:
         """Per-step information for the ``infos`` dict.
@@ -131,23 +150,31 @@ class AttackModel(ABC):
         fixed-shape numpy array (so vector envs and client libraries can batch them); after
         :meth:`reset` the values describe "nothing happened yet" (zeros, the full budget).
         """
-        return {}
+        return self.batch_info()
 
-    # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
-    # The batch state lives in attributes prefixed ``b_``; it is independent of the single-env
-    # state above, and each batch method must equal its single-env twin member by member.
-    # The batch arrays belong to the backend ``xp`` (the vector env sets it before
-    # ``batch_reset``); ``batch_backends`` names the backends a model implements. On both
-    # backends the vector env has checked the actions' type, shape and range (and on torch the
-    # device) before ``batch_apply``, once per step (fdia_env.envs.actions): ``batch_apply``
-    # takes them as valid. On torch, sensor sets may be (B, M) boolean masks, not bitmasks.
+    def private_info(self) -> dict[str, Any]:
+        """Information only the attacker receives (its infos, not the defender's)."""
+        return self.batch_private_info()
+
+    def observe_opponent(self, other: Any) -> None:
+        """Called after each step with the other player's model (repeated games use it)."""
+        self.batch_observe_opponent(other)
+
+    # --- the one implementation, over batches ------------------------------------------------
+    # The batch state lives in attributes prefixed ``b_``. The batch arrays belong to the
+    # backend ``xp`` (the vector env sets it before ``batch_reset``; the single env uses numpy);
+    # ``batch_backends`` names the backends a model implements. On both backends the env has
+    # checked the actions' type, shape and range (and on torch the device) before
+    # ``batch_apply``, once per step (fdia_env.envs.actions): ``batch_apply`` takes them as
+    # valid. On torch, sensor sets may be (B, M) boolean masks, not bitmasks. The arrays a
+    # ``batch_*`` method returns are not changed afterwards (a step makes new ones).
 
     xp: Backend = NUMPY
     batch_backends: tuple[str, ...] = ("numpy",)
 
+    @abstractmethod
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Start episodes for the batch members ``where`` (all when None) of ``batch``."""
-        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
 
     def batch_draw_nature(  # noqa: B027 - optional hook
         self,
@@ -155,30 +182,34 @@ class AttackModel(ABC):
         where: np.ndarray | None = None,
         options: dict[str, Any] | None = None,
     ) -> None:
-        """Batched :meth:`draw_nature`: member ``i`` draws from ``rngs[i]``."""
+        """Nature's draws of the members ``where``: member ``i`` draws from ``rngs[i]``."""
 
     def batch_private_info(self) -> dict[str, np.ndarray]:
-        """Batched :meth:`private_info`."""
+        """(B, ...) values of the attacker's private infos."""
         return {}
 
     def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
-        """Batched :meth:`observe_opponent`."""
+        """Called after each step with the other player's model (repeated games use it)."""
 
+    @abstractmethod
     def batch_features(self) -> np.ndarray:
         """(B, f) features of every batch member."""
-        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
 
     def batch_action_mask(self) -> np.ndarray | None:
-        """(B, A) legal actions (int8) or None."""
+        """(B, A) legal actions (int8, a new array) or None."""
         return None
 
     def batch_info(self) -> dict[str, np.ndarray]:
-        """Batched :meth:`info`: each key's values of the B members stacked on axis 0."""
+        """Each info key's values of the B members stacked on axis 0."""
         return {}
 
+    @abstractmethod
     def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Act on checked (B, ...) actions: ``(attacked bits (B,), Σ (B, nz, nz) or None)``."""
-        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")
+
+    def batch_probability(self) -> np.ndarray | None:
+        """(B,) probabilities that the last :meth:`batch_apply` injects its bias (None = 1)."""
+        return None
 
 
 def as_index(action: Any) -> int | None:

@@ -23,8 +23,8 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_power, check_psd
-from fdia_env.attacks.base import AttackEffect, AttackModel, mask_array_to_bits
-from fdia_env.backend import NUMPY, Backend, namespace
+from fdia_env.attacks.base import AttackModel, mask_array_to_bits, mask_to_bits
+from fdia_env.backend import NUMPY, ONE, Backend, namespace
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman.linalg import psd_sqrt, sym
 from fdia_env.systems import LinearSystem, power_weight
@@ -51,22 +51,17 @@ class CovarianceMap:
         self.size = sum(len(t[0]) for t in self._tril)
 
     def to_sigma(self, entries: np.ndarray, power: float) -> np.ndarray:
-        """Σ with ``tr(Ω Σ) = power`` from (size,) factor entries."""
-        L = np.zeros((self.nz, self.nz))
-        start = 0
-        for block, (r, c) in zip(self.blocks, self._tril, strict=True):
-            L[block.start + r, block.start + c] = entries[start : start + len(r)]
-            start += len(r)
-        shape = L @ L.T
-        total = np.trace(shape)
-        shape = np.eye(self.nz) / self.nz if total <= 0.0 else shape / total
-        return sym(power * (self.w_inv_half @ shape @ self.w_inv_half))
+        """Σ with ``tr(Ω Σ) = power`` from (size,) factor entries (one :meth:`to_sigma_batch`)."""
+        return self.to_sigma_batch(np.asarray(entries, dtype=np.float64), power)
 
     def to_sigma_batch(self, entries: Any, power: Any) -> Any:
-        """(B, nz, nz) covariances from (B, size) entries and (B,) powers (as :meth:`to_sigma`).
+        """(B, nz, nz) covariances with ``tr(Ω Σ) = power`` from (B, size) entries, (B,) powers.
 
-        numpy arrays or torch tensors (:mod:`fdia_env.backend`).
+        numpy arrays or torch tensors (:mod:`fdia_env.backend`). One member's (size,) entries
+        and scalar power (the batch of one, :mod:`fdia_env.backend.one`) give its (nz, nz) Σ.
         """
+        if entries.ndim == 1:  # one member: the batch of one
+            return self.to_sigma_batch(entries[None], np.array([float(power)]))[0]
         xp = namespace(entries)
         tril, eye, w_inv_half = self._constants(xp)
         B = entries.shape[0]
@@ -139,8 +134,6 @@ class CovarianceAttack(AttackModel):
         self.structure = check_choice("structure", structure, STRUCTURES)
         self.power_mode = check_choice("power_mode", power_mode, POWER_MODES)
         self._weight = weight
-        self.remaining = self.power
-        self.last_sigma: np.ndarray | None = None
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Build the action map for ``system``'s stacked measurement."""
@@ -165,38 +158,28 @@ class CovarianceAttack(AttackModel):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(dim,), dtype=np.float32)
         self._row_sensor = system.row_sensor
         self._M = system.M
+        self._b_xp = None  # the backend of the cached constant (see batch_reset)
         n_feat = int(self._budget)
         self.feature_low = np.zeros(n_feat, dtype=np.float32)
         self.feature_high = np.ones(n_feat, dtype=np.float32)
 
-    def reset(self) -> None:
-        """Restore the full power."""
-        self.remaining = self.power
-        self.last_sigma = None
-        self.last_power = 0.0
-
-    def features(self) -> list[float]:
-        """Power left / a² in budget mode."""
-        return [self.remaining / self.power] if self._budget else []
+    @property
+    def remaining(self) -> float:
+        """The power left of the single env (member 0 of the batch)."""
+        return float(self.xp.member(self.b_remaining, 0))
 
     def action_to_sigma(self, action: Any) -> tuple[np.ndarray, float]:
-        """Validate ``action`` and return ``(Σ, power spent)`` without changing the state."""
-        a = np.asarray(action, dtype=np.float64) if _numeric(action) else None
-        if a is None or a.shape != self.action_space.shape:
-            raise ValueError(
-                f"attacker action must be an array of shape {self.action_space.shape} in [-1, 1], "
-                f"got {action!r}"
-            )
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"attacker action must be finite (no NaN or inf), got {a.tolist()}")
-        if np.any(np.abs(a) > 1.0 + 1e-6):
-            raise ValueError(f"attacker action must lie in [-1, 1], got {a.tolist()}")
-        if self._budget:
-            spend = 0.5 * (float(np.clip(a[0], -1.0, 1.0)) + 1.0) * self.remaining
-            entries = a[1:]
-        else:
-            spend, entries = self.power, a
-        return self.map.to_sigma(np.clip(entries, -1.0, 1.0), spend), spend
+        """Validate ``action`` and return ``(Σ, power spent)`` without changing the state.
+
+        The power left is the single env's (the full power before its first reset).
+        """
+        from fdia_env.envs.actions import check_action  # the envs' check (a higher layer)
+
+        check_action(self.action_space, action, "attacker")
+        remaining = self.remaining if hasattr(self, "b_remaining") else self.power
+        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        spend, entries = self._spend(ONE, a, remaining)
+        return self.map.to_sigma(entries, spend), float(spend)
 
     def sigma_to_action(self, sigma: np.ndarray, fraction: float | None = None) -> np.ndarray:
         """The action whose covariance is ``sigma`` (scaled to the power), float32.
@@ -211,19 +194,6 @@ class CovarianceAttack(AttackModel):
             entries = np.concatenate([[2.0 * f - 1.0], entries])
         return entries.astype(np.float32)
 
-    def apply(self, action: Any) -> AttackEffect:
-        """Spend power on the covariance the action maps to."""
-        sigma, spend = self.action_to_sigma(action)
-        self.remaining = max(self.remaining - spend, 0.0) if self._budget else self.power
-        self.last_sigma, self.last_power = sigma, spend
-        diag = np.diag(sigma) > 0.0
-        attacked = sum(1 << int(i) for i in set(self._row_sensor[diag].tolist()))
-        return AttackEffect(attacked=attacked, sigma=sigma)
-
-    def info(self) -> dict[str, Any]:
-        """Power spent this step and power left."""
-        return {"power": float(self.last_power), "power_left": float(self.remaining)}
-
     # --- batched (see AttackModel; numpy or torch arrays of the backend ``xp``) -------------
     batch_backends = ("numpy", "torch")
 
@@ -231,8 +201,14 @@ class CovarianceAttack(AttackModel):
         """Restore the full power of the members ``where``."""
         xp = self.xp
         if where is None:
+            self._batch = batch
             self.b_remaining = xp.full(batch, self.power, dtype=xp.float64)
             self.b_power = xp.zeros(batch)
+            if self._b_xp is not xp:  # the backend's constant, once per backend change
+                # owner[row, sensor] = 1: a sensor is attacked when any of its rows has bias
+                owner = np.zeros((self._row_sensor.size, self._M))
+                owner[np.arange(self._row_sensor.size), self._row_sensor] = 1.0
+                self._b_owner, self._b_xp = xp.asarray(owner), xp
         else:
             self.b_remaining[where] = self.power
             self.b_power[where] = 0.0
@@ -240,37 +216,30 @@ class CovarianceAttack(AttackModel):
     def batch_features(self) -> Any:
         """(B, 1) power left / a² in budget mode, (B, 0) per step."""
         if self._budget:
-            return (self.b_remaining / self.power)[:, None]
-        return self.xp.zeros((self.b_remaining.shape[0], 0))
+            return self.xp.col(self.b_remaining / self.power)
+        return self.xp.zeros((self._batch, 0))
+
+    def _spend(self, xp: Backend, a: Any, remaining: Any) -> tuple[Any, Any]:
+        """(B,) power spent and (B, size) factor entries of clipped (B, d) actions."""
+        if self._budget:
+            return 0.5 * (a[..., 0] + 1.0) * remaining, a[..., 1:]
+        return xp.full(self._batch, self.power, dtype=xp.float64), a
 
     def batch_apply(self, actions: Any) -> tuple[Any, Any]:
-        """Map (B, d) actions to covariances, spending power as :meth:`apply` does."""
+        """Map (B, d) actions to covariances, spending power (the budget mode's fraction)."""
         xp = self.xp
-        a = xp.astype(actions, xp.float64)  # checked by the vector env (shape, finite, in Box)
-        a = xp.clip(a, -1.0, 1.0)
+        a = xp.astype(actions, xp.float64)  # checked by the env (shape, finite, in Box)
+        spend, entries = self._spend(xp, xp.clip(a, -1.0, 1.0), self.b_remaining)
         if self._budget:
-            spend = 0.5 * (a[:, 0] + 1.0) * self.b_remaining
-            entries = a[:, 1:]
             self.b_remaining = xp.maximum(self.b_remaining - spend, 0.0)
-        else:
-            spend, entries = xp.full(a.shape[0], self.power, dtype=xp.float64), a
         self.b_power = xp.copy(spend)
         sigma = self.map.to_sigma_batch(entries, spend)
         rows = xp.diagonal(sigma) > 0.0  # (B, nz)
-        # a sensor is attacked when any of its rows carries bias
-        owner = np.zeros((self._row_sensor.size, self._M))
-        owner[np.arange(self._row_sensor.size), self._row_sensor] = 1.0
-        attacked = xp.astype(rows, xp.float64) @ xp.asarray(owner) > 0.0
+        attacked = xp.astype(rows, xp.float64) @ self._b_owner > 0.0  # (B, M)
+        if xp is ONE:
+            return mask_to_bits(attacked), sigma
         return (mask_array_to_bits(attacked) if xp is NUMPY else attacked), sigma
 
     def batch_info(self) -> dict[str, Any]:
-        """Batched :meth:`info`."""
+        """``power`` spent this step and ``power_left``."""
         return {"power": self.xp.copy(self.b_power), "power_left": self.xp.copy(self.b_remaining)}
-
-
-def _numeric(action: Any) -> bool:
-    try:
-        np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return action is not None

@@ -7,7 +7,6 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env.attacks.base import AttackEffect
 from fdia_env.attacks.covariance import CovarianceAttack
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -29,12 +28,10 @@ class ProbabilisticAttack(CovarianceAttack):
 
     def __init__(self, power: float, structure: str = "full", weight: np.ndarray | None = None):
         super().__init__(power, structure=structure, power_mode="per_step", weight=weight)
-        self.last_probability = 0.0
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Covariance map plus the probability entry."""
         super().bind(system, spec)
-        self._cov_space = self.action_space
         self.action_space = spaces.Box(-1.0, 1.0, shape=(self.map.size + 1,), dtype=np.float32)
 
     def to_action(self, probability: float, sigma: np.ndarray) -> np.ndarray:
@@ -44,35 +41,8 @@ class ProbabilisticAttack(CovarianceAttack):
         cov = super().sigma_to_action(sigma)
         return np.concatenate([[2.0 * float(probability) - 1.0], cov]).astype(np.float32)
 
-    def apply(self, action: Any) -> AttackEffect:
-        """Attack with the probability and covariance the action maps to."""
-        a = np.asarray(action, dtype=np.float64) if _is_vector(action) else None
-        if a is None or a.shape != self.action_space.shape:
-            raise ValueError(
-                f"attacker action must be an array of shape {self.action_space.shape} in [-1, 1], "
-                f"got {action!r}"
-            )
-        if not np.isfinite(a[0]) or abs(a[0]) > 1.0 + 1e-6:
-            raise ValueError(f"attacker action must be finite and in [-1, 1], got {a.tolist()}")
-        self.action_space, space = self._cov_space, self.action_space
-        try:
-            effect = super().apply(a[1:])
-        finally:
-            self.action_space = space
-        self.last_probability = 0.5 * (float(np.clip(a[0], -1.0, 1.0)) + 1.0)
-        return AttackEffect(effect.attacked, effect.sigma, probability=self.last_probability)
-
-    def info(self) -> dict[str, Any]:
-        """Attack probability and power."""
-        return {**super().info(), "attack_probability": float(self.last_probability)}
-
-    def reset(self) -> None:
-        """Restore the power; no attack drawn yet (``attack_probability`` 0 in the info)."""
-        super().reset()
-        self.last_probability = 0.0
-
     def batch_reset(self, batch: int, where: Any = None) -> None:
-        """Batched :meth:`reset`."""
+        """Restore the power of the members ``where``; no attack drawn yet (probability 0)."""
         super().batch_reset(batch, where)
         if where is None:
             self.b_probability = self.xp.zeros(batch)
@@ -80,21 +50,17 @@ class ProbabilisticAttack(CovarianceAttack):
             self.b_probability[where] = 0.0
 
     def batch_info(self) -> dict[str, Any]:
-        """Batched :meth:`info`."""
+        """The covariance attack's infos plus ``attack_probability``."""
         return {**super().batch_info(), "attack_probability": self.xp.copy(self.b_probability)}
 
     def batch_apply(self, actions: Any) -> tuple[Any, Any]:
-        """Batched :meth:`apply`; the attack probabilities are kept in ``b_probability``."""
+        """Attack with the probabilities and covariances the (B, 1 + size) actions map to."""
         xp = self.xp
-        a = xp.astype(actions, xp.float64)  # checked by the vector env (shape, finite, in Box)
-        attacked, sigma = super().batch_apply(a[:, 1:])
-        self.b_probability = 0.5 * (xp.clip(a[:, 0], -1.0, 1.0) + 1.0)
+        a = xp.astype(actions, xp.float64)  # checked by the env (shape, finite, in Box)
+        attacked, sigma = super().batch_apply(a[..., 1:])
+        self.b_probability = 0.5 * (xp.clip(a[..., 0], -1.0, 1.0) + 1.0)
         return attacked, sigma
 
-
-def _is_vector(action: Any) -> bool:
-    try:
-        np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return action is not None
+    def batch_probability(self) -> Any:
+        """(B,) probabilities of the last :meth:`batch_apply`."""
+        return self.b_probability

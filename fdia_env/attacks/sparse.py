@@ -9,13 +9,11 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.base import (
-    AttackEffect,
     AttackModel,
-    as_index,
-    bits_to_mask,
     mask_array_to_bits,
+    mask_to_bits,
 )
-from fdia_env.backend import NUMPY
+from fdia_env.backend import NUMPY, ONE
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -81,8 +79,6 @@ class SparseAttack(AttackModel):
             )
         self.action_format = check_choice("action", action, ACTION_FORMATS)
         self.illegal_action = check_choice("illegal_action", illegal_action, ILLEGAL_ACTIONS)
-        self.remaining = self.budget
-        self.last_attacked = 0
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Build the action space for ``system`` and check the budget fits the window."""
@@ -102,6 +98,7 @@ class SparseAttack(AttackModel):
             )
         self.M = system.M
         self.format = fmt
+        self._b_xp = None  # the backend of the cached constants (see batch_reset)
         self.feature_low = np.zeros(1, dtype=np.float32)
         self.feature_high = np.ones(1, dtype=np.float32)
         if fmt != "bitmask":
@@ -109,18 +106,8 @@ class SparseAttack(AttackModel):
             return
         self.n_actions = 2**system.M
         self.action_space = spaces.Discrete(self.n_actions)
-        sizes = np.array([a.bit_count() for a in range(self.n_actions)])
-        self._sizes = sizes
-        # the (M,) int8 rows of info()["attacked"] for every subset, looked up per step (for
-        # M <= 10: at most 10 KiB per env; bits_to_mask costs more than the rest of the info)
-        self._info_rows = None
-        if system.M <= 10:
-            bits = (np.arange(self.n_actions)[:, None] >> np.arange(system.M)) & 1
-            self._info_rows = bits.astype(np.int8)
-        self._trim_table: np.ndarray | None = None  # built on first batched use
-        self._masks = [
-            (sizes <= r).astype(np.int8) for r in range(self.budget + 1)
-        ]  # per budget left
+        self._sizes = np.array([a.bit_count() for a in range(self.n_actions)])
+        self._trim_table: np.ndarray | None = None  # built on first use (see _tables)
 
     def _bind_large(self, fmt: str) -> None:
         """Spaces and masks of the ``"multibinary"`` and ``"single"`` formats."""
@@ -130,66 +117,9 @@ class SparseAttack(AttackModel):
         else:
             self.n_actions = M + 1
             self.action_space = spaces.Discrete(M + 1)
-            self._open = np.ones(M + 1, dtype=np.int8)
-            self._closed = np.zeros(M + 1, dtype=np.int8)
-            self._closed[0] = 1
-
-    def reset(self) -> None:
-        """Restore the full budget."""
-        self.remaining = self.budget
-        self.last_attacked = 0
-
-    def features(self) -> list[float]:
-        """Remaining budget fraction."""
-        return [self.remaining / self.budget if self.budget else 0.0]
-
-    def action_mask(self) -> np.ndarray | None:
-        """Legal actions for the remaining budget (int8, 1 = legal; None for multibinary)."""
-        if self.format == "multibinary":
-            return None
-        if self.format == "single":
-            return (self._open if self.remaining > 0 else self._closed).copy()
-        return self._masks[self.remaining].copy()
-
-    def _bits_of(self, action: Any) -> int:
-        """The attacked-sensor bitmask of a ``"multibinary"`` or ``"single"`` action."""
-        if self.format == "single":
-            j = as_index(action)
-            if j is None or not 0 <= j <= self.M:
-                raise ValueError(
-                    f"attacker action must be an integer in [0, {self.M + 1}) (0 = no attack, "
-                    f"j = sensor j), got {action!r}"
-                )
-            return 0 if j == 0 else 1 << (j - 1)
-        a = np.asarray(action) if isinstance(action, (np.ndarray, list, tuple)) else None
-        if (
-            a is None
-            or a.shape != (self.M,)
-            or a.dtype.kind not in "biuf"  # 0/1 of any real dtype, as MultiBinary.contains
-            or not np.isin(a, (0, 1)).all()
-        ):
-            raise ValueError(
-                f"attacker action must be a 0/1 array of shape ({self.M},) (any real dtype) "
-                f"(MultiBinary: 1 = attack that sensor), got {action!r}"
-            )
-        return int.from_bytes(np.packbits(a != 0, bitorder="little").tobytes(), "little")
-
-    def apply(self, action: Any) -> AttackEffect:
-        """Attack the chosen subset; an over-budget one by the ``illegal_action`` rule."""
-        if self.format != "bitmask":
-            a = self._bits_of(action)
-        else:
-            a = as_index(action)
-            if a is None or not 0 <= a < self.n_actions:
-                raise ValueError(
-                    f"attacker action must be an integer in [0, {self.n_actions}) (a sensor "
-                    f"bitmask), got {action!r}"
-                )
-        if a.bit_count() > self.remaining:
-            a = self._illegal(a, self.remaining, action)
-        self.remaining -= a.bit_count()
-        self.last_attacked = a
-        return AttackEffect(attacked=a)
+            # row min(budget left, 1): only "no attack" once the budget is spent, else all
+            self._single_masks = np.ones((2, M + 1), dtype=np.int8)
+            self._single_masks[0, 1:] = 0
 
     def _illegal(self, bits: int, remaining: int, action: Any) -> int:
         """What an over-budget action (sensor bitmask ``bits``) does, by ``illegal_action``."""
@@ -202,13 +132,10 @@ class SparseAttack(AttackModel):
             )
         return 0 if self.illegal_action == "noop" else trim_to_budget(bits, remaining)
 
-    def info(self) -> dict[str, Any]:
-        """``attacked``: (M,) int8, 1 for each sensor attacked this step; ``budget_left``."""
-        if self.format == "bitmask" and self._info_rows is not None:
-            attacked = self._info_rows[self.last_attacked].copy()
-        else:
-            attacked = bits_to_mask(self.last_attacked, self.M).astype(np.int8)
-        return {"attacked": attacked, "budget_left": int(self.remaining)}
+    @property
+    def remaining(self) -> int:
+        """The budget left of the single env (member 0 of the batch)."""
+        return int(self.xp.member(self.b_remaining, 0))
 
     # --- batched (see AttackModel; numpy or torch arrays of the backend ``xp``) -------------
     batch_backends = ("numpy", "torch")
@@ -219,18 +146,20 @@ class SparseAttack(AttackModel):
         if where is None or xp.all(where):  # every member (episodes of one length end together)
             self.b_remaining = xp.full(batch, self.budget, dtype=xp.int64)
             self.b_attacked = xp.zeros((batch, self.M), dtype=xp.int8)
-            if self.format == "bitmask":
-                self._b_tables = self._tables()  # read every step: kept as an attribute
+            if self._b_xp is not xp:  # the backend's constants, once per backend change
+                # a 0-d float64 array: int64 × it is float64 on numpy and torch alike (a
+                # Python float would give torch's default float32)
+                self._b_scale = xp.asarray(np.float64(1.0 / self.budget if self.budget else 0.0))
+                if self.format == "bitmask":
+                    self._b_tables = self._tables()  # read every step: kept as an attribute
+                self._b_xp = xp
         else:  # fresh arrays: the infos handed out earlier never change afterwards
             self.b_remaining = xp.where(where, self.budget, self.b_remaining)
             self.b_attacked = xp.where(where[:, None], 0, self.b_attacked)
 
     def batch_features(self) -> Any:
         """(B, 1) remaining budget fraction."""
-        # a 0-d float64 array: int64 × it is float64 on numpy and torch alike (a Python float
-        # would give torch's default float32)
-        scale = self.xp.asarray(np.float64(1.0 / self.budget if self.budget else 0.0))
-        return (self.b_remaining * scale)[:, None]
+        return self.xp.col(self.b_remaining * self._b_scale)
 
     def _batch_tables(self) -> None:
         """Tables indexed by [action, min(budget left, M)]: the trimmed action, and masks."""
@@ -284,9 +213,7 @@ class SparseAttack(AttackModel):
         if self.format == "multibinary":
             return None
         if self.format == "single":
-            return xp.where(
-                (self.b_remaining > 0)[:, None], xp.asarray(self._open), xp.asarray(self._closed)
-            )
+            return xp.take(xp.asarray(self._single_masks), xp.minimum(self.b_remaining, 1), axis=0)
         _, mask_table, _, _ = self._b_tables
         return xp.take(mask_table, xp.minimum(self.b_remaining, self.M), axis=0)
 
@@ -295,20 +222,23 @@ class SparseAttack(AttackModel):
         xp = self.xp
         if self.format == "single":
             j = xp.astype(actions, xp.int64)  # checked by the vector env
-            chosen = (j[:, None] - 1) == xp.arange(self.M)  # j = 0 matches no sensor
+            chosen = xp.arange(self.M) == xp.col(j - 1)  # j = 0 matches no sensor
         else:
             chosen = xp.astype(actions, xp.bool)  # 0/1 of any real dtype, checked
         over = xp.sum(chosen, 1) > self.b_remaining
         if self.illegal_action != "trim" and xp.any(over):
             i = int(xp.flatnonzero(over)[0])
-            bits = int(mask_array_to_bits(xp.to_numpy(chosen[i : i + 1]))[0])
-            shown = xp.to_numpy(actions[i]) if self.format == "multibinary" else int(actions[i])
-            self._illegal(bits, int(self.b_remaining[i]), shown)  # raises for "error"
-            chosen = chosen & ~over[:, None]  # "noop"
+            row, shown = xp.member(chosen, i), xp.member(actions, i)
+            bits = int(mask_array_to_bits(xp.to_numpy(row)[None])[0])
+            shown = xp.to_numpy(shown) if self.format == "multibinary" else int(shown)
+            self._illegal(bits, int(xp.member(self.b_remaining, i)), shown)  # raises: "error"
+            chosen = xp.where(xp.col(over), False, chosen)  # "noop"
         # keep the lowest-numbered chosen sensors that fit each member's budget left
-        kept = chosen & (xp.cumsum(chosen, 1) <= self.b_remaining[:, None])
+        kept = chosen & (xp.cumsum(chosen, 1) <= xp.col(self.b_remaining))
         self.b_remaining = self.b_remaining - xp.sum(kept, 1)
         self.b_attacked = xp.astype(kept, xp.int8)
+        if xp is ONE:
+            return mask_to_bits(kept), None
         return (mask_array_to_bits(kept) if xp is NUMPY else kept), None
 
     def batch_apply(self, actions: Any) -> tuple[Any, None]:
@@ -322,7 +252,8 @@ class SparseAttack(AttackModel):
             over = xp.take(sizes, a) > self.b_remaining
             if xp.any(over):
                 i = int(xp.flatnonzero(over)[0])
-                self._illegal(int(a[i]), int(self.b_remaining[i]), int(a[i]))  # raises: "error"
+                shown = int(xp.member(a, i))
+                self._illegal(shown, int(xp.member(self.b_remaining, i)), shown)  # "error" raises
                 a = xp.where(over, 0, a)
         a = xp.take(trim, a * (self.M + 1) + xp.minimum(self.b_remaining, self.M))
         self.b_remaining = self.b_remaining - xp.take(sizes, a)

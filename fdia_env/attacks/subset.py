@@ -180,6 +180,10 @@ class SubsetAttack(SubsetChoice, AttackModel):
         self.attacked_bits = self.bits[j]
         return AttackEffect(attacked=self.bits[j], sigma=self.sigma(j))
 
+    def apply_checked(self, action: Any) -> AttackEffect:
+        """:meth:`apply` (its own checks)."""
+        return self.apply(action)
+
     def info(self) -> dict[str, Any]:
         """``attacked``: (M,) int8, 1 for each sensor of the subset attacked this step."""
         bits = getattr(self, "attacked_bits", 0)

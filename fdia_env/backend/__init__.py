@@ -19,6 +19,7 @@ import numpy as np
 
 from fdia_env.backend.base import Backend
 from fdia_env.backend.numpy_backend import NUMPY
+from fdia_env.backend.one import ONE
 
 BACKENDS = ("numpy", "torch")
 
@@ -63,4 +64,4 @@ def namespace(x: Any) -> Backend:
     return NUMPY
 
 
-__all__ = ["BACKENDS", "NUMPY", "Backend", "get_backend", "is_torch", "namespace"]
+__all__ = ["BACKENDS", "NUMPY", "ONE", "Backend", "get_backend", "is_torch", "namespace"]

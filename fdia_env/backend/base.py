@@ -218,5 +218,14 @@ class Backend(ABC):
     def searchsorted(self, sorted_values: Any, values: Any) -> Any:
         """Insertion indices to the right of equal values (numpy's ``side="right"``)."""
 
+    # --- batch-axis indexing (the batch of one, fdia_env.backend.one, drops that axis) ------
+    def col(self, x: Any) -> Any:
+        """``x[:, None]``: a (B,) batch as (B, 1)."""
+        return x[:, None]
+
+    def member(self, x: Any, i: int) -> Any:
+        """``x[i]``: member ``i`` of a batch."""
+        return x[i]
+
     def __repr__(self) -> str:
         return f"Backend({self.name!r}, device={str(self.device)!r})"

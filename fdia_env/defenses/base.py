@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -15,8 +15,7 @@ from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
 
-@dataclass(frozen=True)
-class FilterInput:
+class FilterInput(NamedTuple):
     """What reaches the filter in one step.
 
     Attributes:

@@ -146,6 +146,8 @@ def _integer(action: Any) -> int | None:
     A shape-(1,) array is not an element of ``Discrete`` (Gymnasium's ``contains`` refuses it,
     and the vector env refuses a (B, 1) batch): it is refused, not squeezed.
     """
+    if type(action) is int:  # the common case first (bool is another type)
+        return action
     if isinstance(action, bool | np.bool_):
         return None
     if isinstance(action, numbers.Integral):

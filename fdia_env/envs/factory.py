@@ -10,7 +10,7 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 from fdia_env._validation import check_int
 from fdia_env.envs.aec import FdiaAECEnv, FdiaOrderEnforcingWrapper
 from fdia_env.episode import EpisodeSpec
-from fdia_env.scenarios import Scenario, resolve
+from fdia_env.scenarios import Scenario, resolve, scenario_default
 from fdia_env.systems import LinearSystem
 
 
@@ -37,9 +37,7 @@ def episode_spec(
     if horizon is None:
         horizon = max_cycles if max_cycles is not None else default_horizon
     if horizon is None:
-        if sc.horizon is None:
-            raise ValueError(f"horizon is required: scenario {sc.name!r} does not define one")
-        horizon = sc.horizon
+        horizon = scenario_default(sc, "horizon", None)
     if warmup is None:
         warmup = "steady" if sc.steady_state else (sc.attack_step or 0)
     spec = EpisodeSpec(
@@ -50,16 +48,6 @@ def episode_spec(
         dynamics=dynamics,
     )
     return sc, spec
-
-
-def scenario_default(sc: Scenario, name: str, value: Any) -> Any:
-    """``value`` if given, else the preset's attribute ``name``; raise if neither exists."""
-    if value is not None:
-        return value
-    preset = getattr(sc, name, None)
-    if preset is None:
-        raise ValueError(f"{name} is required: scenario {sc.name!r} does not define one")
-    return preset
 
 
 def aec_views(

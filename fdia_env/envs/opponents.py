@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from fdia_env.envs.policy import SampledPolicyBase, batch_size
 
-class FixedMix:
+
+class FixedMix(SampledPolicyBase):
     """Plays action ``i`` with probability ``probs[i]``, independently every step.
 
     Has stable-baselines3's ``predict`` signature, so it can be the opponent of
@@ -36,47 +38,30 @@ class FixedMix:
         self.probs.setflags(write=False)
         self.n_actions = self.probs.size
         self._cdf = np.cumsum(self.probs)
-        self.rng = np.random.default_rng(seed)
+        super().__init__(seed)
 
     @classmethod
     def uniform(cls, n: int, seed: int | None = None) -> FixedMix:
         """Every action with probability 1/n."""
         return cls(np.full(n, 1.0 / n), seed)
 
-    def reset(self, seed: int | None = None) -> None:
-        """Restart the generator from ``seed`` (nothing happens without one)."""
-        if seed is not None:
-            self.rng = np.random.default_rng(seed)
-
     def mode(self) -> int:
         """The most likely action (first on ties)."""
         return int(np.argmax(self.probs))
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = False,
-    ) -> tuple[Any, Any]:
-        """Return ``(action, state)``: a sampled action index and ``state`` unchanged.
+    def act(self, observation: Any, deterministic: bool = False) -> Any:
+        """A sampled action index; only the observation's batch size matters.
 
         Args:
-            observation: Unbatched (d,) or batched (B, d) observation, a dict observation (its
-                ``"observation"`` entry is used) or None; only its batch size matters.
-            state: Returned as given (the policy has no memory).
-            episode_start: Ignored.
+            observation: Unbatched (d,) or batched (B, d) observation, a dict observation or
+                None.
             deterministic: Ignored; see the class docstring.
 
         Returns:
             An ``np.int64`` action for one observation, a (B,) int64 array for a batch.
         """
-        obs = observation["observation"] if isinstance(observation, Mapping) else observation
-        obs = np.asarray(obs) if obs is not None else np.zeros(0)
-        batch = obs.shape[0] if obs.ndim >= 2 else None
+        batch = batch_size(observation)
         u = self.rng.random(1 if batch is None else batch)
         actions = np.minimum(np.searchsorted(self._cdf, u, side="right"), self.n_actions - 1)
         actions = actions.astype(np.int64)
-        if batch is None:
-            return np.int64(actions[0]), state
-        return actions, state
+        return np.int64(actions[0]) if batch is None else actions

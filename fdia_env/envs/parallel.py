@@ -194,7 +194,7 @@ class FdiaParallelEnv(ParallelEnv):
         check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
-        effect = self.attack.apply(actions["attacker"])
+        effect = self.attack.apply_checked(actions["attacker"])  # checked above
         filter_input = self.defense.apply(actions.get("defender"), effect)
         self._last_effect = effect
         if not self.defense.passive:
@@ -207,8 +207,9 @@ class FdiaParallelEnv(ParallelEnv):
         reward = attacker_reward(self.spec.reward_mode, phi, phi_prev, done)
         agents = self.agents
         obs = {a: self._observe(a) for a in agents}
-        rewards = {"attacker": reward, "defender": -reward}
-        rewards = {a: rewards[a] for a in agents}
+        rewards = {"attacker": reward, "defender": -reward} if len(agents) == 2 else {}
+        if len(agents) == 1:
+            rewards[agents[0]] = reward if agents[0] == "attacker" else -reward
         terminations = dict.fromkeys(agents, done)
         truncations = dict.fromkeys(agents, truncated)
         infos = self._infos(agents)
@@ -223,15 +224,16 @@ class FdiaParallelEnv(ParallelEnv):
         """The step's info: the same keys at reset and at every step (see the class doc)."""
         info: dict[str, Any] = {"phi": float(self.sim.phi[-1]), "step": int(self.sim.k)}
         info.update(self.attack.info())
-        engine = self.sim.info()
-        for key, default in self._info_defaults.items():  # the defaults' types, always
-            info[key] = type(default)(engine.get(key, default))
+        if self._info_defaults:
+            engine = self.sim.info()
+            for key, default in self._info_defaults.items():  # the defaults' types, always
+                info[key] = type(default)(engine.get(key, default))
         return info
 
     def _infos(self, agents: list[str]) -> dict[str, dict[str, Any]]:
         """Each agent's info: the common one, plus the attack's private keys for the attacker."""
         info = self._info()
-        infos = {a: dict(info) for a in agents}
+        infos = {a: dict(info) if i else info for i, a in enumerate(agents)}  # own dicts
         if "attacker" in infos:
             infos["attacker"].update(self.attack.private_info())
         return infos

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import importlib
-from typing import Any, Protocol
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -11,26 +11,14 @@ from gymnasium import spaces
 
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
-
-
-class Policy(Protocol):
-    """Anything with stable-baselines3's ``predict`` signature (SB3 models, baseline policies)."""
-
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = False,
-    ) -> tuple[Any, Any]:
-        """Return ``(action, state)``."""
-        ...
+from fdia_env.envs.policy import Policy
 
 
 class SingleAgentEnv(gym.Env):
     """Gymnasium view of :class:`FdiaParallelEnv` for one ``agent``.
 
-    The other player, if the env has one, is played by ``opponent`` (a fixed :class:`Policy`).
+    The other player, if the env has one, is played by ``opponent`` (a fixed
+    :class:`~fdia_env.envs.policy.Policy`).
     Observations are the agent's feature ``Box``; where the agent has illegal discrete actions
     the mask is in ``info["action_mask"]`` and :meth:`action_masks` (sb3-contrib's MaskablePPO
     reads the latter).
@@ -95,12 +83,15 @@ class SingleAgentEnv(gym.Env):
         if self.other is not None:
             self._other_obs = obs[self.other]
         own, extra = self._split(obs[self.agent])
+        info = infos[self.agent]  # the agent's own dict (the parallel env makes one each)
+        if extra:
+            info.update(extra)
         return (
             own,
             float(rewards[self.agent]),
             bool(terms[self.agent]),
             bool(truncs[self.agent]),
-            {**infos[self.agent], **extra},
+            info,
         )
 
     def action_masks(self) -> np.ndarray:

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from fdia_env.envs.policy import PolicyBase, observation_array
 from fdia_env.stealth.dynamic_model import DynamicModel
 
 
@@ -83,7 +84,7 @@ def linear_action(model: DynamicModel, T: Any, sigma_b: Any = None) -> np.ndarra
     return action
 
 
-class ScheduledPolicy:
+class ScheduledPolicy(PolicyBase):
     """Plays ``actions[k]`` at step k of the episode (an open-loop attack; SB3 ``predict``).
 
     The step is read from the observation's first entry (steps left / horizon).
@@ -108,15 +109,9 @@ class ScheduledPolicy:
         self.actions = table.astype(np.float32)
         self.actions.setflags(write=False)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
-        """Return ``(action, state)``: the step's action, (B, ...) for a (B, 4) batch."""
-        obs = np.asarray(observation)
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
+        """The step's action, (B, ...) for a (B, 4) batch."""
+        obs = observation_array(observation)
         horizon = self.actions.shape[0]
         k = np.clip(np.rint((1.0 - obs[..., 0]) * horizon).astype(np.int64), 0, horizon - 1)
-        return self.actions[k].copy(), state
+        return self.actions[k].copy()

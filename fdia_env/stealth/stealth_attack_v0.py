@@ -87,6 +87,7 @@ from typing import Any
 import numpy as np
 
 from fdia_env.envs.factory import aec_views
+from fdia_env.envs.policy import PolicyBase, batch_size, repeat_action
 from fdia_env.stealth.env import StealthAttackEnv
 
 NAME = "stealth_attack_v0"
@@ -107,26 +108,17 @@ parallel_env.__signature__ = inspect.signature(StealthAttackEnv).replace(  # typ
 )
 
 
-class _Fixed:
+class _Fixed(PolicyBase):
     """Plays one fixed action (SB3 ``predict`` signature)."""
 
     def __init__(self, action: Any) -> None:
         self.action = np.asarray(action)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
-        obs = np.asarray(observation)
-        if obs.ndim >= 2:
-            return np.repeat(self.action[None], obs.shape[0], axis=0), state
-        return self.action.copy(), state
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
+        return repeat_action(self.action, observation)
 
 
-class _Sampled:
+class _Sampled(PolicyBase):
     """Samples the attacker's action space (seeded on the view's seeded reset)."""
 
     def __init__(self, space: Any) -> None:
@@ -135,17 +127,11 @@ class _Sampled:
     def reset(self, seed: int | None = None) -> None:
         self.space.seed(seed)
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[Any, Any]:
-        obs = np.asarray(observation)
-        if obs.ndim >= 2:
-            return np.stack([self.space.sample() for _ in range(obs.shape[0])]), state
-        return self.space.sample(), state
+    def act(self, observation: Any, deterministic: bool = False) -> Any:
+        batch = batch_size(observation)
+        if batch is None:
+            return self.space.sample()
+        return np.stack([self.space.sample() for _ in range(batch)])
 
 
 def default_opponent(parallel: StealthAttackEnv, agent: str) -> Any:

@@ -5,6 +5,7 @@ from fdia_env.systems.system import (
     LinearSystem,
     Sensor,
     check_detectable,
+    check_system,
     noise_factor,
     pbh_defects,
 )
@@ -14,6 +15,7 @@ __all__ = [
     "LinearSystem",
     "Sensor",
     "check_detectable",
+    "check_system",
     "grid_system",
     "noise_factor",
     "pbh_defects",

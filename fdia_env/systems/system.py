@@ -34,6 +34,13 @@ from fdia_env._validation import as_matrix, as_vector, check_positive, check_psd
 PBH_TOL = 1e-9  # relative tolerance of the PBH rank tests and of "marginal" (|μ| >= 1 − tol)
 
 
+def check_system(value: Any, param: str = "system") -> LinearSystem:
+    """``value`` if it is a :class:`LinearSystem`, else ``ValueError`` naming ``param``."""
+    if not isinstance(value, LinearSystem):
+        raise ValueError(f"{param} must be a LinearSystem, got {type(value).__name__}")
+    return value
+
+
 def _freeze_state(obj: Any, state: dict[str, Any]) -> None:
     """``__setstate__`` of the frozen system classes: restore, then make every array read-only."""
     for name, value in state.items():

@@ -282,7 +282,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             steady,
             active=~resetting,
             detection=self.defense.batch_detection(),
-            probability=getattr(self.attack, "b_probability", None),
+            probability=self.attack.batch_probability(),
         )
         if self._det_defaults:  # the detector's per-member info, for the members that stepped
             for key, values in self.sim.detection_info.items():
