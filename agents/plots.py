@@ -15,9 +15,11 @@ import matplotlib.pyplot as plt
 from agents.runs import atomic_write
 
 
-def _save(fig: Any, path: Path) -> Path:
+def save_figure(fig: Any, path: Path, dpi: int = 120) -> Path:
+    """Lay ``fig`` out, write it to ``path`` as a PNG (atomically) and close it; return ``path``."""
+    fig.tight_layout()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=120)
+    fig.savefig(buf, format="png", dpi=dpi)
     plt.close(fig)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
@@ -55,8 +57,7 @@ def learning_curve(
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
-    fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def exploitability_curve(
@@ -78,5 +79,4 @@ def exploitability_curve(
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right")
-    fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)

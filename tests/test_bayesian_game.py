@@ -461,3 +461,21 @@ def test_bad_forced_type_leaves_the_running_episode_untouched():
     assert (list(env.agents), env.sim.k, env.attack.type_index) == before[:3]
     np.testing.assert_array_equal(env.state(), before[3])
     env.step({"attacker": 6, "defender": 6})  # the episode goes on
+
+
+@pytest.mark.parametrize(
+    ("matrices", "match"),
+    [
+        ([], "matrices must be a non-empty sequence of payoff matrices"),
+        ("ab", "matrices must be a non-empty sequence of payoff matrices"),
+        ([np.eye(2), np.ones((2, 3))], r"matrices\[1\] is \(2, 3\)"),
+        ([np.eye(2), [[1.0, np.nan], [0.0, 1.0]]], r"matrices\[1\] must be finite"),
+    ],
+)
+def test_the_game_and_its_solver_refuse_the_same_matrices_alike(matrices, match):
+    from baselines.game.lp import solve_bayesian
+
+    with pytest.raises(ValueError, match=match):
+        BayesianGame(matrices, [0.5, 0.5])
+    with pytest.raises(ValueError, match=match):
+        solve_bayesian(matrices, [0.5, 0.5])

@@ -348,3 +348,44 @@ def test_a_game_with_a_subset_size_limit_scores_its_equilibrium_one_and_random_z
     assert expl.normalised == pytest.approx(1.0, abs=1e-9)
     rand = score_policy(game, "random", seeds=(0,), episodes=2)
     assert rand.normalised == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_runner_resumes_missing_runs_and_goes_on_after_a_failure(tmp_path, monkeypatch, capsys):
+    import experiments.bench.run as run
+    from experiments.cli import main as experiments
+
+    out = tmp_path / "rows.json"
+    done = {"task": TASK, "method": "PPO", "seed": 0, "timesteps": 64, "normalised": 0.5}
+    other = {**done, "seed": 1, "timesteps": 128}  # another budget: not a row of this one
+    out.write_text(json.dumps({"rows": [done, other]}))
+    calls = []
+
+    def fake_row(task, algo, seed, timesteps, episodes=None, hp=None):
+        calls.append(seed)
+        if seed == 1:
+            raise RuntimeError("boom")
+        return {**done, "seed": seed, "raw": 1.0, "train_seconds": 0.1, "normalised": 0.25}
+
+    monkeypatch.setattr(run, "learner_row", fake_row)
+    argv = ["bench", "--tasks", TASK, "--algo", "PPO", "--seeds", "3", "--timesteps", "64",
+            "--out", str(out), "--no-render"]  # fmt: skip
+    assert experiments([*argv, "--missing"]) == 1
+    assert calls == [1, 2]  # seed 0 has a row at 64 steps; seed 1 only at 128
+    err = capsys.readouterr().err
+    assert f"FAILED {TASK} PPO seed 1: RuntimeError: boom" in err and "1 run(s) failed" in err
+    rows = json.loads(out.read_text())["rows"]
+    assert sorted((r["seed"], r["timesteps"]) for r in rows) == [(0, 64), (1, 128), (2, 64)]
+    calls.clear()
+    assert experiments(argv) == 1  # without --missing every seed trains again
+    assert calls == [0, 1, 2]
+
+
+def test_torch_ppo_makes_several_updates_on_a_short_budget():
+    from agents.torch_ppo import TorchPPOConfig
+    from experiments.bench.run import TORCH_MIN_ITERATIONS, torch_envs
+
+    for budget, members in ((2048, 21), (20_000, 208), (1_000_000, 256), (10, 1)):
+        assert torch_envs(budget) == members
+        config = TorchPPOConfig(total_timesteps=budget, num_envs=members)
+        if budget >= 96:  # a budget of at least one rollout of 8 members
+            assert config.iterations >= TORCH_MIN_ITERATIONS

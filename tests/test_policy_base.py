@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from agents.bench.agents import CallablePolicy
 from agents.evaluate import RandomPolicy
 from baselines.covariance.policy import CovariancePolicy
 from baselines.game.policy import MixedStrategyPolicy, TypedMixedStrategyPolicy
@@ -36,6 +37,7 @@ SHIPPED = (
     ScheduledPolicy,
     FixedAction,
     RandomPolicy,
+    CallablePolicy,
 )
 
 
@@ -94,3 +96,26 @@ def test_a_policy_without_act_names_what_is_missing():
 
     with pytest.raises(NotImplementedError, match="Bare must implement act"):
         Bare().predict(np.zeros(2))
+
+
+def test_a_users_policy_base_subclass_is_an_opponent_like_the_shipped_mix():
+    """The docs' recipe: subclass PolicyBase, write act(); the view plays it as the opponent."""
+    import gymnasium as gym
+
+    class AlwaysFirst(PolicyBase):
+        def act(self, observation, deterministic=False):
+            batch = batch_size(observation)
+            return np.int64(0) if batch is None else np.zeros(batch, dtype=np.int64)
+
+    n = 7  # the ch5-game's 2**3 - 1 subsets
+    returns = []
+    for opponent in (AlwaysFirst(), FixedMix(np.eye(n)[0])):
+        env = gym.make("fdia_env/SensorGameDefender-v0", opponent=opponent)
+        row = []
+        for a in range(n):  # one-shot game: one episode per defender action
+            env.reset(seed=a)
+            row.append(env.step(a)[1])
+        returns.append(row)
+        env.close()
+    assert returns[0] == returns[1]
+    assert len(set(returns[0])) > 1  # the defender's choice matters against that attacker

@@ -198,3 +198,32 @@ def test_the_readme_tasks_example_prints_the_output_shown():
     with contextlib.redirect_stdout(out):
         exec(compile(code, "README benchmark tasks", "exec"), {})
     assert out.getvalue() == shown
+
+
+@pytest.mark.parametrize(
+    "name", ["detection-game/ch3-static-attacker-v0", "detection-game/ch3-tracking-attacker-v0"]
+)
+def test_the_detection_attacker_bound_holds_for_every_attack(name):
+    from baselines.detection.response import DetectionGame
+
+    task = tasks.get(name)
+    refs = task.references
+    best = refs.optimum
+    assert not best.certified and 0.0 < best.gap <= GAP_HARD
+    assert best.value <= best.bound and best.gap == pytest.approx(1 - best.value / best.bound)
+    with task.make_env() as env:
+        game = DetectionGame.of(env)
+    # the bound is the no-detection maximum: the c2-maximising attack against a blind detector
+    blind = game.threshold_action(math.inf)
+    assert game.reward(game.attack_action(1.0, game.preset_sigma), blind) == pytest.approx(
+        best.bound, rel=1e-9
+    )
+    # no attack the view can play earns more against its fixed detector (action 0)
+    rng = np.random.default_rng(1)
+    actions = rng.uniform(-1.0, 1.0, size=(40, 1 + game.cov_map.size))
+    actions[:20, 0] = 1.0  # always attack
+    rewards = [game.reward(a, np.zeros(1)) for a in actions]
+    assert max(rewards) <= best.bound
+    assert max(rewards) <= best.value  # the searched best response beats every sampled attack
+    for value in refs.heuristics.values():
+        assert refs.random.mean < value <= best.value

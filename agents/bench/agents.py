@@ -32,6 +32,8 @@ from typing import Any
 
 import gymnasium as gym
 
+from fdia_env.envs.policy import MaskedPolicyBase
+
 CALLABLE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
 SB3_FORMAT = "fdia_env-sb3-state-v1"
 TORCH_PPO_FORMAT = "fdia_env-torch-ppo-v1"
@@ -56,7 +58,7 @@ class LoadedAgent:
     description: str
 
 
-class CallablePolicy:
+class CallablePolicy(MaskedPolicyBase):
     """A function ``f(observation) -> action`` behind SB3's ``predict``.
 
     ``f`` receives ``action_masks=`` as well when its signature takes that keyword (or
@@ -74,18 +76,11 @@ class CallablePolicy:
             p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()
         )
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-        action_masks: Any = None,
-    ) -> tuple[Any, Any]:
-        """The function's action for ``observation``."""
+    def act(self, observation: Any, deterministic: bool = False, action_masks: Any = None) -> Any:
+        """The function's action for ``observation`` (``deterministic`` is not passed on)."""
         if self.takes_masks:
-            return self.function(observation, action_masks=action_masks), state
-        return self.function(observation), state
+            return self.function(observation, action_masks=action_masks)
+        return self.function(observation)
 
 
 # ------------------------------------------------------------------------------ task checks

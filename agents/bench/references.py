@@ -249,6 +249,69 @@ def incomplete_information(spec: TaskSpec) -> References:
 
 
 def detection_game(spec: TaskSpec) -> References:
+    """The defender's or the attacker's references (:func:`detection_defender`, ``_attacker``)."""
+    if spec.player == "attacker":
+        return detection_attacker(spec)
+    return detection_defender(spec)
+
+
+def detection_attacker(spec: TaskSpec) -> References:
+    """The best response to the view's fixed detector, with a certified upper bound.
+
+    The attacker's expected Bayes cost ``p R1(Σ) + (1 − p) R0`` is linear in p, so the best
+    response attacks with p = 1 (or never); Σ is searched by
+    :func:`baselines.detection.response.best_attack` (seeded multi-start, Nelder-Mead). That is
+    the best known value, not a proof, so the bound is certified apart: with the detector
+    discarding what it flags, ``R1(Σ) = P_d c1 + P_miss c2(Σ) ≤ max(c1, c2(Σ))``, c1 (the
+    prior's error) does not depend on Σ, and c2 is linear in Σ, largest at the c2-maximising
+    Σ of the power (closed form, docs/math.md §3); so every attack earns at most
+    ``max(R0, c1, max c2)``. Heuristics: the preset attacker (p1, the c2-maximising Σ) and the
+    always-on attack with that Σ, played in the env.
+    """
+    import dataclasses
+
+    from baselines.detection.detectors import strategy_costs
+    from baselines.detection.response import DetectionGame, best_attack
+    from fdia_env.detection_game_v0 import FixedAction
+
+    env = make(spec)
+    try:
+        game = DetectionGame.of(env)
+        tau = game.threshold(env.unwrapped.opponent.predict(None)[0])
+    finally:
+        env.close()
+    if game.on_detect != "discard" or game.criterion != "bayes_cost":
+        raise ValueError(f"{spec.name}: the bound needs on_detect='discard' and the Bayes cost")
+    best = best_attack(game, tau)
+    value = _play(spec, FixedAction(best.action))
+    if not math.isclose(value, best.value, rel_tol=1e-6):
+        raise RuntimeError(f"{spec.name}: the best attack played in the env gives {value}")
+    truth = dataclasses.replace(game.design, Pbb=game.preset_sigma, p1=1.0)
+    costs = strategy_costs(game.design, game.on_detect, truth)  # Σ = the c2-maximising one
+    bound = max(best.no_attack, costs.c1, costs.c2)
+    heuristics = {
+        "preset attack (p1, c2-maximising covariance)": _play(
+            spec, FixedAction(game.attack_action(game.preset_probability, game.preset_sigma))
+        ),
+        "always attack (c2-maximising covariance)": _play(
+            spec, FixedAction(game.attack_action(1.0, game.preset_sigma))
+        ),
+    }
+    gap = 1.0 - _ratio("trace", value, bound)
+    return References(
+        objective="trace",
+        metric="return",
+        random=_random(spec),
+        heuristics=heuristics,
+        optimum=Optimum(
+            value, "best response (multi-start search)", gap <= 0.0, max(bound, value), gap
+        ),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def detection_defender(spec: TaskSpec) -> References:
     """OBDD's threshold (the Bayes-cost optimum), with the χ² test at 5 % false alarms.
 
     The optimum is played in the env as a fixed threshold; the χ² test's Bayes cost is computed.

@@ -532,14 +532,17 @@ def initial_mixes(policies: dict[str, Any], parallel: Any) -> dict[str, np.ndarr
     return out
 
 
-def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, dict[str, int]]:
-    """Check a matrix game's options; its registry entries, env kwargs, exact game, sizes.
+def _matrix_game(
+    cfg: GameConfig,
+) -> tuple[dict[str, Any], dict[str, Any], Any, dict[str, int], dict[str, Any]]:
+    """Check a matrix game's options; its entries, env kwargs, exact game, sizes, PPO settings.
 
     Raises:
         ValueError: For an unknown game, algorithm or env option, or an env that is not a
             one-shot matrix game.
     """
     from agents.population import SIDES
+    from agents.rllib.config import rllib_hyperparameters
     from agents.training import check_env_kwargs
 
     if cfg.env not in game_names():
@@ -555,7 +558,7 @@ def _matrix_game(cfg: GameConfig) -> tuple[dict[str, Any], dict[str, Any], Any, 
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     reference.matrix_game()  # raises for the informed-attacker Bayesian game
-    return entries, env_kwargs, reference, n
+    return entries, env_kwargs, reference, n, rllib_hyperparameters(cfg.hp)
 
 
 def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
@@ -578,7 +581,6 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         FileExistsError: When a new run's folder exists.
     """
     from agents.population import SIDES
-    from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.envs import make_multi_agent
     from agents.rllib.policy import policy_of
     from agents.selfplay import SelfPlayResult, _final_evaluations
@@ -589,8 +591,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
     if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries, env_kwargs, reference, n = _matrix_game(cfg)
-    hyperparameters = rllib_hyperparameters(cfg.hp)
+    entries, env_kwargs, reference, n, hyperparameters = _matrix_game(cfg)
     L, value = reference.payoff, reference.value
     parallel = make_multi_agent(cfg.env, env_kwargs).parallel
     with ExitStack() as stack:
@@ -770,7 +771,6 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         FileExistsError: When a new run's folder exists.
     """
     from agents.population import METHODS, MatrixGame, PopulationState, report_line, run_population
-    from agents.rllib.config import rllib_hyperparameters
     from agents.runs import write_jsonl
     from agents.selfplay import SelfPlayResult, _final_evaluations
 
@@ -779,8 +779,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
     if cfg.env not in game_names() and cfg.env in CONTINUOUS_GAMES:
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
-    entries, env_kwargs, reference, n = _matrix_game(cfg)
-    hyperparameters = rllib_hyperparameters(cfg.hp)
+    entries, env_kwargs, reference, n, hyperparameters = _matrix_game(cfg)
     L, value = reference.payoff, reference.value
     with ExitStack() as stack:
         run = open_run(cfg, stack, report, with_algorithm=False)

@@ -35,7 +35,7 @@ from baselines.game.lp import (
     ATTACKER_MODELS,
     BayesianSolution,
     Exploitability,
-    as_payoff,
+    as_payoffs,
     as_strategy,
     solve_bayesian,
 )
@@ -66,22 +66,10 @@ class BayesianGame:
             raise ValueError(
                 f"attacker must be one of {list(ATTACKER_MODELS)}, got {self.attacker!r}"
             )
-        mats = self.matrices
-        if isinstance(mats, np.ndarray) and mats.ndim == 3:
-            mats = list(mats)
-        if isinstance(mats, str) or not isinstance(mats, Sequence) or len(mats) == 0:
-            raise ValueError("matrices must be a non-empty sequence of payoff matrices")
-        Ls = [as_payoff(L, f"matrices[{s}]") for s, L in enumerate(mats)]
-        for s, L in enumerate(Ls):
-            if L.shape != Ls[0].shape:
-                raise ValueError(
-                    f"matrices must share one shape: matrices[0] is {Ls[0].shape}, "
-                    f"matrices[{s}] is {L.shape}"
-                )
-        stack = np.stack(Ls)
-        priors = as_strategy(self.priors, len(Ls), "priors")
-        if self.types is not None and len(self.types) != len(Ls):
-            raise ValueError(f"types must name the {len(Ls)} matrices, got {self.types!r}")
+        stack = as_payoffs(self.matrices)
+        priors = as_strategy(self.priors, len(stack), "priors")
+        if self.types is not None and len(self.types) != len(stack):
+            raise ValueError(f"types must name the {len(stack)} matrices, got {self.types!r}")
         for name, value in (("matrices", stack), ("priors", priors)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)

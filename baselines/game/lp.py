@@ -51,6 +51,30 @@ def as_payoff(L: Any, name: str = "L") -> np.ndarray:
     return arr
 
 
+def as_payoffs(matrices: Any, name: str = "matrices") -> np.ndarray:
+    """S payoff matrices of one shape (a sequence or an (S, m, n) array) as an (S, m, n) array.
+
+    Raises:
+        ValueError: Naming ``name``: no matrices, a matrix :func:`as_payoff` refuses (named
+            ``name[s]``), or matrices of different shapes.
+
+    Example:
+        >>> as_payoffs([[[1, 2]], [[3, 4]]]).shape
+        (2, 1, 2)
+    """
+    if isinstance(matrices, np.ndarray) and matrices.ndim == 3:
+        matrices = list(matrices)
+    if isinstance(matrices, str) or not isinstance(matrices, Sequence) or len(matrices) == 0:
+        raise ValueError(f"{name} must be a non-empty sequence of payoff matrices")
+    Ls = [as_payoff(L, f"{name}[{s}]") for s, L in enumerate(matrices)]
+    for s, L in enumerate(Ls):
+        if L.shape != Ls[0].shape:
+            raise ValueError(
+                f"{name} must share one shape: {name}[0] is {Ls[0].shape}, {name}[{s}] is {L.shape}"
+            )
+    return np.stack(Ls)
+
+
 def as_strategy(p: Any, size: int, name: str) -> np.ndarray:
     """``p`` as a probability vector of length ``size`` (entries ≥ 0 summing to 1 within 1e-9).
 
@@ -359,34 +383,23 @@ def solve_bayesian(
     """
     if not isinstance(attacker, str) or attacker not in ATTACKER_MODELS:  # arrays too
         raise ValueError(f"attacker must be one of {list(ATTACKER_MODELS)}, got {attacker!r}")
-    if isinstance(matrices, np.ndarray) and matrices.ndim == 3:
-        matrices = list(matrices)
-    if not isinstance(matrices, Sequence) or isinstance(matrices, str) or not matrices:
-        raise ValueError("matrices must be a non-empty sequence of payoff matrices")
-    Ls = [as_payoff(L, f"matrices[{s}]") for s, L in enumerate(matrices)]
-    for s, L in enumerate(Ls):
-        if L.shape != Ls[0].shape:
-            raise ValueError(
-                f"matrices must share one shape: matrices[0] is {Ls[0].shape}, "
-                f"matrices[{s}] is {L.shape}"
-            )
-    p = as_strategy(priors, len(Ls), "priors")
-    S, n = len(Ls), Ls[0].shape[1]
-    stack = np.stack(Ls)
+    stack = as_payoffs(matrices)
+    S, n = stack.shape[0], stack.shape[2]
+    p = as_strategy(priors, S, "priors")
     if attacker == "uninformed":
         x, y, _ = solve_zero_sum(np.tensordot(p, stack, axes=1))  # L̄ = Σ_s p_s L_s
         ys = np.tile(y, (S, 1))
     else:
         lo, hi = float(stack.min()), float(stack.max())
         scale = hi - lo if hi > lo else 1.0
-        x, duals, _ = _defender_lp([(L - lo) / scale for L in Ls], p)
+        x, duals, _ = _defender_lp([(L - lo) / scale for L in stack], p)
         x = _to_simplex(x)
         ys = np.zeros((S, n))
         for s in range(S):
             if p[s] > 0 and duals[s].sum() > 0:
                 ys[s] = _to_simplex(duals[s])
             else:
-                ys[s, int(np.argmax(x @ Ls[s]))] = 1.0
+                ys[s, int(np.argmax(x @ stack[s]))] = 1.0
     type_values = np.einsum("i,sij,sj->s", x, stack, ys)
     return BayesianSolution(
         x=x,

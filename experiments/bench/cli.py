@@ -6,15 +6,18 @@ Examples::
     python -m experiments bench --render-only        # the page from the rows already written
 
 Rows go to ``--out`` (default ``results/bench/rows.json``; a rerun replaces the rows of the
-same task, method and seed and keeps the others). ``--page`` (default docs/benchmark.md) gets
-the leaderboard between its markers and ``--figures`` (default docs/figures) one plot per task
-family; ``--no-render`` skips both.
+same task, method and seed and keeps the others; ``--missing`` trains only the runs that have
+no row at this budget yet, so an interrupted run is resumed by rerunning it). A run that fails
+is reported on stderr and in the summary, and the others go on. ``--page`` (default
+docs/benchmark.md) gets the leaderboard between its markers and ``--figures`` (default
+docs/figures) one plot per task family; ``--no-render`` skips both.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -65,6 +68,14 @@ def merge_rows(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> list[dic
     """``old`` with the rows of the same (task, method, seed) as a new one replaced."""
     keys = {(r["task"], r["method"], r["seed"]) for r in new}
     return [r for r in old if (r["task"], r["method"], r["seed"]) not in keys] + new
+
+
+def has_row(rows: list[dict[str, Any]], task: str, method: str, seed: int, timesteps: int) -> bool:
+    """Whether ``rows`` hold the run (task, method, seed) trained for ``timesteps`` steps."""
+    return any(
+        (r["task"], r["method"], r["seed"], r["timesteps"]) == (task, method, seed, timesteps)
+        for r in rows
+    )
 
 
 def write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -125,6 +136,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON rows file")
     parser.add_argument("--page", type=Path, default=DEFAULT_PAGE, help="leaderboard page")
     parser.add_argument("--figures", type=Path, default=DEFAULT_FIGURES, help="figure folder")
+    parser.add_argument(
+        "--missing",
+        action="store_true",
+        help="train only the (task, learner, seed) runs without a row at this budget",
+    )
     parser.add_argument("--no-render", action="store_true", help="write the rows only")
     parser.add_argument("--render-only", action="store_true", help="render the rows written")
     args = parser.parse_args(argv)
@@ -147,16 +163,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (TypeError, ValueError) as exc:
         parser.error(str(exc))
     rows = read_rows(args.out)
+    failed: list[str] = []
     if not args.render_only:
-        new = []
         for task in tasks:
             for algo in algos:
                 if not applicable(task, algo):
                     print(f"{task.name}: {algo} does not fit its actions, skipped", flush=True)
                     continue
                 for seed in range(args.first_seed, args.first_seed + args.seeds):
-                    row = learner_row(task, algo, seed, args.timesteps, args.episodes, hp)
-                    new.append(row)
+                    if args.missing and has_row(rows, task.name, algo, seed, args.timesteps):
+                        continue
+                    try:
+                        row = learner_row(task, algo, seed, args.timesteps, args.episodes, hp)
+                    except Exception as exc:  # one failed run must not stop the others
+                        failed.append(
+                            f"{task.name} {algo} seed {seed}: {type(exc).__name__}: {exc}"
+                        )
+                        print(f"FAILED {failed[-1]}", file=sys.stderr, flush=True)
+                        continue
                     print(
                         f"{task.name} {algo} seed {seed}: normalised {row['normalised']:.4f} "
                         f"(raw {row['raw']:.6g}, {row['train_seconds']} s)",
@@ -170,4 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         every = [get(n) for n in names()]
         render(rows, args.page, args.figures, every)
         print(f"wrote {args.page} and its figures in {args.figures}")
+    if failed:
+        print(f"{len(failed)} run(s) failed:", *failed, sep="\n  ", file=sys.stderr)
+        return 1
     return 0

@@ -9,7 +9,6 @@ task family (normalised score per method, with the intervals) goes to ``docs/fig
 
 from __future__ import annotations
 
-import io
 import math
 import re
 from collections import defaultdict
@@ -20,6 +19,7 @@ from typing import Any
 import numpy as np
 
 START, END = "<!-- leaderboard:start -->", "<!-- leaderboard:end -->"
+FLOOR = -1.5  # the plots' lowest normalised score; a bar below it is cut and its value written
 
 
 def seed_interval(values: Iterable[float]) -> tuple[float, float]:
@@ -102,7 +102,7 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from agents.runs import atomic_write
+    from agents.plots import save_figure
 
     per_task = {t.name: reference_entries(t) + learner_entries(rows.get(t.name, [])) for t in tasks}
     optimum_names = {t.references.optimum.name for t in tasks}
@@ -118,7 +118,7 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
     colours = {m: f"C{j % 10}" for j, m in enumerate(methods)}
     widest = max(len(entries) for entries in per_task.values())
     width = 0.8 / max(1, widest)
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(tasks) + 2), 3.8))
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(tasks) + 2) + 3.0, 3.8))
     shown: set[str] = set()
     for i, t in enumerate(tasks):
         entries = per_task[t.name]
@@ -135,18 +135,19 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
                 label=None if name in shown else name,
             )
             shown.add(name)
+            if e["normalised"] < FLOOR:  # far below random play: the bar is cut, its value written
+                x = i + (k - (len(entries) - 1) / 2) * width
+                ax.text(x, FLOOR, f"{e['normalised']:.1f}", fontsize=6, ha="center", va="bottom")
+    low = min((e["normalised"] for entries in per_task.values() for e in entries), default=0.0)
+    ax.set_ylim(max(FLOOR, min(-0.1, low - 0.1)), 1.15)
     ax.axhline(0.0, color="k", lw=0.6)
     ax.axhline(1.0, color="k", lw=0.6, ls="--")
     ax.set_xticks(range(len(tasks)))
     ax.set_xticklabels([t.name.split("/", 1)[-1] for t in tasks], rotation=20, ha="right")
     ax.set_ylabel("normalised score")
-    ax.set_title(f"{family}: 0 = random play, 1 = certified optimum")
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+    ax.set_title(f"{family}: 0 = random play, 1 = the certified reference")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return save_figure(fig, path, dpi=110)
 
 
 def leaderboard(

@@ -2,7 +2,10 @@
 
 A stable-baselines3 algorithm (``MaskablePPO``, ``PPO``, ``A2C``, ``DQN``, ``SAC``) trains with
 ``train.py``'s default hyperparameters on the task's env (``task.make_env()``) for
-``timesteps`` steps; ``torch-ppo`` trains on the task's torch vector env. The trained policy is
+``timesteps`` steps; ``torch-ppo`` trains on the task's torch vector env with
+:func:`torch_envs` members, so that even a short budget makes at least
+:data:`TORCH_MIN_ITERATIONS` updates (one rollout is ``members × num_steps`` env steps). The
+trained policy is
 scored with :func:`agents.bench.score.score_policy` on evaluation seed ``seed`` (the training
 seed), so three seeds give three independently trained agents.
 """
@@ -17,6 +20,20 @@ from agents.bench.score import score_policy
 SB3 = ("MaskablePPO", "PPO", "A2C", "DQN", "SAC")
 TORCH_PPO = "torch-ppo"
 LEARNERS = (*SB3, TORCH_PPO)
+TORCH_MAX_ENVS = 256
+TORCH_MIN_ITERATIONS = 8
+
+
+def torch_envs(timesteps: int) -> int:
+    """Members of torch-ppo's vector env for a budget: at most 256, at least 8 updates.
+
+    >>> torch_envs(2048), torch_envs(20_000), torch_envs(10)
+    (21, 208, 1)
+    """
+    from agents.torch_ppo import TorchPPOConfig
+
+    steps = TorchPPOConfig().num_steps
+    return max(1, min(TORCH_MAX_ENVS, int(timesteps) // (steps * TORCH_MIN_ITERATIONS)))
 
 
 def applicable(task: Any, algo: str) -> bool:
@@ -58,12 +75,16 @@ def train_sb3(
     return model
 
 
-def train_torch(task: Any, timesteps: int, seed: int, num_envs: int = 256) -> Any:
-    """A torch-ppo policy trained on ``task``'s torch vector env (CPU)."""
+def train_torch(task: Any, timesteps: int, seed: int, num_envs: int | None = None) -> Any:
+    """A torch-ppo policy trained on ``task``'s torch vector env (CPU).
+
+    ``num_envs`` defaults to :func:`torch_envs` of the budget.
+    """
     from agents.seeding import seed_everything
     from agents.torch_ppo import TorchPPOConfig, make_torch_env, train_torch_ppo
 
     seed_everything(seed, torch_threads=1)
+    num_envs = torch_envs(timesteps) if num_envs is None else num_envs
     env = make_torch_env(task.env_id, num_envs, "cpu", **dict(task.env_kwargs))
     try:
         config = TorchPPOConfig(total_timesteps=timesteps, num_envs=num_envs)
@@ -124,6 +145,6 @@ def learner_row(
         "kind": "learner",
         "seed": seed,
         "timesteps": timesteps,
-        "hyperparameters": hp,
+        "hyperparameters": {"num_envs": torch_envs(timesteps)} if algo == TORCH_PPO else hp,
         "train_seconds": round(seconds, 1),
     }

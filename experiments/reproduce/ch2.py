@@ -361,6 +361,8 @@ def ch2_ellipse_plot(path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from agents.plots import save_figure
+
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
     for ax, name in zip(axes, ("ch2-position", "ch2-pv-1", "ch2-pv-2"), strict=True):
         curves = {
@@ -379,9 +381,7 @@ def ch2_ellipse_plot(path: Path) -> None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper left")
     fig.suptitle("1-σ ellipses of the actual error covariance P[K|K] + W Σ W'")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def ch2_allocation_plot(path: Path) -> None:
@@ -390,6 +390,8 @@ def ch2_allocation_plot(path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from agents.plots import save_figure
 
     share = np.linspace(0.0, 1.0, 401)
     system = scenarios.get("ch2-position").system  # one system, so its steady state is solved once
@@ -408,9 +410,7 @@ def ch2_allocation_plot(path: Path) -> None:
     ax.set_title("ch2-position: trace against the power split")
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def chapter2(args: argparse.Namespace) -> Section:

@@ -499,6 +499,8 @@ def sweep_plot(
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from agents.plots import save_figure
+
         a2 = [p.power for p in points]
         fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
         for n in ALL_NAMES:
@@ -524,9 +526,7 @@ def sweep_plot(
         axes[1].legend()
         axes[2].legend(fontsize=6, ncol=2, loc="best")
         fig.suptitle(title)
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
+        save_figure(fig, path)
 
     return plot
 

@@ -149,6 +149,8 @@ def ch4_dp_vs_sfs(sigmas: np.ndarray, trials: int) -> tuple[str, Callable[[Path]
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from agents.plots import save_figure
+
         fig, ax = plt.subplots(figsize=(6, 3.5))
         for col, label in enumerate(("same", "DP better", "SFS better")):
             ax.semilogx(sigmas, counts[:, col], marker="o", label=label)
@@ -156,9 +158,7 @@ def ch4_dp_vs_sfs(sigmas: np.ndarray, trials: int) -> tuple[str, Callable[[Path]
         ax.set_ylabel(f"trials (of {trials})")
         ax.set_title("DP vs SFS, 10 sensors, c = 10, N = 6")
         ax.legend()
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
+        save_figure(fig, path)
 
     return text, plot
 

@@ -294,6 +294,8 @@ def ch5_heatmap(
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from agents.plots import save_figure
+
         fig, axes = plt.subplots(1, 2, figsize=(12, 5.2))
         for ax, (allocation, L) in zip(axes, matrices.items(), strict=True):
             x, y, value = solutions[allocation]
@@ -325,9 +327,7 @@ def ch5_heatmap(
             ax.set_title(f"{CH5_ALLOCATION_LABELS[allocation]}, value {value:.3f}")
             fig.colorbar(im, ax=ax, shrink=0.8, label="tr(P + W Σ W')")
         fig.suptitle("ch5-game payoff L[D, A] (defender minimises, attacker maximises)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
+        save_figure(fig, path)
 
     return plot
 

@@ -42,8 +42,13 @@ class Section:
 # --- helpers --------------------------------------------------------------------------------
 
 
-def machine() -> str:
-    """One line on the machine and the numerical stack."""
+def machine(threads: str | None = None) -> str:
+    """One line on the machine and the numerical stack.
+
+    Args:
+        threads: The ``OPENBLAS_NUM_THREADS`` to name (default: this process's setting), e.g.
+            ``"1"`` for benchmarks run in processes that set it.
+    """
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -52,7 +57,8 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    threads = os.environ.get("OPENBLAS_NUM_THREADS", "default")
+    if threads is None:
+        threads = os.environ.get("OPENBLAS_NUM_THREADS", "default")
     return (
         f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
         f"Python {platform.python_version()}, numpy {np.__version__}, "

@@ -298,6 +298,35 @@ def attacker_reference(
 
 
 # --- 2. and 3. learned against analytic -----------------------------------------------------
+def _learned_runs(
+    side: str,
+    opponent: np.ndarray,
+    kw: dict[str, Any],
+    steps: int,
+    budget: Budget,
+    seed: int,
+    scale: float,
+    score: Callable[[np.ndarray], float],
+    reference: Reference,
+) -> tuple[list[float], list[float], list[np.ndarray], list[Any]]:
+    """SAC on ``side``'s view against the fixed ``opponent`` action, one run per seed.
+
+    Returns:
+        Per run (seeds ``seed``, ``seed + 1``, ...): its evaluated reward, its score against
+        ``reference``, its action on the first observation of ``seed`` and its learning curve.
+    """
+    values, scores, actions, curves = [], [], [], []
+    for s in range(budget.seeds):
+        env = view(side, opponent, **kw)
+        model, curve = train_sac(env, steps, seed + s, scale, score)
+        result = evaluate(model, env, 1, seed=seed, reference=reference)
+        values.append(result.mean)
+        scores.append(result.score)
+        actions.append(action_of(model, env.reset(seed=seed)[0]))
+        curves.append(curve)
+    return values, scores, actions, curves
+
+
 def learned_attacker(ref: dict[str, Any], budget: Budget, seed: int) -> dict[str, Any]:
     """SAC attackers (``budget.seeds``) against one fixed detector, scored against its BR."""
     game, _ = fixed_defender(
@@ -306,21 +335,12 @@ def learned_attacker(ref: dict[str, Any], budget: Budget, seed: int) -> dict[str
     kw = _kwargs(ref["scenario"], ref["power"], "mse", game.statistic, game.on_detect)
     defend = game.threshold_action(ref["threshold"])
     reference = Reference(ref["br_value"], "numerical best response")
-    scores, values, probs, curves, start = [], [], [], [], time.perf_counter()
-    for s in range(budget.seeds):
-        env = view("attacker", defend, **kw)
-        model, curve = train_sac(
-            env,
-            budget.attacker_steps,
-            seed + s,
-            abs(ref["preset_value"]),
-            lambda a, d=defend: game.reward(a, d),
-        )
-        result = evaluate(model, env, 1, seed=seed, reference=reference)
-        scores.append(result.score)
-        values.append(result.mean)
-        probs.append(game.attack(action_of(model, env.reset(seed=seed)[0]))[0])
-        curves.append(curve)
+    start = time.perf_counter()
+    values, scores, actions, curves = _learned_runs(
+        "attacker", defend, kw, budget.attacker_steps, budget, seed, abs(ref["preset_value"]),
+        lambda a: game.reward(a, defend), reference,
+    )  # fmt: skip
+    probs = [game.attack(a)[0] for a in actions]
     rand = evaluate(
         "random", view("attacker", defend, **kw), budget.random_episodes, seed, reference
     )
@@ -343,22 +363,12 @@ def learned_defender(ref: dict[str, Any], budget: Budget, seed: int) -> dict[str
     game = DetectionGame.of(view("defender", np.zeros(4), **kw))
     preset = game.attack_action(game.preset_probability, game.preset_sigma)
     reference = Reference(ref["best_value"], OPTIMAL, cost=True)
-    scores, values, actions, curves, start = [], [], [], [], time.perf_counter()
-    for s in range(budget.seeds):
-        env = view("defender", preset, **kw)
-        model, curve = train_sac(
-            env,
-            budget.defender_steps,
-            seed + s,
-            abs(ref["best_value"]),
-            lambda a: -game.reward(preset, a),
-        )
-        result = evaluate(model, env, 1, seed=seed, reference=reference)
-        obs, _ = env.reset(seed=seed)
-        actions.append(float(action_of(model, obs)[0]))
-        scores.append(result.score)
-        values.append(result.mean)
-        curves.append(curve)
+    start = time.perf_counter()
+    values, scores, played, curves = _learned_runs(
+        "defender", preset, kw, budget.defender_steps, budget, seed, abs(ref["best_value"]),
+        lambda a: -game.reward(preset, a), reference,
+    )  # fmt: skip
+    actions = [float(a[0]) for a in played]
     return {
         **{k: ref[k] for k in ("scenario", "power", "best_value", "obdd_value", "obdd_score")},
         "random_score": ref["random_score"],

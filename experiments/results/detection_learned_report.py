@@ -142,6 +142,8 @@ def _ratio_plot(
     """Learning curves of ``ratio(row, point)`` (mean over seeds) with the reference at 1."""
     import matplotlib.pyplot as plt
 
+    from agents.plots import save_figure
+
     fig, ax = plt.subplots(figsize=(7, 4))
     for r in rows:
         steps = [c["timesteps"] for c in r["curves"][0]]
@@ -151,9 +153,7 @@ def _ratio_plot(
     ax.set(xlabel="environment steps", ylabel=ylabel, title=title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=legend_size, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 
@@ -163,6 +163,8 @@ def plot(res: dict[str, Any], out: Path) -> list[Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from agents.plots import save_figure
 
     out.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -213,8 +215,5 @@ def plot(res: dict[str, Any], out: Path) -> list[Path]:
     )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    paths.append(out / "results_detection_learned_threshold.png")
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
+    paths.append(save_figure(fig, out / "results_detection_learned_threshold.png"))
     return paths

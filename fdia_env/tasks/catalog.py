@@ -17,6 +17,7 @@ COVARIANCE = "fdia_env/CovarianceAttack-v0"
 GAME_ATTACKER = "fdia_env/SensorGameAttacker-v0"
 GAME_DEFENDER = "fdia_env/SensorGameDefender-v0"
 DETECTION_DEFENDER = "fdia_env/DetectionDefender-v0"
+DETECTION_ATTACKER = "fdia_env/DetectionAttacker-v0"
 STEALTH_ATTACKER = "fdia_env/StealthAttack-v0"
 FAMILY_ID = "fdia_env/SystemFamily-v0"
 FAMILY_ENTRY_POINT = "fdia_env.envs.system_family:SystemFamilyEnv"
@@ -127,16 +128,25 @@ def _bayes(instance: str, scenario: str, player: str, model: str, **kwargs: Any)
     )
 
 
-def _detection(instance: str, scenario: str, power: float) -> TaskSpec:
+def _detection(instance: str, scenario: str, power: float, player: str = "defender") -> TaskSpec:
+    if player == "defender":
+        env_id = DETECTION_DEFENDER
+        what = f"the detector's threshold against an attack of power {power:g}, minimise the "
+        what += "Bayes cost"
+    else:
+        env_id = DETECTION_ATTACKER
+        what = (
+            f"the attacker's probability and bias covariance (power {power:g}) against the "
+            "quadratic detector at its fixed threshold s, maximise the Bayes cost"
+        )
     return TaskSpec(
-        f"detection-game/{instance}-defender-v0",
+        f"detection-game/{instance}-{player}-v0",
         "detection-game",
-        "defender",
-        DETECTION_DEFENDER,
+        player,
+        env_id,
         {"scenario": scenario, "power": power, "criterion": "bayes_cost"},
         "fdia_env.detection_game_v0",
-        f"{scenario}: the detector's threshold against an attack of power {power:g}, "
-        "minimise the Bayes cost",
+        f"{scenario}: {what}",
         episodes=10,
     )
 
@@ -223,6 +233,8 @@ SPECS: tuple[TaskSpec, ...] = (
     _bayes("m10-strong-informed", "game-m10", "defender", "informed", power=1000.0),
     _detection("ch3-static", "ch3-static", 240.0),
     _detection("ch3-tracking", "ch3-tracking", 7.5),
+    _detection("ch3-static", "ch3-static", 240.0, "attacker"),
+    _detection("ch3-tracking", "ch3-tracking", 7.5, "attacker"),
     _stealth("ieee14-b3", "grid-ieee14", 3),
     _family("tracking-m6", "trace", 1_000_000, 20, num_sensors=6, budget=4, horizon=4),
 )
