@@ -479,3 +479,19 @@ def test_the_game_and_its_solver_refuse_the_same_matrices_alike(matrices, match)
         BayesianGame(matrices, [0.5, 0.5])
     with pytest.raises(ValueError, match=match):
         solve_bayesian(matrices, [0.5, 0.5])
+
+
+def test_the_game_of_a_typed_env_is_the_game_of_its_options_and_an_untyped_env_is_refused():
+    from baselines.game import bayesian_game, bayesian_game_of
+    from fdia_env import sensor_game_v0
+
+    env = sensor_game_v0.parallel_env(
+        types=("independent", "dependent"), priors=(0.3, 0.7), attacker_model="informed"
+    )
+    game = bayesian_game_of(env)
+    direct = bayesian_game("ch5-game", ("independent", "dependent"), (0.3, 0.7), "informed")
+    np.testing.assert_array_equal(game.matrices, direct.matrices)
+    assert game.priors.tolist() == [0.3, 0.7] and game.attacker == "informed"
+    assert game.value == pytest.approx(direct.value, abs=1e-12)
+    with pytest.raises(ValueError, match="sensor_game_v0 env with types"):
+        bayesian_game_of(sensor_game_v0.parallel_env())

@@ -19,7 +19,7 @@
 ([0.0, 0.0, 0.0, 0.0, 0.0, 0.4, 0.6], 8.106)
 """
 
-from baselines.game.bayesian import BayesianGame, bayesian_game
+from baselines.game.bayesian import BayesianGame, bayesian_game, bayesian_game_of
 from baselines.game.double_oracle import DoubleOracleResult, solve_double_oracle
 from baselines.game.interop import OpenSpielMatrixArgs, to_nashpy, to_openspiel_matrix
 from baselines.game.lp import (
@@ -51,6 +51,7 @@ __all__ = [
     "TypedMixedStrategyPolicy",
     "attack_covariance",
     "bayesian_game",
+    "bayesian_game_of",
     "exploitability",
     "make_game",
     "payoff_matrix",

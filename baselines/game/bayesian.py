@@ -189,3 +189,36 @@ def bayesian_game(
     sc = resolve_system(system_or_scenario)
     mats = [payoff_matrix(sc, power, t, max_subset_size) for t in types]
     return BayesianGame(np.stack(mats), p, attacker, types)
+
+
+def bayesian_game_of(parallel: Any) -> BayesianGame:
+    """The :class:`BayesianGame` a typed ``sensor_game_v0`` parallel env plays.
+
+    Args:
+        parallel: ``sensor_game_v0.parallel_env(types=..., ...)`` (its scenario and its typed
+            attack's types, priors, attacker model, power and largest subset).
+
+    Raises:
+        ValueError: For an env whose attack has no types (an untyped sensor game).
+
+    Example:
+        >>> from fdia_env import sensor_game_v0
+        >>> env = sensor_game_v0.parallel_env(types=("independent", "dependent"))
+        >>> game = bayesian_game_of(env)
+        >>> game.types, game.matrices.shape
+        (('independent', 'dependent'), (2, 7, 7))
+    """
+    attack = parallel.attack
+    if getattr(attack, "types", None) is None:
+        raise ValueError(
+            "parallel must be a sensor_game_v0 env with types=(...) (a typed attack), got one "
+            f"with a {type(attack).__name__}"
+        )
+    return bayesian_game(
+        parallel.scenario,
+        attack.types,
+        attack.priors,
+        attack.attacker_model,
+        attack.power,
+        attack.max_subset_size,
+    )
