@@ -342,21 +342,17 @@ class ScenarioDefaults:
     when: dict[str, Any] = field(default_factory=dict)
 
 
-# The grid presets' sparse attack is built one sensor per decision (the sequential format):
-# at most N + c decisions of Discrete(M + 1), with the action mask for MaskablePPO.
+# The grid presets' sparse attack is built one pair per decision (the sequential format in its
+# plan-first order: at most c picks of Discrete(N·M + 1), then stop), with the action mask for
+# MaskablePPO; the time-major order (the env's default) does not learn there (docs/guide/
+# sparse.md, decision order). The algorithm's own defaults, rewards normalised.
 _SEQUENTIAL = {"action": "sequential"}
+_PLAN_FIRST = {"action": "sequential", "order": "plan"}
 _GRID_SPARSE = ScenarioDefaults(
-    env_kwargs=_SEQUENTIAL,
+    env_kwargs=_PLAN_FIRST,
     algo="MaskablePPO",
-    hyperparameters={
-        "n_steps": 2048,
-        "batch_size": 256,
-        "ent_coef": 0.01,
-        "net_arch": (128, 128),
-        "stop_prob": 0.9,
-    },
     normalize_reward=True,
-    when=_SEQUENTIAL,
+    when=_PLAN_FIRST,
 )
 _GRID_GAME = ScenarioDefaults(
     env_kwargs=_SEQUENTIAL,

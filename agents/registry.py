@@ -138,6 +138,10 @@ def _plan_policy(result: Any, action: str) -> Any:
     None in ``"single"``: one sensor a step cannot play every plan, so that row is not scored
     by playing.
     """
+    if action == "sequential-plan":  # the sequential format's plan-first order
+        from fdia_env.envs.sequential import PlanOrderPolicy
+
+        return PlanOrderPolicy.from_result(result)
     return None if action == "single" else result.policy(action)
 
 
@@ -154,6 +158,8 @@ def sparse_reference(env: FdiaParallelEnv) -> Reference | None:
 
     # the plan is played in the env's own action format (one sensor per decision when sequential)
     action = "sequential" if isinstance(env, SequentialSetEnv) else env.attack.format
+    if isinstance(env, SequentialSetEnv) and env.plan_first:
+        action = "sequential-plan"
     spec = env.spec
     if spec.reward_mode != "terminal" or spec.warmup != "steady":
         return None  # the solvers' objective is Φ at the window end from steady state
@@ -364,6 +370,8 @@ class Trainable:
             )
         table = SCENARIO_DEFAULTS.get((self.env, scenario))
         preset = {} if table is None else table.env_kwargs
+        if "action" in overrides and overrides["action"] != preset.get("action"):
+            preset = {}  # the table's options go with its action format (e.g. the order)
         return {"scenario": scenario, **self.scenarios[scenario], **preset, **overrides}
 
     def algorithm(self, name: str | None) -> str:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pettingzoo.test import api_test, parallel_api_test
 
-from baselines.sparse import SparsePolicy, branch_and_bound, sfs
+from baselines.sparse import SparsePolicy, branch_and_bound, exhaustive, sfs
 from baselines.sparse.testbeds import mixed_tracking
 from fdia_env import sparse_attack_v0
 from fdia_env.attacks import SparseAttack
@@ -872,3 +872,33 @@ def test_plan_order_pettingzoo_and_gymnasium_conformance():
     check_env(view.unwrapped, skip_render_check=True)
     view.reset(seed=0)
     assert view.unwrapped.action_masks().tolist() == [True] * 10
+
+
+def test_plan_order_reference_policy_plays_the_solver_set_in_the_env_format():
+    from agents.registry import sparse_reference
+    from fdia_env.envs.sequential import PlanOrderPolicy
+
+    env = sparse_attack_v0.parallel_env(
+        scenario="ch4-position", budget=2, horizon=3, action="sequential", order="plan"
+    )
+    ref = sparse_reference(env)
+    best = exhaustive("ch4-position", budget=2, horizon=3)
+    assert ref.value == pytest.approx(best.value, rel=1e-12)
+    assert isinstance(ref.policy, PlanOrderPolicy)
+    view = gym.make(
+        "fdia_env/SparseAttack-v0",
+        scenario="ch4-position",
+        budget=2,
+        horizon=3,
+        action="sequential",
+        order="plan",
+        illegal_action="error",
+    )
+    obs, _ = view.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        obs, r, term, trunc, _ = view.step(int(ref.policy.predict(obs)[0]))
+        total, done = total + r, term or trunc
+    assert total == pytest.approx(best.value, rel=1e-12)
+    with pytest.raises(ValueError, match=r"attacks must be \(step, sensor\) pairs"):
+        PlanOrderPolicy([(3, 0)], num_sensors=3, horizon=3)

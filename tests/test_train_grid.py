@@ -34,9 +34,15 @@ def run(tmp_path, *args):
 def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
     setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
     assert setup.algo == "MaskablePPO" and setup.normalize_reward
-    assert setup.env_kwargs == {"scenario": "grid-ieee14", "action": "sequential"}
-    table = SCENARIO_DEFAULTS["sparse_attack_v0", "grid-ieee14"].hyperparameters
-    assert setup.hp.n_steps == table["n_steps"] and setup.hp.net_arch == table["net_arch"]
+    assert setup.env_kwargs == {"scenario": "grid-ieee14", "action": "sequential", "order": "plan"}
+    assert SCENARIO_DEFAULTS["sparse_attack_v0", "grid-ieee14"].hyperparameters == {}
+    assert setup.hp == Hyperparameters()  # the algorithm's own defaults (stop_prob unset)
+    # the time-major order (the env's default) leaves the table
+    timed = run_setup(
+        "sparse_attack_v0", "attacker", "grid-ieee14", {"order": '"time"'}, None,
+        Hyperparameters(),
+    )  # fmt: skip
+    assert timed.env_kwargs["order"] == "time" and not timed.normalize_reward
     # the command line wins over the table
     given = run_setup(
         "sparse_attack_v0", "attacker", "grid-ieee14", {}, "PPO", Hyperparameters(n_steps=64),
@@ -49,9 +55,11 @@ def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
         Hyperparameters(),
     )  # fmt: skip
     assert other.algo == "MaskablePPO" and other.hp == Hyperparameters()
+    assert "order" not in other.env_kwargs  # the table's options go with its format
     assert not other.normalize_reward
     # a hyperparameter the algorithm does not take is not filled in
-    defaults = scenario_defaults("sparse_attack_v0", "grid-ieee14", setup.env_kwargs)
+    defaults = scenario_defaults("sensor_game_v0", "grid-ieee14", {"action": "sequential"})
+    assert defaults.hyperparameters["n_steps"] == 256
     assert with_defaults("DQN", Hyperparameters(), defaults).n_steps is None
     # scenarios outside the table are unchanged
     plain = run_setup("sparse_attack_v0", "attacker", None, {}, None, Hyperparameters())
@@ -89,7 +97,8 @@ def test_attacker_command_trains_on_grid_ieee14_with_the_table_defaults(tmp_path
     assert result.run_dir.name.startswith("sparse_attack_v0-MaskablePPO-s0-")
     config = json.loads((result.run_dir / "config.json").read_text())["resolved"]
     assert config["env_kwargs"]["action"] == "sequential"
-    assert config["hyperparameters"]["net_arch"] == [128, 128]
+    assert config["env_kwargs"]["order"] == "plan"
+    assert config["hyperparameters"]["net_arch"] == [64, 64]
     norm = config["reward_normalization"]
     best = exhaustive("grid-ieee14", budget=2, horizon=1).value
     assert norm["shift"] + norm["scale"] == pytest.approx(best, rel=1e-12)

@@ -8,10 +8,11 @@ learners trained on the identical instance, 3 seeds each: sb3-contrib's Maskable
 project's SB3 model, :func:`agents.algos.build_model` with the defaults of
 :data:`agents.config.ALGO_DEFAULTS`; SB3's ``VecNormalize`` scales its rewards, as torch-ppo
 scales its own) and the torch PPO (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's
-defaults). Both play the plan format of :mod:`experiments.results.sparse_grid_plan` (``c`` masked
-picks of sensor-time pairs, then the plan is played in ``sparse_attack_v0``), since the
-env's own actions are ``Discrete(2**M)`` (too large for these learners at M = 14) or, above 16
-sensors, an unmasked ``MultiBinary(M)``.
+defaults). Both play the env's own sequential format in the plan-first order
+(``gymnasium.make("fdia_env/SparseAttack-v1", action="sequential", order="plan")``: masked picks
+of sensor-time pairs, then stop, then the plan plays out; torch PPO on its native vector env),
+since the bitmask ``Discrete(2**M)`` is too large for these learners at M = 14 and, above 16
+sensors, the ``MultiBinary(M)`` action has no mask.
 
 Scores, the project's (:meth:`agents.registry.Reference.ratio`): value / optimum for the trace,
 the determinant ratio ``exp(Φ − Φ*)`` for log det. Where only a bound is known, a score is given
@@ -32,8 +33,11 @@ from typing import Any
 import numpy as np
 
 from experiments.results.common import mean_ci95, write_rows
-from experiments.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
 from fdia_env.systems import LinearSystem
+
+GYM_ID = "fdia_env/SparseAttack-v1"
+ORDER = "plan"
+"""The sequential format's decision order the learners train in (docs/guide/sparse.md: why)."""
 
 OBJECTIVES = ("trace", "logdet")
 EXS_MAX_SETS = 200_000  # below this many attack sets EXS also runs (a check of B&B)
@@ -199,7 +203,33 @@ def solve(inst: Instance, system: LinearSystem) -> dict[str, Any]:
     }
 
 
-def _play(policy: Any, env: PlanSparseEnv, episodes: int = 1, seed: int = 0) -> float:
+def env_kwargs(system: LinearSystem, inst: Instance) -> dict[str, Any]:
+    """The options of the learners' env: ``inst`` in the sequential format, plan-first order."""
+    return {
+        "scenario": system,
+        "budget": inst.budget,
+        "horizon": inst.horizon,
+        "objective": inst.objective,
+        "action": "sequential",
+        "order": ORDER,
+    }
+
+
+def make_env(system: LinearSystem, inst: Instance) -> Any:
+    """The learners' Gymnasium env of ``inst`` (see :func:`env_kwargs`)."""
+    import gymnasium as gym
+
+    return gym.make(GYM_ID, **env_kwargs(system, inst))
+
+
+def plan_policy(result: Any) -> Any:
+    """A solver's attack set played in the learners' env (plan-first order)."""
+    from fdia_env.envs.sequential import PlanOrderPolicy
+
+    return PlanOrderPolicy.from_result(result)
+
+
+def _play(policy: Any, env: Any, episodes: int = 1, seed: int = 0) -> float:
     from agents.evaluate import evaluate
 
     return evaluate(policy, env, episodes, seed, reference=1.0).mean
@@ -227,7 +257,7 @@ def replay_native(result: Any, system: LinearSystem, inst: Instance) -> float:
 def train_maskable(
     system: LinearSystem, inst: Instance, budget: Budget, seed: int
 ) -> tuple[Any, list[tuple[int, float]], float]:
-    """MaskablePPO on the plan env: ``(model, curve [(steps, return)], train seconds)``."""
+    """MaskablePPO in the plan-first order: ``(model, curve [(steps, return)], seconds)``."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -236,10 +266,9 @@ def train_maskable(
     from agents.config import Hyperparameters, algo_kwargs
 
     torch.set_num_threads(1)
-    args = (system, inst.budget, inst.horizon, inst.objective)
-    eval_env = PlanSparseEnv(*args)
+    eval_env = make_env(system, inst)
     venv = VecNormalize(
-        DummyVecEnv([lambda: PlanSparseEnv(*args)]), norm_obs=False, norm_reward=True, gamma=1.0
+        DummyVecEnv([lambda: make_env(system, inst)]), norm_obs=False, norm_reward=True, gamma=1.0
     )
     model = build_model("MaskablePPO", venv, algo_kwargs("MaskablePPO", Hyperparameters()), seed)
     every = max(1, budget.maskable_steps // budget.evals)
@@ -264,18 +293,17 @@ def train_maskable(
 def train_torch(
     system: LinearSystem, inst: Instance, budget: Budget, seed: int
 ) -> tuple[Any, list[tuple[int, float]], float]:
-    """torch-ppo on the plan vector env: ``(policy, curve [(steps, return)], train seconds)``."""
+    """torch-ppo on the native vector env: ``(policy, curve [(steps, return)], seconds)``."""
     import torch
 
     from agents.config import ALGO_DEFAULTS, TORCH_PPO
-    from agents.torch_ppo import TorchPPOConfig, train_torch_ppo
+    from agents.torch_ppo import TorchPPOConfig, make_torch_env, train_torch_ppo
 
     torch.set_num_threads(1)
     hp = ALGO_DEFAULTS[TORCH_PPO]
     config = TorchPPOConfig.from_hyperparameters(hp, budget.torch_steps, budget.torch_envs)
-    args = (system, inst.budget, inst.horizon, inst.objective)
-    eval_env = PlanSparseEnv(*args)
-    venv = PlanVectorEnv(*args, num_envs=budget.torch_envs)
+    eval_env = make_env(system, inst)
+    venv = make_torch_env(GYM_ID, budget.torch_envs, "cpu", **env_kwargs(system, inst))
     every = max(1, config.iterations // budget.evals)
     curve: list[tuple[int, float]] = []
 
@@ -297,9 +325,9 @@ def run_instance(
     system = SYSTEMS[inst.system][2]()
     sol = solve(inst, system)
     opt, obj = sol["optimum"], inst.objective
-    env = PlanSparseEnv(system, inst.budget, inst.horizon, inst.objective)
-    sfs_plan = _play(PlanPolicy(sol["sfs"]), env)
-    bnb_plan = _play(PlanPolicy(sol["bnb"]), env)
+    env = make_env(system, inst)
+    sfs_plan = _play(plan_policy(sol["sfs"]), env)
+    bnb_plan = _play(plan_policy(sol["bnb"]), env)
     sfs_native = replay_native(sol["sfs"], system, inst)
     random_return = _play("random", env, random_episodes, seeds[0])
     env.close()

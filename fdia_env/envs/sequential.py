@@ -417,6 +417,61 @@ def plan_actions(env: SequentialSetEnv, plan: list[list[int]]) -> list[int]:
     return [*actions, STOP]
 
 
+class PlanOrderPolicy:
+    """Plays a fixed attack set in the ``order="plan"`` format (stable-baselines3 signature).
+
+    At each decision: the lowest-numbered pair of the set not yet in the plan (read from the
+    observation's N·M plan entries, before its last entry), else stop (0), which plays the plan
+    out. Takes one (d,) observation or a (B, d) batch (a dict observation: its
+    ``"observation"``).
+
+    Args:
+        attacks: The set's 0-based (window step, sensor) pairs, e.g. a solver's
+            ``SparseResult.attacks``.
+        num_sensors: M.
+        horizon: N.
+
+    Raises:
+        ValueError: For a pair outside the N x M window.
+
+    Example:
+        >>> policy = PlanOrderPolicy([(1, 0), (0, 2)], num_sensors=3, horizon=2)
+        >>> int(policy.predict(np.zeros(4 + 6 + 1))[0])  # sensor 3 at window step 1
+        3
+    """
+
+    def __init__(self, attacks: Any, num_sensors: int, horizon: int) -> None:
+        M = check_int("num_sensors", num_sensors, minimum=1)
+        N = check_int("horizon", horizon, minimum=1)
+        self.size = N * M
+        self.todo = np.zeros(self.size, dtype=bool)
+        for k, i in attacks:
+            if not (0 <= int(k) < N and 0 <= int(i) < M):
+                raise ValueError(
+                    f"attacks must be (step, sensor) pairs in [0, {N}) x [0, {M}), got ({k}, {i})"
+                )
+            self.todo[int(k) * M + int(i)] = True
+
+    @classmethod
+    def from_result(cls, result: Any) -> PlanOrderPolicy:
+        """The policy of a solver's answer (``attacks``, ``num_sensors``, ``horizon``)."""
+        return cls(result.attacks, int(result.num_sensors), int(result.horizon))
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[Any, Any]:
+        """``(action, state)``: 1 + the next pair's slot, or 0; ``np.int64`` or (B,) array."""
+        obs = observation["observation"] if isinstance(observation, dict) else observation
+        plan = np.asarray(obs)[..., -(self.size + 1) : -1] > 0.5
+        todo = self.todo & ~plan
+        action = np.where(todo.any(-1), todo.argmax(-1) + 1, 0).astype(np.int64)
+        return (np.int64(action) if action.ndim == 0 else action), state
+
+
 def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = None) -> float:
     """Play ``plan`` (per window step, the 1-based sensors) in ``env``; return the return.
 
