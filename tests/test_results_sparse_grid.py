@@ -112,3 +112,17 @@ def test_quick_run_learned_policy_beats_random_play(quick):
         assert len(learner["scores"]) == 1 and math.isnan(learner["ci95"]), name  # one seed
         assert max(learner["scores"]) <= 1 + 1e-12, name  # feasible: never above the optimum
     assert "| ieee14-rtu | bus | 14, 13 | 3, 3 | logdet | 42 |" in text
+
+
+def test_order_study_rows_per_instance_order_and_seed(monkeypatch):
+    from fdia_env.scenarios import get
+
+    # a small system under the instance's key: the study's loop, not the grid build, is tested
+    small = ("ch4-position", "meter", lambda: get("ch4-position").system)
+    monkeypatch.setitem(sparse_grid.SYSTEMS, "ieee14-rtu", small)
+    inst = Instance("ieee14-rtu", 1, 2, "trace")
+    rows = sparse_grid.order_study((inst,), orders=("time",), seeds=(0,), steps=64)
+    assert [(r["order"], r["seed"]) for r in rows] == [("time", 0)]
+    for r in rows:
+        assert r["instance"] == "ieee14-rtu c=1 N=2 trace"
+        assert 0 < r["score"] <= 1 + 1e-12 and 0 < r["sfs"] <= 1 + 1e-12
