@@ -227,3 +227,30 @@ def test_the_detection_attacker_bound_holds_for_every_attack(name):
     assert max(rewards) <= best.value  # the searched best response beats every sampled attack
     for value in refs.heuristics.values():
         assert refs.random.mean < value <= best.value
+
+
+def test_the_dynamic_stealth_bound_holds_for_every_bias_attack():
+    task = tasks.get("stealth/ch4-position-dynamic-bias-v0")
+    best = task.references.optimum
+    assert not best.certified and 0.0 < best.gap <= GAP_HARD
+    assert best.value <= best.bound
+    kwargs = dict(task.env_kwargs)
+    venv = gym.make_vec(task.env_id, num_envs=64, vectorization_mode="vector_entry_point", **kwargs)
+    rng = np.random.default_rng(3)
+    try:
+        venv.reset(seed=0)
+        total = np.zeros(64)
+        signs = rng.choice([-1.0, 1.0], size=(64, 3))
+        for _ in range(kwargs["horizon"]):
+            actions = rng.uniform(-1.0, 1.0, size=(64, 3))
+            actions[:32] = signs[:32]  # half keep a constant sign pattern at full strength
+            actions[32:48] = np.where(rng.random((16, 3)) < 0.8, signs[32:48], -signs[32:48])
+            _, reward, _, _, infos = venv.step(actions.astype(np.float32))
+            # a bias never lowers the detection probability below the false-alarm rate
+            assert np.all(infos["detection_probability"] >= infos["alpha"] - 1e-12)
+            total += reward
+    finally:
+        venv.close()
+    assert total.max() <= best.bound
+    assert total.max() <= best.value + 1e-12  # no sampled attack beats the best constant sign
+    assert task.references.random.mean < best.value

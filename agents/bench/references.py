@@ -387,6 +387,13 @@ def system_family(spec: TaskSpec) -> References:
 
 
 def stealth(spec: TaskSpec) -> References:
+    """The static env's references (below), or the dynamic env's (:func:`stealth_dynamic`)."""
+    if spec.env_id == "fdia_env/StealthDynamic-v0":
+        return stealth_dynamic(spec)
+    return stealth_static(spec)
+
+
+def stealth_static(spec: TaskSpec) -> References:
     """The optimum over every shift pattern, with the best single-state shift as heuristic.
 
     All patterns of the ``action="shift"`` space are played at once in the native vector env
@@ -420,6 +427,71 @@ def stealth(spec: TaskSpec) -> References:
         random=_random(spec),
         heuristics={"best single-state shift": single},
         optimum=Optimum(value, f"exhaustive over the 2^{n} shift patterns", True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
+
+
+def stealth_dynamic(spec: TaskSpec) -> References:
+    """Bias attacks on ``stealth_dynamic_v0``: the best constant-sign bias, a certified bound.
+
+    The best known value is the best of the 2^r constant attacks ``a_max · s`` (s a sign
+    pattern over the r attacked rows), played in the env. The bound: a bias only raises the
+    non-central χ² statistic, so each step is detected with probability ``p ≥ α`` and pays at
+    most ``(1 − α) · phi``; ``phi_k = tr P_f + |d_k|²`` with ``d_k = −Σ_j Ā^{k−j} K Γ a_j``, so
+    ``|d_k| ≤ Σ_{i<k} max_s |Ā^i K Γ s|`` (a convex function of a is largest at a vertex of
+    the action box). The heuristic is Mo & Sinopoli's stealthy attack
+    (:func:`baselines.stealth.dynamic.mo_sinopoli`) scaled to the largest bias, or nothing
+    when the attacked sensors admit none.
+    """
+    import itertools
+
+    from baselines.stealth.dynamic import mo_sinopoli
+    from fdia_env.stealth.dynamic_policy import ScheduledPolicy, bias_actions
+    from fdia_env.stealth.stealth_attack_v0 import _Fixed
+
+    kw = spec.env_kwargs
+    if kw.get("action") != "bias" or kw.get("dynamics") != "expected":
+        raise ValueError(f"{spec.name}: the bound needs action='bias' and expected dynamics")
+    if kw.get("on_detect", "zero") != "zero" or kw.get("protected"):
+        raise ValueError(f"{spec.name}: the bound needs on_detect='zero' and no protected sensor")
+    env = make(spec)
+    try:
+        parallel = env.unwrapped.parallel
+        model, horizon, alpha = parallel.model, int(parallel.horizon), float(parallel.alpha)
+    finally:
+        env.close()
+    r = len(model.rows)
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=r)))
+    returns = [_play(spec, _Fixed(s.astype(np.float32))) for s in signs]
+    value = float(max(returns))
+    gamma = np.zeros((model.m, r))
+    gamma[model.rows, np.arange(r)] = model.a_max * model.sigma
+    reach, power = [], np.eye(model.n)
+    for _ in range(horizon):
+        reach.append(float(np.linalg.norm(power @ model.K @ gamma @ signs.T, axis=0).max()))
+        power = model.Abar @ power
+    bound = (1.0 - alpha) * sum(model.clean + sum(reach[:k]) ** 2 for k in range(1, horizon + 1))
+    heuristics = {}
+    system = model.system
+    ms = mo_sinopoli(system.F, system.H, system.Q, system.R, model.rows.tolist())
+    if ms.reach is not None:
+        injections = ms.attack(horizon)
+        peak = float(np.abs(injections[:, model.rows] / (model.a_max * model.sigma)).max())
+        if peak > 0.0:
+            actions = bias_actions(model, injections * ((1.0 - 1e-12) / peak))
+            heuristics["Mo-Sinopoli stealthy attack (scaled to a_max)"] = _play(
+                spec, ScheduledPolicy(actions)
+            )
+    gap = 1.0 - _ratio("trace", value, bound)
+    return References(
+        objective="trace",
+        metric="return",
+        random=_random(spec),
+        heuristics=heuristics,
+        optimum=Optimum(
+            value, f"best of the 2^{r} constant-sign biases", gap <= 0.0, max(bound, value), gap
+        ),
         game_value=None,
         **_stamp(),
     )

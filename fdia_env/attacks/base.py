@@ -54,6 +54,19 @@ def bit_array(values: Any, M: int) -> np.ndarray:
     return out
 
 
+def same_sensors(xp: Backend, batch: int, bits: int, M: int) -> Any:
+    """Every member's sensor set = ``bits``, as the backend ``xp`` holds sensor sets.
+
+    numpy: (B,) bitmasks (:func:`bit_array`); torch: (B, M) boolean masks; the batch of one
+    (:data:`~fdia_env.backend.ONE`): the Python int itself.
+    """
+    if xp is ONE:
+        return int(bits)
+    if xp is NUMPY:
+        return bit_array([bits] * batch, M)
+    return xp.asarray(np.broadcast_to(bits_to_mask(bits, M), (batch, M)).copy())
+
+
 def mask_array_to_bits(masks: np.ndarray) -> np.ndarray:
     """(B, M) booleans -> (B,) bitmasks (:func:`bit_array` dtype)."""
     masks = np.asarray(masks, dtype=bool)

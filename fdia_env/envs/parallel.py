@@ -195,7 +195,7 @@ class FdiaParallelEnv(ParallelEnv):
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
         effect = self.attack.apply_checked(actions["attacker"])  # checked above
-        filter_input = self.defense.apply(actions.get("defender"), effect)
+        filter_input = self.defense.apply_checked(actions.get("defender"), effect)
         self._last_effect = effect
         if not self.defense.passive:
             self.attack.observe_opponent(self.defense)

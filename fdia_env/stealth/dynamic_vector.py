@@ -14,17 +14,15 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
-from fdia_env._validation import check_int
 from fdia_env.envs.actions import check_batch_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
+from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
 
 MAX_NUM_ENVS = 1 << 16
 
 
-class StealthDynamicVectorEnv(VectorEnv):
+class StealthDynamicVectorEnv(StealthVectorBase):
     """B copies of the attacker's view, stepped as one batch (see the module docstring).
 
     Args:
@@ -32,22 +30,11 @@ class StealthDynamicVectorEnv(VectorEnv):
         **kwargs: Options of ``stealth_dynamic_v0.parallel_env`` (no ``render_mode``).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
-
     def __init__(self, num_envs: int, **kwargs: Any) -> None:
-        if kwargs.get("render_mode") is not None:
-            raise ValueError("render_mode is not supported by the native vector env")
-        kwargs.pop("render_mode", None)
-        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
-        self.env = StealthDynamicEnv(**kwargs)
+        self._init_batch(num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs)
         self.model = self.env.model
-        self.single_action_space = self.env.action_space("attacker")
-        self.single_observation_space = self.env.observation_space("attacker")
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._alpha = np.full(self.num_envs, self.env.alpha)
         self._tau = np.repeat(self.env._tau[[self.env._default_rate()]], self.num_envs, axis=0)
-        self._rng = np.random.default_rng()
         self._state = self.model.new_state(self.num_envs)
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
 
@@ -55,8 +42,7 @@ class StealthDynamicVectorEnv(VectorEnv):
         self, *, seed: int | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict]:
         """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        if seed is not None:
-            self._rng = np.random.default_rng(int(seed))
+        self._seed(seed)
         self._state = self.model.new_state(self.num_envs)
         everyone = np.ones(self.num_envs, dtype=bool)
         self.model.restart(self._state, everyone, self._rng, self.env.dynamics == "sampled")
@@ -133,20 +119,10 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthDynamicVectorEnv:
         ValueError: For ``backend``/``device`` other than numpy on the CPU, the defender's
             view, or a bad option.
     """
-    backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
-    agent = kwargs.pop("agent", "attacker")
-    kwargs.pop("module", None)
-    if agent != "attacker" or kwargs.get("defender") is not None:
-        raise ValueError(
-            "the native vector env plays the attacker alone (defender=None); use "
-            "vectorization_mode='sync' for the defender's view"
-        )
+    backend, device = vector_options(kwargs, "dynamic stealth env")
     if backend != "numpy" or device not in (None, "cpu"):
         raise ValueError(
             f"backend={backend!r}, device={device!r}: the dynamic stealth env's native vector "
             "env runs numpy on the CPU (backend='numpy')"
         )
-    autoreset = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    if autoreset not in (AutoresetMode.NEXT_STEP, "next_step", "NextStep"):
-        raise ValueError(f"autoreset_mode must be NEXT_STEP here, got {autoreset!r}")
     return StealthDynamicVectorEnv(num_envs, **kwargs)

@@ -19,6 +19,7 @@ GAME_DEFENDER = "fdia_env/SensorGameDefender-v0"
 DETECTION_DEFENDER = "fdia_env/DetectionDefender-v0"
 DETECTION_ATTACKER = "fdia_env/DetectionAttacker-v0"
 STEALTH_ATTACKER = "fdia_env/StealthAttack-v0"
+STEALTH_DYNAMIC = "fdia_env/StealthDynamic-v0"
 FAMILY_ID = "fdia_env/SystemFamily-v0"
 FAMILY_ENTRY_POINT = "fdia_env.envs.system_family:SystemFamilyEnv"
 
@@ -165,6 +166,27 @@ def _stealth(instance: str, scenario: str, budget: int) -> TaskSpec:
     )
 
 
+def _stealth_dynamic(instance: str, scenario: str, a_max: float, horizon: int) -> TaskSpec:
+    return TaskSpec(
+        f"stealth/{instance}-v0",
+        "stealth",
+        "attacker",
+        STEALTH_DYNAMIC,
+        {
+            "scenario": scenario,
+            "action": "bias",
+            "a_max": a_max,
+            "horizon": horizon,
+            "dynamics": "expected",
+        },
+        "fdia_env.stealth.stealth_dynamic_v0",
+        f"{scenario}: bias every sensor by at most {a_max:g} innovation standard deviations per "
+        f"step for {horizon} steps against the Kalman filter's windowed chi2 detector, maximise "
+        "the expected undetected error (trace of its covariance, summed over the steps)",
+        episodes=10,
+    )
+
+
 def _family(instance: str, objective: str, first: int, count: int, **family: Any) -> TaskSpec:
     from fdia_env.envs.system_family import TrackingFamily
 
@@ -236,5 +258,6 @@ SPECS: tuple[TaskSpec, ...] = (
     _detection("ch3-static", "ch3-static", 240.0, "attacker"),
     _detection("ch3-tracking", "ch3-tracking", 7.5, "attacker"),
     _stealth("ieee14-b3", "grid-ieee14", 3),
+    _stealth_dynamic("ch4-position-dynamic-bias", "ch4-position", 0.25, 10),
     _family("tracking-m6", "trace", 1_000_000, 20, num_sensors=6, budget=4, horizon=4),
 )
