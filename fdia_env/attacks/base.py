@@ -154,7 +154,7 @@ class AttackModel(ABC):
         """Act on an action already checked against :attr:`action_space` (the env's step)."""
         bits, sigma = self.batch_apply(action)
         probability = self.batch_probability()
-        return AttackEffect(int(bits), sigma, 1.0 if probability is None else probability)
+        return AttackEffect(int(bits), sigma, 1.0 if probability is None else float(probability))
 
     def info(self) -> dict[str, Any]:
         """Per-step information for the ``infos`` dict.

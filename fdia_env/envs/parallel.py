@@ -233,7 +233,10 @@ class FdiaParallelEnv(ParallelEnv):
     def _infos(self, agents: list[str]) -> dict[str, dict[str, Any]]:
         """Each agent's info: the common one, plus the attack's private keys for the attacker."""
         info = self._info()
-        infos = {a: dict(info) if i else info for i, a in enumerate(agents)}  # own dicts
+        if len(agents) == 1:
+            infos = {agents[0]: info}
+        else:  # each agent its own dict
+            infos = {a: dict(info) if i else info for i, a in enumerate(agents)}
         if "attacker" in infos:
             infos["attacker"].update(self.attack.private_info())
         return infos
