@@ -15,6 +15,25 @@ _SYM_RTOL = 1e-9
 MAX_POWER = 1e300
 
 
+def as_float_array(name: str, value: Any, expected: str) -> np.ndarray:
+    """``value`` as a float64 array (a copy), or ``ValueError`` naming ``name``.
+
+    Args:
+        name: Parameter name used in the error message.
+        value: Anything ``np.array`` accepts.
+        expected: What ``value`` should be, for the message ``"<name> must be <expected>,
+            got <value>"`` (a ragged list, a string, an object numpy cannot convert).
+
+    Example:
+        >>> as_float_array("x", [1, 2], "a vector").dtype
+        dtype('float64')
+    """
+    try:
+        return np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be {expected}, got {value!r}") from exc
+
+
 def as_matrix(
     name: str, value: Any, shape: tuple[int | None, int | None] | None = None
 ) -> np.ndarray:
@@ -28,10 +47,7 @@ def as_matrix(
     Returns:
         A read-only float64 copy of shape ``(rows, cols)``.
     """
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric matrix, got {value!r}") from exc
+    arr = as_float_array(name, value, "a numeric matrix")
     if arr.ndim == 0:
         arr = arr.reshape(1, 1)
     elif arr.ndim == 1:
@@ -49,10 +65,7 @@ def as_matrix(
 
 def as_vector(name: str, value: Any, size: int) -> np.ndarray:
     """Convert ``value`` to a finite, read-only float64 vector of length ``size``."""
-    try:
-        arr = np.array(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric vector, got {value!r}") from exc
+    arr = as_float_array(name, value, "a numeric vector").reshape(-1)
     if arr.size != size:
         raise ValueError(f"{name} must have {size} entries, got {arr.size}")
     check_finite(name, arr)

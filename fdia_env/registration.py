@@ -363,7 +363,7 @@ for _entry in (
             "attacker": "fdia_env/StealthDynamic-v0",
             "defender": "fdia_env/StealthDynamicDefender-v0",
         },
-        backends=("numpy",),
+        backends=("numpy", "torch"),
         kalman=False,
         vector="fdia_env.stealth.dynamic_vector:make_vector",
         vector_views=("attacker",),  # the defender's view: copies in SyncVectorEnv

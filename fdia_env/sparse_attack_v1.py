@@ -20,7 +20,10 @@ and this package's ``sparse_attack_v0`` stay, unchanged, for results made with t
 ``action="auto"`` (default): ``Discrete(M + 1)`` in the sequential format above 16 sensors
 (action j adds sensor j to the window step's set, 0 stops and takes the window step; an episode
 takes at most N + c decisions); ``Discrete(2**M)``, the bitmask, up to 16. The other formats by
-name, as in ``sparse_attack_v0``.
+name, as in ``sparse_attack_v0``. ``order="plan"`` (sequential format only; default
+``"time"``) picks the (sensor, window step) pairs of the whole horizon first,
+``Discrete(N·M + 1)``, then the plan plays out (see ``sparse_attack_v0``); ``train.py`` uses
+it on the grid presets, where the time-major order does not learn.
 
 ## Observation Space
 

@@ -111,3 +111,74 @@ def test_covariance_action_to_sigma_uses_the_power_left_without_spending_it():
     effect = attack.apply(half)
     np.testing.assert_allclose(effect.sigma, sigma, rtol=1e-12)
     assert attack.remaining == 1500.0 and attack.info() == {"power": 1500.0, "power_left": 1500.0}
+
+
+PAIRS = [
+    ("sensor_game_v0", {}),
+    ("sensor_game_v0", {"attacker_model": "informed", "types": ("independent", "dependent")}),
+    ("detection_game_v0", {}),
+    (
+        "fdia_v0",
+        {
+            "scenario": "ch2-position",
+            "attack": "covariance",
+            "defense": "unaware",
+            "attack_kwargs": {"power": 3000.0},
+            "horizon": 4,
+        },
+    ),
+    ("fdia_v0", {"attack": "sparse", "defense": "perfect_detection"}),
+]
+
+
+@pytest.mark.parametrize(("module", "kwargs"), PAIRS, ids=lambda x: str(x))
+def test_single_pair_equals_member_zero_of_the_numpy_batch(module, kwargs):
+    """Attack and defense together: the filter input, features and infos of member 0."""
+    import importlib
+
+    make = importlib.import_module(f"fdia_env.{module}").parallel_env
+    if kwargs.get("types"):
+        from fdia_env.attacks.typed import TypedSubsetAttack
+
+        kwargs = {}
+        env_s, env_b = make(), make()
+        for env in (env_s, env_b):
+            env.attack = TypedSubsetAttack(100.0, ("independent", "dependent"), (0.25, 0.75))
+            env.attack.bind(env.system, env.spec)
+    else:
+        env_s, env_b = make(**kwargs), make(**kwargs)
+    (att, dfn), (batt, bdfn) = (env_s.attack, env_s.defense), (env_b.attack, env_b.defense)
+    B, rng = 3, np.random.default_rng(1)
+    att.reset(), dfn.reset()
+    batt.xp = bdfn.xp = NUMPY
+    batt.batch_reset(B), bdfn.batch_reset(B)
+    seeds = [np.random.default_rng(s) for s in range(B)]
+    att.draw_nature(np.random.default_rng(0), {})
+    batt.batch_draw_nature(seeds, None, {})
+    assert att.private_info().keys() == batt.batch_private_info().keys()
+    for _ in range(3):
+        assert att.features() == batt.batch_features()[0].tolist()
+        assert dfn.features() == bdfn.batch_features()[0].tolist()
+        a = [_random_action(att.action_space, rng) for _ in range(B)]
+        d = [None] * B
+        if dfn.action_space is not None:
+            d = [_random_action(dfn.action_space, rng) for _ in range(B)]
+        effect = att.apply(a[0])
+        fi = dfn.apply(d[0], effect)
+        bits, sigma = batt.batch_apply(np.stack([np.asarray(x) for x in a]))
+        actions = None if d[0] is None else np.stack([np.asarray(x) for x in d])
+        used, leak, present, steady = bdfn.batch_apply(actions, bits, sigma)
+        assert fi.used == int(used[0]) and fi.steady == bool(steady)
+        if present is None or not present[0]:
+            assert fi.leaked_sigma is None
+        else:
+            np.testing.assert_allclose(fi.leaked_sigma, leak[0], rtol=1e-12, atol=1e-12)
+        rule = bdfn.batch_detection()
+        assert (fi.detection is None) == (rule is None)
+        if rule is not None:
+            assert fi.detection.threshold == rule.member(0).threshold
+            assert np.array_equal(fi.detection.assumed_sigma, rule.assumed_sigma)
+            assert fi.attack_probability == float(batt.batch_probability()[0])
+        att.observe_opponent(dfn), dfn.observe_opponent(att)
+        batt.batch_observe_opponent(bdfn), bdfn.batch_observe_opponent(batt)
+        assert att.info().keys() == batt.batch_info().keys()

@@ -495,3 +495,17 @@ def test_the_game_of_a_typed_env_is_the_game_of_its_options_and_an_untyped_env_i
     assert game.value == pytest.approx(direct.value, abs=1e-12)
     with pytest.raises(ValueError, match="sensor_game_v0 env with types"):
         bayesian_game_of(sensor_game_v0.parallel_env())
+
+
+@pytest.mark.parametrize("given", ["ch5-game", None, "gym"])
+def test_the_game_of_anything_but_a_parallel_env_names_the_parameter(given):
+    """Regression: a scenario name or a Gymnasium view raised a raw AttributeError."""
+    import gymnasium as gym
+
+    from baselines.game import bayesian_game_of
+
+    if given == "gym":
+        given = gym.make("fdia_env/SensorGameAttacker-v0", types=("independent", "dependent"))
+        assert bayesian_game_of(given.unwrapped.parallel).types == ("independent", "dependent")
+    with pytest.raises(ValueError, match="parallel must be a sensor_game_v0 parallel env"):
+        bayesian_game_of(given)

@@ -198,6 +198,21 @@ def _generated_at_build(path: str) -> bool:
     return "environments" in path and name in env_pages
 
 
+def test_no_page_the_build_writes_is_tracked():
+    """Regression: a generated env page was committed (docs/environments/sparse_attack_v1.md).
+
+    The build rewrites those pages from the env modules' docstrings and renders their images into
+    docs/_static/envs/ (ignored); a tracked copy goes stale and links an image that is not there.
+    """
+    env_pages = {f"docs/environments/{module}.md" for module in generate_pages.ENV_MODULES}
+    generated = [
+        name
+        for name in _tracked()
+        if name in env_pages or (name.startswith("docs/api/") and name != "docs/api/index.md")
+    ]
+    assert not generated, f"generated pages tracked by git: {generated}"
+
+
 def test_no_tracked_file_cites_a_file_the_repository_does_not_contain():
     """Every Markdown file or project path named in code, tests and docs is in the repository.
 

@@ -7,7 +7,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 import scipy.stats
-from conftest import all_masks, random_pd, rel_err, stable_systems
+from conftest import all_masks, random_pd, random_system, rel_err, stable_systems
 from filterpy.kalman import KalmanFilter
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -154,6 +154,17 @@ def test_information_form_equals_covariance_form_on_random_systems(system, steps
             P_cov[i] = covariance_update(predict_cov(P_cov[i], system.F, system.Q), H, R)[0]
     for i in range(len(masks)):
         assert rel_err(P_info[i], P_cov[i]) <= 1e-8, (masks[i], P_info[i], P_cov[i])
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_random_noise_free_systems_are_stable_so_linear_system_accepts_them(n):
+    """Regression: the random-system strategy drew Q = 0 with an unstable F (rejected, flaky)."""
+    for seed in range(40):
+        system = random_system(seed, n, [1], q_rank=0, radius=1.19)  # raised ValueError before
+        assert not system.Q.any()
+        assert np.abs(np.linalg.eigvals(system.F)).max() < 0.99
+        noisy = random_system(seed, n, [1], q_rank=n, radius=1.19)
+        assert np.linalg.eigvalsh(noisy.Q).min() > 0 and np.linalg.norm(noisy.F, 2) < 1.19
 
 
 # --- 3. steady state ----------------------------------------------------------------------------

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from experiments.results import cli
-from experiments.results.stealth import format_rows, shift_payoffs
+from experiments.results.stealth import format_rows, references, shift_payoffs, threshold_game
 
 
 def test_enumerated_optimum_of_the_shift_actions_is_bus_7():
@@ -22,16 +22,51 @@ def test_enumerated_optimum_of_the_shift_actions_is_bus_7():
     assert cli.TABLES["stealth"] == "experiments.results.stealth"
 
 
+def test_threshold_game_value_is_the_smallest_rate_against_a_stealthy_attack():
+    game = threshold_game(3)
+    alphas = np.array(game["alphas"])
+    # a stealthy 3-meter shift is seen with probability α exactly, whatever the rate: each rate
+    # concedes (1 − α) · 0.05 + α (the false-alarm cost), the smallest rate is the equilibrium
+    np.testing.assert_allclose(game["concedes"], (1 - alphas) * 0.05 + alphas, rtol=1e-12)
+    assert game["value"] == pytest.approx((1 - 0.001) * 0.05 + 0.001, rel=1e-9)
+    assert game["defender"] == pytest.approx([1.0, 0.0, 0.0, 0.0, 0.0], abs=1e-9)
+
+
+def test_ieee118_reference_is_the_min_cut_shift_played_in_the_env():
+    ref = references(3, "grid-ieee118")
+    # a 3-meter undetectable shift exists (the smallest security index on IEEE 118 is 3): the
+    # env pays it (1 − α) · magnitude exactly; random 0/1 shifts of 117 states, trimmed to 3
+    # meters, are nearly always seen
+    assert ref["optimum"] == pytest.approx((1 - 0.05) * 0.05, rel=1e-12)
+    assert "3 meters" in ref["optimum_kind"]
+    assert 0.0 < ref["random"] < 0.1 * ref["optimum"]
+    with pytest.raises(ValueError, match="budget=2: every undetectable shift on grid-ieee118"):
+        references(2, "grid-ieee118")
+    with pytest.raises(ValueError, match="too many to enumerate"):
+        shift_payoffs(3, "grid-ieee118")
+
+
 def test_the_table_shows_every_seed_and_the_game():
     attacker = {
-        "budget": 3, "steps": 10, "learned": [0.0475, 0.0], "learned_mean": 0.02375,
-        "learned_ci95": 0.3, "random": 1.7e-5, "optimum": 0.0475, "score": [1.0, 0.0],
+        "scenario": "grid-ieee14", "budget": 3, "steps": 10, "learned": [0.0475, 0.0],
+        "learned_mean": 0.02375, "learned_ci95": 0.3, "random": 1.7e-5, "optimum": 0.0475,
+        "optimum_kind": "enumerated", "score": [1.0, 0.0], "train_seconds": [4.0, 5.0],
     }  # fmt: skip
     game = {
         "budget": 5, "protection": 2, "value": 0.02996, "gap": 1e-17,
         "protect_optimal_attack_concedes": 0.05, "protect_basic_concedes": 0.06,
         "unprotected": 0.12,
     }  # fmt: skip
-    table = format_rows([attacker], [game])
-    assert "| 3 | 10 | 0.0475, 0.0000 | 0.0238 ± 0.3 | 0.0000 | 0.0475 | 100.0%, 0.0% |" in table
+    defender = {
+        "steps": 8, "alpha": [0.001, 0.01], "concedes": [0.05095, 0.0595],
+        "concedes_mean": 0.055225, "concedes_ci95": 0.05, "value": 0.05095,
+        "train_seconds": [3.0, 4.0],
+    }  # fmt: skip
+    table = format_rows([attacker], [game], [defender])
+    assert "| 8 | 0.001, 0.01 | 0.05095, 0.05950 | 0.05523 ± 0.05 | 0.05095 | 3, 4 |" in table
+    row = (
+        "| grid-ieee14 | 3 | 10 | 0.0475, 0.0000 | 0.0238 ± 0.3 | 1.70e-05 | 0.0475 (enumerated) "
+        "| 100.0%, 0.0% | 4, 5 |"
+    )
+    assert row in table
     assert "| 5 | 2 | 0.0300 (1.0e-17) | 0.0500 | 0.0600 | 0.1200 |" in table

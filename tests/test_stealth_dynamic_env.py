@@ -375,5 +375,74 @@ def test_bad_input_is_a_value_error_naming_the_parameter():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="attacker"):
         env.step({"attacker": np.array([np.nan, 0.0, 0.0], dtype=np.float32)})
-    with pytest.raises(ValueError, match="backend"):
-        gym.make_vec(GYM_ID, num_envs=2, vectorization_mode="vector_entry_point", backend="torch")
+    with pytest.raises(ValueError, match="backend must be one of"):
+        gym.make_vec(GYM_ID, num_envs=2, vectorization_mode="vector_entry_point", backend="jax")
+    with pytest.raises(ValueError, match="backend='torch' runs action='bias' only"):
+        gym.make_vec(
+            GYM_ID,
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            backend="torch",
+            action="linear",
+        )
+
+
+# --- the torch backend of the native vector env (bias attack) -------------------------------
+def _np(x):
+    return x.detach().cpu().numpy() if hasattr(x, "detach") else np.asarray(x)
+
+
+def _compare(out, tout):
+    for want, got in zip(out[:4], tout[:4], strict=True):
+        np.testing.assert_allclose(_np(got), want, rtol=0, atol=1e-10)
+    assert set(tout[4]) == set(out[4])
+    for key, want in out[4].items():
+        np.testing.assert_allclose(_np(tout[4][key]), want, rtol=1e-10, atol=1e-10, err_msg=key)
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+def test_torch_backend_equals_numpy_on_the_same_draws(dynamics, monkeypatch):
+    torch = pytest.importorskip("torch")
+    from fdia_env.backend import NUMPY
+    from fdia_env.stealth.dynamic_model import DynamicModel
+
+    kwargs = {"dynamics": dynamics, "horizon": 3, "on_detect": "end", "a_max": 3.0}
+    runs = []
+    for backend in ("numpy", "torch"):
+        draws = np.random.default_rng(7)  # the same noise, in the same order, for both
+
+        def normal(xp, rng, shape, draws=draws):
+            x = draws.standard_normal(shape)
+            return x if xp is NUMPY else xp.asarray(x)
+
+        monkeypatch.setattr(DynamicModel, "_normal", staticmethod(normal))
+        venv = gym.make_vec(
+            GYM_ID, num_envs=16, vectorization_mode="vector_entry_point", backend=backend, **kwargs
+        )
+        outs = [venv.reset(seed=0)]
+        acts = np.random.default_rng(1).uniform(-1, 1, (6, 16, 3)).astype(np.float32)
+        for a in acts:  # across the ends of episodes (horizon, alarms) and their autoresets
+            outs.append(venv.step(a if backend == "numpy" else torch.as_tensor(a)))
+        runs.append(outs)
+    (obs, _), (tobs, _) = runs[0][0], runs[1][0]
+    np.testing.assert_array_equal(_np(tobs), obs)
+    for out, tout in zip(runs[0][1:], runs[1][1:], strict=True):
+        _compare(out, tout)
+    p = np.concatenate([o[4]["detection_probability"] for o in runs[0][1:]])
+    assert ((p > 0.05 + 1e-6) & (p < 1 - 1e-6)).sum() > 10  # the torch χ² tail was exercised
+    if dynamics == "sampled":
+        assert any(o[4]["detected"].any() for o in runs[0][1:])
+
+
+def test_torch_backend_draws_its_own_noise_and_refuses_numpy_actions():
+    torch = pytest.importorskip("torch")
+    venv = gym.make_vec(
+        GYM_ID, num_envs=4000, vectorization_mode="vector_entry_point", backend="torch"
+    )
+    venv.reset(seed=3)
+    with pytest.raises(TypeError, match=r"attacker actions must be a torch\.Tensor"):
+        venv.step(np.zeros((4000, 3), dtype=np.float32))
+    _, rewards, _, _, infos = venv.step(torch.zeros((4000, 3)))
+    rate = float(infos["detected"].double().mean())  # no attack: the detector's α
+    assert abs(rate - 0.05) < 4 * np.sqrt(0.05 * 0.95 / 4000)
+    assert torch.all(rewards[~infos["detected"]] > 0)

@@ -22,7 +22,7 @@ import numpy as np
 
 from baselines.covariance.problem import make_problem, weight_roots
 from baselines.covariance.result import CovarianceResult
-from fdia_env._validation import check_positive
+from fdia_env._validation import as_float_array, check_positive
 from fdia_env.kalman import spd_inv_sum
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -59,10 +59,7 @@ def water_filling(xi: np.ndarray, power: float) -> tuple[np.ndarray, float]:
         [4.5, 1.5]
     """
     power = check_positive("power", power)
-    try:
-        xi = np.asarray(xi, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"xi must be a non-empty finite 1-D array of numbers, got {xi!r}") from exc
+    xi = as_float_array("xi", xi, "a non-empty finite 1-D array of numbers")
     if xi.ndim != 1 or xi.size == 0 or not np.all(np.isfinite(xi)):
         raise ValueError(f"xi must be a non-empty finite 1-D array, got {xi!r}")
     if np.any(xi < 0.0):

@@ -30,7 +30,14 @@ import numpy as np
 from baselines._inputs import resolve_system
 from baselines.covariance.problem import make_problem
 from baselines.covariance.trace import top_eigenvector
-from fdia_env._validation import as_vector, check_choice, check_finite, check_int, check_psd
+from fdia_env._validation import (
+    as_float_array,
+    as_vector,
+    check_choice,
+    check_finite,
+    check_int,
+    check_psd,
+)
 from fdia_env.kalman import actual_covariance_step, steady_state
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -190,12 +197,7 @@ def recursion_objective(
         weights: (N,) time weights α (default equal).
     """
     system = resolve_system(system_or_scenario).system
-    try:
-        sigmas = np.asarray(sigmas, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"sigmas must be an (N, {system.nz}, {system.nz}) array of numbers, got {sigmas!r}"
-        ) from exc
+    sigmas = as_float_array("sigmas", sigmas, f"an (N, {system.nz}, {system.nz}) array of numbers")
     if sigmas.ndim != 3 or sigmas.shape[1:] != (system.nz, system.nz):
         raise ValueError(
             f"sigmas must have shape (N, {system.nz}, {system.nz}), got {sigmas.shape}"

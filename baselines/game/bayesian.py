@@ -199,7 +199,8 @@ def bayesian_game_of(parallel: Any) -> BayesianGame:
             attack's types, priors, attacker model, power and largest subset).
 
     Raises:
-        ValueError: For an env whose attack has no types (an untyped sensor game).
+        ValueError: For an object that is not a parallel env with an attack (a Gymnasium view,
+            a scenario name) or an env whose attack has no types (an untyped sensor game).
 
     Example:
         >>> from fdia_env import sensor_game_v0
@@ -208,7 +209,12 @@ def bayesian_game_of(parallel: Any) -> BayesianGame:
         >>> game.types, game.matrices.shape
         (('independent', 'dependent'), (2, 7, 7))
     """
-    attack = parallel.attack
+    attack = getattr(parallel, "attack", None)
+    if attack is None:
+        raise ValueError(
+            "parallel must be a sensor_game_v0 parallel env with types=(...), got a "
+            f"{type(parallel).__name__} (a Gymnasium view: pass env.unwrapped.parallel)"
+        )
     if getattr(attack, "types", None) is None:
         raise ValueError(
             "parallel must be a sensor_game_v0 env with types=(...) (a typed attack), got one "

@@ -20,6 +20,8 @@ import numpy as np
 import scipy.optimize
 import scipy.sparse
 
+from fdia_env._validation import as_float_array
+
 # HiGHS' default feasibility tolerances (1e-7) would let a basis whose reduced costs are ~1e-8
 # off pass as optimal; the payoffs are rescaled to [0, 1] before solving, so these tolerances are
 # relative to the payoff range and the returned strategies are exploitable by ~1e-10 of it at most.
@@ -36,12 +38,7 @@ def as_payoff(L: Any, name: str = "L") -> np.ndarray:
         ValueError: Naming ``name``: a ragged nested list, a non-numeric entry, an array that is
             not 2-D, an empty dimension, NaN or infinity.
     """
-    try:
-        arr = np.array(L, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"{name} must be a 2-D numeric payoff matrix (rows of equal length), got {L!r}"
-        ) from exc
+    arr = as_float_array(name, L, "a 2-D numeric payoff matrix (rows of equal length)")
     if arr.ndim != 2:
         raise ValueError(f"{name} must be a 2-D payoff matrix, got an array of shape {arr.shape}")
     if 0 in arr.shape:
@@ -83,10 +80,7 @@ def as_strategy(p: Any, size: int, name: str) -> np.ndarray:
     Raises:
         ValueError: Naming ``name`` when the shape, sign or sum is wrong.
     """
-    try:
-        arr = np.array(p, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a 1-D probability vector, got {p!r}") from exc
+    arr = as_float_array(name, p, "a 1-D probability vector")
     if arr.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
     if not np.all(np.isfinite(arr)) or (arr < -1e-12).any():

@@ -29,6 +29,7 @@ from baselines.stealth.common import (
     meter_indices,
     milp,
     null_space,
+    on_support,
     state_index,
     support,
 )
@@ -89,7 +90,7 @@ class StealthyAttack:
 
 
 def _attack(a: np.ndarray, c: np.ndarray, **kwargs: Any) -> StealthyAttack:
-    a = np.array(a, dtype=np.float64)
+    a = on_support(np.asarray(a, dtype=np.float64))
     c = np.array(c, dtype=np.float64)
     a.setflags(write=False)
     c.setflags(write=False)

@@ -95,6 +95,14 @@ def support(a: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.abs(a) > ZERO_RTOL * scale)
 
 
+def on_support(a: np.ndarray) -> np.ndarray:
+    """``a`` with the entries off its :func:`support` set to 0 (rounding residue of ``H c``)."""
+    out = np.zeros_like(a, dtype=np.float64)
+    keep = support(a)
+    out[keep] = a[keep]
+    return out
+
+
 def null_space(A: np.ndarray, n: int) -> np.ndarray:
     """(n, d) orthonormal basis of ``{c : A c = 0}`` for an (r, n) matrix (r may be 0)."""
     if A.shape[0] == 0:

@@ -44,6 +44,7 @@ from baselines.stealth.common import (
     meter_indices,
     milp,
     null_space,
+    on_support,
     state_index,
     support,
 )
@@ -206,7 +207,7 @@ def security_index(
         c, a = hit
         indices[k] = len(support(a))
         lower[k] = indices[k] if bound is None else min(bound, indices[k])
-        attacks[k], shifts[k] = a, c
+        attacks[k], shifts[k] = on_support(a), c  # no rounding residue off the support
     for arr in (indices, lower, attacks, shifts):
         arr.setflags(write=False)
     return SecurityIndex(

@@ -17,6 +17,7 @@ from experiments.reproduce.ch3 import chapter3
 from experiments.reproduce.ch4 import chapter4
 from experiments.reproduce.ch5 import chapter5
 from experiments.reproduce.common import DEFAULT_OUTPUT, DOC_INTRO, DOC_TITLE, Section, machine
+from experiments.reproduce.stealth import stealth_chapter
 
 CHAPTERS: dict[str, tuple[Callable[[argparse.Namespace], Section], str]] = {
     "ch2": (chapter2, "attack covariances: literature strategies, pv optima, ellipses, errata"),
@@ -24,6 +25,7 @@ CHAPTERS: dict[str, tuple[Callable[[argparse.Namespace], Section], str]] = {
     "ch4": (chapter4, "sparse attacks: SFS order, solver table, pv cases, DP vs SFS"),
     "ch5": (chapter5, "sensor-selection game: payoffs, equilibria, incomplete information"),
     "certified": (certified, "certified optima by branch and bound: the heuristics' gaps"),
+    "stealth": (stealth_chapter, "stealthy attacks: a = Hc, security indices, Mo-Sinopoli, Guo"),
 }
 
 

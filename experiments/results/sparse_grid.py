@@ -203,23 +203,23 @@ def solve(inst: Instance, system: LinearSystem) -> dict[str, Any]:
     }
 
 
-def env_kwargs(system: LinearSystem, inst: Instance) -> dict[str, Any]:
-    """The options of the learners' env: ``inst`` in the sequential format, plan-first order."""
+def env_kwargs(system: LinearSystem, inst: Instance, order: str = ORDER) -> dict[str, Any]:
+    """The options of the learners' env: ``inst`` in the sequential format, in ``order``."""
     return {
         "scenario": system,
         "budget": inst.budget,
         "horizon": inst.horizon,
         "objective": inst.objective,
         "action": "sequential",
-        "order": ORDER,
+        "order": order,
     }
 
 
-def make_env(system: LinearSystem, inst: Instance) -> Any:
+def make_env(system: LinearSystem, inst: Instance, order: str = ORDER) -> Any:
     """The learners' Gymnasium env of ``inst`` (see :func:`env_kwargs`)."""
     import gymnasium as gym
 
-    return gym.make(GYM_ID, **env_kwargs(system, inst))
+    return gym.make(GYM_ID, **env_kwargs(system, inst, order))
 
 
 def plan_policy(result: Any) -> Any:
@@ -255,9 +255,9 @@ def replay_native(result: Any, system: LinearSystem, inst: Instance) -> float:
 
 
 def train_maskable(
-    system: LinearSystem, inst: Instance, budget: Budget, seed: int
+    system: LinearSystem, inst: Instance, budget: Budget, seed: int, order: str = ORDER
 ) -> tuple[Any, list[tuple[int, float]], float]:
-    """MaskablePPO in the plan-first order: ``(model, curve [(steps, return)], seconds)``."""
+    """MaskablePPO in ``order``: ``(model, curve [(steps, return)], train seconds)``."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -266,9 +266,12 @@ def train_maskable(
     from agents.config import Hyperparameters, algo_kwargs
 
     torch.set_num_threads(1)
-    eval_env = make_env(system, inst)
+    eval_env = make_env(system, inst, order)
     venv = VecNormalize(
-        DummyVecEnv([lambda: make_env(system, inst)]), norm_obs=False, norm_reward=True, gamma=1.0
+        DummyVecEnv([lambda: make_env(system, inst, order)]),
+        norm_obs=False,
+        norm_reward=True,
+        gamma=1.0,
     )
     model = build_model("MaskablePPO", venv, algo_kwargs("MaskablePPO", Hyperparameters()), seed)
     every = max(1, budget.maskable_steps // budget.evals)
@@ -315,6 +318,44 @@ def train_torch(
     venv.close()
     eval_env.close()
     return result.policy, curve, result.train_seconds
+
+
+ORDER_INSTANCES = FULL_INSTANCES[:3]
+"""The decision-order study's instances: those whose optimum branch and bound proves."""
+
+
+def order_study(
+    instances: tuple[Instance, ...] = ORDER_INSTANCES,
+    orders: tuple[str, ...] = ("plan", "time"),
+    seeds: tuple[int, ...] = (0, 1, 2),
+    steps: int = 20_000,
+) -> list[dict[str, Any]]:
+    """MaskablePPO in each decision order of the sequential format, scored against B&B.
+
+    One row per (instance, order, seed): the final deterministic policy's score (the project's
+    ratio to branch and bound's optimum), SFS's score and the training seconds; each row is
+    printed as it comes (docs/guide/sparse.md shows the numbers)::
+
+        python -c "from experiments.results.sparse_grid import order_study; order_study()"
+    """
+    from baselines.sparse import branch_and_bound, sfs
+
+    budget = Budget(maskable_steps=steps, torch_steps=1, evals=1)
+    rows = []
+    for inst in instances:
+        system = SYSTEMS[inst.system][2]()
+        args = (system, inst.budget, inst.horizon, inst.objective)
+        best = branch_and_bound(*args, time_limit=inst.bnb_limit).value
+        greedy = ratio(sfs(*args).value, best, inst.objective)
+        for order in orders:
+            for seed in seeds:
+                _, curve, secs = train_maskable(system, inst, budget, seed, order)
+                score = ratio(curve[-1][1], best, inst.objective)
+                row = {"instance": inst.label, "order": order, "seed": seed}
+                row.update(sfs=greedy, score=score, seconds=secs)
+                print(row, flush=True)
+                rows.append(row)
+    return rows
 
 
 def run_instance(

@@ -1,5 +1,12 @@
 """The sparse attack as a plan of sensor-time pairs: the same instance, a learnable action space.
 
+The results table (:mod:`experiments.results.sparse_grid`) now trains in the env's own
+sequential format, plan-first order (``action="sequential", order="plan"``). This module is
+the format of the published full table (2026-11-23) and stays for comparison: in the quick run
+its torch PPO reached 76.5 % of the optimum against 74.1 % in the env's format (MaskablePPO
+0.4 % against 15.6 %), and on ieee14-rtu c = 6, N = 6 (seed 0) torch PPO 100 % against 46.4 %,
+so the env's format does not yet do at least as well for every learner.
+
 ``sparse_attack_v0`` acts once per window step with a subset of sensors: ``Discrete(2**M)``
 (16,384 masked actions on a 14-bus RTU grid, where sb3-contrib's MaskablePPO runs at about
 50 steps/s here) or, above 16 sensors, ``MultiBinary(M)`` (no mask: neither MaskablePPO nor the

@@ -1,10 +1,21 @@
-"""``stealth``: a learned stealthy attacker on IEEE 14 against the exact optimum, and protection.
+"""``stealth``: a learned stealthy attacker on IEEE 14 and 118 against the exact optimum.
 
-Attacker rows: stable-baselines3 PPO trained on ``"fdia_env/StealthAttack-v0"`` (IEEE 14,
-``action="shift"``: ``MultiBinary(13)``, bit j shifts state j's estimate by ``magnitude``;
+Attacker rows: stable-baselines3 PPO trained on ``"fdia_env/StealthAttack-v0"`` (``action=
+"shift"``: ``MultiBinary(n)``, bit j shifts state j's estimate by ``magnitude``;
 ``dynamics="expected"``, one snapshot per episode, so the reward is the exact expected damage
 ``(1 − p) · |K a|_∞``). Its deterministic action's payoff is set against random play and the
-optimum of the same action space, found by enumerating all 8,191 non-zero shift vectors (exact).
+optimum:
+
+- IEEE 14 (13 states): the optimum of the action space, found by enumerating all 8,191 non-zero
+  shift vectors (exact); random play is their mean.
+- IEEE 118 (117 states): 2¹¹⁷ shift vectors cannot be enumerated. The reference is the best
+  *undetectable* shift, certified by the security indices: a 0/1 shift is undetectable iff the
+  meters it moves fit the budget, and the minimum cut finds, for every state, the fewest meters
+  such a shift needs; when the smallest index fits the budget, that shift is played in the env
+  and pays ``(1 − α) · magnitude`` (the most any undetectable shift of ``magnitude`` pays, since
+  ``K H c = c``). Detectable shifts are not enumerated there (on IEEE 14 none beats it); random
+  play is the mean payoff of 4,096 uniform non-zero actions.
+
 Every seed's figure is reported, with the mean and its 95 % CI.
 
 Protection rows: the protection game's value (double oracle, certified by its gap) against what
@@ -25,11 +36,13 @@ from experiments.results.common import mean_ci95, write_rows
 
 SCENARIO = "grid-ieee14"
 MAGNITUDE = 0.05
+ENUMERABLE = 16
+"""Largest number of states whose shift vectors are enumerated (2^16 − 1 actions)."""
 
 
-def _env_kwargs(budget: int) -> dict[str, Any]:
+def _env_kwargs(budget: int, scenario: str = SCENARIO) -> dict[str, Any]:
     return {
-        "scenario": SCENARIO,
+        "scenario": scenario,
         "budget": budget,
         "magnitude": MAGNITUDE,
         "dynamics": "expected",
@@ -37,59 +50,196 @@ def _env_kwargs(budget: int) -> dict[str, Any]:
     }
 
 
-def shift_payoffs(budget: int) -> np.ndarray:
-    """(2^n − 1,) exact expected payoff of every non-zero shift action (bits in binary order)."""
-    from fdia_env.stealth.vector import StealthVectorEnv
-
-    venv = StealthVectorEnv(1, **_env_kwargs(budget))
-    n = venv.env.estimation.n
-    bits = ((np.arange(1, 2**n)[:, None] >> np.arange(n)) & 1).astype(np.int8)
+def _payoffs(venv: Any, bits: np.ndarray) -> np.ndarray:
+    """Exact expected payoff of each row of ``bits`` (shift actions) in ``venv``'s env."""
     a = venv.injections(bits)
     damage = np.max(np.abs(a @ venv.env.estimation.K.T), axis=1)
     p = np.asarray(venv.env.estimation.detection_probability(a))
     return (1.0 - p) * damage
 
 
-def _payoff(budget: int, action: np.ndarray) -> float:
+def shift_payoffs(budget: int, scenario: str = SCENARIO) -> np.ndarray:
+    """(2^n − 1,) exact expected payoff of every non-zero shift action (bits in binary order)."""
+    from fdia_env.stealth.vector import StealthVectorEnv
+
+    venv = StealthVectorEnv(1, **_env_kwargs(budget, scenario))
+    n = venv.env.estimation.n
+    if n > ENUMERABLE:
+        raise ValueError(f"{scenario} has {n} states: 2^{n} shifts are too many to enumerate")
+    bits = ((np.arange(1, 2**n)[:, None] >> np.arange(n)) & 1).astype(np.int8)
+    return _payoffs(venv, bits)
+
+
+def references(budget: int, scenario: str = SCENARIO, seed: int = 0) -> dict[str, Any]:
+    """The optimum (and how it is known) and random play's mean payoff for one setting."""
+    from fdia_env.stealth.vector import StealthVectorEnv
+
+    venv = StealthVectorEnv(1, **_env_kwargs(budget, scenario))
+    est = venv.env.estimation
+    if est.n <= ENUMERABLE:
+        payoffs = shift_payoffs(budget, scenario)
+        return {
+            "optimum": float(np.max(payoffs)),
+            "optimum_kind": f"enumerated ({payoffs.size:,} shifts)",
+            "random": float(np.mean(payoffs)),
+        }
+    from baselines.stealth import security_index
+
+    si = security_index(est, method="mincut")
+    k = int(np.argmin(si.indices))
+    if si.indices[k] > budget:
+        raise ValueError(
+            f"budget={budget}: every undetectable shift on {scenario} needs at least "
+            f"{int(si.indices[k])} meters, so no certified reference is known"
+        )
+    bits = (np.abs(si.shifts[k]) > 0.5).astype(np.int8)[None, :]
+    best = float(_payoffs(venv, bits)[0])
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, 2, (4096, est.n)).astype(np.int8)
+    draws = draws[draws.any(axis=1)]
+    return {
+        "optimum": best,
+        "optimum_kind": (
+            f"best undetectable shift (min cut: state {k}, {int(si.indices[k])} meters)"
+        ),
+        "random": float(np.mean(_payoffs(venv, draws))),
+    }
+
+
+def _payoff(budget: int, action: np.ndarray, scenario: str = SCENARIO) -> float:
     from fdia_env.stealth import stealth_attack_v0
 
-    env = stealth_attack_v0.parallel_env(**_env_kwargs(budget))
+    env = stealth_attack_v0.parallel_env(**_env_kwargs(budget, scenario))
     env.reset(seed=0)
     _, rewards, *_ = env.step({"attacker": np.asarray(action, dtype=np.int8)})
     return float(rewards["attacker"])
 
 
-def learned_attacker(budget: int, steps: int, seeds: list[int]) -> dict[str, Any]:
-    """PPO's payoff per seed against random play and the enumerated optimum."""
+def learned_attacker(
+    budget: int, steps: int, seeds: list[int], scenario: str = SCENARIO
+) -> dict[str, Any]:
+    """PPO's payoff per seed against random play and the optimum (see the module docstring)."""
     import gymnasium as gym
     from stable_baselines3 import PPO
 
     import fdia_env  # noqa: F401 - registers the ids
 
-    payoffs = shift_payoffs(budget)
+    ref = references(budget, scenario)
     learned, seconds = [], []
     for seed in seeds:
-        env = gym.make("fdia_env/StealthAttack-v0", **_env_kwargs(budget))
+        env = gym.make("fdia_env/StealthAttack-v0", **_env_kwargs(budget, scenario))
         start = time.perf_counter()
         model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, seed=seed, verbose=0)
         model.learn(total_timesteps=steps)
         seconds.append(time.perf_counter() - start)
         obs, _ = env.reset(seed=seed)
         action, _ = model.predict(obs, deterministic=True)
-        learned.append(_payoff(budget, action))
+        learned.append(_payoff(budget, action, scenario))
         env.close()
     mean, ci = mean_ci95(learned)
-    best = float(np.max(payoffs))
+    best = ref["optimum"]
     return {
+        "scenario": scenario,
         "budget": budget,
         "steps": steps,
         "seeds": seeds,
         "learned": learned,
         "learned_mean": mean,
         "learned_ci95": ci,
-        "random": float(np.mean(payoffs)),  # uniform over the non-zero actions
+        "random": ref["random"],
         "optimum": best,
+        "optimum_kind": ref["optimum_kind"],
         "score": [v / best for v in learned],
+        "train_seconds": seconds,
+    }
+
+
+def threshold_game(budget: int, false_alarm_cost: float = 1.0) -> dict[str, Any]:
+    """The threshold game on IEEE 14's shift actions, solved exactly (enumeration + LP).
+
+    The defender picks the false-alarm rate α among the env's ``alphas``; its loss is the
+    attacker's expected damage ``(1 − p_α(a)) · |K a|_∞`` plus ``false_alarm_cost · α``. The α
+    term does not depend on the attacker's action, so the game is the zero-sum game of that
+    loss (the attacker's best responses are unchanged), whose value the LP gives.
+    """
+    from scipy import optimize
+
+    from fdia_env.stealth.vector import StealthVectorEnv
+
+    venv = StealthVectorEnv(1, **_env_kwargs(budget))
+    env = venv.env
+    n = env.estimation.n
+    bits = ((np.arange(1, 2**n)[:, None] >> np.arange(n)) & 1).astype(np.int8)
+    a = venv.injections(bits)
+    damage = np.max(np.abs(a @ env.estimation.K.T), axis=1)
+    loss = np.array(
+        [
+            (1.0 - np.asarray(est.detection_probability(a))) * damage + false_alarm_cost * est.alpha
+            for est in env._estimations
+        ]
+    )  # (rates, actions): the defender's expected loss
+    rates = len(env.alphas)
+    # min v s.t. x' loss[:, j] <= v for every j, x a distribution over the rates
+    res = optimize.linprog(
+        np.r_[np.zeros(rates), 1.0],
+        A_ub=np.c_[loss.T, -np.ones(loss.shape[1])],
+        b_ub=np.zeros(loss.shape[1]),
+        A_eq=np.r_[np.ones(rates), 0.0][None],
+        b_eq=[1.0],
+        bounds=[(0, None)] * rates + [(None, None)],
+        method="highs",
+    )
+    mix = np.clip(res.x[:rates], 0.0, None)
+    return {
+        "alphas": list(env.alphas),
+        "loss": loss,
+        "value": float(res.x[rates]),
+        "defender": (mix / mix.sum()).tolist(),
+        "concedes": loss.max(axis=1).tolist(),  # each pure rate against a best response
+    }
+
+
+def learned_defender(
+    budget: int, steps: int, seeds: list[int], false_alarm_cost: float = 1.0
+) -> dict[str, Any]:
+    """PPO on the defender's view (its attacker plays at random) against the game value.
+
+    Each seed's deterministic rate is scored by what it concedes to a best-responding attacker
+    (its row's largest loss), set against the value of the threshold game.
+    """
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    import fdia_env  # noqa: F401 - registers the ids
+    from fdia_env.stealth import DEFENDER_GYM_ID
+
+    game = threshold_game(budget, false_alarm_cost)
+    picked, concedes, seconds = [], [], []
+    for seed in seeds:
+        env = gym.make(DEFENDER_GYM_ID, **_env_kwargs(budget), false_alarm_cost=false_alarm_cost)
+        start = time.perf_counter()
+        model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, seed=seed, verbose=0)
+        model.learn(total_timesteps=steps)
+        seconds.append(time.perf_counter() - start)
+        obs, _ = env.reset(seed=seed)
+        action, _ = model.predict(obs, deterministic=True)
+        picked.append(game["alphas"][int(action)])
+        concedes.append(game["concedes"][int(action)])
+        env.close()
+    mean, ci = mean_ci95(concedes)
+    return {
+        "kind": "defender",
+        "budget": budget,
+        "steps": steps,
+        "seeds": seeds,
+        "false_alarm_cost": false_alarm_cost,
+        "alpha": picked,
+        "concedes": concedes,
+        "concedes_mean": mean,
+        "concedes_ci95": ci,
+        "value": game["value"],
+        "game_defender": game["defender"],
+        "alphas": game["alphas"],
         "train_seconds": seconds,
     }
 
@@ -129,21 +279,25 @@ def protection_rows(budget: int, protection: int) -> dict[str, Any]:
     }
 
 
-def format_rows(attackers: list[dict], protections: list[dict]) -> str:
+def format_rows(
+    attackers: list[dict], protections: list[dict], defenders: list[dict] | None = None
+) -> str:
     """The rows as Markdown tables."""
     lines = [
-        f"Attacker (PPO, {SCENARIO}, shift actions of {MAGNITUDE} rad, expected dynamics):",
+        f"Attacker (PPO, shift actions of {MAGNITUDE} rad, expected dynamics):",
         "",
-        "| budget | steps | PPO per seed (rad) | PPO mean ± 95 % CI | random | optimum "
-        "(enumerated) | PPO / optimum per seed |",
-        "|---|---|---|---|---|---|---|",
+        "| grid | budget | steps | PPO per seed (rad) | PPO mean ± 95 % CI | random | optimum "
+        "| PPO / optimum per seed | train s per seed |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in attackers:
         per = ", ".join(f"{v:.4f}" for v in r["learned"])
         ratio = ", ".join(f"{s:.1%}" for s in r["score"])
+        secs = ", ".join(f"{s:.0f}" for s in r["train_seconds"])
         lines.append(
-            f"| {r['budget']} | {r['steps']:,} | {per} | {r['learned_mean']:.4f} ± "
-            f"{r['learned_ci95']:.2g} | {r['random']:.4f} | {r['optimum']:.4f} | {ratio} |"
+            f"| {r['scenario']} | {r['budget']} | {r['steps']:,} | {per} | "
+            f"{r['learned_mean']:.4f} ± {r['learned_ci95']:.2g} | {r['random']:.2e} | "
+            f"{r['optimum']:.4f} ({r['optimum_kind']}) | {ratio} | {secs} |"
         )
     lines += [
         "",
@@ -159,18 +313,46 @@ def format_rows(attackers: list[dict], protections: list[dict]) -> str:
             f"{r['protect_optimal_attack_concedes']:.4f} | {r['protect_basic_concedes']:.4f} | "
             f"{r['unprotected']:.4f} |"
         )
+    if defenders:
+        lines += [
+            "",
+            "Learned threshold defender (PPO on the defender's view, IEEE 14, attacker budget 3; "
+            "loss = the attacker's expected damage + false_alarm_cost · α against a "
+            "best-responding attacker):",
+            "",
+            "| steps | α picked per seed | loss conceded per seed | mean ± 95 % CI | game value "
+            "| train s per seed |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in defenders:
+            lines.append(
+                f"| {r['steps']:,} | {', '.join(f'{a:g}' for a in r['alpha'])} | "
+                f"{', '.join(f'{v:.5f}' for v in r['concedes'])} | {r['concedes_mean']:.5f} ± "
+                f"{r['concedes_ci95']:.2g} | {r['value']:.5f} | "
+                f"{', '.join(f'{v:.0f}' for v in r['train_seconds'])} |"
+            )
     return "\n".join(lines)
 
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
-    """The ``stealth`` tables; ``quick``: budget 3 only, 2 seeds, 2,048 steps, no game."""
+    """The ``stealth`` tables; ``quick``: IEEE 14, budget 3, 2 seeds, 2,048 steps, no game.
+
+    The full run (its budgets fit one session on 2 shared cores): 3 seeds of PPO for the
+    attacker (budget 3) on IEEE 14 (4,096 steps) and IEEE 118 (2,048 steps), 3 seeds of 1,024
+    steps for the threshold defender, and the two protection games.
+    """
+    seeds = [seed, seed + 1, seed + 2]
     if quick:
-        attackers = [learned_attacker(3, 2048, [seed, seed + 1])]
+        attackers = [learned_attacker(3, 2048, seeds[:2])]
         protections: list[dict] = []
+        defenders: list[dict] = []
     else:
-        seeds = [seed, seed + 1, seed + 2]
-        attackers = [learned_attacker(b, 20_000, seeds) for b in (3, 5)]
+        attackers = [
+            learned_attacker(3, 4096, seeds),
+            learned_attacker(3, 2048, seeds, "grid-ieee118"),
+        ]
+        defenders = [learned_defender(3, 1024, seeds)]
         protections = [protection_rows(3, 1), protection_rows(5, 2)]
     if out is not None:
-        write_rows(out / "stealth.json", [*attackers, *protections])
-    return format_rows(attackers, protections)
+        write_rows(out / "stealth.json", [*attackers, *defenders, *protections])
+    return format_rows(attackers, protections, defenders)

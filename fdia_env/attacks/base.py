@@ -54,6 +54,19 @@ def bit_array(values: Any, M: int) -> np.ndarray:
     return out
 
 
+def same_sensors(xp: Backend, batch: int, bits: int, M: int) -> Any:
+    """Every member's sensor set = ``bits``, as the backend ``xp`` holds sensor sets.
+
+    numpy: (B,) bitmasks (:func:`bit_array`); torch: (B, M) boolean masks; the batch of one
+    (:data:`~fdia_env.backend.ONE`): the Python int itself.
+    """
+    if xp is ONE:
+        return int(bits)
+    if xp is NUMPY:
+        return bit_array([bits] * batch, M)
+    return xp.asarray(np.broadcast_to(bits_to_mask(bits, M), (batch, M)).copy())
+
+
 def mask_array_to_bits(masks: np.ndarray) -> np.ndarray:
     """(B, M) booleans -> (B,) bitmasks (:func:`bit_array` dtype)."""
     masks = np.asarray(masks, dtype=bool)
@@ -141,7 +154,7 @@ class AttackModel(ABC):
         """Act on an action already checked against :attr:`action_space` (the env's step)."""
         bits, sigma = self.batch_apply(action)
         probability = self.batch_probability()
-        return AttackEffect(int(bits), sigma, 1.0 if probability is None else probability)
+        return AttackEffect(int(bits), sigma, 1.0 if probability is None else float(probability))
 
     def info(self) -> dict[str, Any]:
         """Per-step information for the ``infos`` dict.

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from fdia_env._validation import check_choice, check_int, check_power
-from fdia_env.attacks.base import AttackEffect, AttackModel, bits_to_mask
+from fdia_env.attacks.base import AttackModel
 from fdia_env.attacks.subsets import SubsetChoice
 from fdia_env.backend import NUMPY, namespace
 from fdia_env.episode import EpisodeSpec
@@ -158,56 +158,42 @@ class SubsetAttack(SubsetChoice, AttackModel):
                 f"scenario {system.name!r} cannot host the subset attack: {exc}"
             ) from exc
         self.bind_subsets(system.M, self._k, "attacker")
-        self._sigmas: dict[int, np.ndarray] = {}
         self._system = system
+        self._dirs = self._directions(system)  # (types, subsets, nz): Σ_A = a² u u'
+
+    def _directions(self, system: LinearSystem) -> np.ndarray:
+        """Every subset's allocation direction, one row of types (here the one allocation)."""
+        return attack_directions(system, self._masks_np, self.allocation)[None]
 
     def sigma(self, j: int) -> np.ndarray:
-        """Σ of subset index ``j`` (cached)."""
-        if j not in self._sigmas:
-            self._sigmas[j] = allocation_covariance(
-                self._system, self.subsets[j], self.power, self.allocation
-            )
-        return self._sigmas[j]
-
-    def reset(self) -> None:
-        """Forget the last round (nothing attacked yet)."""
-        super().reset()
-        self.attacked_bits = 0
-
-    def apply(self, action: Any) -> AttackEffect:
-        """Attack subset ``action``."""
-        j = self.last = self.subset_index(action, "attacker")
-        self.attacked_bits = self.bits[j]
-        return AttackEffect(attacked=self.bits[j], sigma=self.sigma(j))
-
-    def apply_checked(self, action: Any) -> AttackEffect:
-        """:meth:`apply` (its own checks)."""
-        return self.apply(action)
-
-    def info(self) -> dict[str, Any]:
-        """``attacked``: (M,) int8, 1 for each sensor of the subset attacked this step."""
-        bits = getattr(self, "attacked_bits", 0)
-        return {"attacked": bits_to_mask(bits, self.M).astype(np.int8)}
+        """Σ of subset index ``j`` (of the single env's type for a typed attack)."""
+        kind = int(self.xp.member(self.b_type, 0)) if hasattr(self, "b_type") else 0
+        u = self._dirs[kind, j]
+        return self.power * np.outer(u, u)
 
     # --- batched (see AttackModel) ---------------------------------------------------------
-    def batch_apply(self, actions: Any) -> tuple[Any, Any]:
-        """Σ_A of each member's subset (rank one, from the allocation directions)."""
-        xp = self.xp
-        j = xp.astype(actions, xp.int64)  # checked by the vector env
-        self.b_last = j
-        self.b_attacked = xp.astype(self._masks[j], xp.int8)
-        u = attack_directions(self._system, self._masks[j], self.allocation)
-        return self._bits_arr[j], self.power * (u[:, :, None] * u[:, None, :])
-
     def batch_reset(self, batch: int, where: Any = None) -> None:
-        """Batched :meth:`reset`."""
-        super().batch_reset(batch, where)
+        """Forget the last round of the members ``where``; nothing attacked yet."""
         xp = self.xp
+        rebuild = where is None and self._b_xp is not xp
+        super().batch_reset(batch, where)
         if where is None:
             self.b_attacked = xp.zeros((batch, self.M), dtype=xp.int8)
+            self.b_type = xp.zeros(batch, dtype=xp.int64)  # the allocation rule's index
+            if rebuild:
+                self._b_dirs = xp.asarray(self._dirs)
         else:
             self.b_attacked[where] = 0
 
+    def batch_apply(self, actions: Any) -> tuple[Any, Any]:
+        """Σ_A of each member's subset (rank one, from its type's allocation direction)."""
+        xp = self.xp
+        j = xp.astype(actions, xp.int64)  # checked by the env
+        self.b_last = j
+        self.b_attacked = xp.astype(self._masks[j], xp.int8)
+        u = self._b_dirs[self.b_type, j]  # (B, nz)
+        return xp.take(self._bits_arr, j), self.power * (u[..., :, None] * u[..., None, :])
+
     def batch_info(self) -> dict[str, Any]:
-        """Batched :meth:`info`."""
+        """``attacked``: (B, M) int8, 1 for each sensor of the subset attacked this step."""
         return {"attacked": self.xp.copy(self.b_attacked)}

@@ -32,7 +32,6 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.base import as_index, bit_array
-from fdia_env.backend import NUMPY
 
 PLAYERS = ("attacker", "defender")
 MAX_STRATEGIES = 2**16 - 1
@@ -110,8 +109,9 @@ class SubsetChoice:
 
     Shared by the sensor game's attack model (:class:`~fdia_env.attacks.subset.SubsetAttack`) and
     defense model (:class:`~fdia_env.defenses.selection.SensorSelection`): the action space,
-    the last choice, the opponent's last subset as 0/1 indicator features, and their batched
-    counterparts (``b_last``, ``b_opponent``).
+    the last choice (``b_last``), the opponent's last subset as 0/1 indicator features
+    (``b_opponent``), over batches of the backend ``xp`` (the single env's is the batch of
+    one, :mod:`fdia_env.backend.one`).
     """
 
     def bind_subsets(self, M: int, max_subset_size: int | None = None, player: str = "") -> None:
@@ -141,8 +141,11 @@ class SubsetChoice:
         self.action_space = spaces.Discrete(len(self.subsets))
         self.feature_low = np.zeros(M, dtype=np.float32)
         self.feature_high = np.ones(M, dtype=np.float32)
-        self.last = 0
-        self.opponent_last: tuple[int, ...] = ()
+        masks = np.zeros((len(self.subsets), M), dtype=bool)
+        for j, s in enumerate(self.subsets):
+            masks[j, list(s)] = True
+        self._masks_np = masks
+        self._b_xp = None  # the backend of the tables below (see batch_reset)
 
     def subset_index(self, action: Any, who: str) -> int:
         """``action`` as a subset index, or ``ValueError`` naming ``who``."""
@@ -154,42 +157,36 @@ class SubsetChoice:
             )
         return j
 
-    def reset(self) -> None:
-        """Forget the last round."""
-        self.opponent_last = ()
+    @property
+    def last(self) -> int:
+        """The single env's subset index of the last step (0 before the first)."""
+        return int(self.xp.member(self.b_last, 0)) if hasattr(self, "b_last") else 0
 
     @property
     def last_subset(self) -> tuple[int, ...]:
         """The subset chosen in the last step (0-based sensors)."""
         return self.subsets[self.last]
 
-    def observe_opponent(self, other: Any) -> None:
-        """Remember the other player's last subset for the next observation."""
-        self.opponent_last = getattr(other, "last_subset", ())
-
-    def features(self) -> list[float]:
-        """The other player's last subset as indicators."""
-        return [1.0 if i in self.opponent_last else 0.0 for i in range(self.M)]
-
     batch_backends = ("numpy", "torch")
+
+    def _batch_tables(self, xp: Any) -> None:
+        """The subsets' masks and bitmasks on the backend ``xp`` (once per backend change)."""
+        self._masks = xp.asarray(self._masks_np)
+        self._bits_arr = xp.asarray(bit_array(self.bits, self.M))  # <= 16 sensors: int64
 
     def batch_reset(self, batch: int, where: Any = None) -> None:
         """Forget the last round of the members ``where`` (all when None).
 
-        The batch arrays belong to the backend ``self.xp`` (numpy or torch, see AttackModel).
+        The batch arrays belong to the backend ``self.xp`` (numpy, torch or the batch of one).
         """
-        xp = getattr(self, "xp", NUMPY)
+        xp = self.xp
         if where is None:
             self._batch = batch
             self.b_last = xp.zeros(batch, dtype=xp.int64)
             self.b_opponent = xp.zeros((batch, self.M))
-            masks = np.zeros((len(self.subsets), self.M), dtype=bool)
-            for j, s in enumerate(self.subsets):
-                masks[j, list(s)] = True
-            self._masks_np = masks
-            bits = bit_array(self.bits, self.M)  # at most 16 sensors: int64
-            self._bits_arr = bits if xp is NUMPY else xp.asarray(bits)
-            self._masks = masks if xp is NUMPY else xp.asarray(masks)
+            if self._b_xp is not xp:
+                self._batch_tables(xp)
+                self._b_xp = xp
         else:
             self.b_opponent[where] = 0.0
 
@@ -197,15 +194,14 @@ class SubsetChoice:
         """Every member's opponent subset (from the opponent's own subset list).
 
         An opponent that picks no subset (e.g. a sparse or covariance attack against sensor
-        selection)
-        leaves the indicators at zero, as :meth:`observe_opponent` does.
+        selection) leaves the indicators at zero.
         """
-        xp = getattr(self, "xp", NUMPY)
+        xp = self.xp
         if not isinstance(other, SubsetChoice):
             self.b_opponent = xp.zeros((self._batch, self.M))
             return
         self.b_opponent = xp.astype(other._masks[other.b_last], xp.float64)
 
-    def batch_features(self) -> np.ndarray:
+    def batch_features(self) -> Any:
         """(B, M) the other player's last subsets as indicators."""
         return self.b_opponent

@@ -29,7 +29,6 @@ from fdia_env._validation import check_choice
 from fdia_env.attacks.subset import (
     ALLOCATIONS,
     SubsetAttack,
-    allocation_covariance,
     attack_directions,
 )
 from fdia_env.episode import EpisodeSpec
@@ -121,7 +120,6 @@ class TypedSubsetAttack(SubsetAttack):
         cdf = np.cumsum(self.priors)
         cdf[-1] = 1.0  # u < 1 always lands on a type with positive prior
         self._cdf = cdf
-        self.type_index = 0
 
     @property
     def n_types(self) -> int:
@@ -135,16 +133,11 @@ class TypedSubsetAttack(SubsetAttack):
             S = self.n_types
             self.feature_low = np.concatenate([self.feature_low, np.zeros(S, np.float32)])
             self.feature_high = np.concatenate([self.feature_high, np.ones(S, np.float32)])
-        self._typed_sigmas: dict[tuple[int, int], np.ndarray] = {}
-        self._dirs = np.stack(
-            [attack_directions(system, self._all_masks(), t) for t in self.types]
-        )  # (S, subsets, M)
+        self._eye = np.eye(self.n_types)
 
-    def _all_masks(self) -> np.ndarray:
-        masks = np.zeros((len(self.subsets), self.M), dtype=bool)
-        for j, s in enumerate(self.subsets):
-            masks[j, list(s)] = True
-        return masks
+    def _directions(self, system: LinearSystem) -> np.ndarray:
+        """Every subset's allocation direction under each type: (types, subsets, nz)."""
+        return np.stack([attack_directions(system, self._masks_np, t) for t in self.types])
 
     def type_of(self, value: Any) -> int:
         """A type given by name (one of ``types``) or index, as an index; else ``ValueError``."""
@@ -164,85 +157,54 @@ class TypedSubsetAttack(SubsetAttack):
         )
 
     def draw_type(self, rng: np.random.Generator, forced: Any = None) -> int:
-        """Nature's draw of the episode's type with ``priors``, or the ``forced`` one.
-
-        One uniform is taken from ``rng`` in both cases, so that the episode's other draws do not
-        depend on forcing the type.
-        """
-        u = rng.random()
-        drawn = int(np.searchsorted(self._cdf, u, side="right"))
-        self.type_index = drawn if forced is None else self.type_of(forced)
+        """The single env's draw of the episode's type (see :meth:`batch_draw_nature`)."""
+        self.draw_nature(rng, {} if forced is None else {TYPE_OPTION: forced})
         return self.type_index
 
     @property
+    def type_index(self) -> int:
+        """The single env's type this episode (an index into ``types``)."""
+        return int(self.xp.member(self.b_type, 0)) if hasattr(self, "b_type") else 0
+
+    @property
     def current_type(self) -> str:
-        """The episode's allocation rule."""
+        """The single env's allocation rule this episode."""
         return self.types[self.type_index]
-
-    def sigma(self, j: int) -> np.ndarray:
-        """Σ of subset index ``j`` under the episode's type (cached)."""
-        key = (self.type_index, j)
-        if key not in self._typed_sigmas:
-            self._typed_sigmas[key] = allocation_covariance(
-                self._system, self.subsets[j], self.power, self.current_type
-            )
-        return self._typed_sigmas[key]
-
-    def features(self) -> list[float]:
-        """The defender's last subset, then (informed) the type's one-hot."""
-        out = super().features()
-        if self.informed:
-            out += [1.0 if s == self.type_index else 0.0 for s in range(self.n_types)]
-        return out
 
     def check_reset_options(self, options: dict[str, Any]) -> None:
         """A forced ``attacker_type`` must name a type (or index one)."""
         if TYPE_OPTION in options:
             self.type_of(options[TYPE_OPTION])
 
-    def draw_nature(self, rng: np.random.Generator, options: dict[str, Any]) -> None:
-        """At reset: draw the type (``options["attacker_type"]`` forces it)."""
-        self.draw_type(rng, options.get(TYPE_OPTION))
-
-    def private_info(self) -> dict[str, Any]:
-        """``type``: the episode's type index (in the attacker's infos only)."""
-        return {"type": int(self.type_index)}
-
     # --- batched -------------------------------------------------------------------------------
-    def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
-        """Batched :meth:`reset`; the types are drawn by :meth:`batch_draw_nature`."""
-        super().batch_reset(batch, where)
-        if where is None:
-            self.b_type = np.zeros(batch, dtype=np.int64)
-
     def batch_draw_nature(
         self,
         rngs: list[np.random.Generator],
         where: np.ndarray | None = None,
         options: dict[str, Any] | None = None,
     ) -> None:
-        """:meth:`draw_type` for the members ``where`` (all when None), each from its own rng."""
-        forced = (options or {}).get(TYPE_OPTION)
-        members = np.arange(len(self.b_type)) if where is None else np.flatnonzero(where)
-        for i in members:
-            u = rngs[i].random()
-            drawn = int(np.searchsorted(self._cdf, u, side="right"))
-            self.b_type[i] = drawn if forced is None else self.type_of(forced)
+        """Nature's draw of the type of the members ``where`` (all when None) with ``priors``.
 
-    def batch_apply(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Σ_A of each member's subset under its own type."""
-        j = np.asarray(actions, dtype=np.int64)  # checked by the vector env
-        self.b_last = j
-        self.b_attacked = self._masks[j].astype(np.int8)
-        u = self._dirs[self.b_type, j]
-        return self._bits_arr[j], self.power * (u[:, :, None] * u[:, None, :])
+        Member ``i`` takes one uniform from ``rngs[i]`` even when ``options["attacker_type"]``
+        forces the type, so that the episode's other draws do not depend on forcing it.
+        """
+        forced = (options or {}).get(TYPE_OPTION)
+        members = range(self._batch) if where is None else np.flatnonzero(where)
+        types = []
+        for i in members:
+            drawn = int(np.searchsorted(self._cdf, rngs[i].random(), side="right"))
+            types.append(drawn if forced is None else self.type_of(forced))
+        if where is None:  # the whole batch: (B,) types, or the batch of one's scalar
+            self.b_type = self.xp.from_members(types, self.xp.int64)
+        else:
+            self.b_type[np.flatnonzero(where)] = types
 
     def batch_features(self) -> np.ndarray:
         """(B, M [+ S]) the defender's last subsets, then (informed) each member's type."""
         if not self.informed:
             return self.b_opponent
-        return np.hstack([self.b_opponent, np.eye(self.n_types)[self.b_type]])
+        return np.hstack([self.b_opponent, self._eye[self.b_type]])
 
     def batch_private_info(self) -> dict[str, np.ndarray]:
-        """Batched :meth:`private_info`."""
-        return {"type": self.b_type.copy()}
+        """``type``: (B,) each member's type index (in the attacker's infos only)."""
+        return {"type": self.xp.copy(self.b_type)}

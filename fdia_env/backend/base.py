@@ -227,5 +227,9 @@ class Backend(ABC):
         """``x[i]``: member ``i`` of a batch."""
         return x[i]
 
+    def from_members(self, values: list, dtype: Any = None) -> Any:
+        """A (B,) batch from the B members' Python values."""
+        return self.asarray(values, dtype=dtype)
+
     def __repr__(self) -> str:
         return f"Backend({self.name!r}, device={str(self.device)!r})"

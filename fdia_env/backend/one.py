@@ -85,6 +85,8 @@ class OneBackend(NumpyBackend):
     # --- elementwise, on scalars without numpy ----------------------------------------------
     def astype(self, x: Any, dtype: Any) -> Any:
         """``x`` as ``dtype``: a Python scalar for a scalar, else a numpy copy."""
+        if type(x) is int and dtype is np.int64:  # the common case: a discrete action
+            return x
         if _scalar(x):
             return _cast(x, dtype)
         return np.asarray(x).astype(dtype)
@@ -147,6 +149,10 @@ class OneBackend(NumpyBackend):
     def member(self, x: Any, i: int) -> Any:
         """``x[i]``, member ``i`` (only 0 here)."""
         return x
+
+    def from_members(self, values: list, dtype: Any = None) -> Any:
+        """The one member's value (``values[0]``) as a Python scalar of ``dtype``."""
+        return _cast(values[0], dtype)
 
 
 ONE = OneBackend()

@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env.attacks.base import AttackEffect
-from fdia_env.backend import NUMPY, Backend
+from fdia_env.backend import NUMPY, ONE, Backend
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -74,10 +74,11 @@ class BatchDetection:
     criterion: str
 
     def member(self, i: int) -> Detection:
-        """The single-env rule of member ``i``."""
+        """The single-env rule of member ``i`` (the batch of one holds one threshold)."""
+        t = self.thresholds
         return Detection(
             self.statistic,
-            float(self.thresholds[i]),
+            float(t if np.ndim(t) == 0 else t[i]),
             self.on_detect,
             self.assumed_sigma,
             self.fresh_prior,
@@ -89,6 +90,12 @@ class DefenseModel(ABC):
     """Owns the defender's action space (if any) and turns an attack into the filter's input.
 
     A *passive* model takes no action; its environments have only the attacker.
+
+    As for :class:`~fdia_env.attacks.base.AttackModel`, a model has one implementation, its
+    ``batch_*`` methods over (B, ...) arrays of the backend :attr:`xp`; the single-env calls
+    (:meth:`reset`, :meth:`features`, :meth:`action_mask`, :meth:`apply`,
+    :meth:`observe_opponent`) run them on the batch of one (:data:`~fdia_env.backend.ONE`)
+    and no subclass overrides them.
     """
 
     name: str = "defense"
@@ -99,23 +106,7 @@ class DefenseModel(ABC):
 
     @abstractmethod
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
-        """Attach to a system and episode; build spaces here, once."""
-
-    _batch: int = 0
-
-    def reset(self) -> None:  # noqa: B027 - optional hook
-        """Start an episode."""
-
-    def features(self) -> list[float]:
-        """Model-specific observation features."""
-        return []
-
-    def observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
-        """Called after each step with the other player's model (repeated games use it)."""
-
-    def action_mask(self) -> np.ndarray | None:
-        """Legal discrete actions or None."""
-        return None
+        """Attach to a system and episode; build spaces (and lookup tables) here, once."""
 
     def info_defaults(self, sampled: bool) -> dict[str, Any]:
         """The per-step info keys this defense adds, with their values before the first step.
@@ -124,15 +115,51 @@ class DefenseModel(ABC):
         """
         return {}
 
-    @abstractmethod
-    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
-        """Decide what the filter uses given the defender's action and the attack."""
+    # --- the single env: the batch of one ---------------------------------------------------
+    def reset(self) -> None:
+        """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
+        self.xp = ONE
+        self.batch_reset(1)
 
-    # --- batched counterparts, used by the native vector envs (fdia_env.vector) -------------
+    def features(self) -> list[float]:
+        """Model-specific observation features."""
+        values = self.batch_features()
+        return values if type(values) is list else values.tolist()
+
+    def observe_opponent(self, other: Any) -> None:
+        """Called after each step with the other player's model (repeated games use it)."""
+        self.batch_observe_opponent(other)
+
+    def action_mask(self) -> np.ndarray | None:
+        """Legal discrete actions or None."""
+        return self.batch_action_mask()
+
+    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
+        """Decide what the filter uses given the defender's action (checked) and the attack."""
+        if self.action_space is not None:
+            from fdia_env.envs.actions import check_action  # the envs' check (a higher layer)
+
+            check_action(self.action_space, action, "defender")
+        return self.apply_checked(action, effect)
+
+    def apply_checked(self, action: Any, effect: AttackEffect) -> FilterInput:
+        """:meth:`apply` for an action already checked against :attr:`action_space`."""
+        used, leak, present, steady = self.batch_apply(action, effect.attacked, effect.sigma)
+        rule = self.batch_detection()
+        return FilterInput(
+            int(used),
+            leak if present else None,
+            bool(steady),
+            None if rule is None else rule.member(0),
+            effect.probability,
+        )
+
+    # --- the one implementation, over batches ------------------------------------------------
     # As for AttackModel: ``xp`` is the batch arrays' backend, ``batch_backends`` those supported.
 
     xp: Backend = NUMPY
     batch_backends: tuple[str, ...] = ("numpy",)
+    _batch: int = 0
 
     def batch_detection(self) -> BatchDetection | None:
         """The detector of the last :meth:`batch_apply`, for the detection game; else None."""
@@ -143,24 +170,24 @@ class DefenseModel(ABC):
         self._batch = batch
 
     def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
-        """Batched :meth:`observe_opponent`."""
+        """Called after each step with the other player's model (repeated games use it)."""
 
     def batch_action_mask(self) -> np.ndarray | None:
-        """(B, A) legal actions (int8) or None (every action legal)."""
+        """(B, A) legal actions (int8, a new array) or None (every action legal)."""
         return None
 
     def batch_features(self) -> np.ndarray:
         """(B, f) features of every batch member (none by default)."""
         return self.xp.zeros((self._batch, 0))
 
+    @abstractmethod
     def batch_apply(
         self, actions: np.ndarray | None, attacked: np.ndarray, sigma: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, bool]:
-        """Batched :meth:`apply`.
+        """What the filter of each member uses, given the checked actions and the attack.
 
         Returns:
             ``(used bits (B,), leaked Σ (B, nz, nz) or None, leak present (B,) bool or None,
-            steady restart)``; "present" marks the members whose single-env twin would get a
-            ``leaked_sigma`` that is not None.
+            steady restart)``; "present" marks the members whose filter gets the leaked bias
+            (the others' Σ rows are ignored).
         """
-        raise NotImplementedError(f"{type(self).__name__} has no batched implementation")

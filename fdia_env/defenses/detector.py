@@ -8,9 +8,8 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_positive, check_psd
-from fdia_env.attacks.base import AttackEffect, bit_array
-from fdia_env.backend import NUMPY
-from fdia_env.defenses.base import BatchDetection, DefenseModel, Detection, FilterInput
+from fdia_env.attacks.base import same_sensors
+from fdia_env.defenses.base import BatchDetection, DefenseModel
 from fdia_env.detection.statistics import STATISTICS
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -76,7 +75,6 @@ class ThresholdDetector(DefenseModel):
         self._scale = (
             None if threshold_scale is None else check_positive("threshold_scale", threshold_scale)
         )
-        self.last_threshold = float("nan")
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Check the assumed covariance against the stacked measurement."""
@@ -121,43 +119,14 @@ class ThresholdDetector(DefenseModel):
             return {"attacked_now": False, "detected": False, "statistic": 0.0, "threshold": 0.0}
         return {"p_false_alarm": 0.0, "p_detection": 0.0, "threshold": 0.0}
 
-    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
-        """Every sensor is measured; the detector decides per measurement."""
-        tau = self.action_to_threshold(action)
-        self.last_threshold = tau
-        rule = Detection(
-            self.statistic,
-            tau,
-            self.on_detect,
-            self.assumed_sigma,
-            self.fresh_prior,
-            self.criterion,
-        )
-        return FilterInput(
-            used=self._all,
-            leaked_sigma=effect.sigma,
-            detection=rule,
-            attack_probability=effect.probability,
-        )
-
     # --- batched (see DefenseModel) --------------------------------------------------------
     batch_backends = ("numpy", "torch")
 
     def batch_apply(self, actions, attacked, sigma):
         """Every sensor is measured; the per-member thresholds go to :meth:`batch_detection`."""
         xp = self.xp
-        if xp is NUMPY:
-            try:
-                a = np.asarray(actions, dtype=np.float64).reshape(self._batch, -1)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(
-                    f"defender actions must be a (B, 1) array in [-1, 1], got {actions!r}"
-                ) from exc
-            if a.shape[1] != 1 or not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1.0 + 1e-6):
-                raise ValueError("defender actions must be one finite number in [-1, 1] per member")
-        else:  # checked by the vector env
-            a = xp.astype(actions, xp.float64).reshape(self._batch, -1)
-        x = xp.clip(a[:, 0], -1.0, 1.0)
+        a = xp.astype(actions, xp.float64)  # (B, 1), checked by the env (finite, in the Box)
+        x = xp.clip(a[..., 0], -1.0, 1.0)
         with np.errstate(divide="ignore"):
             tau = xp.where(x >= 1.0, np.inf, self.scale * (1.0 + x) / (1.0 - x))
         self._b_rule = BatchDetection(
@@ -168,11 +137,14 @@ class ThresholdDetector(DefenseModel):
             self.fresh_prior,
             self.criterion,
         )
-        B = attacked.shape[0]
-        present = None if sigma is None else xp.ones(B, dtype=xp.bool)
-        if xp is not NUMPY:  # sensor sets as (B, M) masks on torch (the detector reads none)
-            return xp.ones((B, self._M), dtype=xp.bool), sigma, present, False
-        return bit_array([self._all] * B, self._M), sigma, present, False
+        present = None if sigma is None else xp.ones(self._batch, dtype=xp.bool)
+        return same_sensors(xp, self._batch, self._all, self._M), sigma, present, False
+
+    @property
+    def last_threshold(self) -> float:
+        """The single env's threshold τ of the last step (NaN before the first)."""
+        rule = getattr(self, "_b_rule", None)
+        return float("nan") if rule is None else rule.member(0).threshold
 
     def batch_detection(self) -> BatchDetection:
         """The per-member thresholds of the last batched step."""

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-from fdia_env.attacks.base import AttackEffect
-from fdia_env.defenses.base import DefenseModel, FilterInput
+from fdia_env.defenses.base import DefenseModel
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -21,12 +18,8 @@ class PerfectDetection(DefenseModel):
         """Nothing to build: the model has no action."""
         self._all = (1 << system.M) - 1
 
-    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
-        """Use every sensor that was not attacked."""
-        return FilterInput(used=self._all & ~effect.attacked)
-
     def batch_apply(self, actions, attacked, sigma):
-        """Every un-attacked sensor, no leak (bitmasks, or (B, M) boolean masks)."""
-        if attacked.ndim == 2:
+        """Every un-attacked sensor, no leak (bitmasks, or (B, M) boolean masks on torch)."""
+        if getattr(attacked, "ndim", 0) == 2:  # masks (the batch of one's bitmask is an int)
             return ~attacked, None, None, False
         return self._all & ~attacked, None, None, False

@@ -4,11 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
-from fdia_env.attacks.base import AttackEffect, bits_to_mask
 from fdia_env.attacks.subsets import SubsetChoice
-from fdia_env.defenses.base import DefenseModel, FilterInput
+from fdia_env.defenses.base import DefenseModel
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -35,31 +32,23 @@ class SensorSelection(SubsetChoice, DefenseModel):
         self.bind_subsets(system.M, self._k, "defender")
         self._row_sensor = system.row_sensor
 
-    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
-        """Use subset ``action``; the bias on attacked sensors outside it is not seen."""
-        j = self.last = self.subset_index(action, "defender")
-        used = self.bits[j]
-        leak = None
-        if effect.sigma is not None and used & effect.attacked:
-            rows = bits_to_mask(used, self.M)[self._row_sensor]
-            leak = effect.sigma * np.outer(rows, rows)  # Σ restricted to A ∩ D
-        return FilterInput(used=used, leaked_sigma=leak, steady=True)
-
     # --- batched (see DefenseModel) --------------------------------------------------------
     def batch_reset(self, batch: int, where: Any = None) -> None:
-        """Forget the last round of the members ``where``; build the row masks once."""
+        """Forget the last round of the members ``where``; the row masks once per backend."""
+        xp = self.xp
+        rebuild = where is None and self._b_xp is not xp
         super().batch_reset(batch, where)
-        if where is None:
-            self._row_masks = self.xp.asarray(self._masks_np[:, self._row_sensor].astype(float))
+        if rebuild:
+            self._row_masks = xp.asarray(self._masks_np[:, self._row_sensor].astype(float))
 
     def batch_apply(self, actions, attacked, sigma):
-        """Each member's subset; Σ restricted to A ∩ D leaks; every round restarts steady."""
+        """Each member's subset D; Σ restricted to A ∩ D leaks; every round restarts steady."""
         xp = self.xp
-        j = xp.astype(actions, xp.int64)  # checked by the vector env
+        j = xp.astype(actions, xp.int64)  # checked by the env
         self.b_last = j
-        rows = self._row_masks[j]
-        used = self._bits_arr[j]
+        used = xp.take(self._bits_arr, j)
         if sigma is None:
             return used, None, None, True
-        leak = sigma * rows[:, :, None] * rows[:, None, :]
+        rows = self._row_masks[j]  # (B, nz) measurement rows of D
+        leak = sigma * rows[..., :, None] * rows[..., None, :]
         return used, leak, (used & attacked) != 0, True

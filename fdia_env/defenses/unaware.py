@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-from fdia_env.attacks.base import AttackEffect, bit_array
-from fdia_env.backend import NUMPY
-from fdia_env.defenses.base import DefenseModel, FilterInput
+from fdia_env.attacks.base import same_sensors
+from fdia_env.defenses.base import DefenseModel
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -27,15 +24,8 @@ class UnawareFilter(DefenseModel):
         self._all = (1 << system.M) - 1
         self._M = system.M
 
-    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
-        """Every sensor is used; the bias leaks through."""
-        return FilterInput(used=self._all, leaked_sigma=effect.sigma)
-
     def batch_apply(self, actions, attacked, sigma):
-        """Every sensor; the whole bias leaks (torch: sensor sets as (B, M) boolean masks)."""
+        """Every sensor; the whole bias leaks."""
         xp = self.xp
-        B = attacked.shape[0]
-        present = None if sigma is None else xp.ones(B, dtype=xp.bool)
-        if xp is not NUMPY:
-            return xp.ones((B, self._M), dtype=xp.bool), sigma, present, False
-        return bit_array([self._all] * B, self._M), sigma, present, False
+        present = None if sigma is None else xp.ones(self._batch, dtype=xp.bool)
+        return same_sensors(xp, self._batch, self._all, self._M), sigma, present, False

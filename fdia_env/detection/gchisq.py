@@ -50,7 +50,7 @@ import scipy.integrate
 import scipy.optimize
 import scipy.stats
 
-from fdia_env._validation import as_matrix, check_psd, check_square
+from fdia_env._validation import as_float_array, as_matrix, check_psd, check_square
 from fdia_env.kalman import psd_sqrt
 
 _DROP = 1e-12  # Imhof only: weights below this fraction of the largest are treated as zero
@@ -296,10 +296,7 @@ def gchisq_cdf(x: float | np.ndarray, weights: np.ndarray) -> np.ndarray:
 def _as_floats(name: str, value: object, scalar: bool = False) -> np.ndarray:
     """``value`` as a flat float64 array (one entry if ``scalar``), else ``ValueError``."""
     kind = "a real number" if scalar else "a real number or an array of real numbers"
-    try:
-        arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be {kind}, got {value!r}") from exc
+    arr = as_float_array(name, value, kind).reshape(-1)
     if scalar and arr.size != 1:
         raise ValueError(f"{name} must be a single real number, got {value!r}")
     return arr

@@ -146,8 +146,10 @@ def _integer(action: Any) -> int | None:
     A shape-(1,) array is not an element of ``Discrete`` (Gymnasium's ``contains`` refuses it,
     and the vector env refuses a (B, 1) batch): it is refused, not squeezed.
     """
-    if type(action) is int:  # the common case first (bool is another type)
+    if type(action) is int:  # the common cases first (bool is another type)
         return action
+    if type(action) is np.int64:  # a policy's sampled action
+        return int(action)
     if isinstance(action, bool | np.bool_):
         return None
     if isinstance(action, numbers.Integral):

@@ -195,7 +195,7 @@ class FdiaParallelEnv(ParallelEnv):
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
         effect = self.attack.apply_checked(actions["attacker"])  # checked above
-        filter_input = self.defense.apply(actions.get("defender"), effect)
+        filter_input = self.defense.apply_checked(actions.get("defender"), effect)
         self._last_effect = effect
         if not self.defense.passive:
             self.attack.observe_opponent(self.defense)
@@ -233,7 +233,10 @@ class FdiaParallelEnv(ParallelEnv):
     def _infos(self, agents: list[str]) -> dict[str, dict[str, Any]]:
         """Each agent's info: the common one, plus the attack's private keys for the attacker."""
         info = self._info()
-        infos = {a: dict(info) if i else info for i, a in enumerate(agents)}  # own dicts
+        if len(agents) == 1:
+            infos = {agents[0]: info}
+        else:  # each agent its own dict
+            infos = {a: dict(info) if i else info for i, a in enumerate(agents)}
         if "attacker" in infos:
             infos["attacker"].update(self.attack.private_info())
         return infos

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import sys
 from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
-from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_step_actions
-from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+from fdia_env.envs.parallel import RENDER_MODES
 from fdia_env.scenarios import resolve
+from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.dynamic_model import ACTIONS, DynamicModel
 from fdia_env.stealth.env import DEFAULT_ALPHAS, DYNAMICS, ON_DETECT, _check_alphas
 from fdia_env.stealth.static import check_alpha
@@ -27,23 +25,15 @@ DEFENDERS = (None, "threshold", "protect")
 """The defender: none (passive), the detector's false-alarm rate, or the sensors it protects."""
 
 
-class _NoResetOptions:
-    """What the single-agent view asks of an env's attack model: the reset options it reads."""
-
-    reset_options: tuple[str, ...] = ()
-
-
-class StealthDynamicEnv(ParallelEnv):
+class StealthDynamicEnv(StealthParallelEnv):
     """An attacker against a Kalman filter with a windowed χ² detector (``stealth_dynamic_v0``).
 
     Args: as :func:`fdia_env.stealth.stealth_dynamic_v0.parallel_env`.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
+        **StealthParallelEnv.metadata,
         "name": "stealth_dynamic_v0",
-        "render_modes": list(RENDER_MODES),
-        "render_fps": RENDER_FPS,
-        "is_parallelizable": True,
     }
 
     def __init__(
@@ -87,7 +77,7 @@ class StealthDynamicEnv(ParallelEnv):
         self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
         self.alpha = check_alpha(alpha)
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
-        self.penalty = _check_cost("penalty", penalty)
+        self.penalty = check_cost("penalty", penalty)
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES)
         self.render_mode = render_mode
@@ -95,7 +85,7 @@ class StealthDynamicEnv(ParallelEnv):
             raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
         self.defender = defender
         self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
-        self.false_alarm_cost = _check_cost("false_alarm_cost", false_alarm_cost)
+        self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
         self.protect_budget = check_int(
             "protect_budget", protect_budget, minimum=1, maximum=system.M
         )
@@ -117,44 +107,17 @@ class StealthDynamicEnv(ParallelEnv):
         # the attacker alone faces alpha; with a defender, the rate it picks among alphas
         self._rates = self.alphas if defender == "threshold" else (self.alpha,)
         self._tau = self.model.thresholds(self._rates)
-        self.attack = _NoResetOptions()
-        self.possible_agents = ["attacker"] if defender is None else ["attacker", "defender"]
-        self.agents: list[str] = []
         act = spaces.Box(-1.0, 1.0, shape=self.model.action_shape, dtype=np.float32)
         guard = (
             spaces.MultiBinary(system.M)
             if defender == "protect"
             else spaces.Discrete(len(self.alphas))
         )
-        self._action_spaces = {"attacker": act, "defender": guard}
         low = np.zeros(4, dtype=np.float32)
         high = np.array([1.0, 1.0, MAX_RATIO, MAX_LOG_ERROR], dtype=np.float32)
-        self._observation_space = spaces.Box(low, high, dtype=np.float32)
-        self.state_space = self._observation_space
-        self.np_random, self.np_random_seed = seeding.np_random(None)
-        self._reset_called = False
-        self._done = True
-        self._clear()
-
-    # --- spaces -------------------------------------------------------------------------
-    def observation_space(self, agent: str) -> spaces.Space:
-        """The observation space of ``agent`` (the same object on every call)."""
-        self._check_agent(agent)
-        return self._observation_space
-
-    def action_space(self, agent: str) -> spaces.Space:
-        """The action space of ``agent`` (the same object on every call)."""
-        return self._action_spaces[self._check_agent(agent)]
-
-    def _check_agent(self, agent: str) -> str:
-        if agent not in self.possible_agents:
-            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
-        return agent
-
-    def action_masks(self, agent: str = "attacker") -> None:
-        """No action mask (every action is legal)."""
-        self._check_agent(agent)
-        return None
+        self._init_agents(
+            defender, {"attacker": act, "defender": guard}, spaces.Box(low, high, dtype=np.float32)
+        )
 
     # --- episode ------------------------------------------------------------------------
     def _clear(self) -> None:
@@ -176,21 +139,10 @@ class StealthDynamicEnv(ParallelEnv):
     def _default_rate(self) -> int:
         return int(np.argmin(np.abs(np.asarray(self._rates) - self.alpha)))
 
-    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        """Start an episode; ``seed`` makes every noise draw reproducible."""
-        check_reset_args(seed, options)
-        if seed is not None:
-            self.np_random, self.np_random_seed = seeding.np_random(int(seed))
-        self.agents = list(self.possible_agents)
-        self._clear()
+    def _restart(self) -> None:
+        """Draw the clean filter's error (sampled dynamics) for the new episode."""
         sampled = self.dynamics == "sampled"
         self.model.restart(self._state, np.ones(1, dtype=bool), self.np_random, sampled)
-        self._done = False
-        self._reset_called = True
-        return self._per_agent(self._observe()), self._per_agent(self._info())
-
-    def _per_agent(self, value: Any) -> dict[str, Any]:
-        return {a: (dict(value) if isinstance(value, dict) else value.copy()) for a in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """One filter step under the attacker's injection and the defender's threshold.
@@ -240,21 +192,7 @@ class StealthDynamicEnv(ParallelEnv):
             "protected": self._protected_indicator(guarded),
         }
         self._history.append((self._last["phi"], self._last["statistic"] / self._last["threshold"]))
-        done = self._k >= self.horizon or (detected and self.on_detect == "end")
-        truncated = not done and self.max_cycles is not None and self._k >= self.max_cycles
-        agents = self.agents
-        obs = self._per_agent(self._observe())
-        infos = self._per_agent(self._info())
-        rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * alpha}
-        rewards = {a: rewards[a] for a in agents}
-        terms = dict.fromkeys(agents, done)
-        truncs = dict.fromkeys(agents, truncated)
-        if done or truncated:
-            self._done = True
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terms, truncs, infos
+        return self._finish_step(reward, alpha, detected)
 
     def _observe(self) -> np.ndarray:
         last = self._last
@@ -285,28 +223,16 @@ class StealthDynamicEnv(ParallelEnv):
         out[np.asarray(sensors, dtype=np.int64)] = 1
         return out
 
-    def state(self) -> np.ndarray:
-        """Global state: the attacker's observation (the defender sees the same)."""
-        return self._observe()
-
-    def render(self, mode: str | None = None) -> str | np.ndarray | None:
-        """``"ansi"``: a line for the last step; ``"rgb_array"``: error trace and statistic."""
-        mode = self.render_mode if mode is None else check_choice("mode", mode, RENDER_MODES)
-        if mode is None:
-            return None
-        if mode == "rgb_array":
-            return self._render_rgb()
+    def _render_line(self) -> str:
+        """The ``"ansi"`` line: the error covariance's trace, g/τ, the alarm."""
         last = self._last
-        line = (
+        return (
             f"step {self._k}/{self.horizon}  tr error cov = {last['phi']:.6g}  "
             f"g/τ = {last['statistic'] / last['threshold']:.3f}  detected: {last['detected']}\n"
         )
-        if mode == "human":
-            sys.stdout.write(line)
-            return None
-        return line
 
     def _render_rgb(self) -> np.ndarray:
+        """The ``"rgb_array"`` frame: the error trace and the statistic over the steps."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
@@ -329,17 +255,6 @@ class StealthDynamicEnv(ParallelEnv):
         fig.tight_layout()
         canvas.draw()
         return np.asarray(canvas.buffer_rgba())[..., :3].copy()
-
-    def close(self) -> None:
-        """Nothing to release."""
-
-
-def _check_cost(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a number >= 0, got {value!r}")
-    if not (np.isfinite(value) and value >= 0.0):
-        raise ValueError(f"{name} must be a finite number >= 0, got {value}")
-    return float(value)
 
 
 def _sensor_positions(system: Any, sensors: Any, param: str, *, default_all: bool) -> np.ndarray:

@@ -23,7 +23,10 @@ clean filter's error (covariance ``P_f``, the filtered steady state, orthogonal 
   ``Σ̃ = T Σ T' + Σ_b``), its tail computed by Imhof's integral.
 
 Everything is batched over B members (arrays with a leading batch axis): the single env is a
-batch of one. See docs/guide/stealth.md ("Dynamic").
+batch of one. The bias attack also runs on torch tensors (``xp``, a torch backend of
+:mod:`fdia_env.backend`: the native vector env's ``backend="torch"``), its χ² tail by
+:func:`fdia_env.stealth.torch_ops.ncx2_sf`; the linear attack's tail is a numerical integral
+per member, numpy only. See docs/guide/stealth.md ("Dynamic").
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from typing import Any
 import numpy as np
 from scipy import integrate, stats
 
+from fdia_env.backend import NUMPY, Backend
 from fdia_env.kalman import steady_state
 from fdia_env.systems import LinearSystem
 
@@ -113,33 +117,56 @@ class DynamicModel:
         dof = self.m * np.arange(1, self.window + 1)
         return np.array([stats.chi2.isf(a, dof) for a in alphas])
 
-    def new_state(self, batch: int) -> dict[str, np.ndarray]:
+    def arrays(self, xp: Backend = NUMPY) -> dict[str, Any]:
+        """The model's matrices on the backend ``xp`` (numpy: the attributes themselves)."""
+        names = ("F", "H", "K", "HF", "Abar", "Wz", "sigma", "Qh", "Rh", "Pfh", "rows", "free")
+        if xp is NUMPY:
+            return {name: getattr(self, name) for name in names}
+        cache = self.__dict__.setdefault("_on", {})
+        key = (xp.name, str(xp.device))
+        if key not in cache:
+            cache[key] = {name: xp.asarray(np.asarray(getattr(self, name))) for name in names}
+        return cache[key]
+
+    def new_state(self, batch: int, xp: Backend = NUMPY) -> dict[str, Any]:
         """Zero attack effect for ``batch`` members (clean errors drawn by :meth:`restart`)."""
         n, m, w = self.n, self.m, self.window
+        linear = self.action == "linear"
         return {
-            "k": np.zeros(batch, dtype=np.int64),
-            "e": np.zeros((batch, n)),
-            "d": np.zeros((batch, n)),
-            "D": np.zeros((batch, n, n)) if self.action == "linear" else np.zeros((batch, 0, 0)),
-            "nc": np.zeros((batch, w)),
-            "mu": np.zeros((batch, w, m)) if self.action == "linear" else np.zeros((batch, w, 0)),
-            "q": np.zeros((batch, w)),
+            "k": xp.zeros(batch, dtype=np.int64),
+            "e": xp.zeros((batch, n)),
+            "d": xp.zeros((batch, n)),
+            "D": xp.zeros((batch, n, n)) if linear else xp.zeros((batch, 0, 0)),
+            "nc": xp.zeros((batch, w)),
+            "mu": xp.zeros((batch, w, m)) if linear else xp.zeros((batch, w, 0)),
+            "q": xp.zeros((batch, w)),
         }
 
     def restart(
-        self, state: dict[str, np.ndarray], members: np.ndarray, rng: Any, sampled: bool
+        self,
+        state: dict[str, Any],
+        members: Any,
+        rng: Any,
+        sampled: bool,
+        xp: Backend = NUMPY,
     ) -> None:
         """Start ``members`` (bool (B,)) afresh with no attack effect.
 
         In sampled dynamics the clean error is drawn from N(0, P_f) (the filter in steady state).
         """
-        idx = np.flatnonzero(members)
-        if idx.size == 0:
+        idx = xp.flatnonzero(members)
+        count = int(idx.shape[0])
+        if count == 0:
             return
         for key in ("k", "e", "d", "D", "nc", "mu", "q"):
             state[key][idx] = 0
         if sampled:
-            state["e"][idx] = rng.standard_normal((idx.size, self.n)) @ self.Pfh.T
+            state["e"][idx] = self._normal(xp, rng, (count, self.n)) @ self.arrays(xp)["Pfh"].T
+
+    @staticmethod
+    def _normal(xp: Backend, rng: Any, shape: tuple[int, ...]) -> Any:
+        """Standard normal draws from ``rng`` (numpy's Generator or the device's)."""
+        return rng.standard_normal(shape) if xp is NUMPY else xp.normal(rng, shape)
 
     def step(
         self,
@@ -150,7 +177,8 @@ class DynamicModel:
         sampled: bool,
         rng: Any,
         free: np.ndarray | None = None,
-    ) -> dict[str, np.ndarray]:
+        xp: Backend = NUMPY,
+    ) -> dict[str, Any]:
         """Advance every member one step (in place) and return what it saw.
 
         Args:
@@ -159,9 +187,10 @@ class DynamicModel:
             alpha: (B,) each member's false-alarm rate.
             tau: (B, w) each member's thresholds (:meth:`thresholds` rows).
             sampled: Draw the noises (else the expected dynamics: no draw).
-            rng: numpy Generator for the draws.
+            rng: numpy Generator for the draws (torch: a ``torch.Generator`` of the device).
             free: (B, |S|) bool, the attacked rows each member's attacker may write this step
                 (default :attr:`free`; a defender's protection clears some).
+            xp: The arrays' backend (torch: the bias attack only; see the module docstring).
 
         Returns:
             Arrays (B,): ``phi`` (trace of the error covariance given the attack), ``error``
@@ -169,26 +198,34 @@ class DynamicModel:
             in expected dynamics), ``threshold``, ``detected``, ``p`` (detection probability),
             ``kl`` (KL divergence of this step's innovation law from the clean one).
         """
+        if xp is not NUMPY and free is not None:
+            raise ValueError("free (a protecting defender's rows) runs on numpy only")
+        if xp is not NUMPY and self.action != "bias":
+            raise ValueError(
+                "action='linear' runs on numpy only: its detection probability is a numerical "
+                "integral per member (use backend='numpy')"
+            )
+        mat = self.arrays(xp)
         B = actions.shape[0]
-        acts = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        acts = xp.clip(xp.asarray(actions, dtype=np.float64), -1.0, 1.0)
         k = state["k"] + 1
         slot = (k - 1) % self.window
-        rows_b = np.arange(B)
+        rows_b = xp.arange(B)
         d = state["d"]
         if sampled:
-            w = rng.standard_normal((B, self.n)) @ self.Qh.T
-            v = rng.standard_normal((B, self.m)) @ self.Rh.T
-            z = (state["e"] @ self.F.T + w) @ self.H.T + v
-            state["e"] = state["e"] @ self.F.T + w - z @ self.K.T
+            w = self._normal(xp, rng, (B, self.n)) @ mat["Qh"].T
+            v = self._normal(xp, rng, (B, self.m)) @ mat["Rh"].T
+            z = (state["e"] @ mat["F"].T + w) @ mat["H"].T + v
+            state["e"] = state["e"] @ mat["F"].T + w - z @ mat["K"].T
         if self.action == "bias":
-            inj = self.injections(acts, free)
-            dz = d @ self.HF.T + inj
-            nc = np.sum((dz @ self.Wz.T) ** 2, axis=1)
-            state["d"] = d @ self.Abar.T - inj @ self.K.T
+            inj = self.injections(acts, free, xp)
+            dz = d @ mat["HF"].T + inj
+            nc = ((dz @ mat["Wz"].T) ** 2).sum(1)
+            state["d"] = d @ mat["Abar"].T - inj @ mat["K"].T
             state["nc"][rows_b, slot] = nc
             kl = 0.5 * nc
             zt = z + dz if sampled else None
-            phi = self.clean + np.sum(state["d"] ** 2, axis=1)
+            phi = self.clean + (state["d"] ** 2).sum(1)
         else:
             T, Sb = self._linear(acts, free)
             eye = np.eye(self.m)
@@ -210,35 +247,39 @@ class DynamicModel:
                 zt = None
             phi = self.clean + np.trace(state["D"], axis1=1, axis2=2)
         state["k"] = k
-        filled = np.minimum(k, self.window)
+        filled = xp.minimum(k, self.window)
         threshold = tau[rows_b, filled - 1]
         dof = self.m * filled
         if self.action == "bias":
-            total = state["nc"].sum(axis=1)
-            p = np.where(
-                total > 0.0, stats.ncx2.sf(threshold, dof, np.maximum(total, 1e-300)), alpha
-            )
+            total = state["nc"].sum(1)
+            if xp is NUMPY:
+                tail = stats.ncx2.sf(threshold, dof, np.maximum(total, 1e-300))
+            else:
+                from fdia_env.stealth.torch_ops import ncx2_sf
+
+                tail = ncx2_sf(threshold, dof, total)
+            p = xp.where(total > 0.0, tail, alpha)
             mean = dof + total
         else:
             weights = state["mu"].reshape(B, -1)
             p = np.array([_chi2_mix_sf(weights[i], threshold[i], alpha[i]) for i in range(B)])
             mean = weights.sum(axis=1)
         if sampled:
-            state["q"][rows_b, slot] = np.sum((zt @ self.Wz.T) ** 2, axis=1)
-            statistic = state["q"].sum(axis=1)
+            state["q"][rows_b, slot] = ((zt @ mat["Wz"].T) ** 2).sum(1)
+            statistic = state["q"].sum(1)
             detected = statistic > threshold
-            error = np.sum((state["e"] + state["d"]) ** 2, axis=1)
+            error = ((state["e"] + state["d"]) ** 2).sum(1)
         else:
             statistic = mean
-            detected = np.zeros(B, dtype=bool)
-            error = phi.copy()
+            detected = xp.zeros(B, dtype=np.bool_)
+            error = xp.copy(phi)
         return {
             "phi": phi,
             "error": error,
             "statistic": statistic,
             "threshold": threshold,
             "detected": detected,
-            "p": np.clip(p, 0.0, 1.0),
+            "p": xp.clip(p, 0.0, 1.0),
             "kl": kl,
         }
 
@@ -262,11 +303,13 @@ class DynamicModel:
         Sb[:, self.rows, self.rows] = sb**2
         return T, Sb
 
-    def injections(self, actions: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
+    def injections(self, actions: Any, free: np.ndarray | None = None, xp: Backend = NUMPY) -> Any:
         """(B, m) the bias injections ``Γ a`` of (B, |S|) actions (``action="bias"``)."""
-        acts = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
-        inj = np.zeros((acts.shape[0], self.m))
-        inj[:, self.rows] = self.a_max * self.sigma * acts * self._free(acts.shape[0], free)
+        mat = self.arrays(xp)
+        acts = xp.clip(xp.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        inj = xp.zeros((acts.shape[0], self.m))
+        allowed = self._free(acts.shape[0], free) if xp is NUMPY else mat["free"].to(acts.dtype)
+        inj[:, mat["rows"]] = self.a_max * mat["sigma"] * acts * allowed
         return inj
 
 

@@ -1,12 +1,18 @@
-"""Native vector env of ``stealth_dynamic_v0``'s attacker view: B filters as one numpy batch.
+"""Native vector env of ``stealth_dynamic_v0``'s attacker view: B filters as one batch.
 
 ``gymnasium.make_vec("fdia_env/StealthDynamic-v0", num_envs=B,
 vectorization_mode="vector_entry_point", **options)`` (the options of
-:func:`fdia_env.stealth.stealth_dynamic_v0.parallel_env`, numpy only). The members run the same
-batched model as the single env (a batch of one there). Autoreset is Gymnasium's default
+:func:`fdia_env.stealth.stealth_dynamic_v0.parallel_env`). The members run the same batched
+model as the single env (a batch of one there). Autoreset is Gymnasium's default
 ``NEXT_STEP``: the step after an episode's last one resets that member (its action is ignored,
 reward 0). ``action="linear"`` computes each member's detection probability by a numerical
 integral (Imhof's), about 10–40 ms a member-step unless the window is strictly stealthy.
+
+``backend="torch", device="cpu" | "cuda"`` runs the bias attack (``action="bias"``, the
+default) on float64 tensors of that device: actions are tensors of the device, observations,
+rewards, flags and infos come back as tensors there; its expected dynamics equal numpy's to
+1e-10 and its sampled dynamics draw from a ``torch.Generator`` of the device (``seed`` an int
+or None). The linear attack runs on numpy only.
 """
 
 from __future__ import annotations
@@ -14,114 +20,122 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
-from fdia_env._validation import check_int
-from fdia_env.envs.actions import check_batch_actions
+from fdia_env.backend import NUMPY, get_backend
+from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
+from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
 
 MAX_NUM_ENVS = 1 << 16
 
 
-class StealthDynamicVectorEnv(VectorEnv):
+class StealthDynamicVectorEnv(StealthVectorBase):
     """B copies of the attacker's view, stepped as one batch (see the module docstring).
 
     Args:
         num_envs: B, 1..2**16.
+        backend: ``"numpy"`` (default) or ``"torch"`` (``action="bias"`` only).
+        device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
         **kwargs: Options of ``stealth_dynamic_v0.parallel_env`` (no ``render_mode``).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
-
-    def __init__(self, num_envs: int, **kwargs: Any) -> None:
-        if kwargs.get("render_mode") is not None:
-            raise ValueError("render_mode is not supported by the native vector env")
-        kwargs.pop("render_mode", None)
-        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
-        self.env = StealthDynamicEnv(**kwargs)
+    def __init__(
+        self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
+    ) -> None:
+        self.xp = xp = get_backend(backend, device)
+        self.backend, self.device = xp.name, xp.device
+        self._init_batch(num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs)
         self.model = self.env.model
-        self.single_action_space = self.env.action_space("attacker")
-        self.single_observation_space = self.env.observation_space("attacker")
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._alpha = np.full(self.num_envs, self.env.alpha)
-        self._tau = np.repeat(self.env._tau[[self.env._default_rate()]], self.num_envs, axis=0)
-        self._rng = np.random.default_rng()
-        self._state = self.model.new_state(self.num_envs)
-        self._needs_reset = np.zeros(self.num_envs, dtype=bool)
+        if xp is not NUMPY and self.model.action != "bias":
+            raise ValueError(
+                "backend='torch' runs action='bias' only: the linear attack's detection "
+                "probability is a numerical integral per member (use backend='numpy')"
+            )
+        self._alpha = xp.full(self.num_envs, float(self.env.alpha), dtype=np.float64)
+        tau = np.repeat(self.env._tau[[self.env._default_rate()]], self.num_envs, axis=0)
+        self._tau = xp.asarray(tau)
+        self._state = self.model.new_state(self.num_envs, xp)
+        self._needs_reset = xp.zeros(self.num_envs, dtype=np.bool_)
 
-    def reset(
-        self, *, seed: int | None = None, options: dict | None = None
-    ) -> tuple[np.ndarray, dict]:
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        if seed is not None:
-            self._rng = np.random.default_rng(int(seed))
-        self._state = self.model.new_state(self.num_envs)
-        everyone = np.ones(self.num_envs, dtype=bool)
-        self.model.restart(self._state, everyone, self._rng, self.env.dynamics == "sampled")
+        xp, B = self.xp, self.num_envs
+        self._seed(seed)
+        self._state = self.model.new_state(B, xp)
+        everyone = xp.ones(B, dtype=np.bool_)
+        self.model.restart(self._state, everyone, self._rng, self.env.dynamics == "sampled", xp)
         self._needs_reset[:] = False
-        B = self.num_envs
-        obs = np.zeros((B, 4), dtype=np.float32)
+        obs = xp.zeros((B, 4), dtype=np.float32)
         obs[:, 0] = 1.0
-        clean = np.full(B, self.model.clean)
-        zero = np.zeros(B)
-        return obs, self._infos(clean, clean, zero.astype(bool), zero, zero, self._tau[:, 0], zero)
+        clean = xp.full(B, self.model.clean, dtype=np.float64)
+        zero = xp.zeros(B)
+        return obs, self._infos(clean, clean, zero > 0, zero, zero, self._tau[:, 0], zero)
 
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
         """One filter step for every member (members that ended last step are reset instead)."""
-        acts = check_batch_actions(self.single_action_space, actions, self.num_envs, "attacker")
-        env, B = self.env, self.num_envs
-        resetting = self._needs_reset.copy()
+        env, B, xp = self.env, self.num_envs, self.xp
+        if xp is NUMPY:
+            acts = check_batch_actions(self.single_action_space, actions, B, "attacker")
+        else:
+            check_batch_tensor_actions(self.single_action_space, actions, B, "attacker", xp)
+            acts = actions
+        resetting = xp.copy(self._needs_reset)
         sampled = env.dynamics == "sampled"
-        out = self.model.step(self._state, acts, self._alpha, self._tau, sampled, self._rng)
+        out = self.model.step(
+            self._state, acts, self._alpha, self._tau, sampled, self._rng, None, xp
+        )
         caught = -env.penalty if env.on_detect == "penalty" else 0.0
         if sampled:
-            reward = np.where(out["detected"], caught, out["error"])
+            reward = xp.where(out["detected"], caught, out["error"])
         else:
             reward = (1.0 - out["p"]) * out["phi"] + out["p"] * caught
+        if xp.any(resetting):  # the reset step itself: a fresh member, nothing happened
+            self.model.restart(self._state, resetting, self._rng, sampled, xp)
         k = self._state["k"]
-        if resetting.any():  # the reset step itself: a fresh member, nothing happened
-            self.model.restart(self._state, resetting, self._rng, sampled)
-            k = self._state["k"]
         live = ~resetting
         detected = out["detected"] & live
-        terminated = live & ((k >= env.horizon) | (detected & (env.on_detect == "end")))
-        truncated = live & ~terminated
-        truncated &= (env.max_cycles is not None) & (k >= (env.max_cycles or 0))
-        reward = np.where(live, reward, 0.0)
-        phi = np.where(live, out["phi"], self.model.clean)
-        ratio = np.where(live, out["statistic"] / out["threshold"], 0.0)
-        obs = np.empty((B, 4), dtype=np.float32)
+        ends = k >= env.horizon
+        if env.on_detect == "end":
+            ends = ends | detected
+        terminated = live & ends
+        if env.max_cycles is None:
+            truncated = xp.zeros(B, dtype=np.bool_)
+        else:
+            truncated = live & ~terminated & (k >= env.max_cycles)
+        reward = xp.where(live, reward, 0.0)
+        phi = xp.where(live, out["phi"], self.model.clean)
+        ratio = xp.where(live, out["statistic"] / out["threshold"], 0.0)
+        obs = xp.empty((B, 4), dtype=np.float32)
         obs[:, 0] = (env.horizon - k) / env.horizon
-        obs[:, 1] = detected
-        obs[:, 2] = np.minimum(ratio, MAX_RATIO)
-        obs[:, 3] = np.minimum(np.log(np.maximum(phi / self.model.clean, 1.0)), MAX_LOG_ERROR)
+        obs[:, 1] = xp.astype(detected, np.float32)
+        obs[:, 2] = xp.minimum(ratio, MAX_RATIO)
+        obs[:, 3] = xp.minimum(xp.log(xp.maximum(phi / self.model.clean, 1.0)), MAX_LOG_ERROR)
         self._needs_reset = terminated | truncated
         infos = self._infos(
             phi,
-            np.where(live, out["error"], self.model.clean),
+            xp.where(live, out["error"], self.model.clean),
             detected,
-            np.where(live, out["p"], 0.0),
-            np.where(live, out["statistic"], 0.0),
-            np.where(live, out["threshold"], self._tau[:, 0]),
-            np.where(live, out["kl"], 0.0),
+            xp.where(live, out["p"], 0.0),
+            xp.where(live, out["statistic"], 0.0),
+            xp.where(live, out["threshold"], self._tau[:, 0]),
+            xp.where(live, out["kl"], 0.0),
         )
         return obs, reward, terminated, truncated, infos
 
-    def _infos(self, phi, error, detected, p, statistic, threshold, kl) -> dict[str, np.ndarray]:
+    def _infos(self, phi, error, detected, p, statistic, threshold, kl) -> dict[str, Any]:
+        xp = self.xp
         info = {
-            "phi": np.asarray(phi, dtype=np.float64),
-            "error": np.asarray(error, dtype=np.float64),
-            "step": self._state["k"].copy(),
-            "alpha": self._alpha.copy(),
-            "detected": np.asarray(detected, dtype=bool),
-            "detection_probability": np.asarray(p, dtype=np.float64),
-            "statistic": np.asarray(statistic, dtype=np.float64),
-            "threshold": np.asarray(threshold, dtype=np.float64),
-            "kl": np.asarray(kl, dtype=np.float64),
+            "phi": xp.astype(phi, np.float64),
+            "error": xp.astype(error, np.float64),
+            "step": xp.copy(self._state["k"]),
+            "alpha": xp.copy(self._alpha),
+            "detected": xp.astype(detected, np.bool_),
+            "detection_probability": xp.astype(p, np.float64),
+            "statistic": xp.astype(statistic, np.float64),
+            "threshold": xp.astype(threshold, np.float64),
+            "kl": xp.astype(kl, np.float64),
         }
-        mask = np.ones(self.num_envs, dtype=bool)
+        mask = xp.ones(self.num_envs, dtype=np.bool_)
         info.update({f"_{k}": mask for k in list(info)})
         return info
 
@@ -130,23 +144,8 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthDynamicVectorEnv:
     """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthDynamic-v0"``.
 
     Raises:
-        ValueError: For ``backend``/``device`` other than numpy on the CPU, the defender's
-            view, or a bad option.
+        ValueError: For an unknown backend, a device it cannot use, ``backend="torch"`` with
+            the linear attack, the defender's view, or a bad option.
     """
-    backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
-    agent = kwargs.pop("agent", "attacker")
-    kwargs.pop("module", None)
-    if agent != "attacker" or kwargs.get("defender") is not None:
-        raise ValueError(
-            "the native vector env plays the attacker alone (defender=None); use "
-            "vectorization_mode='sync' for the defender's view"
-        )
-    if backend != "numpy" or device not in (None, "cpu"):
-        raise ValueError(
-            f"backend={backend!r}, device={device!r}: the dynamic stealth env's native vector "
-            "env runs numpy on the CPU (backend='numpy')"
-        )
-    autoreset = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    if autoreset not in (AutoresetMode.NEXT_STEP, "next_step", "NextStep"):
-        raise ValueError(f"autoreset_mode must be NEXT_STEP here, got {autoreset!r}")
-    return StealthDynamicVectorEnv(num_envs, **kwargs)
+    backend, device = vector_options(kwargs, "dynamic stealth env")
+    return StealthDynamicVectorEnv(num_envs, backend=backend, device=device, **kwargs)

@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-import sys
 from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
-from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_step_actions
-from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+from fdia_env.envs.parallel import RENDER_MODES
+from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.static import (
     StaticEstimation,
     check_alpha,
@@ -31,23 +29,15 @@ MAX_RATIO = 10.0
 """Cap of the observed χ² statistic, in units of the threshold."""
 
 
-class _NoResetOptions:
-    """What the single-agent view asks of an env's attack model: the reset options it reads."""
-
-    reset_options: tuple[str, ...] = ()
-
-
-class StealthAttackEnv(ParallelEnv):
+class StealthAttackEnv(StealthParallelEnv):
     """One attacker against WLS state estimation with a bad-data test (see ``stealth_attack_v0``).
 
     Args: as :func:`fdia_env.stealth.stealth_attack_v0.parallel_env`.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
+        **StealthParallelEnv.metadata,
         "name": "stealth_attack_v0",
-        "render_modes": list(RENDER_MODES),
-        "render_fps": RENDER_FPS,
-        "is_parallelizable": True,
     }
 
     def __init__(
@@ -101,74 +91,35 @@ class StealthAttackEnv(ParallelEnv):
             )
         self.test = test
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
-        if isinstance(penalty, bool) or not isinstance(
-            penalty, (int, float, np.integer, np.floating)
-        ):
-            raise ValueError(f"penalty must be a number >= 0, got {penalty!r}")
-        if not (np.isfinite(penalty) and penalty >= 0.0):
-            raise ValueError(f"penalty must be a finite number >= 0, got {penalty}")
-        self.penalty = float(penalty)
+        self.penalty = check_cost("penalty", penalty)
         self.protected = est.meter_positions(protected, "protected")
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES)
         self.render_mode = render_mode
-        self.attack = _NoResetOptions()
         if defender not in DEFENDERS:
             raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
         self.defender = defender
         self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
-        if isinstance(false_alarm_cost, bool) or not isinstance(
-            false_alarm_cost, (int, float, np.integer, np.floating)
-        ):
-            raise ValueError(f"false_alarm_cost must be a number >= 0, got {false_alarm_cost!r}")
-        if not (np.isfinite(false_alarm_cost) and false_alarm_cost >= 0.0):
-            raise ValueError(
-                f"false_alarm_cost must be a finite number >= 0, got {false_alarm_cost}"
-            )
-        self.false_alarm_cost = float(false_alarm_cost)
+        self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
         self._estimations = [
             est
             if a == est.alpha
             else dataclasses.replace(est, alpha=a, lnr_threshold=sidak_threshold(a, est.m))
             for a in self.alphas
         ]
-        self.possible_agents = ["attacker"] if defender is None else ["attacker", "defender"]
-        self.agents: list[str] = []
         if self.action_kind == "shift":
             act: spaces.Space = spaces.MultiBinary(est.n)
         else:
             act = spaces.Box(-1.0, 1.0, shape=(est.m,), dtype=np.float32)
         self._action_space = act
-        self._action_spaces = {"attacker": act, "defender": spaces.Discrete(len(self.alphas))}
         low = np.zeros(3, dtype=np.float32)
         high = np.array([1.0, 1.0, MAX_RATIO], dtype=np.float32)
-        self._observation_space = spaces.Box(low, high, dtype=np.float32)
-        self.state_space = self._observation_space
         self._L = np.linalg.cholesky(est.R)
-        self.np_random, self.np_random_seed = seeding.np_random(None)
-        self._reset_called = False
-        self._done = True
-        self._clear()
-
-    # --- spaces -------------------------------------------------------------------------
-    def observation_space(self, agent: str) -> spaces.Space:
-        """The observation space of ``agent`` (the same object on every call)."""
-        self._check_agent(agent)
-        return self._observation_space
-
-    def action_space(self, agent: str) -> spaces.Space:
-        """The action space of ``agent`` (the same object on every call)."""
-        return self._action_spaces[self._check_agent(agent)]
-
-    def _check_agent(self, agent: str) -> str:
-        if agent not in self.possible_agents:
-            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
-        return agent
-
-    def action_masks(self, agent: str = "attacker") -> None:
-        """No action mask (every action is legal; the budget trims the injection)."""
-        self._check_agent(agent)
-        return None
+        self._init_agents(
+            defender,
+            {"attacker": act, "defender": spaces.Discrete(len(self.alphas))},
+            spaces.Box(low, high, dtype=np.float32),
+        )
 
     # --- the model ----------------------------------------------------------------------
     def injection(self, action: Any) -> np.ndarray:
@@ -209,20 +160,6 @@ class StealthAttackEnv(ParallelEnv):
         self._last_a = np.zeros(self.estimation.m)
 
     # --- PettingZoo API -----------------------------------------------------------------
-    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        """Start an episode; ``seed`` makes every noise draw reproducible."""
-        check_reset_args(seed, options)
-        if seed is not None:
-            self.np_random, self.np_random_seed = seeding.np_random(int(seed))
-        self.agents = list(self.possible_agents)
-        self._clear()
-        self._done = False
-        self._reset_called = True
-        return self._per_agent(self._observe()), self._per_agent(self._info())
-
-    def _per_agent(self, value: Any) -> dict[str, Any]:
-        return {a: (dict(value) if isinstance(value, dict) else value.copy()) for a in self.agents}
-
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Inject, run the estimator and its bad-data test on one snapshot.
 
@@ -261,21 +198,7 @@ class StealthAttackEnv(ParallelEnv):
             "attacked": (a != 0.0).astype(np.int8),
             "alpha": float(est.alpha),
         }
-        done = self._k >= self.horizon or (detected and self.on_detect == "end")
-        truncated = not done and self.max_cycles is not None and self._k >= self.max_cycles
-        agents = self.agents
-        obs = self._per_agent(self._observe())
-        infos = self._per_agent(self._info())
-        rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * est.alpha}
-        rewards = {a: rewards[a] for a in agents}
-        terms = dict.fromkeys(agents, done)
-        truncs = dict.fromkeys(agents, truncated)
-        if done or truncated:
-            self._done = True
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terms, truncs, infos
+        return self._finish_step(reward, est.alpha, detected)
 
     def _observe(self) -> np.ndarray:
         ratio = min(self._last["statistic"] / self.estimation.threshold, MAX_RATIO)
@@ -289,28 +212,16 @@ class StealthAttackEnv(ParallelEnv):
         info["attacked"] = self._last["attacked"].copy()
         return info
 
-    def state(self) -> np.ndarray:
-        """Global state: the attacker's observation (the only player)."""
-        return self._observe()
-
-    def render(self, mode: str | None = None) -> str | np.ndarray | None:
-        """``"ansi"``: a line for the last step; ``"rgb_array"``: the injection per meter."""
-        mode = self.render_mode if mode is None else check_choice("mode", mode, RENDER_MODES)
-        if mode is None:
-            return None
-        if mode == "rgb_array":
-            return self._render_rgb()
+    def _render_line(self) -> str:
+        """The ``"ansi"`` line: the meters injected, the shift, the alarm."""
         names = [self.estimation.meters[i] for i in np.flatnonzero(self._last_a)]
-        line = (
+        return (
             f"step {self._k}/{self.horizon}  meters: {', '.join(names) or 'none'}  "
             f"shift = {self._last['phi']:.6g}  detected: {self._last['detected']}\n"
         )
-        if mode == "human":
-            sys.stdout.write(line)
-            return None
-        return line
 
     def _render_rgb(self) -> np.ndarray:
+        """The ``"rgb_array"`` frame: the injection per meter."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
@@ -324,9 +235,6 @@ class StealthAttackEnv(ParallelEnv):
         fig.tight_layout()
         canvas.draw()
         return np.asarray(canvas.buffer_rgba())[..., :3].copy()
-
-    def close(self) -> None:
-        """Nothing to release."""
 
 
 def _check_alphas(alphas: Any) -> tuple[float, ...]:

@@ -21,6 +21,7 @@ True
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import torch
 
@@ -28,12 +29,12 @@ _CHUNK = 1 << 22
 """Largest number of (member, term) pairs evaluated at once (32 MiB of float64)."""
 
 
-def ncx2_sf(x: float, dof: int, lam: torch.Tensor) -> torch.Tensor:
+def ncx2_sf(x: Any, dof: Any, lam: torch.Tensor) -> torch.Tensor:
     """``P[χ²_dof(λ) > x]`` for every entry of ``lam`` (float64, any device).
 
     Args:
-        x: The threshold, > 0.
-        dof: Degrees of freedom, >= 1.
+        x: The threshold, > 0: a float, or an (N,) tensor (one per entry of ``lam``).
+        dof: Degrees of freedom, >= 1: an int, or an (N,) tensor.
         lam: (N,) non-centralities >= 0.
 
     Returns:
@@ -43,18 +44,21 @@ def ncx2_sf(x: float, dof: int, lam: torch.Tensor) -> torch.Tensor:
     out = torch.empty_like(lam)
     if lam.numel() == 0:
         return out
+    x = torch.as_tensor(x, dtype=torch.float64, device=lam.device).expand_as(lam)
+    dof = torch.as_tensor(dof, dtype=torch.float64, device=lam.device).expand_as(lam)
     mu = 0.5 * lam
-    half_k, y = 0.5 * float(dof), 0.5 * float(x)
-    log_y = math.log(y)
     # Poisson(μ) mass beyond 12 standard deviations + 30 from its mean is below 1e-30
     width = math.ceil(12.0 * math.sqrt(float(mu.max())) + 30.0)
     j = torch.arange(2 * width + 1, dtype=torch.float64, device=lam.device)
     # the series of P(a, y) = y^a e^{-y} / Γ(a + 1) · Σ_n y^n / ((a + 1) ... (a + n))
-    n = torch.arange(1, math.ceil(y + 20.0 * math.sqrt(y) + 60.0), dtype=torch.float64)
+    y_max = 0.5 * float(x.max())
+    n = torch.arange(1, math.ceil(y_max + 20.0 * math.sqrt(y_max) + 60.0), dtype=torch.float64)
     n = n.to(lam.device)
     rows = max(1, _CHUNK // max(j.numel(), n.numel()))
     for start in range(0, lam.numel(), rows):
-        m = mu[start : start + rows, None]
+        part = slice(start, start + rows)
+        m, y, half_k = mu[part, None], 0.5 * x[part, None], 0.5 * dof[part, None]
+        log_y = torch.log(y)
         first = torch.clamp(torch.floor(m) - width, min=0.0)  # (rows, 1) the window's first j
         a0 = half_k + first
         log_series = torch.logsumexp(
@@ -70,5 +74,5 @@ def ncx2_sf(x: float, dof: int, lam: torch.Tensor) -> torch.Tensor:
         lower = torch.clamp(p0 - (torch.cumsum(drop, dim=1) - drop), min=0.0)  # P(a, y)
         terms = first + j
         weights = torch.exp(torch.xlogy(terms, m) - m - torch.lgamma(terms + 1.0))
-        out[start : start + rows] = 1.0 - torch.sum(weights * lower, dim=1)
+        out[part] = 1.0 - torch.sum(weights * lower, dim=1)
     return torch.clamp(out, 0.0, 1.0)

@@ -19,18 +19,16 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
-from fdia_env._validation import check_int
 from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
+from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
 
 MAX_NUM_ENVS = 1 << 20
 
 
-class StealthVectorEnv(VectorEnv):
+class StealthVectorEnv(StealthVectorBase):
     """B copies of the attacker's view, stepped as one batch (see the module docstring).
 
     Args:
@@ -40,23 +38,13 @@ class StealthVectorEnv(VectorEnv):
         **kwargs: Options of ``stealth_attack_v0.parallel_env`` (no ``render_mode``).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
-
     def __init__(
         self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
     ) -> None:
-        if kwargs.get("render_mode") is not None:
-            raise ValueError("render_mode is not supported by the native vector env")
-        kwargs.pop("render_mode", None)
         self.xp = xp = get_backend(backend, device)
         self.backend, self.device = xp.name, xp.device
-        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=MAX_NUM_ENVS)
-        self.env = StealthAttackEnv(**kwargs)
+        self._init_batch(num_envs, StealthAttackEnv, MAX_NUM_ENVS, kwargs)
         est = self.env.estimation
-        self.single_action_space = self.env.action_space("attacker")
-        self.single_observation_space = self.env.observation_space("attacker")
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         L = np.linalg.cholesky(est.R)
         diag_L = np.diag(L).copy() if not np.any(L - np.diag(np.diag(L))) else None
         self._HT = xp.asarray(est.H.T * self.env.magnitude)  # (n, m): bits @ HT = H c
@@ -70,7 +58,6 @@ class StealthVectorEnv(VectorEnv):
             self._ST = xp.asarray(est.S.T)
             self._lnr_scale = xp.asarray(est._lnr_scale)
             self._critical = xp.asarray(est.critical)
-        self._rng = np.random.default_rng() if xp is NUMPY else xp.generator(None)
         self._k = xp.zeros(self.num_envs, dtype=np.int64)
         self._needs_reset = xp.zeros(self.num_envs, dtype=np.bool_)
 
@@ -100,16 +87,7 @@ class StealthVectorEnv(VectorEnv):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset every member; ``seed`` seeds the noise of the whole batch."""
         xp = self.xp
-        if seed is not None:
-            if xp is NUMPY:
-                self._rng = np.random.default_rng(int(seed))
-            elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-                self._rng = xp.generator(int(seed))
-            else:
-                raise ValueError(
-                    f"seed must be an int or None for backend='torch' (it seeds the device's "
-                    f"torch.Generator), got {seed!r}"
-                )
+        self._seed(seed)
         self._k[:] = 0
         self._needs_reset[:] = False
         obs = xp.zeros((self.num_envs, 3), dtype=np.float32)
@@ -234,17 +212,8 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
     """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthAttack-v0"``.
 
     Raises:
-        ValueError: For an unknown backend, a device it cannot use, or a bad option.
+        ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
+            bad option.
     """
-    backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
-    agent = kwargs.pop("agent", "attacker")
-    kwargs.pop("module", None)
-    if agent != "attacker" or kwargs.get("defender") is not None:
-        raise ValueError(
-            "the native vector env plays the attacker alone (defender=None); use "
-            "vectorization_mode='sync' for the defender's view"
-        )
-    autoreset = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    if autoreset not in (AutoresetMode.NEXT_STEP, "next_step", "NextStep"):
-        raise ValueError(f"autoreset_mode must be NEXT_STEP here, got {autoreset!r}")
+    backend, device = vector_options(kwargs, "stealth env")
     return StealthVectorEnv(num_envs, backend=backend, device=device, **kwargs)

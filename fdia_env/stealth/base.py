@@ -1,0 +1,175 @@
+"""What the two stealth PettingZoo envs share: spaces, the episode skeleton, rendering.
+
+:class:`StealthParallelEnv` is the base of ``stealth_attack_v0``'s
+:class:`~fdia_env.stealth.env.StealthAttackEnv` and ``stealth_dynamic_v0``'s
+:class:`~fdia_env.stealth.dynamic.StealthDynamicEnv`. A subclass sets ``metadata["name"]``,
+calls :meth:`_init_agents` at the end of its constructor (after its model is built) and
+implements:
+
+- ``_clear()``: the per-episode state (``_k`` and ``_last`` included);
+- ``_restart()``: draws at the start of an episode (default: none);
+- ``_observe()`` and ``_info()``: one agent's observation and info;
+- ``step(actions)``: the model's step, then :meth:`_finish_step` for the PettingZoo tail;
+- ``_render_line()`` and ``_render_rgb()``: the ``"ansi"`` line and the ``"rgb_array"`` frame.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from fdia_env._validation import check_choice
+from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+
+
+class NoResetOptions:
+    """What the single-agent view asks of an env's attack model: the reset options it reads."""
+
+    reset_options: tuple[str, ...] = ()
+
+
+def check_cost(name: str, value: Any) -> float:
+    """``value`` as a finite float >= 0 (``ValueError`` naming ``name`` otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+    if not (np.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+    return float(value)
+
+
+class StealthParallelEnv(ParallelEnv):
+    """The PettingZoo scaffolding of the stealth envs (see the module docstring)."""
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "stealth",
+        "render_modes": list(RENDER_MODES),
+        "render_fps": RENDER_FPS,
+        "is_parallelizable": True,
+    }
+    horizon: int
+    max_cycles: int | None
+    on_detect: str
+    false_alarm_cost: float
+    render_mode: str | None
+    _k: int
+
+    def _init_agents(
+        self,
+        defender: str | None,
+        action_spaces: dict[str, spaces.Space],
+        observation_space: spaces.Space,
+    ) -> None:
+        """Agents, spaces, the random generator and a cleared episode (end of ``__init__``)."""
+        self.attack = NoResetOptions()
+        self.possible_agents = ["attacker"] if defender is None else ["attacker", "defender"]
+        self.agents: list[str] = []
+        self._action_spaces = action_spaces
+        self._observation_space = observation_space
+        self.state_space = observation_space
+        self.np_random, self.np_random_seed = seeding.np_random(None)
+        self._reset_called = False
+        self._done = True
+        self._clear()
+
+    # --- spaces -------------------------------------------------------------------------
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The observation space of ``agent`` (the same object on every call)."""
+        self._check_agent(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The action space of ``agent`` (the same object on every call)."""
+        return self._action_spaces[self._check_agent(agent)]
+
+    def _check_agent(self, agent: str) -> str:
+        if agent not in self.possible_agents:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
+        return agent
+
+    def action_masks(self, agent: str = "attacker") -> None:
+        """No action mask (every action is legal)."""
+        self._check_agent(agent)
+        return None
+
+    # --- episode ------------------------------------------------------------------------
+    def _clear(self) -> None:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def _restart(self) -> None:
+        """Draws at the start of an episode (none by default)."""
+
+    def _observe(self) -> np.ndarray:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def _info(self) -> dict[str, Any]:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """Start an episode; ``seed`` makes every noise draw reproducible."""
+        check_reset_args(seed, options)
+        if seed is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(int(seed))
+        self.agents = list(self.possible_agents)
+        self._clear()
+        self._restart()
+        self._done = False
+        self._reset_called = True
+        return self._per_agent(self._observe()), self._per_agent(self._info())
+
+    def _per_agent(self, value: Any) -> dict[str, Any]:
+        return {a: (dict(value) if isinstance(value, dict) else value.copy()) for a in self.agents}
+
+    def _finish_step(
+        self, reward: float, alpha: float, detected: bool
+    ) -> tuple[dict, dict, dict, dict, dict]:
+        """The PettingZoo tail of a step, after ``_k`` and ``_last`` were updated.
+
+        The attacker gets ``reward``; the defender its negative minus ``false_alarm_cost · α``.
+        """
+        done = self._k >= self.horizon or (detected and self.on_detect == "end")
+        truncated = not done and self.max_cycles is not None and self._k >= self.max_cycles
+        agents = self.agents
+        obs = self._per_agent(self._observe())
+        infos = self._per_agent(self._info())
+        rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * alpha}
+        rewards = {a: rewards[a] for a in agents}
+        terms = dict.fromkeys(agents, done)
+        truncs = dict.fromkeys(agents, truncated)
+        if done or truncated:
+            self._done = True
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terms, truncs, infos
+
+    def state(self) -> np.ndarray:
+        """Global state: the attacker's observation (the defender sees the same)."""
+        return self._observe()
+
+    # --- rendering ----------------------------------------------------------------------
+    def render(self, mode: str | None = None) -> str | np.ndarray | None:
+        """``"ansi"``: a line for the last step; ``"rgb_array"``: a frame of the last steps."""
+        mode = self.render_mode if mode is None else check_choice("mode", mode, RENDER_MODES)
+        if mode is None:
+            return None
+        if mode == "rgb_array":
+            return self._render_rgb()
+        line = self._render_line()
+        if mode == "human":
+            sys.stdout.write(line)
+            return None
+        return line
+
+    def _render_line(self) -> str:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def _render_rgb(self) -> np.ndarray:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Nothing to release."""
