@@ -389,3 +389,12 @@ def test_torch_ppo_makes_several_updates_on_a_short_budget():
         config = TorchPPOConfig(total_timesteps=budget, num_envs=members)
         if budget >= 96:  # a budget of at least one rollout of 8 members
             assert config.iterations >= TORCH_MIN_ITERATIONS
+
+
+def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch():
+    from experiments.bench.run import applicable
+
+    assert applicable(get(TASK), "torch-ppo")
+    assert not applicable(get("stealth/ch4-position-dynamic-bias-v0"), "torch-ppo")  # numpy only
+    assert not applicable(get("system-family/tracking-m6-v0"), "torch-ppo")  # no vector env
+    assert applicable(get("system-family/tracking-m6-v0"), "PPO")
