@@ -10,7 +10,9 @@ line:
 - env-steps/s of the attacker's native numpy vector env (``gymnasium.make_vec(
   "fdia_env/StealthAttack-v0", vectorization_mode="vector_entry_point")``) on grid-ieee118 at
   B = 4,096 (random shift actions, sampled and expected dynamics), and of ``SyncVectorEnv`` of
-  the single view at B = 64 for scale.
+  the single view at B = 64 for scale;
+- the same native vector env on ``backend="torch"`` (``--device cpu``, the default, or
+  ``cuda``), whose expected dynamics equal numpy's to 1e-10.
 
 Target: the security indices of all states of IEEE 118 in ≤ 60 s on 2 cores. Figures on a
 shared machine are noisy.
@@ -71,9 +73,15 @@ def security_indices(milp_states: int) -> dict[str, float]:
     return {"mincut_s": cut_s, "milp_per_state_s": per_state}
 
 
-def vector_rate(num_envs: int, dynamics: str, steps: int, native: bool = True) -> float:
-    """Env-steps/s (members × steps) of the stealth attacker's vector env on grid-ieee118."""
+def vector_rate(
+    num_envs: int, dynamics: str, steps: int, native: bool = True, device: str | None = None
+) -> float:
+    """Env-steps/s (members × steps) of the stealth attacker's vector env on grid-ieee118.
+
+    ``device``: run the native env on ``backend="torch"`` on that device (None: numpy).
+    """
     mode = "vector_entry_point" if native else "sync"
+    options = {} if device is None else {"backend": "torch", "device": device}
     venv = gym.make_vec(
         GYM_ID,
         num_envs=num_envs,
@@ -81,10 +89,15 @@ def vector_rate(num_envs: int, dynamics: str, steps: int, native: bool = True) -
         scenario="grid-ieee118",
         budget=20,
         dynamics=dynamics,
+        **options,
     )
     venv.reset(seed=0)
     rng = np.random.default_rng(0)
     actions = (rng.random((8, num_envs, 117)) < 0.02).astype(np.int8)
+    if device is not None:
+        import torch
+
+        actions = torch.as_tensor(actions, device=device)
 
     def run(k: int) -> None:
         for i in range(k):
@@ -99,6 +112,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer repeats")
     p.add_argument("--milp-states", type=int, default=2, help="states solved by the MILP")
+    p.add_argument("--device", default="cpu", help="torch device of the torch-backend line")
     args = p.parse_args()
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
@@ -115,6 +129,12 @@ def main() -> None:
             f"grid-ieee118 native vector env, B = 4,096, {dynamics}: {native:,.0f} env-steps/s "
             f"({1e6 / native * 4096:,.0f} µs per batch step); SyncVectorEnv B = 64: "
             f"{sync:,.0f} env-steps/s; native/Sync {native / sync:.1f}x",
+            flush=True,
+        )
+        on_torch = vector_rate(4096, dynamics, steps, device=args.device)
+        print(
+            f"grid-ieee118 native vector env, backend='torch' on {args.device}, B = 4,096, "
+            f"{dynamics}: {on_torch:,.0f} env-steps/s (numpy/torch {native / on_torch:.2f}x)",
             flush=True,
         )
 

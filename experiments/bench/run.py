@@ -41,9 +41,13 @@ def applicable(task: Any, algo: str) -> bool:
     from agents.registry import by_gym_id
 
     entry = by_gym_id(task.env_id)
-    if algo == TORCH_PPO:
+    if algo == TORCH_PPO:  # a native vector env on torch, and actions its policy fits
         from gymnasium import spaces
 
+        from fdia_env.registration import torch_ids
+
+        if task.entry_point is not None or task.env_id not in torch_ids():
+            return False
         with task.make_env() as env:
             space = env.action_space
         return isinstance(space, spaces.Discrete) or (
