@@ -274,6 +274,16 @@ def test_torchrl_face_serves_the_sequential_format_with_its_action_mask(backend)
     assert bool(mask.gather(-1, action.unsqueeze(-1)).all())  # "error": none was illegal
     assert int(rollout["next", "done"].sum()) >= 3  # every member ended at least once
     assert bool(torch.isfinite(rollout["next", "reward"]).all())
+    plan = FdiaTorchRLEnv(
+        ID, num_envs=2, backend=backend, action="sequential", order="plan",
+        scenario="ch4-position", budget=2, horizon=4, illegal_action="error",
+    )  # fmt: skip
+    assert plan.observation_spec["action_mask"].shape == (2, 4 * 3 + 1)
+    masked = TransformedEnv(plan, ActionMask())
+    masked.set_seed(0)
+    rollout = masked.rollout(8, break_when_any_done=False)
+    assert bool(rollout["action_mask"].gather(-1, rollout["action"].unsqueeze(-1)).all())
+    assert int(rollout["next", "done"].sum()) >= 2  # a plan ends within c + 1 decisions
 
 
 @pytest.mark.parametrize("action", ["sequential", "multibinary"])
