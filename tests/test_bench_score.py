@@ -391,10 +391,14 @@ def test_torch_ppo_makes_several_updates_on_a_short_budget():
             assert config.iterations >= TORCH_MIN_ITERATIONS
 
 
-def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch():
+def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch(monkeypatch):
+    import fdia_env.registration as registration
     from experiments.bench.run import applicable
 
     assert applicable(get(TASK), "torch-ppo")
-    assert not applicable(get("stealth/ch4-position-dynamic-bias-v0"), "torch-ppo")  # numpy only
     assert not applicable(get("system-family/tracking-m6-v0"), "torch-ppo")  # no vector env
     assert applicable(get("system-family/tracking-m6-v0"), "PPO")
+    numpy_only = tuple(i for i in registration.torch_ids() if i != get(TASK).env_id)
+    monkeypatch.setattr(registration, "torch_ids", lambda: numpy_only)
+    assert not applicable(get(TASK), "torch-ppo")  # its env without a torch backend
+    assert applicable(get(TASK), "PPO")
