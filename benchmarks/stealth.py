@@ -111,9 +111,11 @@ def vector_rate(
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer repeats")
-    p.add_argument("--milp-states", type=int, default=2, help="states solved by the MILP")
+    p.add_argument("--milp-states", type=int, default=2, help="states solved by the MILP (1..117)")
     p.add_argument("--device", default="cpu", help="torch device of the torch-backend line")
     args = p.parse_args()
+    if not 1 <= args.milp_states <= 117:
+        p.error(f"--milp-states must be 1..117 (IEEE 118's states), got {args.milp_states}")
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"python {platform.python_version()}, numpy {np.__version__}, "

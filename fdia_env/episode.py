@@ -14,6 +14,10 @@ DYNAMICS = ("expected", "sampled")
 # warmup only reproduces ``warmup="steady"`` (the DARE solution) at a cost that grows without
 # bound (the literature's attack step K is 100).
 MAX_WARMUP = 10_000
+# Largest attack window N. The engine tabulates per-step values of the whole window at
+# construction, so a window of 10**9 steps (or 2**63) failed at the first reset or step with a
+# MemoryError or an IndexError instead of naming the parameter.
+MAX_HORIZON = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -21,7 +25,8 @@ class EpisodeSpec:
     """How an episode runs.
 
     Attributes:
-        horizon: Number of attack-window steps N (the agents act once per step), >= 1.
+        horizon: Number of attack-window steps N (the agents act once per step),
+            ``1 <= horizon <= MAX_HORIZON`` (1 000 000).
         warmup: ``"steady"`` to start the window with the filter in steady state (all sensors),
             or the number of unattacked steps to run from the system's prior first,
             ``0 <= warmup <= MAX_WARMUP`` (10 000; beyond it use ``"steady"``).
@@ -39,7 +44,13 @@ class EpisodeSpec:
     dynamics: str = "expected"
 
     def __post_init__(self) -> None:
-        check_int("horizon", self.horizon, minimum=1)
+        try:
+            check_int("horizon", self.horizon, minimum=1, maximum=MAX_HORIZON)
+        except ValueError as exc:
+            raise ValueError(
+                f"{exc}: horizon (the envs' max_cycles where no horizon is given) must be an "
+                f"integer in [1, {MAX_HORIZON}]"
+            ) from None
         if not (isinstance(self.warmup, str) and self.warmup == "steady"):
             if isinstance(self.warmup, str):
                 raise ValueError(f"warmup must be 'steady' or an integer, got {self.warmup!r}")

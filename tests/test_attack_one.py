@@ -92,8 +92,10 @@ def test_single_calls_equal_member_zero_of_the_numpy_batch(scenario, make):
 def test_single_apply_checks_the_action_and_changes_nothing_on_error():
     attack = _bound(SparseAttack(2, illegal_action="error"))
     attack.reset()
-    with pytest.raises(ValueError, match=r"attacker action must be an integer in \[0, 8\)"):
+    with pytest.raises(ValueError, match=r"attacker action must be an element of Discrete\(8\)"):
         attack.apply(8)
+    with pytest.raises(ValueError, match="attacker action must be an element of Discrete"):
+        attack.apply("big")
     assert attack.remaining == 2
     attack.apply(3)  # sensors 1 and 2: the whole budget
     with pytest.raises(ValueError, match="is illegal: it attacks 1 sensors with 0 of the budget"):
@@ -182,3 +184,21 @@ def test_single_pair_equals_member_zero_of_the_numpy_batch(module, kwargs):
         att.observe_opponent(dfn), dfn.observe_opponent(att)
         batt.batch_observe_opponent(bdfn), bdfn.batch_observe_opponent(batt)
         assert att.info().keys() == batt.batch_info().keys()
+
+
+def test_a_model_that_writes_a_single_env_call_is_refused():
+    from fdia_env.defenses.base import DefenseModel
+
+    with pytest.raises(
+        TypeError, match=r"defines \['apply'\]: a model implements only its batched"
+    ):
+
+        class Twin(SparseAttack):
+            def apply(self, action):
+                return super().apply(action)
+
+    with pytest.raises(TypeError, match=r"defines \['reset'\]"):
+
+        class Legacy(DefenseModel):
+            def reset(self):
+                pass

@@ -174,6 +174,27 @@ def test_ch5_equilibrium_value_and_unique_defender_strategy():
     assert high[0] - low[0] > 0.5
 
 
+def test_strategy_bounds_of_a_game_with_a_huge_payoff_are_those_of_its_rescaled_game():
+    """Regression: a 1e300 payoff made HiGHS fail ("Model error", a RuntimeError).
+
+    Rescaled to [0, 1] (the bounds are loose by ``rtol`` times the payoff range), the game is
+    ``[[0, 0], [0, 0], [0, 0], [0, 1]]`` in float64: the defender never plays row 3 and mixes
+    the other rows freely; every attacker mix is an equilibrium.
+    """
+    L = [[-1.124e-4, 1.2964e-3], [-9.147e-4, -1.0055e-3], [-8.542e-4, -6.998e-4], [-1e-3, 1e300]]
+    low, high = strategy_bounds(L, "defender")
+    np.testing.assert_allclose(low, [0.0, 0.0, 0.0, 0.0], atol=1e-7)
+    np.testing.assert_allclose(high, [1.0, 1.0, 1.0, 0.0], atol=1e-7)
+    low, high = strategy_bounds(L, "attacker")
+    np.testing.assert_allclose(low, [0.0, 0.0], atol=1e-7)
+    np.testing.assert_allclose(high, [1.0, 1.0], atol=1e-7)
+    rescaled = [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 1.0]]
+    for player in ("defender", "attacker"):
+        np.testing.assert_allclose(
+            strategy_bounds(L, player), strategy_bounds(rescaled, player), atol=1e-9
+        )
+
+
 def test_ch5_dependent_equilibrium():
     L = payoff_matrix("ch5-game", allocation="dependent")
     x, y, value = solve_zero_sum(L)

@@ -10,8 +10,8 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from baselines.sparse import SparsePolicy
 from fdia_env import fdia_v0
-from fdia_env.attacks import AttackEffect, SparseAttack
-from fdia_env.defenses import DefenseModel, FilterInput
+from fdia_env.attacks import SparseAttack
+from fdia_env.defenses import DefenseModel
 from fdia_env.envs.single_agent import SingleAgentEnv
 
 
@@ -31,10 +31,11 @@ class DropChosenSensors(DefenseModel):
         self.feature_low = np.zeros(0, dtype=np.float32)
         self.feature_high = np.zeros(0, dtype=np.float32)
 
-    def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
-        if not isinstance(action, (int, np.integer)) or not 0 <= action <= self.full:
-            raise ValueError(f"defender action must be an integer in [0, {self.full + 1})")
-        return FilterInput(used=self.full & ~int(action) & ~effect.attacked)
+    def batch_apply(self, actions: Any, attacked: Any, sigma: Any) -> tuple:
+        # one implementation over batches (the single env runs it on the batch of one);
+        # the env has checked the actions against action_space
+        dropped = self.xp.astype(actions, self.xp.int64)
+        return self.full & ~dropped & ~attacked, None, None, False
 
 
 class FixedAction:

@@ -234,9 +234,14 @@ def strategy_bounds(
     if not isinstance(player, str) or player not in ("defender", "attacker"):  # arrays too
         raise ValueError(f"player must be 'defender' or 'attacker', got {player!r}")
     value = solve_zero_sum(L)[2]
-    slack = rtol * max(float(L.max() - L.min()), 1.0)
-    # defender: L' x ≤ (v + slack) 1; attacker: −L y ≤ −(v − slack) 1
-    A_ub, b_ub = (L.T, value + slack) if player == "defender" else (-L, -(value - slack))
+    lo, hi = float(L.min()), float(L.max())
+    scale = hi - lo if hi > lo else 1.0
+    # The LPs run on the payoffs rescaled to [0, 1], as the solver's do: HiGHS' tolerances are
+    # absolute, and it takes entries beyond 1e15 for infinite (a 1e300 payoff: "Model error").
+    S, v = (L - lo) / scale, (value - lo) / scale
+    slack = rtol * max(hi - lo, 1.0) / scale
+    # defender: S' x ≤ (v + slack) 1; attacker: −S y ≤ −(v − slack) 1
+    A_ub, b_ub = (S.T, v + slack) if player == "defender" else (-S, -(v - slack))
     k = A_ub.shape[1]
     groups = [[j] for j in range(k)] if groups is None else [list(g) for g in groups]
     low, high = np.zeros(len(groups)), np.zeros(len(groups))
@@ -251,6 +256,7 @@ def strategy_bounds(
                 A_eq=np.ones((1, k)),
                 b_eq=[1.0],
                 method="highs",
+                options=_HIGHS_OPTIONS,
             )
             if res.status != 0:
                 raise RuntimeError(f"HiGHS failed on a strategy-bound LP: {res.message}")

@@ -338,8 +338,8 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     """The ``stealth`` tables; ``quick``: IEEE 14, budget 3, 2 seeds, 2,048 steps, no game.
 
     The full run (its budgets fit one session on 2 shared cores): 3 seeds of PPO for the
-    attacker (budget 3) on IEEE 14 (4,096 steps) and IEEE 118 (2,048 steps), 3 seeds of 1,024
-    steps for the threshold defender, and the two protection games.
+    attacker (budget 3) on IEEE 14 (4,096 and 8,192 steps) and IEEE 118 (2,048 steps), 3 seeds
+    of 1,024 steps for the threshold defender, and the two protection games.
     """
     seeds = [seed, seed + 1, seed + 2]
     if quick:
@@ -349,6 +349,7 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     else:
         attackers = [
             learned_attacker(3, 4096, seeds),
+            learned_attacker(3, 8192, seeds),
             learned_attacker(3, 2048, seeds, "grid-ieee118"),
         ]
         defenders = [learned_defender(3, 1024, seeds)]

@@ -120,6 +120,29 @@ class AttackModel(ABC):
         Called before reset changes anything.
         """
 
+    _SINGLE_ENV_CALLS = (
+        "reset",
+        "draw_nature",
+        "features",
+        "action_mask",
+        "apply",
+        "apply_checked",
+        "info",
+        "private_info",
+        "observe_opponent",
+    )
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Refuse a subclass that writes a single-env call: its logic goes in ``batch_*``."""
+        super().__init_subclass__(**kwargs)
+        written = [name for name in cls._SINGLE_ENV_CALLS if name in vars(cls)]
+        if written:
+            raise TypeError(
+                f"{cls.__name__} defines {written}: a model implements only its batched "
+                "methods (batch_reset, batch_apply, batch_features, ...); the single env runs "
+                f"them on the batch of one (see AttackModel)"
+            )
+
     # --- the single env: the batch of one ---------------------------------------------------
     def reset(self) -> None:
         """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
@@ -145,9 +168,7 @@ class AttackModel(ABC):
 
     def apply(self, action: Any) -> AttackEffect:
         """Validate ``action`` (``ValueError`` if outside the space) and act."""
-        from fdia_env.envs.actions import check_action  # the envs' check (a higher layer)
-
-        check_action(self.action_space, action, "attacker")
+        check_space(self.action_space, action, "attacker")
         return self.apply_checked(action)
 
     def apply_checked(self, action: Any) -> AttackEffect:
@@ -223,6 +244,21 @@ class AttackModel(ABC):
     def batch_probability(self) -> np.ndarray | None:
         """(B,) probabilities that the last :meth:`batch_apply` injects its bias (None = 1)."""
         return None
+
+
+def check_space(space: spaces.Space, action: Any, who: str) -> None:
+    """Raise ``ValueError`` unless ``action`` is an element of ``space`` (Gymnasium's check).
+
+    The envs check a step's actions first, with messages per space
+    (:mod:`fdia_env.envs.actions`); this is the models' own check for a direct call.
+    """
+    try:  # a Box takes any real dtype (as the envs' check), compared in the space's dtype
+        boxed = isinstance(space, spaces.Box) and not isinstance(action, str | bytes)
+        inside = space.contains(np.asarray(action, dtype=space.dtype) if boxed else action)
+    except (TypeError, ValueError):
+        inside = False
+    if not inside:
+        raise ValueError(f"{who} action must be an element of {space}, got {action!r}")
 
 
 def as_index(action: Any) -> int | None:

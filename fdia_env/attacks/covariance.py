@@ -23,7 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import as_matrix, check_choice, check_power, check_psd
-from fdia_env.attacks.base import AttackModel, mask_array_to_bits, mask_to_bits
+from fdia_env.attacks.base import AttackModel, check_space, mask_array_to_bits, mask_to_bits
 from fdia_env.backend import NUMPY, ONE, Backend, namespace
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman.linalg import psd_sqrt, sym
@@ -173,9 +173,7 @@ class CovarianceAttack(AttackModel):
 
         The power left is the single env's (the full power before its first reset).
         """
-        from fdia_env.envs.actions import check_action  # the envs' check (a higher layer)
-
-        check_action(self.action_space, action, "attacker")
+        check_space(self.action_space, action, "attacker")
         remaining = self.remaining if hasattr(self, "b_remaining") else self.power
         a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
         spend, entries = self._spend(ONE, a, remaining)

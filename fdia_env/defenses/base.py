@@ -9,7 +9,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env.attacks.base import AttackEffect
+from fdia_env.attacks.base import AttackEffect, check_space
 from fdia_env.backend import NUMPY, ONE, Backend
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
@@ -115,6 +115,26 @@ class DefenseModel(ABC):
         """
         return {}
 
+    _SINGLE_ENV_CALLS = (
+        "reset",
+        "features",
+        "observe_opponent",
+        "action_mask",
+        "apply",
+        "apply_checked",
+    )
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Refuse a subclass that writes a single-env call: its logic goes in ``batch_*``."""
+        super().__init_subclass__(**kwargs)
+        written = [name for name in cls._SINGLE_ENV_CALLS if name in vars(cls)]
+        if written:
+            raise TypeError(
+                f"{cls.__name__} defines {written}: a model implements only its batched "
+                "methods (batch_reset, batch_apply, batch_features, ...); the single env runs "
+                f"them on the batch of one (see DefenseModel)"
+            )
+
     # --- the single env: the batch of one ---------------------------------------------------
     def reset(self) -> None:
         """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
@@ -137,9 +157,7 @@ class DefenseModel(ABC):
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Decide what the filter uses given the defender's action (checked) and the attack."""
         if self.action_space is not None:
-            from fdia_env.envs.actions import check_action  # the envs' check (a higher layer)
-
-            check_action(self.action_space, action, "defender")
+            check_space(self.action_space, action, "defender")
         return self.apply_checked(action, effect)
 
     def apply_checked(self, action: Any, effect: AttackEffect) -> FilterInput:
