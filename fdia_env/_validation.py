@@ -22,12 +22,17 @@ def as_float_array(name: str, value: Any, expected: str) -> np.ndarray:
         name: Parameter name used in the error message.
         value: Anything ``np.array`` accepts.
         expected: What ``value`` should be, for the message ``"<name> must be <expected>,
-            got <value>"`` (a ragged list, a string, an object numpy cannot convert).
+            got <value>"`` (a ragged list, a string, an object numpy cannot convert, a complex
+            array).
 
     Example:
         >>> as_float_array("x", [1, 2], "a vector").dtype
         dtype('float64')
     """
+    dtype = getattr(value, "dtype", None)
+    if dtype is not None and np.issubdtype(dtype, np.complexfloating):
+        # numpy would drop the imaginary part with only a ComplexWarning
+        raise ValueError(f"{name} must be {expected}, got a complex array: {value!r}")
     try:
         return np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:

@@ -201,3 +201,19 @@ def test_plan_env_rejects_bad_input_by_name():
         PlanSparseEnv("ch4-position", 10, 3)  # above M·N = 9 pairs: the sparse env's message
     with pytest.raises(ValueError, match="budget"):
         PlanVectorEnv("ch4-position", 1.5, 3, "trace", num_envs=2)
+
+
+def test_plot_curves_writes_the_learning_curve_figure(tmp_path):
+    row = {
+        "optimum": 2.0,
+        "objective": "trace",
+        "instance": "toy",
+        "heuristic_scores": {"SFS": 0.9},
+        "learners": {
+            "MaskablePPO": {"runs": [{"curve": [[10, 1.0], [100, 1.8]]}]},
+            "torch PPO": {"runs": [{"curve": [[10, 0.5], [100, 2.0]]}]},
+        },
+    }
+    path = sparse_grid.plot_curves(row, tmp_path / "curve.png")
+    assert path == tmp_path / "curve.png"
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from fdia_env import detection_game_v0, scenarios
+from fdia_env import detection_game_v0, scenarios, sensor_game_v0
 from fdia_env.episode import MAX_HORIZON, MAX_WARMUP, EpisodeSpec
 from fdia_env.kalman import information_update, predict_cov, steady_state, steady_state_iterate
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
@@ -105,6 +105,8 @@ def test_huge_horizon_or_max_cycles_is_rejected_with_the_bound(huge):
         EpisodeSpec(horizon=huge)
     with pytest.raises(ValueError, match=rf"horizon must be <= {MAX_HORIZON}.*max_cycles"):
         detection_game_v0.parallel_env(scenario="ch3-static", max_cycles=huge)
+    with pytest.raises(ValueError, match=rf"horizon must be <= {MAX_HORIZON}.*rounds"):
+        sensor_game_v0.parallel_env(rounds=huge)
     assert EpisodeSpec(horizon=MAX_HORIZON).horizon == MAX_HORIZON
 
 
@@ -228,3 +230,14 @@ def test_scenario_default_reads_the_attribute_then_extra_and_names_what_is_missi
     assert static_problem(sc).p1 == 0.85  # the detection baseline's p1 comes from extra
     with pytest.raises(ValueError, match="budget is required: scenario 'ch3-static'"):
         scenario_default(sc, "budget", None)
+
+
+def test_a_complex_array_is_refused_by_name_not_cast_to_its_real_part():
+    """Regression: numpy cast a complex F or R to its real part with only a ComplexWarning."""
+    from fdia_env._validation import as_float_array
+
+    with pytest.raises(ValueError, match="F must be a numeric matrix, got a complex array"):
+        LinearSystem(F=np.array([[1.0 + 0.5j]]), Q=[[1.0]], sensors=(Sensor([[1.0]], [[1.0]]),))
+    with pytest.raises(ValueError, match="x must be a vector, got a complex array"):
+        as_float_array("x", np.array([1.0, 2.0], dtype=np.complex128), "a vector")
+    assert as_float_array("x", np.array([1, 2], dtype=np.int8), "a vector").dtype == np.float64

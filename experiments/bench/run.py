@@ -48,6 +48,12 @@ def applicable(task: Any, algo: str) -> bool:
 
         if task.entry_point is not None or task.env_id not in torch_ids():
             return False
+        from agents.torch_ppo import make_torch_env
+
+        try:  # the task's options may need a model without a torch implementation
+            make_torch_env(task.env_id, 1, "cpu", **dict(task.env_kwargs)).close()
+        except (TypeError, ValueError):
+            return False
         with task.make_env() as env:
             space = env.action_space
         return isinstance(space, spaces.Discrete) or (

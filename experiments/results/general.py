@@ -272,7 +272,7 @@ def plot(
 
     The files are ``<prefix>_curve.png`` and ``<prefix>_scores.png`` in ``out``.
     """
-    from agents.plots import _save, plt
+    from agents.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for name, hist in curves.items():
@@ -288,7 +288,7 @@ def plot(
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     fig.tight_layout()
-    _save(fig, out / f"{prefix}_curve.png")
+    save_figure(fig, out / f"{prefix}_curve.png")
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for name, s in scores.items():
@@ -300,7 +300,7 @@ def plot(
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left")
     fig.tight_layout()
-    _save(fig, out / f"{prefix}_scores.png")
+    save_figure(fig, out / f"{prefix}_scores.png")
 
 
 def general_table(

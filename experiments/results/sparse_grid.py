@@ -488,7 +488,7 @@ def plot_curves(row: dict[str, Any], path: Path) -> Path:
     """Learning curves (score per seed, mean line) with the optimum and SFS as horizontal lines."""
     import matplotlib.pyplot as plt
 
-    from agents.plots import _save
+    from agents.plots import save_figure
 
     fig, ax = plt.subplots(figsize=(7, 4))
     opt, obj = row["optimum"], row["objective"]
@@ -508,7 +508,7 @@ def plot_curves(row: dict[str, Any], path: Path) -> Path:
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
