@@ -30,6 +30,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from baselines.game import exploitability, solve_zero_sum
+from fdia_env.envs.policy import PolicyBase, repeat_action
 
 METHODS = ("psro", "fsp", "ibr")
 SIDES = ("attacker", "defender")
@@ -256,15 +257,15 @@ def report_line(rec: dict[str, Any]) -> str:
     )
 
 
-class ConstantPolicy:
+class ConstantPolicy(PolicyBase):
     """Plays ``action`` whatever it observes (SB3's ``predict``): a pure strategy."""
 
     def __init__(self, action: int) -> None:
         self.action = int(action)
 
-    def predict(self, obs: Any, state: Any = None, episode_start: Any = None, deterministic=True):
-        """``(action, None)``."""
-        return np.array(self.action), None
+    def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
+        """``action`` (a 0-d array), or (B,) of it for a batched observation."""
+        return repeat_action(np.array(self.action), observation)
 
 
 class ExactOracle:

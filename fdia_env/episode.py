@@ -48,8 +48,8 @@ class EpisodeSpec:
             check_int("horizon", self.horizon, minimum=1, maximum=MAX_HORIZON)
         except ValueError as exc:
             raise ValueError(
-                f"{exc}: horizon (the envs' max_cycles where no horizon is given) must be an "
-                f"integer in [1, {MAX_HORIZON}]"
+                f"{exc}: horizon (an env's max_cycles where no horizon is given, the sensor "
+                f"game's rounds) must be an integer in [1, {MAX_HORIZON}]"
             ) from None
         if not (isinstance(self.warmup, str) and self.warmup == "steady"):
             if isinstance(self.warmup, str):

@@ -60,6 +60,7 @@ Discrete(8)
 from __future__ import annotations
 
 from fdia_env import sparse_attack_v0
+from fdia_env._validation import check_int
 from fdia_env.attacks.sparse import MAX_SENSORS
 from fdia_env.envs.factory import aec_views, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
@@ -91,7 +92,9 @@ def parallel_env(
     docstring).
     """
     sc = resolve(scenario)
-    if action == "auto" and sc.system.M > MAX_SENSORS and scenario_default(sc, "budget", budget):
+    # the attack model checks the budget too; here first, before its truth is tested
+    c = check_int("budget", scenario_default(sc, "budget", budget), minimum=0)
+    if action == "auto" and sc.system.M > MAX_SENSORS and c:
         action = "sequential"  # (a budget of 0 has no decision to make: v0's format)
     env = sparse_attack_v0.parallel_env(
         sc, budget, horizon, objective, reward_mode, dynamics, warmup, render_mode, max_cycles,

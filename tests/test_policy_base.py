@@ -10,6 +10,7 @@ from gymnasium import spaces
 
 from agents.bench.agents import CallablePolicy
 from agents.evaluate import RandomPolicy
+from agents.population import ConstantPolicy
 from baselines.covariance.policy import CovariancePolicy
 from baselines.game.policy import MixedStrategyPolicy, TypedMixedStrategyPolicy
 from baselines.sparse.policy import SparsePolicy
@@ -24,6 +25,7 @@ from fdia_env.envs.policy import (
     observation_array,
     repeat_action,
 )
+from fdia_env.envs.sequential import PlanOrderPolicy
 from fdia_env.stealth.dynamic_policy import ScheduledPolicy
 
 SHIPPED = (
@@ -38,6 +40,8 @@ SHIPPED = (
     FixedAction,
     RandomPolicy,
     CallablePolicy,
+    PlanOrderPolicy,
+    ConstantPolicy,
 )
 
 
@@ -119,3 +123,15 @@ def test_a_users_policy_base_subclass_is_an_opponent_like_the_shipped_mix():
         env.close()
     assert returns[0] == returns[1]
     assert len(set(returns[0])) > 1  # the defender's choice matters against that attacker
+
+
+def test_constant_and_plan_order_policies_batch_and_hand_back_the_state():
+    state = object()
+    action, got = ConstantPolicy(3).predict(np.zeros((4, 2)), state=state)
+    assert got is state and action.tolist() == [3, 3, 3, 3]
+    assert int(ConstantPolicy(2).predict(np.zeros(2))[0]) == 2
+    plan = PlanOrderPolicy([(1, 0), (0, 2)], num_sensors=3, horizon=2)
+    obs = np.zeros((2, 4 + 6 + 1))
+    obs[1, 4 + 2] = 1.0  # member 1 has planned (step 0, sensor 2): next is (step 1, sensor 0)
+    action, got = plan.predict({"observation": obs, "action_mask": None}, state=state)
+    assert got is state and action.tolist() == [3, 4]

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from experiments.results import cli
-from experiments.results.stealth import format_rows, references, shift_payoffs, threshold_game
+from experiments.results.stealth import (
+    format_rows,
+    learned_attacker,
+    references,
+    shift_payoffs,
+    threshold_game,
+)
 
 
 def test_enumerated_optimum_of_the_shift_actions_is_bus_7():
@@ -48,7 +54,8 @@ def test_ieee118_reference_is_the_min_cut_shift_played_in_the_env():
 
 def test_the_table_shows_every_seed_and_the_game():
     attacker = {
-        "scenario": "grid-ieee14", "budget": 3, "steps": 10, "learned": [0.0475, 0.0],
+        "algo": "torch-ppo", "scenario": "grid-ieee14", "budget": 3, "steps": 10,
+        "learned": [0.0475, 0.0],
         "learned_mean": 0.02375, "learned_ci95": 0.3, "random": 1.7e-5, "optimum": 0.0475,
         "optimum_kind": "enumerated", "score": [1.0, 0.0], "train_seconds": [4.0, 5.0],
     }  # fmt: skip
@@ -65,8 +72,23 @@ def test_the_table_shows_every_seed_and_the_game():
     table = format_rows([attacker], [game], [defender])
     assert "| 8 | 0.001, 0.01 | 0.05095, 0.05950 | 0.05523 ± 0.05 | 0.05095 | 3, 4 |" in table
     row = (
-        "| grid-ieee14 | 3 | 10 | 0.0475, 0.0000 | 0.0238 ± 0.3 | 1.70e-05 | 0.0475 (enumerated) "
-        "| 100.0%, 0.0% | 4, 5 |"
+        "| grid-ieee14 | torch-ppo | 3 | 10 | 0.0475, 0.0000 | 0.0238 ± 0.3 | 1.70e-05 "
+        "| 0.0475 (enumerated) | 100.0%, 0.0% | 4, 5 |"
     )
     assert row in table
     assert "| 5 | 2 | 0.0300 (1.0e-17) | 0.0500 | 0.0600 | 0.1200 |" in table
+
+
+def test_learned_attacker_torch_ppo_tiny_budget_and_bad_algo():
+    row = learned_attacker(3, 256, [0], algo="torch-ppo")
+    assert row["algo"] == "torch-ppo"
+    assert {"learned", "score", "train_seconds", "optimum", "random"} <= row.keys()
+    # the deterministic shift is played in the env: its payoff is one of the action space's
+    # (0 when trimmed and seen for sure, at most the enumerated optimum)
+    (value,) = row["learned"]
+    assert np.isfinite(value) and 0.0 <= value <= row["optimum"] + 1e-12
+    assert row["optimum"] == pytest.approx((1 - 0.05) * 0.05, rel=1e-12)
+    assert row["score"] == [pytest.approx(value / row["optimum"])]
+    assert 0.0 < row["train_seconds"][0] < 60.0
+    with pytest.raises(ValueError, match=r"algo must be one of \['PPO', 'torch-ppo'\], got 'A2C'"):
+        learned_attacker(3, 256, [0], algo="A2C")

@@ -349,6 +349,15 @@ def test_make_vec_of_v1_names_a_bad_agent_or_action(kwargs, name):
         )  # fmt: skip
 
 
+@pytest.mark.parametrize("budget", [np.zeros(0), np.array([1, 2]), 2.5, -1])
+def test_v1_names_a_bad_budget_on_a_large_grid(budget):
+    # an empty array gave numpy's "truth value of an empty array" error (property test)
+    from fdia_env import sparse_attack_v1
+
+    with pytest.raises(ValueError, match="budget must be"):
+        sparse_attack_v1.parallel_env(scenario="grid-ieee14", budget=budget)
+
+
 @pytest.mark.parametrize("action", ["bitmask", "sequential"])  # FdiaVectorEnv, SequentialVectorEnv
 @pytest.mark.parametrize(
     ("kwargs", "match"),

@@ -145,12 +145,20 @@ def test_torch_backend_refuses_numpy_actions_and_a_float_seed(est):
     vec.reset()
     with pytest.raises(TypeError, match=r"attacker actions must be a torch\.Tensor"):
         vec.step(np.zeros((2, est.n), dtype=np.int8))
-    with pytest.raises(ValueError, match="seed must be an int or None"):
+    with pytest.raises(ValueError, match="seed must be a non-negative int or None"):
         vec.reset(seed=1.5)
     _, _, terms, _, _ = vec.step(torch.zeros((2, est.n), dtype=torch.int8))
     assert terms.all()
     with pytest.raises(ValueError, match="backend must be one of"):
         _vec(est, 2, backend="jax")
+
+
+@pytest.mark.parametrize("seed", [1.5, [1, 2], True, -1, "3"])
+def test_numpy_backend_names_a_bad_seed(est, seed):
+    vec = _vec(est, 2)
+    with pytest.raises(ValueError, match="seed must be a non-negative int or None"):
+        vec.reset(seed=seed)
+    vec.reset(seed=np.int64(3))
 
 
 def test_torch_ncx2_tail_equals_scipy():

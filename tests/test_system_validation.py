@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from fdia_env import detection_game_v0, scenarios
+from fdia_env import detection_game_v0, scenarios, sensor_game_v0
 from fdia_env.episode import MAX_HORIZON, MAX_WARMUP, EpisodeSpec
 from fdia_env.kalman import information_update, predict_cov, steady_state, steady_state_iterate
 from fdia_env.systems import LinearSystem, Sensor, pv_sensor, tracking_system
@@ -105,6 +105,8 @@ def test_huge_horizon_or_max_cycles_is_rejected_with_the_bound(huge):
         EpisodeSpec(horizon=huge)
     with pytest.raises(ValueError, match=rf"horizon must be <= {MAX_HORIZON}.*max_cycles"):
         detection_game_v0.parallel_env(scenario="ch3-static", max_cycles=huge)
+    with pytest.raises(ValueError, match=rf"horizon must be <= {MAX_HORIZON}.*rounds"):
+        sensor_game_v0.parallel_env(rounds=huge)
     assert EpisodeSpec(horizon=MAX_HORIZON).horizon == MAX_HORIZON
 
 

@@ -1,6 +1,7 @@
 """``stealth``: a learned stealthy attacker on IEEE 14 and 118 against the exact optimum.
 
-Attacker rows: stable-baselines3 PPO trained on ``"fdia_env/StealthAttack-v0"`` (``action=
+Attacker rows: stable-baselines3 PPO, or :mod:`agents.torch_ppo` on the env's torch native
+vector env (``algo="torch-ppo"``), trained on ``"fdia_env/StealthAttack-v0"`` (``action=
 "shift"``: ``MultiBinary(n)``, bit j shifts state j's estimate by ``magnitude``;
 ``dynamics="expected"``, one snapshot per episode, so the reward is the exact expected damage
 ``(1 − p) · |K a|_∞``). Its deterministic action's payoff is set against random play and the
@@ -115,30 +116,112 @@ def _payoff(budget: int, action: np.ndarray, scenario: str = SCENARIO) -> float:
     return float(rewards["attacker"])
 
 
-def learned_attacker(
-    budget: int, steps: int, seeds: list[int], scenario: str = SCENARIO
-) -> dict[str, Any]:
-    """PPO's payoff per seed against random play and the optimum (see the module docstring)."""
+ALGOS = ("PPO", "torch-ppo")
+"""Learners of :func:`learned_attacker`. MaskablePPO does not apply: the env offers no action
+mask (``action_masks`` is None, every shift is legal) and the shift space is ``MultiBinary``."""
+
+TORCH_ENVS = 64
+"""Members of the torch vector env that ``algo="torch-ppo"`` trains on."""
+
+
+class _ShiftBox:
+    """The torch native vector env's attacker with a ``Box(-1, 1, (n,))`` action (bit j = a_j > 0).
+
+    :func:`agents.torch_ppo.train_torch_ppo` needs ``Discrete`` or ``Box`` actions and
+    ``SAME_STEP`` autoreset; the stealth vector env has ``MultiBinary`` shifts and ``NEXT_STEP``.
+    With one snapshot per episode (``horizon=1``) every member ends each step, so the adapter
+    resets the batch after it (its noise generator runs on) and thresholds the Gaussian action.
+    """
+
+    def __init__(self, budget: int, scenario: str, num_envs: int) -> None:
+        import gymnasium as gym
+
+        from fdia_env.stealth.vector import StealthVectorEnv
+
+        self.inner = StealthVectorEnv(
+            num_envs, backend="torch", device="cpu", **_env_kwargs(budget, scenario)
+        )
+        n = self.inner.env.estimation.n
+        self.num_envs, self.backend, self.device = num_envs, "torch", "cpu"
+        self.metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}
+        self.single_observation_space = self.inner.single_observation_space
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (n,), dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple:
+        return self.inner.reset(seed=seed)
+
+    def step(self, actions: Any) -> tuple:
+        _, reward, terminated, truncated, info = self.inner.step((actions > 0).to(int))
+        obs, _ = self.inner.reset()
+        return obs, reward, terminated, truncated, info
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def _train(algo: str, budget: int, steps: int, seed: int, scenario: str) -> tuple[Any, float]:
+    """Train ``algo`` for ``steps`` env steps; (its deterministic shift action, train seconds)."""
+    if algo == "torch-ppo":
+        import torch
+
+        from agents.torch_ppo import TorchPPOConfig, train_torch_ppo
+
+        venv = _ShiftBox(budget, scenario, TORCH_ENVS)
+        config = TorchPPOConfig(total_timesteps=steps, num_envs=TORCH_ENVS, num_steps=4)
+        torch.set_num_threads(1)
+        result = train_torch_ppo(venv, config, seed=seed)  # type: ignore[arg-type]
+        obs, _ = venv.reset(seed=seed)
+        mean, _ = result.policy.predict(obs[0].numpy(), deterministic=True)
+        venv.close()
+        return (mean > 0).astype(np.int8), result.train_seconds
     import gymnasium as gym
     from stable_baselines3 import PPO
 
     import fdia_env  # noqa: F401 - registers the ids
 
+    env = gym.make("fdia_env/StealthAttack-v0", **_env_kwargs(budget, scenario))
+    start = time.perf_counter()
+    model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, seed=seed, verbose=0)
+    model.learn(total_timesteps=steps)
+    seconds = time.perf_counter() - start
+    obs, _ = env.reset(seed=seed)
+    action, _ = model.predict(obs, deterministic=True)
+    env.close()
+    return action, seconds
+
+
+def learned_attacker(
+    budget: int, steps: int, seeds: list[int], scenario: str = SCENARIO, algo: str = "PPO"
+) -> dict[str, Any]:
+    """A learner's payoff per seed against random play and the optimum (see the module docstring).
+
+    Args:
+        budget: Meters the attacker holds.
+        steps: Env steps of training per seed.
+        seeds: Training seeds.
+        scenario: Grid preset.
+        algo: ``"PPO"`` (stable-baselines3, ``MultiBinary`` shifts) or ``"torch-ppo"``
+            (:mod:`agents.torch_ppo` on the torch native vector env, 64 members, a Gaussian
+            policy over ``Box(-1, 1, (n,))`` whose positive entries are the shifted states).
+
+    Raises:
+        ValueError: For an ``algo`` other than those of :data:`ALGOS`.
+    """
+    if algo not in ALGOS:
+        raise ValueError(
+            f"algo must be one of {list(ALGOS)}, got {algo!r} (MaskablePPO does not apply: the "
+            "stealth env offers no action mask)"
+        )
     ref = references(budget, scenario)
     learned, seconds = [], []
     for seed in seeds:
-        env = gym.make("fdia_env/StealthAttack-v0", **_env_kwargs(budget, scenario))
-        start = time.perf_counter()
-        model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, seed=seed, verbose=0)
-        model.learn(total_timesteps=steps)
-        seconds.append(time.perf_counter() - start)
-        obs, _ = env.reset(seed=seed)
-        action, _ = model.predict(obs, deterministic=True)
+        action, secs = _train(algo, budget, steps, seed, scenario)
+        seconds.append(secs)
         learned.append(_payoff(budget, action, scenario))
-        env.close()
     mean, ci = mean_ci95(learned)
     best = ref["optimum"]
     return {
+        "algo": algo,
         "scenario": scenario,
         "budget": budget,
         "steps": steps,
@@ -284,18 +367,19 @@ def format_rows(
 ) -> str:
     """The rows as Markdown tables."""
     lines = [
-        f"Attacker (PPO, shift actions of {MAGNITUDE} rad, expected dynamics):",
+        f"Attacker (shift actions of {MAGNITUDE} rad, expected dynamics):",
         "",
-        "| grid | budget | steps | PPO per seed (rad) | PPO mean ± 95 % CI | random | optimum "
-        "| PPO / optimum per seed | train s per seed |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| grid | learner | budget | steps | learned per seed (rad) | mean ± 95 % CI | random "
+        "| optimum | learned / optimum per seed | train s per seed |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in attackers:
         per = ", ".join(f"{v:.4f}" for v in r["learned"])
         ratio = ", ".join(f"{s:.1%}" for s in r["score"])
         secs = ", ".join(f"{s:.0f}" for s in r["train_seconds"])
         lines.append(
-            f"| {r['scenario']} | {r['budget']} | {r['steps']:,} | {per} | "
+            f"| {r['scenario']} | {r.get('algo', 'PPO')} | {r['budget']} | {r['steps']:,} | "
+            f"{per} | "
             f"{r['learned_mean']:.4f} ± {r['learned_ci95']:.2g} | {r['random']:.2e} | "
             f"{r['optimum']:.4f} ({r['optimum_kind']}) | {ratio} | {secs} |"
         )
@@ -337,8 +421,9 @@ def format_rows(
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     """The ``stealth`` tables; ``quick``: IEEE 14, budget 3, 2 seeds, 2,048 steps, no game.
 
-    The full run (its budgets fit one session on 2 shared cores): 3 seeds of PPO for the
-    attacker (budget 3) on IEEE 14 (4,096 and 8,192 steps) and IEEE 118 (2,048 steps), 3 seeds
+    The full run (its budgets fit one session on 2 shared cores): 3 seeds of each learner for
+    the attacker (budget 3): SB3 PPO on IEEE 14 (4,096 and 8,192 steps) and IEEE 118 (2,048
+    steps), torch PPO on IEEE 14 and IEEE 118 (16,384 and 65,536 steps each); 3 seeds
     of 1,024 steps for the threshold defender, and the two protection games.
     """
     seeds = [seed, seed + 1, seed + 2]
@@ -351,6 +436,10 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
             learned_attacker(3, 4096, seeds),
             learned_attacker(3, 8192, seeds),
             learned_attacker(3, 2048, seeds, "grid-ieee118"),
+            learned_attacker(3, 16384, seeds, algo="torch-ppo"),
+            learned_attacker(3, 65536, seeds, algo="torch-ppo"),
+            learned_attacker(3, 16384, seeds, "grid-ieee118", algo="torch-ppo"),
+            learned_attacker(3, 65536, seeds, "grid-ieee118", algo="torch-ppo"),
         ]
         defenders = [learned_defender(3, 1024, seeds)]
         protections = [protection_rows(3, 1), protection_rows(5, 2)]

@@ -58,6 +58,7 @@ from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.attacks.subsets import SubsetChoice, game_sizes
 from fdia_env.envs.actions import check_action
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
+from fdia_env.envs.policy import PolicyBase, observation_array
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -417,7 +418,7 @@ def plan_actions(env: SequentialSetEnv, plan: list[list[int]]) -> list[int]:
     return [*actions, STOP]
 
 
-class PlanOrderPolicy:
+class PlanOrderPolicy(PolicyBase):
     """Plays a fixed attack set in the ``order="plan"`` format (stable-baselines3 signature).
 
     At each decision: the lowest-numbered pair of the set not yet in the plan (read from the
@@ -457,19 +458,12 @@ class PlanOrderPolicy:
         """The policy of a solver's answer (``attacks``, ``num_sensors``, ``horizon``)."""
         return cls(result.attacks, int(result.num_sensors), int(result.horizon))
 
-    def predict(
-        self,
-        observation: Any,
-        state: Any = None,
-        episode_start: Any = None,
-        deterministic: bool = True,
-    ) -> tuple[Any, Any]:
-        """``(action, state)``: 1 + the next pair's slot, or 0; ``np.int64`` or (B,) array."""
-        obs = observation["observation"] if isinstance(observation, dict) else observation
-        plan = np.asarray(obs)[..., -(self.size + 1) : -1] > 0.5
+    def act(self, observation: Any, deterministic: bool = False) -> Any:
+        """1 + the next pair's slot, or 0 (stop): ``np.int64``, or (B,) for a batch."""
+        plan = observation_array(observation)[..., -(self.size + 1) : -1] > 0.5
         todo = self.todo & ~plan
         action = np.where(todo.any(-1), todo.argmax(-1) + 1, 0).astype(np.int64)
-        return (np.int64(action) if action.ndim == 0 else action), state
+        return np.int64(action) if action.ndim == 0 else action
 
 
 def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = None) -> float:

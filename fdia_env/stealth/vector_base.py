@@ -44,15 +44,17 @@ class StealthVectorBase(VectorEnv):
         return np.random.default_rng(seed) if self.xp is NUMPY else self.xp.generator(seed)
 
     def _seed(self, seed: Any) -> None:
-        """Reseed the batch's noise when ``seed`` is given (an int for the torch backend)."""
+        """Reseed the batch's noise when ``seed`` is given (a non-negative int: one generator).
+
+        Raises:
+            ValueError: Naming ``seed`` for anything but None or a non-negative int.
+        """
         if seed is None:
             return
-        if self.xp is not NUMPY and (
-            not isinstance(seed, (int, np.integer)) or isinstance(seed, bool)
-        ):
+        if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
             raise ValueError(
-                f"seed must be an int or None for backend='torch' (it seeds the device's "
-                f"torch.Generator), got {seed!r}"
+                f"seed must be a non-negative int or None (it seeds the batch's one "
+                f"generator), got {seed!r}"
             )
         self._rng = self._generator(int(seed))
 
