@@ -402,9 +402,8 @@ def protection_payoffs(budget: int = 3, estimation: Any = "ieee14") -> np.ndarra
     from fdia_env.stealth import static_estimation
 
     est = static_estimation(estimation) if isinstance(estimation, str) else estimation
-    return np.array(
-        [-protection_exploitability(est, [j], budget, a_max=0.5)[0] for j in range(est.m)]
-    )
+    damage = [protection_exploitability(est, [j], budget, a_max=0.5)[0] for j in range(est.m)]
+    return 0.0 - np.array(damage)  # 0.0 - d: no -0.0 where a meter stops every attack
 
 
 def learned_protection(
