@@ -9,6 +9,7 @@ from experiments.results import cli
 from experiments.results.stealth import (
     format_rows,
     learned_attacker,
+    learned_protection,
     references,
     shift_payoffs,
     threshold_game,
@@ -92,3 +93,32 @@ def test_learned_attacker_torch_ppo_tiny_budget_and_bad_algo():
     assert 0.0 < row["train_seconds"][0] < 60.0
     with pytest.raises(ValueError, match=r"algo must be one of \['PPO', 'torch-ppo'\], got 'A2C'"):
         learned_attacker(3, 256, [0], algo="A2C")
+
+
+def test_learned_protection_picks_the_best_meter_of_exact_payoffs():
+    # synthetic exact payoffs: protecting meter 2 stops every attack, meter 1 halves the damage
+    payoffs = [-0.08, -0.04, 0.0, -0.08]
+    row = learned_protection(3, 1, 256, [0], payoffs=payoffs)
+    assert {
+        "meter", "concedes", "mix", "mix_concedes", "value", "gap", "payoffs", "best_meters",
+        "train_seconds", "steps", "seeds", "budget", "protection",
+    } <= row.keys()  # fmt: skip
+    assert row["meter"] == [2] and row["concedes"] == [0.0]
+    assert row["best_meters"] == [2] and row["payoffs"] == payoffs
+    (mix,) = row["mix"]
+    assert sum(mix.values()) == pytest.approx(1.0) and mix["2"] > 0.9
+    # the game and the mix's exact score need the real estimation: skipped when injected
+    assert row["value"] is None and row["mix_concedes"] == [None]
+    table = format_rows([], [], None, [row])
+    assert "| 3 | 1 | 256 | 2 | 0.0000 | - | - |" in table
+
+
+def test_learned_protection_bad_input():
+    with pytest.raises(ValueError, match="protection must be 1"):
+        learned_protection(3, 2, 256, [0], payoffs=[0.0, -1.0])
+    with pytest.raises(ValueError, match="steps must be an int >= 1"):
+        learned_protection(3, 1, 0, [0], payoffs=[0.0, -1.0])
+    with pytest.raises(ValueError, match="seeds must be a non-empty list"):
+        learned_protection(3, 1, 256, [], payoffs=[0.0, -1.0])
+    with pytest.raises(ValueError, match="payoffs must be a non-empty finite 1-d vector"):
+        learned_protection(3, 1, 256, [0], payoffs=[0.0, float("nan")])

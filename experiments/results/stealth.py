@@ -22,7 +22,9 @@ Every seed's figure is reported, with the mean and its 95 % CI.
 Protection rows: the protection game's value (double oracle, certified by its gap) against what
 simple protections concede to a best-responding attacker (:func:`baselines.stealth.
 protection_exploitability`): protecting the meters of the unprotected optimal attack, and the
-first meters of a basic measurement set. No learned defender is trained here.
+first meters of a basic measurement set; and a learned protection (:func:`learned_protection`:
+PPO picks the one meter to protect, paid minus the attacker's exact best-response damage),
+scored against the game's value.
 """
 
 from __future__ import annotations
@@ -362,8 +364,174 @@ def protection_rows(budget: int, protection: int) -> dict[str, Any]:
     }
 
 
+LEARNING_RATE = 0.01
+"""PPO's step size in :func:`learned_protection` (the one-step bandit; SB3's 3e-4 leaves the
+stochastic mix near uniform after 1,024 steps)."""
+
+
+def _protect_one_env(payoffs: np.ndarray) -> Any:
+    """A one-step ``gymnasium.Env``: pick the meter to protect, paid ``payoffs[action]``."""
+    import gymnasium as gym
+
+    class ProtectOneMeter(gym.Env):
+        """One step per episode, a constant observation; reward ``payoffs[action]``."""
+
+        def __init__(self) -> None:
+            self.payoffs = np.asarray(payoffs, dtype=float)
+            self.observation_space = gym.spaces.Box(0.0, 1.0, (1,), dtype=np.float32)
+            self.action_space = gym.spaces.Discrete(self.payoffs.size)
+
+        def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple:
+            super().reset(seed=seed)
+            return np.zeros(1, dtype=np.float32), {}
+
+        def step(self, action: Any) -> tuple:
+            reward = float(self.payoffs[int(action)])
+            return np.zeros(1, dtype=np.float32), reward, True, False, {}
+
+    return ProtectOneMeter()
+
+
+def protection_payoffs(budget: int = 3, estimation: Any = "ieee14") -> np.ndarray:
+    """(m,) the defender's payoff for protecting each single meter, ``a_max = 0.5``.
+
+    Minus the attacker's exact best-response damage against that protection
+    (:func:`baselines.stealth.protection_exploitability`, one MILP per meter, certified).
+    """
+    from baselines.stealth import protection_exploitability
+    from fdia_env.stealth import static_estimation
+
+    est = static_estimation(estimation) if isinstance(estimation, str) else estimation
+    damage = [protection_exploitability(est, [j], budget, a_max=0.5)[0] for j in range(est.m)]
+    return 0.0 - np.array(damage)  # 0.0 - d: no -0.0 where a meter stops every attack
+
+
+def learned_protection(
+    budget: int = 3,
+    protection: int = 1,
+    steps: int = 2048,
+    seeds: list[int] | None = None,
+    *,
+    payoffs: Any = None,
+    samples: int = 1000,
+) -> dict[str, Any]:
+    """SB3 PPO picks the meter to protect on IEEE 14 (``a_max = 0.5``) against the game value.
+
+    The defender's payoff for protecting meter j is minus the damage of the attacker's exact
+    best response to it (:func:`protection_payoffs`, computed once per call); PPO learns on a
+    one-step env with ``Discrete(m)`` actions, a constant observation and that payoff as reward.
+    Per seed the row reports the deterministic action (the meter), what it concedes, the
+    empirical mix of ``samples`` stochastic actions and what that mix concedes to a
+    best-responding attacker (:func:`baselines.stealth.protection_exploitability` on the mix),
+    against the value of :func:`baselines.stealth.protection_game` (no time limit: certified).
+
+    Args:
+        budget: Meters the attacker may corrupt.
+        protection: Meters the defender protects; only 1 (one ``Discrete(m)`` action).
+        steps: PPO env steps per seed (> 0).
+        seeds: Training seeds (default ``[0, 1, 2]``).
+        payoffs: Injected (m,) payoffs (tests): then the game and the mix's exact score are
+            skipped (``value``, ``mix_concedes`` are None) and the pure actions concede
+            ``-payoffs[j]``.
+        samples: Stochastic actions drawn for the empirical mix (> 0).
+
+    Raises:
+        ValueError: Naming ``protection`` (other than 1), ``steps``, ``samples``, ``seeds`` or
+            ``payoffs`` (not a non-empty finite 1-d vector).
+    """
+    from stable_baselines3 import PPO
+
+    if isinstance(protection, bool) or protection != 1:
+        raise ValueError(
+            f"protection must be 1 (the learner picks one meter: Discrete(m)), got {protection!r}"
+        )
+    for name, v in (("steps", steps), ("samples", samples)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+    seeds = [0, 1, 2] if seeds is None else list(seeds)
+    if not seeds or not all(isinstance(s, (int, np.integer)) and s >= 0 for s in seeds):
+        raise ValueError(f"seeds must be a non-empty list of ints >= 0, got {seeds!r}")
+    est = None
+    payoff_seconds = 0.0
+    if payoffs is None:
+        from fdia_env.stealth import static_estimation
+
+        est = static_estimation("ieee14")
+        start = time.perf_counter()
+        pay = protection_payoffs(budget, est)
+        payoff_seconds = time.perf_counter() - start
+    else:
+        pay = np.asarray(payoffs, dtype=float)
+        if pay.ndim != 1 or pay.size == 0 or not np.all(np.isfinite(pay)):
+            raise ValueError(f"payoffs must be a non-empty finite 1-d vector, got {payoffs!r}")
+    m = pay.size
+    meters, concedes, mixes, mix_concedes, seconds = [], [], [], [], []
+    for seed in seeds:
+        env = _protect_one_env(pay)
+        start = time.perf_counter()
+        model = PPO(
+            "MlpPolicy",
+            env,
+            learning_rate=LEARNING_RATE,
+            n_steps=128,
+            batch_size=64,
+            seed=seed,
+            verbose=0,
+        )
+        model.learn(total_timesteps=steps)
+        seconds.append(time.perf_counter() - start)
+        obs = np.zeros((1, 1), dtype=np.float32)
+        j = int(model.predict(obs, deterministic=True)[0][0])
+        meters.append(j)
+        concedes.append(0.0 - float(pay[j]))
+        model.set_random_seed(seed)
+        drawn = model.predict(np.zeros((samples, 1), dtype=np.float32), deterministic=False)[0]
+        counts = np.bincount(np.asarray(drawn, dtype=int), minlength=m)
+        mix = {(int(k),): float(c / samples) for k, c in enumerate(counts) if c}
+        mixes.append({str(k[0]): p for k, p in mix.items()})
+        if est is not None:
+            from baselines.stealth import protection_exploitability
+
+            mix_concedes.append(protection_exploitability(est, mix, budget, a_max=0.5)[0])
+        else:
+            mix_concedes.append(None)
+        env.close()
+    value = gap = game_seconds = None
+    if est is not None:
+        from baselines.stealth import protection_game
+
+        start = time.perf_counter()
+        game = protection_game(est, budget, protection, a_max=0.5)
+        game_seconds = time.perf_counter() - start
+        value, gap = game.value, game.gap
+    best = float(pay.max())
+    return {
+        "kind": "protection_learner",
+        "budget": budget,
+        "protection": protection,
+        "steps": steps,
+        "seeds": seeds,
+        "samples": samples,
+        "payoffs": pay.tolist(),
+        "best_meters": np.flatnonzero(pay >= best - 1e-12).tolist(),
+        "best_concedes": 0.0 - best,
+        "meter": meters,
+        "concedes": concedes,
+        "mix": mixes,
+        "mix_concedes": mix_concedes,
+        "value": value,
+        "gap": gap,
+        "train_seconds": seconds,
+        "payoff_seconds": payoff_seconds,
+        "game_seconds": game_seconds,
+    }
+
+
 def format_rows(
-    attackers: list[dict], protections: list[dict], defenders: list[dict] | None = None
+    attackers: list[dict],
+    protections: list[dict],
+    defenders: list[dict] | None = None,
+    protectors: list[dict] | None = None,
 ) -> str:
     """The rows as Markdown tables."""
     lines = [
@@ -415,6 +583,25 @@ def format_rows(
                 f"{r['concedes_ci95']:.2g} | {r['value']:.5f} | "
                 f"{', '.join(f'{v:.0f}' for v in r['train_seconds'])} |"
             )
+    if protectors:
+        lines += [
+            "",
+            "Learned protection (SB3 PPO on a one-step Discrete(m) env, reward = minus the "
+            "attacker's exact best-response damage; IEEE 14, a_max = 0.5 pu, damage in rad):",
+            "",
+            "| attacker meters | protected | steps | meter per seed | concedes per seed "
+            "| stochastic mix concedes per seed | game value (gap) | train s per seed |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for r in protectors:
+            mixed = ", ".join("-" if v is None else f"{v:.4f}" for v in r["mix_concedes"])
+            value = "-" if r["value"] is None else f"{r['value']:.4f} ({r['gap']:.1e})"
+            lines.append(
+                f"| {r['budget']} | {r['protection']} | {r['steps']:,} | "
+                f"{', '.join(str(j) for j in r['meter'])} | "
+                f"{', '.join(f'{v:.4f}' for v in r['concedes'])} | {mixed} | {value} | "
+                f"{', '.join(f'{v:.0f}' for v in r['train_seconds'])} |"
+            )
     return "\n".join(lines)
 
 
@@ -424,13 +611,15 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     The full run (its budgets fit one session on 2 shared cores): 3 seeds of each learner for
     the attacker (budget 3): SB3 PPO on IEEE 14 (4,096 and 8,192 steps) and IEEE 118 (2,048
     steps), torch PPO on IEEE 14 and IEEE 118 (16,384 and 65,536 steps each); 3 seeds
-    of 1,024 steps for the threshold defender, and the two protection games.
+    of 1,024 steps for the threshold defender, the two protection games, and 3 seeds of 1,024
+    steps for the learned protection (attacker budget 3, one meter protected).
     """
     seeds = [seed, seed + 1, seed + 2]
     if quick:
         attackers = [learned_attacker(3, 2048, seeds[:2])]
         protections: list[dict] = []
         defenders: list[dict] = []
+        protectors: list[dict] = []
     else:
         attackers = [
             learned_attacker(3, 4096, seeds),
@@ -443,6 +632,7 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
         ]
         defenders = [learned_defender(3, 1024, seeds)]
         protections = [protection_rows(3, 1), protection_rows(5, 2)]
+        protectors = [learned_protection(3, 1, 1024, seeds)]
     if out is not None:
-        write_rows(out / "stealth.json", [*attackers, *defenders, *protections])
-    return format_rows(attackers, protections, defenders)
+        write_rows(out / "stealth.json", [*attackers, *defenders, *protections, *protectors])
+    return format_rows(attackers, protections, defenders, protectors)
