@@ -97,8 +97,10 @@ class ProtectionGame:
 
         - ``"attacker"``: plays each attack ``a / a_max`` (``stealth_attack_v0`` with
           ``action="free"`` and this ``a_max``) with its probability;
-        - ``"defender"``: plays the (m,) 0/1 vector of a protected set with its probability
-          (``stealth_attack_v0`` with ``defender="protect"``).
+        - ``"defender"``: plays the (m,) 0/1 vector of a protected set with its probability.
+          ``stealth_attack_v0`` has no protecting defender to play it in: score a protection
+          with :func:`protection_exploitability`, or fix one set with the env's ``protected``
+          option.
 
         Raises:
             ValueError: For another ``player``.
