@@ -82,7 +82,37 @@ def mask_to_bits(mask: np.ndarray) -> int:
     return sum(1 << int(i) for i in np.flatnonzero(mask))
 
 
-class AttackModel(ABC):
+class BatchOfOneModel:
+    """The single-env calls of a model family run its batched code on the batch of one.
+
+    A family's base class (:class:`AttackModel`, ``DefenseModel``) lists its single-env calls in
+    ``_SINGLE_ENV_CALLS`` and writes them on :data:`~fdia_env.backend.ONE`; a subclass that
+    writes one of them is refused, since its logic belongs in the ``batch_*`` methods.
+    """
+
+    _SINGLE_ENV_CALLS: tuple[str, ...] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Refuse a subclass that writes a single-env call: its logic goes in ``batch_*``."""
+        super().__init_subclass__(**kwargs)
+        if "_SINGLE_ENV_CALLS" in vars(cls):  # the family's base writes them
+            return
+        written = [name for name in cls._SINGLE_ENV_CALLS if name in vars(cls)]
+        if written:
+            family = next(c for c in cls.__mro__ if "_SINGLE_ENV_CALLS" in vars(c))
+            raise TypeError(
+                f"{cls.__name__} defines {written}: a model implements only its batched "
+                "methods (batch_reset, batch_apply, batch_features, ...); the single env runs "
+                f"them on the batch of one (see {family.__name__})"
+            )
+
+    def reset(self) -> None:
+        """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
+        self.xp = ONE
+        self.batch_reset(1)  # type: ignore[attr-defined]  # each family's base declares it
+
+
+class AttackModel(ABC, BatchOfOneModel):
     """Owns the attacker's action space, its observation features and how an action acts.
 
     Models are built with their own parameters only; the environment calls :meth:`bind`
@@ -114,7 +144,7 @@ class AttackModel(ABC):
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Attach to a system and episode; build spaces (and lookup tables) here, once."""
 
-    def check_reset_options(self, options: dict[str, Any]) -> None:  # noqa: B027 - optional
+    def check_reset_options(self, options: dict[str, Any]) -> None:
         """Raise ``ValueError`` for a bad value of one of :attr:`reset_options`.
 
         Called before reset changes anything.
@@ -132,23 +162,7 @@ class AttackModel(ABC):
         "observe_opponent",
     )
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Refuse a subclass that writes a single-env call: its logic goes in ``batch_*``."""
-        super().__init_subclass__(**kwargs)
-        written = [name for name in cls._SINGLE_ENV_CALLS if name in vars(cls)]
-        if written:
-            raise TypeError(
-                f"{cls.__name__} defines {written}: a model implements only its batched "
-                "methods (batch_reset, batch_apply, batch_features, ...); the single env runs "
-                f"them on the batch of one (see AttackModel)"
-            )
-
     # --- the single env: the batch of one ---------------------------------------------------
-    def reset(self) -> None:
-        """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
-        self.xp = ONE
-        self.batch_reset(1)
-
     def draw_nature(self, rng: np.random.Generator, options: dict[str, Any]) -> None:
         """Nature's draws of an episode (e.g. the attacker's type), at every reset.
 
@@ -210,7 +224,7 @@ class AttackModel(ABC):
     def batch_reset(self, batch: int, where: np.ndarray | None = None) -> None:
         """Start episodes for the batch members ``where`` (all when None) of ``batch``."""
 
-    def batch_draw_nature(  # noqa: B027 - optional hook
+    def batch_draw_nature(
         self,
         rngs: list[np.random.Generator],
         where: np.ndarray | None = None,
@@ -222,7 +236,7 @@ class AttackModel(ABC):
         """(B, ...) values of the attacker's private infos."""
         return {}
 
-    def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
+    def batch_observe_opponent(self, other: Any) -> None:
         """Called after each step with the other player's model (repeated games use it)."""
 
     @abstractmethod

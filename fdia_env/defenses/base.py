@@ -9,8 +9,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env.attacks.base import AttackEffect, check_space
-from fdia_env.backend import NUMPY, ONE, Backend
+from fdia_env.attacks.base import AttackEffect, BatchOfOneModel, check_space
+from fdia_env.backend import NUMPY, Backend
 from fdia_env.episode import EpisodeSpec
 from fdia_env.systems import LinearSystem
 
@@ -86,7 +86,7 @@ class BatchDetection:
         )
 
 
-class DefenseModel(ABC):
+class DefenseModel(ABC, BatchOfOneModel):
     """Owns the defender's action space (if any) and turns an attack into the filter's input.
 
     A *passive* model takes no action; its environments have only the attacker.
@@ -124,23 +124,7 @@ class DefenseModel(ABC):
         "apply_checked",
     )
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Refuse a subclass that writes a single-env call: its logic goes in ``batch_*``."""
-        super().__init_subclass__(**kwargs)
-        written = [name for name in cls._SINGLE_ENV_CALLS if name in vars(cls)]
-        if written:
-            raise TypeError(
-                f"{cls.__name__} defines {written}: a model implements only its batched "
-                "methods (batch_reset, batch_apply, batch_features, ...); the single env runs "
-                f"them on the batch of one (see DefenseModel)"
-            )
-
     # --- the single env: the batch of one ---------------------------------------------------
-    def reset(self) -> None:
-        """Start an episode (the batch of one, :data:`~fdia_env.backend.ONE`)."""
-        self.xp = ONE
-        self.batch_reset(1)
-
     def features(self) -> list[float]:
         """Model-specific observation features."""
         values = self.batch_features()
@@ -187,7 +171,7 @@ class DefenseModel(ABC):
         """Start episodes for the batch members ``where`` (all when None); records B."""
         self._batch = batch
 
-    def batch_observe_opponent(self, other: Any) -> None:  # noqa: B027 - optional hook
+    def batch_observe_opponent(self, other: Any) -> None:
         """Called after each step with the other player's model (repeated games use it)."""
 
     def batch_action_mask(self) -> np.ndarray | None:
