@@ -45,6 +45,8 @@ class RandomPolicy(MaskedPolicyBase):
     def __init__(self, action_space: spaces.Space, seed: int | None = None) -> None:
         self.action_space = action_space
         self.rngs = [np.random.default_rng(seed)]
+        if isinstance(action_space, spaces.Discrete):
+            self.mask_size = int(action_space.n)  # a mask must cover every action
 
     @property
     def probs(self) -> np.ndarray | None:

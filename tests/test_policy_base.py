@@ -135,3 +135,34 @@ def test_constant_and_plan_order_policies_batch_and_hand_back_the_state():
     obs[1, 4 + 2] = 1.0  # member 1 has planned (step 0, sensor 2): next is (step 1, sensor 0)
     action, got = plan.predict({"observation": obs, "action_mask": None}, state=state)
     assert got is state and action.tolist() == [3, 4]
+
+
+@pytest.mark.parametrize(
+    ("masks", "obs", "match"),
+    [
+        (np.zeros(3), np.zeros(2), "allows no action"),
+        (np.array([1, 0]), np.zeros(2), "3 entries per mask"),
+        (np.array([2, 1, 0]), np.zeros(2), "only 0 and 1"),
+        ("abc", np.zeros(2), "0/1 \\(or bool\\) array"),
+        (np.ones((2, 3)), np.zeros(2), "shape \\(n,\\)"),
+        (np.ones((3, 3)), np.zeros((2, 2)), "shape \\(2, n\\)"),
+        (np.array([[1, 1, 0], [0, 0, 0]]), np.zeros((2, 2)), "mask 1 allows no action"),
+    ],
+)
+def test_a_malformed_mask_is_refused_by_name(masks, obs, match):
+    # RandomPolicy played action 0 for each of these, legal or not
+    policy = RandomPolicy(spaces.Discrete(3), seed=0)
+    policy.seed_episodes([0, 1])
+    with pytest.raises(ValueError, match=f"action_masks.*{match}|{match}"):
+        policy.predict(obs, action_masks=masks)
+
+
+def test_a_well_formed_mask_is_obeyed_batched_and_not():
+    policy = RandomPolicy(spaces.Discrete(3), seed=0)
+    for _ in range(20):
+        assert int(policy.predict(np.zeros(2), action_masks=[0, 0, 1])[0]) == 2
+    policy.seed_episodes([0, 1])
+    masks = np.array([[True, False, False], [False, True, False]])
+    assert policy.predict(np.zeros((2, 2)), action_masks=masks)[0].tolist() == [0, 1]
+    fn = CallablePolicy(lambda obs, action_masks=None: int(np.argmax(action_masks)), "f")
+    assert fn.predict(np.zeros(2), action_masks=[0, 1, 0])[0] == 1

@@ -36,6 +36,8 @@ class RLlibPolicy(MaskedPolicyBase):
         self.action_space = action_space
         self.masked = masked
         self.rng = np.random.default_rng(seed)
+        if masked and isinstance(action_space, spaces.Discrete):
+            self.mask_size = int(action_space.n)
 
     def distribution_inputs(
         self, observation: Any, action_masks: np.ndarray | None = None

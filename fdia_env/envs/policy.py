@@ -74,6 +74,54 @@ def repeat_action(action: np.ndarray, observation: Any) -> np.ndarray:
     return np.repeat(action[None], batch, axis=0)
 
 
+def check_action_masks(action_masks: Any, batch: int | None, size: int | None = None) -> Any:
+    """``action_masks`` as a 0/1 bool array, or a ``ValueError`` naming what is wrong.
+
+    Args:
+        action_masks: None, one (n,) mask (an unbatched observation) or (B, n) masks.
+        batch: B for a batched observation, None for an unbatched one.
+        size: n when the policy knows its number of actions (None: any).
+
+    Returns:
+        None for None, else the masks as a bool array of shape (n,) or (B, n).
+
+    Raises:
+        ValueError: Naming ``action_masks``: not numeric, not 0/1, the wrong shape for the
+            observation (or for ``size`` actions), or a mask with no legal action.
+
+    Example:
+        >>> check_action_masks([1, 0, 1], None).tolist()
+        [True, False, True]
+        >>> check_action_masks([[0, 0]], 1)
+        Traceback (most recent call last):
+        ...
+        ValueError: action_masks: mask 0 allows no action (every entry is 0)
+    """
+    if action_masks is None:
+        return None
+    try:
+        masks = np.asarray(action_masks)
+    except (TypeError, ValueError):
+        masks = np.asarray(None)
+    if masks.dtype == object or not (masks.dtype == bool or np.issubdtype(masks.dtype, np.number)):
+        raise ValueError(f"action_masks must be a 0/1 (or bool) array, got {action_masks!r}")
+    want = 1 if batch is None else 2
+    if masks.ndim != want or (batch is not None and masks.shape[0] != batch):
+        shape = "(n,)" if batch is None else f"({batch}, n)"
+        raise ValueError(
+            f"action_masks must have shape {shape} for this observation, got {masks.shape}"
+        )
+    if size is not None and masks.shape[-1] != size:
+        raise ValueError(f"action_masks must have {size} entries per mask, got {masks.shape[-1]}")
+    if not np.isin(masks, (0, 1)).all():
+        raise ValueError("action_masks must hold only 0 and 1 (or booleans)")
+    legal = masks.astype(bool)
+    empty = np.flatnonzero(~legal.reshape(-1, legal.shape[-1]).any(axis=-1))
+    if empty.size:
+        raise ValueError(f"action_masks: mask {int(empty[0])} allows no action (every entry is 0)")
+    return legal
+
+
 class PolicyBase:
     """A memoryless policy with stable-baselines3's ``predict``; subclasses write :meth:`act`."""
 
@@ -107,8 +155,11 @@ class MaskedPolicyBase(PolicyBase):
     """A :class:`PolicyBase` that reads action masks (``predict(..., action_masks=...)``).
 
     The evaluators pass masks to a policy whose ``predict`` takes ``action_masks``, as
-    sb3-contrib's MaskablePPO does; :meth:`act` gets them (None when the env has none).
+    sb3-contrib's MaskablePPO does; :meth:`act` gets them checked (a bool array, None when the
+    env has none). ``mask_size`` is the number of actions a mask must have (None: any).
     """
+
+    mask_size: int | None = None
 
     def act(self, observation: Any, deterministic: bool = False, action_masks: Any = None) -> Any:
         """The action for ``observation``, legal under ``action_masks`` when given."""
@@ -122,8 +173,14 @@ class MaskedPolicyBase(PolicyBase):
         deterministic: bool = False,
         action_masks: Any = None,
     ) -> tuple[Any, Any]:
-        """Return ``(action, state)``: :meth:`act`'s action (under ``action_masks``), ``state``."""
-        return self.act(observation, deterministic, action_masks), state
+        """Return ``(action, state)``: :meth:`act`'s action (under ``action_masks``), ``state``.
+
+        Raises:
+            ValueError: Naming ``action_masks`` when they are malformed
+                (:func:`check_action_masks`; ``mask_size`` is the policy's number of actions).
+        """
+        masks = check_action_masks(action_masks, batch_size(observation), self.mask_size)
+        return self.act(observation, deterministic, masks), state
 
 
 class SampledPolicyBase(PolicyBase):
