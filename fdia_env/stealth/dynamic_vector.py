@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.backend import NUMPY, get_backend
+from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
 from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
@@ -42,9 +42,8 @@ class StealthDynamicVectorEnv(StealthVectorBase):
     def __init__(
         self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
     ) -> None:
-        self.xp = xp = get_backend(backend, device)
-        self.backend, self.device = xp.name, xp.device
-        self._init_batch(num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs)
+        self._init_batch(num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs, backend, device)
+        xp = self.xp
         self.model = self.env.model
         if xp is not NUMPY and self.model.action != "bias":
             raise ValueError(

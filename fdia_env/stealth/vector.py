@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.backend import NUMPY, get_backend
+from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
 from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
@@ -41,9 +41,8 @@ class StealthVectorEnv(StealthVectorBase):
     def __init__(
         self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
     ) -> None:
-        self.xp = xp = get_backend(backend, device)
-        self.backend, self.device = xp.name, xp.device
-        self._init_batch(num_envs, StealthAttackEnv, MAX_NUM_ENVS, kwargs)
+        self._init_batch(num_envs, StealthAttackEnv, MAX_NUM_ENVS, kwargs, backend, device)
+        xp = self.xp
         est = self.env.estimation
         L = np.linalg.cholesky(est.R)
         diag_L = np.diag(L).copy() if not np.any(L - np.diag(np.diag(L))) else None

@@ -14,7 +14,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_int
-from fdia_env.backend import NUMPY, Backend
+from fdia_env.backend import NUMPY, Backend, get_backend
 
 
 class StealthVectorBase(VectorEnv):
@@ -26,8 +26,12 @@ class StealthVectorBase(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
     xp: Backend = NUMPY
 
-    def _init_batch(self, num_envs: int, env_cls: type, maximum: int, kwargs: dict) -> None:
-        """Check ``num_envs``, build the single env from ``kwargs`` and the batched spaces."""
+    def _init_batch(
+        self, num_envs: int, env_cls: type, maximum: int, kwargs: dict, backend: str, device: Any
+    ) -> None:
+        """Resolve the backend, check ``num_envs``, build the single env and the batched spaces."""
+        self.xp = get_backend(backend, device)
+        self.backend, self.device = self.xp.name, self.xp.device
         if kwargs.get("render_mode") is not None:
             raise ValueError("render_mode is not supported by the native vector env")
         kwargs.pop("render_mode", None)
