@@ -9,6 +9,7 @@ A family (:class:`~fdia_env.envs.grid_family.GridFamily`,
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 import numpy as np
@@ -47,17 +48,21 @@ def check_range(
 class NumberedFamily:
     """Base of a frozen family dataclass with ``budget``, ``horizon`` and ``draw(rng)``.
 
-    Subclasses set ``scenario_prefix`` (the scenarios' names) and may extend
-    :meth:`describe` (their descriptions).
+    Its scenarios are named after the class (``TrackingFamily``: ``"tracking-family-<seed>"``);
+    a subclass may extend :meth:`describe` (their descriptions).
     """
 
-    scenario_prefix = "family"
     budget: int
     horizon: int
 
     def draw(self, rng: np.random.Generator) -> LinearSystem:
         """One system, drawn with ``rng`` (written by each family)."""
         raise NotImplementedError(f"{type(self).__name__} must implement draw()")
+
+    @property
+    def scenario_prefix(self) -> str:
+        """The scenarios' name before the seed: the class name in kebab case."""
+        return re.sub(r"(?<!^)(?=[A-Z])", "-", type(self).__name__).lower()
 
     def describe(self) -> str:
         """The family in words, for its scenarios' descriptions."""

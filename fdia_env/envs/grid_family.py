@@ -32,7 +32,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -93,7 +92,6 @@ class GridFamily(NumberedFamily):
     noise_scale: tuple[float, float] = (0.5, 2.0)
     budget: int = 3
     horizon: int = 2
-    scenario_prefix: ClassVar[str] = "grid-family"
 
     def __post_init__(self) -> None:
         check_choice("case", self.case, FAMILY_CASES)

@@ -143,7 +143,6 @@ class TrackingFamily(NumberedFamily):
     sigma_w: tuple[float, float] = (0.0, 1.0)
     budget: int = 10
     horizon: int = 6
-    scenario_prefix: ClassVar[str] = "tracking-family"
 
     def __post_init__(self) -> None:
         check_int("num_sensors", self.num_sensors, minimum=1, maximum=MAX_SENSORS)
