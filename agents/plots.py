@@ -24,6 +24,17 @@ def save_figure(fig: Any, path: Path, dpi: int = 120) -> Path:
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
 
+def _finish(ax: Any, path: Path, labels: tuple[str, str, str], legend: str) -> Path:
+    """Label ``ax`` (x label, y label, title), grid and legend it, and save its figure."""
+    xlabel, ylabel, title = labels
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc=legend)
+    return save_figure(ax.figure, path)
+
+
 def learning_curve(
     path: Path,
     history: Sequence[dict[str, Any]],
@@ -40,7 +51,7 @@ def learning_curve(
         reference_name: Its label.
         title: Figure title.
     """
-    fig, ax = plt.subplots(figsize=(7, 4))
+    _, ax = plt.subplots(figsize=(7, 4))
     steps = [h["timesteps"] for h in history]
     mean = [h["mean"] for h in history]
     half = [h["ci95"] or 0.0 for h in history]
@@ -52,19 +63,14 @@ def learning_curve(
             ax.fill_between(steps, lo, hi, alpha=0.25, label="95% CI")
     if reference is not None:
         ax.axhline(reference, color="k", ls="--", label=f"{reference_name} = {reference:.6g}")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("episode return")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower right")
-    return save_figure(fig, path)
+    return _finish(ax, path, ("environment steps", "episode return", title), "lower right")
 
 
 def exploitability_curve(
     path: Path, history: Sequence[dict[str, Any]], value: float, title: str
 ) -> Path:
     """NashConv and each side's exploitability per iteration; 0 (the equilibrium) as a line."""
-    fig, ax = plt.subplots(figsize=(7, 4))
+    _, ax = plt.subplots(figsize=(7, 4))
     it = [h["iteration"] for h in history]
     for key, label in (
         ("nash_conv", "NashConv"),
@@ -74,9 +80,5 @@ def exploitability_curve(
         ax.plot(it, [h[key] for h in history], marker="o", ms=3, label=label)
     ax.axhline(0.0, color="k", ls="--", label="equilibrium (LP) = 0")
     ax.axhline(0.01 * abs(value), color="grey", ls=":", label=f"1% of the value {value:.4g}")
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("exploitability (payoff units)")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right")
-    return save_figure(fig, path)
+    labels = ("iteration", "exploitability (payoff units)", title)
+    return _finish(ax, path, labels, "upper right")

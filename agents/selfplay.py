@@ -61,6 +61,7 @@ from agents.population import (
     BestResponse,
     ConstantPolicy,
     ExactOracle,
+    LearnedOracle,
     MatrixGame,
     Oracle,
     PopulationState,
@@ -419,7 +420,8 @@ def _load_torch_policies(
     }
 
 
-class TorchPPOOracle:
+@dataclass
+class TorchPPOOracle(LearnedOracle):
     """Best responses learned by torch-ppo on the device (the ``torch-ppo`` oracle).
 
     Each answer trains a fresh :func:`~agents.torch_ppo.train_torch_ppo` policy for
@@ -429,25 +431,18 @@ class TorchPPOOracle:
     the current PPO iteration and drops the answer.
     """
 
-    def __init__(
-        self,
-        cfg: GameConfig,
-        run_dir: Path,
-        entries: dict[str, Trainable],
-        env_kwargs: dict[str, Any],
-        config: TorchPPOConfig,
-        stop: StopRequest,
-    ) -> None:
-        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
-        self.config, self.stop = config, stop
-        self.device = resolve_device(cfg.run.device)
+    config: TorchPPOConfig
+    stop: StopRequest
+
+    def __post_init__(self) -> None:
+        self.device = resolve_device(self.cfg.run.device)
 
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
         """A fresh torch-ppo policy's answer to ``opponent``, or None if a stop cut it short."""
         from agents.torch_ppo import make_torch_env, train_torch_ppo
 
         entry = self.entries[side]
-        seed = derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
+        seed = self.seed(side, iteration)
         mix = FixedMix(opponent, seed=derived_seed(seed, 1))
         venv = make_torch_env(
             entry.gym_id, self.config.num_envs, self.device, opponent=mix, **self.env_kwargs
@@ -464,11 +459,11 @@ class TorchPPOOracle:
         """Save the policy as ``policies/<side>_<index>.json``; returns the file's name."""
         from agents.torch_ppo import save_policy
 
-        path = self.run_dir / "policies" / f"{side}_{index}.json"
-        return save_policy(response.policy, path, self.config).name
+        return save_policy(response.policy, self.policy_path(side, index), self.config).name
 
 
-class SB3Oracle:
+@dataclass
+class SB3Oracle(LearnedOracle):
     """Best responses learned by a fresh stable-baselines3 learner each (the ``sb3`` oracle).
 
     Each answer trains ``algo`` for ``steps`` env steps on the side's Gymnasium view against
@@ -477,23 +472,14 @@ class SB3Oracle:
     A stop request ends the learner at its next step and drops the answer.
     """
 
-    def __init__(
-        self,
-        cfg: GameConfig,
-        run_dir: Path,
-        entries: dict[str, Trainable],
-        env_kwargs: dict[str, Any],
-        algo: str,
-        kwargs: dict[str, Any],
-        hyperparameters: dict[str, Any],
-        stop: StopRequest,
-        reward_scale: float | None = None,
-    ) -> None:
-        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
-        self.algo, self.kwargs, self.hyperparameters = algo, kwargs, hyperparameters
-        self.stop = stop
-        self.reward_scale = reward_scale
-        self.callback = StopTrainingCallback(stop)
+    algo: str
+    kwargs: dict[str, Any]
+    hyperparameters: dict[str, Any]
+    stop: StopRequest
+    reward_scale: float | None = None
+
+    def __post_init__(self) -> None:
+        self.callback = StopTrainingCallback(self.stop)
 
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
         """A fresh learner's answer to ``opponent``, or None if a stop request cut it short."""
@@ -504,7 +490,7 @@ class SB3Oracle:
             self.algo,
             self.kwargs,
             self.cfg.steps_per_iteration,
-            derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side)),
+            self.seed(side, iteration),
             self.cfg.run.device,
             self.run_dir / "tb" / f"{side}_br_{iteration:03d}",
             self.callback,
@@ -514,7 +500,7 @@ class SB3Oracle:
 
     def save(self, side: str, index: int, response: BestResponse) -> str:
         """Save the model as ``policies/<side>_<index>.json``; returns the file's name."""
-        path = self.run_dir / "policies" / f"{side}_{index}.json"
+        path = self.policy_path(side, index)
         return save_model(response.policy, path, self.algo, self.hyperparameters).name
 
 

@@ -23,7 +23,8 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from baselines.sparse import SOLVERS, exhaustive
-from experiments.reproduce import CH4_LITERATURE_TIMES, SOLVER_LABELS, machine
+from experiments.reproduce import machine
+from experiments.reproduce.ch4 import literature_columns, solver_label
 from experiments.reproduce.common import timed
 from fdia_env import scenarios
 
@@ -44,10 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     for col, N in enumerate(SIZES):
         for name, solver in SOLVERS.items():
             seconds = timed(lambda s=solver, n=N: s(system, 5, n), args.repeats)[1]
-            lit = CH4_LITERATURE_TIMES[name][col]
-            ratio = "–" if lit is None else f"{lit / seconds:.1f}×"
-            lit_text = "not feasible" if lit is None else f"{lit:.3f}"
-            print(f"{SOLVER_LABELS[name]:<8}{3 * N:>5}{seconds:>11.4f}{lit_text:>16}{ratio:>12}")
+            lit_text, ratio = literature_columns(name, col, seconds)
+            print(f"{solver_label(name):<8}{3 * N:>5}{seconds:>11.4f}{lit_text:>16}{ratio:>12}")
             if name == "exs" and N == 20:
                 exs_60 = seconds
 

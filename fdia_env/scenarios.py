@@ -177,20 +177,17 @@ def _ch4_random(seed: int = 0, sigma_v: float = 0.1) -> Scenario:
     )
 
 
-def _ch5_game() -> Scenario:
+def _sensor_game(name: str, sigma_w: list[float], description: str) -> Scenario:
+    """A sensor-selection game of ch. 5: position sensors of noise ``sigma_w``, T = 0.5."""
     sys = tracking_system(
-        0.5,
-        [3.0, 4.0, 5.0],
-        x0=[1.0, 1.0],
-        P0=np.array([[0.25, 0.25], [0.25, 0.5]]),
-        name="ch5-game",
+        0.5, sigma_w, x0=[1.0, 1.0], P0=np.array([[0.25, 0.25], [0.25, 0.5]]), name=name
     )
-    return Scenario(
-        "ch5-game",
-        sys,
-        "3 position sensors, sensor-selection game (ch. 5)",
-        power=100.0,
-        attack_step=100,
+    return Scenario(name, sys, description, power=100.0, attack_step=100)
+
+
+def _ch5_game() -> Scenario:
+    return _sensor_game(
+        "ch5-game", [3.0, 4.0, 5.0], "3 position sensors, sensor-selection game (ch. 5)"
     )
 
 
@@ -210,19 +207,10 @@ GRID_POWER = 0.01
 
 
 def _game_m10() -> Scenario:
-    sys = tracking_system(
-        0.5,
-        [3.0 + 0.5 * i for i in range(10)],
-        x0=[1.0, 1.0],
-        P0=np.array([[0.25, 0.25], [0.25, 0.5]]),
-        name="game-m10",
-    )
-    return Scenario(
+    return _sensor_game(
         "game-m10",
-        sys,
+        [3.0 + 0.5 * i for i in range(10)],
         "10 position sensors, σ_w = 3.0..7.5, sensor-selection game (ch. 5 setting, M = 10)",
-        power=100.0,
-        attack_step=100,
     )
 
 

@@ -404,3 +404,25 @@ def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch(monkeypatch):
     monkeypatch.setattr(registration, "torch_ids", lambda: numpy_only)
     assert not applicable(get(TASK), "torch-ppo")  # its env without a torch backend
     assert applicable(get(TASK), "PPO")
+
+
+def test_the_tutorial_scores_a_policy_in_under_20_lines_of_code():
+    """Lines holding code in docs/tutorials/score_policy.py (no comments, docstrings, blanks)."""
+    import ast
+    import io
+    import tokenize
+
+    source = (ROOT / "docs" / "tutorials" / "score_policy.py").read_text(encoding="utf-8")
+    docstrings = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef)):
+            if ast.get_docstring(node) is not None:
+                first = node.body[0]
+                docstrings |= set(range(first.lineno, first.end_lineno + 1))
+    skip = {tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT}
+    code = set()
+    for token in tokenize.generate_tokens(io.StringIO(source).readline):
+        if token.type not in skip | {tokenize.ENDMARKER}:
+            code |= set(range(token.start[0], token.end[0] + 1))
+    assert 10 <= len(code - docstrings) < 20
+    assert "score_policy(task, LastSteps()" in source  # the user's own policy is what it scores

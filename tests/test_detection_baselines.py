@@ -255,6 +255,25 @@ def test_exact_mse_agrees_with_the_core_detection_numerics(label, det, truth):
     )
 
 
+@pytest.mark.parametrize(("label", "det", "truth"), _cases(), ids=[c[0] for c in _cases()])
+def test_exact_bayes_cost_criterion_agrees_with_the_baselines_bayes_cost(label, det, truth):
+    """The core's ``criterion="bayes_cost"`` trace is the baselines' Bayes cost (rel 1e-10)."""
+    from fdia_env.detection.expected import expected_squared_error
+
+    t = det.problem if truth is None else truth
+    K_d1 = np.zeros_like(det.problem.K0) if det.on_detect == "discard" else det.problem.K1
+    args = (t.Pxx, t.H, t.Pww, t.Pbb, t.p1, det.matrix, det.threshold, det.problem.K0, K_d1)
+    core = expected_squared_error(*args, criterion="bayes_cost")
+    assert core.mse == pytest.approx(bayes_cost(det, truth).value, rel=1e-10)
+    mse = expected_squared_error(*args)
+    assert (core.p_false_alarm, core.p_detection) == (
+        pytest.approx(mse.p_false_alarm, abs=1e-12),
+        pytest.approx(mse.p_detection, abs=1e-12),
+    )
+    with pytest.raises(ValueError, match="criterion must be one of"):
+        expected_squared_error(*args, criterion="bayes")
+
+
 def test_constant_decisions_make_the_bayes_cost_exact():
     """Always-D1 OBDI: the Bayes cost is p1 c1 + p0 c3, and the MC MSE estimates it."""
     problem = static_problem(power=100.0)

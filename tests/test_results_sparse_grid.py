@@ -12,7 +12,6 @@ from agents.evaluate import evaluate
 from baselines.sparse import exhaustive, sfs
 from experiments.results import sparse_grid
 from experiments.results.sparse_grid import Budget, Instance, ratio
-from experiments.results.sparse_grid_plan import PlanPolicy, PlanSparseEnv, PlanVectorEnv
 
 
 @pytest.fixture(scope="module")
@@ -34,6 +33,25 @@ def test_plan_policy_replays_exs_set_exactly_in_the_learners_env():
     result = evaluate(sparse_grid.plan_policy(best), env, 2, seed=0, reference=best.value)
     assert result.mean == pytest.approx(best.value, rel=1e-12)
     assert result.score == pytest.approx(1.0, rel=1e-12)
+
+
+def test_training_env_rescales_as_train_py_nothing_0_optimum_1():
+    from fdia_env.scenarios import get
+
+    best = exhaustive("ch4-position", budget=3, horizon=4)
+    inst = Instance("ieee14-rtu", 3, 4, "trace")
+    system = get("ch4-position").system
+    venv = sparse_grid.training_env(system, inst, reference=best.value)
+    (env,) = venv.envs
+    optimum = evaluate(sparse_grid.plan_policy(best), env, 1, seed=0, reference=1.0).mean
+    empty = exhaustive("ch4-position", budget=0, horizon=4)  # attacking nothing
+    nothing = evaluate(sparse_grid.plan_policy(empty), env, 1, seed=0, reference=1.0).mean
+    assert optimum == pytest.approx(1.0, abs=1e-12)
+    assert nothing == pytest.approx(0.0, abs=1e-12)
+    # without a reference (or one no better than nothing) SB3's running normalisation
+    assert type(sparse_grid.training_env(system, inst)).__name__ == "VecNormalize"
+    useless = sparse_grid.training_env(system, inst, reference=empty.value)
+    assert type(useless).__name__ == "VecNormalize"
 
 
 def test_plan_policy_picks_the_lowest_pair_not_yet_planned_batched():
@@ -127,80 +145,6 @@ def test_order_study_rows_per_instance_order_and_seed(monkeypatch):
     for r in rows:
         assert r["instance"] == "ieee14-rtu c=1 N=2 trace"
         assert 0 < r["score"] <= 1 + 1e-12 and 0 < r["sfs"] <= 1 + 1e-12
-
-
-# --- the former plan env (experiments/results/sparse_grid_plan.py), kept for comparison ---
-
-
-def test_plan_env_replays_exs_plan_exactly():
-    best = exhaustive("ch4-position", budget=3, horizon=4)
-    env = PlanSparseEnv("ch4-position", 3, 4)
-    result = evaluate(PlanPolicy(best), env, 2, seed=0, reference=best.value)
-    assert result.mean == pytest.approx(best.value, rel=1e-12)
-    assert result.score == pytest.approx(1.0, rel=1e-12)
-
-
-def test_plan_env_masks_picked_pairs_and_refuses_them():
-    env = PlanSparseEnv("ch4-position", 2, 3)
-    M = env.M
-    env.reset(seed=0)
-    assert env.action_masks().all() and env.action_masks().shape == (M * 3 + 1,)
-    pair = 1 + 1 * M + 1  # sensor 2 (index 1) at step 1
-    obs, reward, term, _, _ = env.step(pair)
-    assert not env.action_masks()[pair] and env.action_masks().sum() == M * 3
-    assert obs[pair - 1] == 1.0 and obs[:-1].sum() == 1.0 and obs[-1] == pytest.approx(0.5)
-    assert reward == 0.0 and not term
-    with pytest.raises(ValueError, match="action"):
-        env.step(pair)
-    with pytest.raises(ValueError, match="action"):
-        env.step(M * 3 + 1)
-
-
-def test_plan_env_return_is_the_sparse_env_return_of_the_same_set():
-    # (step 2, sensor 1) and (step 2, sensor 2) of ch4-position over N = 3, c = 2, against the
-    # sparse env's own bitmask action
-    import gymnasium as gym
-
-    native = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", budget=2, horizon=3)
-    native.reset(seed=0)
-    total = 0.0
-    for a in (0, 0, 3):
-        total += native.step(a)[1]
-    env = PlanSparseEnv("ch4-position", 2, 3)
-    env.reset(seed=0)
-    env.step(1 + 2 * env.M + 0)
-    _, reward, term, _, _ = env.step(1 + 2 * env.M + 1)
-    assert term and reward == pytest.approx(total, rel=1e-12) and total > 0
-
-
-def test_plan_vector_env_equals_plan_env_member_by_member():
-    import torch
-
-    venv = PlanVectorEnv("ch4-position", 2, 3, "trace", num_envs=3)
-    venv.reset(seed=0)
-    picks = [(7, 9), (0, 0), (1, 8)]  # member plans (ch4-position: M = 3, 9 pairs)
-    for d in range(2):
-        actions = torch.tensor([p[d] for p in picks], dtype=torch.int64)
-        if d == 0:
-            assert venv.action_masks().all()
-        _, reward, term, _, _ = venv.step(actions)
-    assert bool(term.all())
-    for member, plan in enumerate(picks):
-        env = PlanSparseEnv("ch4-position", 2, 3)
-        env.reset(seed=0)
-        for a in plan:
-            single = env.step(a)[1]
-        assert float(reward[member]) == pytest.approx(single, rel=1e-9)
-    assert not bool(venv.action_masks()[:, 1:].logical_not().any())  # reset: all legal again
-
-
-def test_plan_env_rejects_bad_input_by_name():
-    with pytest.raises(ValueError, match="budget"):
-        PlanSparseEnv("ch4-position", 0, 3)
-    with pytest.raises(ValueError, match="budget"):
-        PlanSparseEnv("ch4-position", 10, 3)  # above M·N = 9 pairs: the sparse env's message
-    with pytest.raises(ValueError, match="budget"):
-        PlanVectorEnv("ch4-position", 1.5, 3, "trace", num_envs=2)
 
 
 def test_plot_curves_writes_the_learning_curve_figure(tmp_path):

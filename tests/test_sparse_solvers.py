@@ -280,3 +280,20 @@ def test_reproduce_ch4_quick_writes_its_section(tmp_path, capsys):
     # rerunning replaces the section rather than appending a second one
     reproduce.main(["ch4", "--quick", "--output", str(output)])
     assert output.read_text().count("## Chapter 4") == 1
+
+
+def test_a_solver_added_to_solvers_reaches_the_reproduction_tables(monkeypatch):
+    """A new solver needs only its module and its SOLVERS entry: the tables label it."""
+    from experiments.reproduce import ch4
+
+    monkeypatch.setattr(ch4, "SOLVERS", {"sfs": sfs, "toy_greedy": sfs})
+    rows = [line for line in ch4.ch4_table2(1, warmup=False).splitlines() if "TOY" in line]
+    assert [row.split(" | ")[:2] for row in rows] == [
+        ["| 18", "TOY-GREEDY"],
+        ["| 30", "TOY-GREEDY"],
+        ["| 60", "TOY-GREEDY"],
+    ]
+    assert all(row.endswith("| not in the literature | – |") for row in rows)
+    assert ch4.literature_columns("sfs", 2, 0.249 / 2) == ("0.249", "2.0×")
+    assert ch4.literature_columns("exs", 2, 1.0) == ("not feasible", "–")
+    assert [ch4.solver_label(n) for n in ("exs", "sfs_ss", "dp")] == ["EXS", "SFS-SS", "DP"]

@@ -166,3 +166,30 @@ def test_the_game_command_runs_torch_ppo_best_responses_and_resumes_them(tmp_pat
     rows, cols = state["populations"]["defender"], state["populations"]["attacker"]
     L = payoff_matrix("ch5-game")
     np.testing.assert_allclose(state["meta_payoff"], L[np.ix_(rows, cols)], rtol=1e-9)
+
+
+def test_the_learned_oracles_share_their_seeds_and_policy_files(tmp_path):
+    """SB3, torch-ppo and RLlib answers: one seed per (side, iteration), one file per policy."""
+    from types import SimpleNamespace
+
+    from agents.interrupt import StopRequest
+    from agents.population import LearnedOracle
+    from agents.rllib.train import RLlibOracle
+    from agents.seeding import derived_seed
+    from agents.selfplay import SB3Oracle, TorchPPOOracle
+
+    cfg = SimpleNamespace(run=SimpleNamespace(seed=7, device="cpu"))
+    stop = StopRequest()
+    oracles = [
+        SB3Oracle(cfg, tmp_path, {}, {}, "ppo", {}, {}, stop),
+        TorchPPOOracle(cfg, tmp_path, {}, {}, None, stop),
+        RLlibOracle(cfg, tmp_path, {}, {}),
+    ]
+    seeds = {(s, k): derived_seed(7, 1000 * k + SIDES.index(s)) for s in SIDES for k in range(3)}
+    assert len(set(seeds.values())) == 6  # every answer its own seed
+    for oracle in oracles:
+        assert isinstance(oracle, LearnedOracle)
+        assert {key: oracle.seed(*key) for key in seeds} == seeds
+        assert oracle.policy_path("defender", 4) == tmp_path / "policies" / "defender_4.json"
+    assert oracles[1].device == "cpu" and oracles[0].callback is not None
+    assert oracles[2].policy_path("attacker", 0, ".pt").name == "attacker_0.pt"

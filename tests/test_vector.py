@@ -96,8 +96,11 @@ def assert_infos_equal(native, sync, where=""):
                 np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
 
 
-def compare_with_sync(env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEXT_STEP):
-    native = gym.make_vec(
+def compare_with_sync(
+    env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEXT_STEP, exact=False, native=None
+):
+    """The native vector env against SyncVectorEnv of the single env (bit for bit if exact)."""
+    native = native or gym.make_vec(
         env_id,
         num_envs=B,
         vectorization_mode="vector_entry_point",
@@ -110,6 +113,9 @@ def compare_with_sync(env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEX
     )
     obs_n, info_n = native.reset(seed=11)
     obs_s, info_s = sync.reset(seed=11)
+    if exact:
+        np.testing.assert_array_equal(obs_n, obs_s)
+        np.testing.assert_array_equal(info_n["phi"], info_s["phi"])
     np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-7)
     assert_infos_equal(info_n, info_s, "reset")
     rng = np.random.default_rng(0)
@@ -128,6 +134,10 @@ def compare_with_sync(env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEX
             actions = rng.uniform(-1, 1, size=(B, *single.shape)).astype(np.float32)
         obs_n, r_n, te_n, tr_n, info_n = native.step(actions)
         obs_s, r_s, te_s, tr_s, info_s = sync.step(actions)
+        if exact:
+            np.testing.assert_array_equal(obs_n, obs_s, err_msg=f"step {t}")
+            np.testing.assert_array_equal(r_n, r_s, err_msg=f"step {t}")
+            np.testing.assert_array_equal(info_n["phi"], info_s["phi"], err_msg=f"step {t}")
         np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(r_n, r_s, rtol=1e-9, atol=1e-12)
         np.testing.assert_array_equal(te_n, te_s)
@@ -135,6 +145,7 @@ def compare_with_sync(env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEX
         assert_infos_equal(info_n, info_s, f"step {t}")
         ended += int((te_s | tr_s).sum())
     assert ended >= B  # every member went through at least one autoreset
+    return native
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -253,6 +264,69 @@ def test_vector_step_before_reset_and_bad_actions_raise():
         cov.step(np.full((2, 3), np.nan, dtype=np.float32))
     with pytest.raises(ValueError, match="SAME_STEP"):
         SB3VecEnv(venv)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {},
+        {"objective": "logdet", "reward_mode": "shaped", "budget": 2},
+        {"scenario": "ch2-pv-2", "budget": 1, "horizon": 3, "warmup": 2},
+    ],
+)
+@pytest.mark.parametrize("autoreset", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_members_sharing_histories_equal_the_single_env_bit_for_bit(kwargs, autoreset):
+    # 2-state expected dynamics: the members are nodes of the history table, each node computed
+    # by the single env's own kernel, so observations, rewards and Φ are the single env's exactly
+    native = compare_with_sync(
+        "fdia_env/SparseAttack-v0", kwargs, B=16, steps=16, autoreset=autoreset, exact=True
+    )
+    assert native.sim.shares_histories
+    table = native.sim._history
+    assert 1 < table.size < 16 * 16  # shared: fewer nodes than member-steps
+
+
+def test_history_table_full_falls_back_to_the_closed_form():
+    # a table that holds only the root and a few children: the engine leaves it at the step
+    # that would overflow it and goes on with the closed form on every member (to round-off)
+    native = gym.make_vec(
+        "fdia_env/SparseAttack-v0", num_envs=16, vectorization_mode="vector_entry_point"
+    )
+    native.reset(seed=11)
+    native.sim._history.max_nodes = 4
+    compare_with_sync("fdia_env/SparseAttack-v0", {}, B=16, steps=16, native=native)
+    assert not native.sim.shares_histories
+    assert native.sim._history.size <= 4
+
+
+def test_history_table_nodes_are_the_single_env_kernel():
+    # every node: the covariance, features and Φ the single env's float kernel gives for the
+    # node's history, bit for bit
+    import math
+
+    from fdia_env.envs.history import HistoryTable
+    from fdia_env.kalman import small
+
+    rng = np.random.default_rng(5)
+    F, q = (1.0, 0.7, -0.2, 0.9), (0.3, 0.05, 0.2)
+    start = (1.5, 0.4, 0.8)
+    j = [tuple(float(v) for v in (x * x, x * y, y * y)) for x, y in rng.normal(size=(8, 2))]
+    j[0] = (0.0, 0.0, 0.0)
+    for objective in ("trace", "logdet"):
+        table = HistoryTable(start, F, q, j, objective)
+        node = np.zeros(50, dtype=np.int32)
+        p = [start] * 50
+        for _ in range(4):
+            used = rng.integers(0, 8, size=50)
+            node = table.step(node, used)
+            p = [small.info_update2(small.predict2(p[i], F, q), j[used[i]]) for i in range(50)]
+            for i in range(50):
+                assert tuple(table.comps[:, node[i]]) == p[i]
+                assert list(table.feats64[:, node[i]]) == small.shape_features2(p[i], start)
+                want = small.trace2(p[i]) if objective == "trace" else small.logdet2(p[i])
+                assert table.phi[node[i]] == want and not math.isnan(want)
+        assert table.size < 1 + 50 * 4
+        assert table.feats.dtype == np.float32
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fdia_env._validation import check_int
-from fdia_env.attacks.sparse import MAX_SENSORS
+from fdia_env.attacks.sparse import subset_format
 from fdia_env.envs.policy import PolicyBase, observation_array
 
 if TYPE_CHECKING:  # a result builds its policy (SparseResult.policy): the import goes that way
@@ -79,13 +79,7 @@ class SparsePolicy(PolicyBase):
                 f"action must be one of {formats} (the formats a plan can be played in; "
                 f"'single' attacks at most one sensor a step), got {action!r}"
             )
-        if action == "auto":
-            action = "bitmask" if result.num_sensors <= MAX_SENSORS else "multibinary"
-        if action == "bitmask" and result.num_sensors > MAX_SENSORS:
-            raise ValueError(
-                f"action='bitmask' takes at most {MAX_SENSORS} sensors, the plan has "
-                f"{result.num_sensors}: use 'multibinary' or 'sequential'"
-            )
+        action = subset_format(action, result.num_sensors, "'multibinary' or 'sequential'")
         if action == "bitmask":
             return cls(result.actions())
         return cls(result.plan(), sequential=action == "sequential")

@@ -18,7 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 from experiments.reproduce.ch2 import CH2_LITERATURE
-from experiments.reproduce.ch4 import CH4_LITERATURE_TIMES, SOLVER_LABELS
+from experiments.reproduce.ch4 import CH4_LITERATURE_TIMES
 from experiments.reproduce.cli import CHAPTERS, main, replace_section
 from experiments.reproduce.common import Section, machine
 
@@ -26,7 +26,6 @@ __all__ = [
     "CH2_LITERATURE",
     "CH4_LITERATURE_TIMES",
     "CHAPTERS",
-    "SOLVER_LABELS",
     "Section",
     "machine",
     "main",

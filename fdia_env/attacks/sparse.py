@@ -34,6 +34,30 @@ def trim_to_budget(bits: int, remaining: int) -> int:
     return kept
 
 
+def subset_format(action: str, num_sensors: int, instead: str) -> str:
+    """The format ``action`` names for ``num_sensors`` sensors (``"auto"`` resolved).
+
+    ``"auto"`` is ``"bitmask"`` up to :data:`MAX_SENSORS` sensors and ``"multibinary"`` above;
+    any other format is returned as it is.
+
+    Args:
+        action: A format name (``"auto"``, ``"bitmask"``, ...).
+        num_sensors: M.
+        instead: The formats the error suggests above :data:`MAX_SENSORS` sensors.
+
+    Raises:
+        ValueError: For ``"bitmask"`` above :data:`MAX_SENSORS` sensors.
+    """
+    if action == "auto":
+        return "bitmask" if num_sensors <= MAX_SENSORS else "multibinary"
+    if action == "bitmask" and num_sensors > MAX_SENSORS:
+        raise ValueError(
+            f"action='bitmask' takes at most {MAX_SENSORS} sensors (a subset per action), "
+            f"got {num_sensors} sensors: use {instead}"
+        )
+    return action
+
+
 class SparseAttack(AttackModel):
     """Attack up to ``budget`` sensor-time pairs over the window.
 
@@ -82,14 +106,7 @@ class SparseAttack(AttackModel):
 
     def bind(self, system: LinearSystem, spec: EpisodeSpec) -> None:
         """Build the action space for ``system`` and check the budget fits the window."""
-        fmt = self.action_format
-        if fmt == "auto":
-            fmt = "bitmask" if system.M <= MAX_SENSORS else "multibinary"
-        if fmt == "bitmask" and system.M > MAX_SENSORS:
-            raise ValueError(
-                f"the sparse attack's subset action supports at most {MAX_SENSORS} sensors, "
-                f"the system has {system.M}; use action='multibinary' or action='single'"
-            )
+        fmt = subset_format(self.action_format, system.M, "'multibinary' or 'single'")
         if self.budget > system.M * spec.horizon:
             raise ValueError(
                 f"budget must be <= M * horizon = {system.M * spec.horizon} (every sensor-time "

@@ -45,8 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from fdia_env._validation import check_choice
 from fdia_env.detection.gchisq import gchisq_tails
-from fdia_env.kalman import psd_sqrt
 from fdia_env.kalman.linalg import mT
 
 
@@ -198,23 +198,6 @@ def _moments(lam: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
     return p, m
 
 
-def truncated_moments(
-    A: np.ndarray, C: np.ndarray, tau: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The pieces of ``E[y y' 1{y'Ay <= τ}]`` and ``E[y y' 1{y'Ay > τ}]`` for ``y ~ N(0, C)``.
-
-    Returns:
-        ``(p, T, m0, m1)``: ``p = (P(D0), P(D1))``; ``T = L V`` (nz, nz); ``m0``, ``m1`` (nz,)
-        with ``E[y y' 1{D_j}] = T diag(m_j) T'``; every entry of p, m0, m1 in [0, 1] and
-        accurate relative to its size (module docstring).
-    """
-    L = psd_sqrt(C)
-    B = L.T @ A @ L
-    lam, V = np.linalg.eigh(0.5 * (B + B.T))
-    p, m = _moments(np.clip(lam, 0.0, None), tau)
-    return p, L @ V, m[0], m[1]
-
-
 def hypotheses(
     Pxx: np.ndarray, H: np.ndarray, Pww: np.ndarray, sigma: np.ndarray, p1: float
 ) -> Iterator[tuple[float, np.ndarray, Innovation, np.ndarray | None]]:
@@ -254,6 +237,9 @@ def _error_factors(
     return 0.5 * (posterior + posterior.T), E
 
 
+CRITERIA = ("mse", "bayes_cost")
+
+
 def expected_squared_error(
     Pxx: np.ndarray,
     H: np.ndarray,
@@ -266,8 +252,15 @@ def expected_squared_error(
     gain_d1: np.ndarray,
     *,
     assumed_sigma: np.ndarray | None = None,
+    criterion: str = "mse",
 ) -> DetectorOutcome:
     """Exact error covariance of the detector ``y'Ay > τ`` with gains ``gain_d0`` / ``gain_d1``.
+
+    ``criterion="mse"``: the expected squared error's covariance (module docstring).
+    ``criterion="bayes_cost"``: its Bayes-cost counterpart
+    ``Σ_h p_h [P(D1|h) C(K_D1, h) + P(D0|h) C(K_D0, h)]`` with the fixed case covariances of
+    :func:`case_covariance`; its trace is
+    ``p1 [P_d c1 + (1 − P_d) c2] + p0 [P_fa c3 + (1 − P_fa) c4]``.
 
     Args:
         Pxx: (n, n) prior covariance.
@@ -282,19 +275,29 @@ def expected_squared_error(
         assumed_sigma: (nz, nz) the defender's model Σa when ``gain_d1`` is its H1-model gain
             ``Pxz (H Pxx H' + Pww + Σa)⁻¹`` (incorporate): that gain is then recomputed from
             Σa, exactly consistent with ``sigma`` at any power.
+        criterion: ``"mse"`` or ``"bayes_cost"``.
+
+    Raises:
+        ValueError: For a criterion not in :data:`CRITERIA`.
     """
+    check_choice("criterion", criterion, CRITERIA)
     cov = np.zeros_like(Pxx, dtype=float)
     probs = []
     for prob, Pxz, factor, sigma_h in hypotheses(Pxx, H, Pww, sigma, p1):
         lam, V = _weights(factor, A)
-        p, m = _moments(lam, tau)
         gains = (gain_d0, gain_d1)
         posterior, (E0, E1) = _error_factors(factor, Pxx, Pxz, gains, sigma_h, assumed_sigma)
-        W0 = (E0 @ V) * np.sqrt(m[0])  # error = (K* − K_D) y + posterior noise
-        W1 = (E1 @ V) * np.sqrt(m[1])
+        if criterion == "mse":
+            p, m = _moments(lam, tau)
+            W0 = (E0 @ V) * np.sqrt(m[0])  # error = (K* − K_D) y + posterior noise
+            W1 = (E1 @ V) * np.sqrt(m[1])
+            term, p_d1 = posterior + W0 @ W0.T + W1 @ W1.T, float(p[1])
+        else:  # the case covariance Pxx − K Pxz' − Pxz K' + K C K' = posterior + E C E'
+            p_d0, p_d1 = tails(lam, tau)  # each accurate, no 1 − p
+            term = p_d1 * (posterior + E1 @ E1.T) + p_d0 * (posterior + E0 @ E0.T)
         if prob > 0.0:
-            cov += prob * (posterior + W0 @ W0.T + W1 @ W1.T)
-        probs.append(float(p[1]))
+            cov += prob * term
+        probs.append(p_d1)
     cov = 0.5 * (cov + cov.T)
     return DetectorOutcome(error_cov=cov, p_false_alarm=probs[0], p_detection=probs[1])
 
@@ -306,37 +309,3 @@ def case_covariance(Pxx: np.ndarray, Pxz: np.ndarray, C: np.ndarray, K: np.ndarr
     """
     cov = Pxx - K @ mT(Pxz) - Pxz @ mT(K) + K @ C @ mT(K)  # leading batch dimensions allowed
     return 0.5 * (cov + mT(cov))
-
-
-def bayes_cost_covariance(
-    Pxx: np.ndarray,
-    H: np.ndarray,
-    Pww: np.ndarray,
-    sigma: np.ndarray,
-    p1: float,
-    A: np.ndarray,
-    tau: float,
-    gain_d0: np.ndarray,
-    gain_d1: np.ndarray,
-    *,
-    assumed_sigma: np.ndarray | None = None,
-) -> DetectorOutcome:
-    """The Bayes-cost counterpart of :func:`expected_squared_error` (same arguments).
-
-    ``Σ_h p_h [P(D1|h) C(K_D1, h) + P(D0|h) C(K_D0, h)]`` with the fixed case covariances of
-    :func:`case_covariance`; its trace is
-    ``p1 [P_d c1 + (1 − P_d) c2] + p0 [P_fa c3 + (1 − P_fa) c4]``.
-    """
-    cov = np.zeros_like(Pxx, dtype=float)
-    probs = []
-    for prob, Pxz, factor, sigma_h in hypotheses(Pxx, H, Pww, sigma, p1):
-        lam, _ = _weights(factor, A)
-        p_d0, p_d1 = tails(lam, tau)  # each accurate, no 1 − p
-        # the case covariance Pxx − K Pxz' − Pxz K' + K C K' = posterior + (K* − K) C (K* − K)'
-        gains = (gain_d0, gain_d1)
-        posterior, (E0, E1) = _error_factors(factor, Pxx, Pxz, gains, sigma_h, assumed_sigma)
-        if prob > 0.0:
-            cov += prob * (p_d1 * (posterior + E1 @ E1.T) + p_d0 * (posterior + E0 @ E0.T))
-        probs.append(p_d1)
-    cov = 0.5 * (cov + cov.T)
-    return DetectorOutcome(error_cov=cov, p_false_alarm=probs[0], p_detection=probs[1])

@@ -4,7 +4,7 @@ A statistic is a quadratic form ``y' A y`` of the innovation ``y = z − H x̂�
 §3); an entry gives its matrix ``A`` from the inverses of the innovation covariances under H0
 (``Pzz0⁻¹``) and under the attack model H1 (``Pzz1⁻¹``), and the default scale of the detection
 game's threshold action. Read by the env's :class:`~fdia_env.defenses.ThresholdDetector`
-(names, threshold scale), the detection step, single and batched (the matrix), and the
+(names, threshold scale), the one detection step (the matrix; single and vector env), and the
 baselines' :class:`~baselines.detection.Detector`.
 
 Adding a statistic is one :class:`Statistic` in :data:`STATISTICS` (its matrix written with

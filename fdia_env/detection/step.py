@@ -21,7 +21,6 @@ import numpy as np
 from fdia_env.backend import Backend
 from fdia_env.defenses.base import BatchDetection
 from fdia_env.detection.expected import (
-    bayes_cost_covariance,
     case_covariance,
     expected_squared_error,
 )
@@ -200,7 +199,6 @@ def _exact_on_host(
     host = [xp.to_numpy(a) for a in (P_pred, sigma, probability, A, K0, D1)]
     P_pred, sigma, probability, A, K0, gain_d1 = host
     thresholds = np.asarray(xp.to_numpy(xp.asarray(rule.thresholds)), dtype=np.float64)
-    exact = expected_squared_error if rule.criterion == "mse" else bayes_cost_covariance
     model = np.asarray(rule.assumed_sigma) if rule.on_detect == "incorporate" else None
     cov = np.empty((B, system.n, system.n))
     p_fa, p_d = np.zeros(B), np.zeros(B)
@@ -215,7 +213,7 @@ def _exact_on_host(
             )
         )
         if key not in cache:
-            cache[key] = exact(
+            cache[key] = expected_squared_error(
                 P_pred[i],
                 system.H,
                 system.R,
@@ -226,6 +224,7 @@ def _exact_on_host(
                 K0[i],
                 gain_d1[i],
                 assumed_sigma=model,  # K1 rebuilt in the attack's basis (any power)
+                criterion=rule.criterion,
             )
         out = cache[key]
         cov[i], p_fa[i], p_d[i] = out.error_cov, out.p_false_alarm, out.p_detection

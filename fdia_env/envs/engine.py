@@ -2,10 +2,12 @@
 
 Every face runs it: the native vector env with its batch, the single env
 (:class:`~fdia_env.envs.simulation.Simulation`) as a batch of one. The 2-state case without a
-leaking bias runs a closed-form kernel on (3, B) component arrays
-(:func:`info_update2_stacked`; the single env's scalar copy of it is
-:mod:`fdia_env.kalman.small`), everything else the generic batched functions of
-:mod:`fdia_env.kalman`. Large systems (n >= 40) that start at the
+leaking bias keeps each member as a node of a :class:`~fdia_env.envs.history.HistoryTable` on
+numpy in expected dynamics (members with the same attack history share one covariance, computed
+once by the single env's own kernel, so they equal the single env bit for bit) and otherwise runs
+a closed-form kernel on (3, B) component arrays (:func:`info_update2_stacked`; the single env's
+scalar kernel is :mod:`fdia_env.kalman.small`); everything else runs the generic batched
+functions of :mod:`fdia_env.kalman`. Large systems (n >= 40) that start at the
 steady state keep each expected covariance as the steady state plus a low-rank term in the
 sensor rows dropped so far (numpy backend; see :meth:`BatchedSimulation._init_low_rank`): an
 O(n² r) step instead of an n × n solve per member.
@@ -31,6 +33,7 @@ from fdia_env.attacks.base import bits_to_mask, mask_array_to_bits
 from fdia_env.backend import NUMPY, Backend
 from fdia_env.defenses.base import BatchDetection
 from fdia_env.detection.step import SystemArrays, batched_detection_step
+from fdia_env.envs.history import HistoryTable
 from fdia_env.episode import EpisodeSpec
 from fdia_env.kalman import (
     information_update,
@@ -118,6 +121,13 @@ class BatchedSimulation:
             self._start_comp = c(np.array(self._start2)[:, None])
             if jtab is not None:
                 self._jcomp = c(np.stack([jtab[:, 0, 0], jtab[:, 0, 1], jtab[:, 1, 1]]))
+        # expected 2-state dynamics on numpy: members share the covariance of a shared history
+        self._c: Any = None  # (3, B) components of P when the history table is not used
+        self._node: Any = None  # (B,) int32 node of each member in the history table, or None
+        self._history: HistoryTable | None = None
+        self._share = (
+            self.fast and not self.sampled and xp is NUMPY and jtab is not None and M <= 10
+        )
         if self.sampled:  # the sampled reset's constants: start factor, or warm-up gains
             warmup = self.spec.warmup
             root = psd_sqrt(P_start if warmup == "steady" else system.P0)
@@ -137,10 +147,38 @@ class BatchedSimulation:
 
     # --- state -------------------------------------------------------------------------------
     @property
+    def shares_histories(self) -> bool:
+        """Whether the members are nodes of the history table (see :mod:`fdia_env.envs.history`).
+
+        True from a full reset of a 2-state model in expected dynamics (numpy) until a step the
+        table does not cover: a leaking bias, a steady restart, the detection game's step, or
+        more histories than the table holds.
+        """
+        return self._node is not None
+
+    @property
+    def _comp(self) -> Any:
+        """(3, B) components of P (2-state models), or None; read or set, it leaves the table."""
+        if self._node is not None:
+            self._leave_history()
+        return self._c
+
+    @_comp.setter
+    def _comp(self, value: Any) -> None:
+        self._node = None
+        self._c = value
+
+    def _leave_history(self) -> None:
+        """The members' components out of the history table, which the batch stops using."""
+        self._c = self._history.comps.take(self._node, axis=1)
+        self._node = None
+
+    @property
     def P(self) -> Any:
         """(B, n, n) filter covariances."""
-        if self._comp is not None:
-            a, b, d = self._comp
+        comp = self._c if self._node is None else self._history.comps.take(self._node, axis=1)
+        if comp is not None:
+            a, b, d = comp
             P = self.xp.empty((self.B, 2, 2))
             P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = a, b, b, d
             return P
@@ -295,6 +333,12 @@ class BatchedSimulation:
         if full:
             if self.fast:
                 self._comp = xp.broadcast_to(self._start_comp, (3, B))
+                if self._share:  # every member at the table's root
+                    if self._history is None:
+                        j = [small.to_sym2(self._jtab[u]) for u in range(2**self.system.M)]
+                        f, q = small.to_mat2(self.system.F), small.to_sym2(self.system.Q)
+                        self._history = HistoryTable(self._start2, f, q, j, self.spec.objective)
+                    self._node = np.zeros(B, dtype=np.int32)
             else:
                 self._set_P(xp.broadcast_to(self._start, (B, n, n)))
             self._M = None  # only read where a member is inconsistent
@@ -307,8 +351,10 @@ class BatchedSimulation:
                 self.x = xp.zeros((B, n))
                 self.x_hat = xp.zeros((B, n))
         else:
-            if self._comp is not None:
-                self._comp[:, where] = self._start_comp
+            if self._node is not None:
+                self._node[where] = 0
+            elif self._c is not None:
+                self._c[:, where] = self._start_comp
             else:
                 self._P[where] = self._start
             if not self.all_consistent():
@@ -390,6 +436,13 @@ class BatchedSimulation:
             return self.phi
         if steady:
             self._restart_steady(used, active)
+        if self._node is not None:
+            if leak is None and used.ndim == 1 and (self._clean or self.all_consistent()):
+                if self._history_step(used, active):
+                    self.k += 1
+                    self.phi = self._measure_all()
+                    return self.phi
+            self._leave_history()
         if (
             self.fast
             and leak is None
@@ -405,6 +458,22 @@ class BatchedSimulation:
         self.k += 1
         self.phi = self._measure_all()
         return self.phi
+
+    def _history_step(self, used: Any, active: Any) -> bool:
+        """Each member to the child of its node under ``used``; False if the table is full.
+
+        Members about to be reset (not ``active``) step from the root instead, so that the
+        table does not grow with the histories past the window's end.
+        """
+        node = self._node
+        if active is not None and not active.all():
+            node = np.where(active, node, 0).astype(np.int32)
+        child = self._history.step(node, used)
+        if child is None:  # too many histories: the closed form on every member from now on
+            self._share = False
+            return False
+        self._node = child
+        return True
 
     def _detection_step(
         self, rule: BatchDetection, sigma: Any, probability: Any, active: Any
@@ -614,13 +683,15 @@ class BatchedSimulation:
     # --- outputs -----------------------------------------------------------------------------
     def _measure_all(self) -> Any:
         xp = self.xp
+        if self._node is not None:  # Φ of each member's node
+            return self._history.phi.take(self._node)
         if self.sampled:
             if self.value_override is not None:  # the detection game's fixed Bayes costs
                 return self.value_override
             e = self.x - self.x_hat
             return xp.einsum("bi,bi->b", e, e)
-        if self._comp is not None and (self._clean or self.all_consistent()):
-            a, b, d = self._comp
+        if self._c is not None and (self._clean or self.all_consistent()):
+            a, b, d = self._c
             if self.spec.objective == "trace":
                 return a + d
             det = a * d - b * b
@@ -640,8 +711,14 @@ class BatchedSimulation:
         xp = self.xp
         n = self.system.n
         out[0] = xp.take(self._steps_left, self.k)  # (horizon − k) / horizon, looked up
-        if self._comp is not None and (self._clean or self.all_consistent()):
-            a, b, d = self._comp
+        if self._node is not None:  # each member's node's features, gathered
+            if out.dtype == np.float32:
+                np.take(self._history.feats, self._node, axis=1, out=out[1:4], mode="clip")
+            else:
+                out[1:4] = self._history.feats64.take(self._node, axis=1)
+            col = 4
+        elif self._c is not None and (self._clean or self.all_consistent()):
+            a, b, d = self._c
             a0, _, d0 = self._start2
             # the observation is float32: numpy computes its transcendental parts so
             xp.log_into(a * (1.0 / a0), out[1])

@@ -32,12 +32,11 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from fdia_env._validation import check_choice, check_int
-from fdia_env.scenarios import Scenario
+from fdia_env.envs.family import NumberedFamily, check_range
 from fdia_env.systems import LinearSystem
 from fdia_env.systems.grid.cases import GRID_CASES
 from fdia_env.systems.system import Sensor
@@ -76,20 +75,8 @@ def _base(case: str) -> _Base:
     return _Base(model.system, load_bus, load_pu, B_inv)
 
 
-def _check_range(name: str, value: Any) -> tuple[float, float]:
-    ok = isinstance(value, (tuple, list)) and len(value) == 2
-    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-    ok = ok and all(math.isfinite(v) for v in value) and 0 < value[0] <= value[1]
-    if not ok:
-        raise ValueError(
-            f"{name} must be a (low, high) pair of finite numbers with 0 < low <= high, "
-            f"got {value!r}"
-        )
-    return float(value[0]), float(value[1])
-
-
 @dataclass(frozen=True)
-class GridFamily:
+class GridFamily(NumberedFamily):
     """Random loads and meter noise on one pandapower case (module docstring).
 
     Attributes:
@@ -108,8 +95,8 @@ class GridFamily:
 
     def __post_init__(self) -> None:
         check_choice("case", self.case, FAMILY_CASES)
-        object.__setattr__(self, "load_scale", _check_range("load_scale", self.load_scale))
-        object.__setattr__(self, "noise_scale", _check_range("noise_scale", self.noise_scale))
+        object.__setattr__(self, "load_scale", check_range("load_scale", self.load_scale))
+        object.__setattr__(self, "noise_scale", check_range("noise_scale", self.noise_scale))
         check_int("horizon", self.horizon, minimum=1, maximum=10_000)
         M = GRID_CASES[self.case].meters  # known without building the case
         check_int("budget", self.budget, minimum=0, maximum=M * self.horizon)
@@ -160,16 +147,6 @@ class GridFamily:
             F=sys.F, Q=sys.Q, sensors=sensors, x0=x0, P0=sys.P0, name=f"grid-{self.case}-family"
         )
 
-    def system(self, seed: int) -> LinearSystem:
-        """System number ``seed``: ``draw(numpy.random.default_rng(seed))``."""
-        return self.draw(np.random.default_rng(check_int("seed", seed, minimum=0)))
-
-    def scenario(self, seed: int) -> Scenario:
-        """System number ``seed`` with the family's budget and horizon (for the solvers)."""
-        return Scenario(
-            f"grid-family-{seed}",
-            self.system(seed),
-            f"grid family ({self.case}) system {seed}",
-            budget=self.budget,
-            horizon=self.horizon,
-        )
+    def describe(self) -> str:
+        """The family in words, for its scenarios' descriptions."""
+        return f"grid family ({self.case})"

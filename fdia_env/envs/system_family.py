@@ -104,11 +104,11 @@ from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import MAX_SENSORS, SparseAttack
 from fdia_env.defenses import PerfectDetection
 from fdia_env.envs.factory import episode_spec
+from fdia_env.envs.family import NumberedFamily, check_range
 from fdia_env.envs.grid_family import GridFamily
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.single_agent import SingleAgentEnv
 from fdia_env.kalman import information_update, objective, steady_state
-from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem, tracking_system
 
 OBJECTIVES = ("trace", "logdet")
@@ -120,22 +120,8 @@ MAX_SEQUENTIAL_SENSORS = 128
 """Largest ``max_sensors`` of ``action="sequential"`` (the bitmask action stops at 16)."""
 
 
-def _check_range(name: str, value: Any, lower: float, allow_zero: bool) -> tuple[float, float]:
-    ok = isinstance(value, (tuple, list)) and len(value) == 2
-    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-    ok = ok and all(math.isfinite(v) for v in value) and value[0] <= value[1]
-    ok = ok and (value[0] >= lower if allow_zero else value[0] > lower)
-    if not ok:
-        bound = f">= {lower}" if allow_zero else f"> {lower}"
-        raise ValueError(
-            f"{name} must be a (low, high) pair of finite numbers with {bound} <= ... "
-            f"low <= high, got {value!r}"
-        )
-    return float(value[0]), float(value[1])
-
-
 @dataclass(frozen=True)
-class TrackingFamily:
+class TrackingFamily(NumberedFamily):
     """Random tracking systems as in the ``ch4-random`` preset (docs/math.md §6).
 
     A draw: ``num_sensors`` position sensors with ``σ_w ~ U(sigma_w)`` (floored at 1e-6), then
@@ -160,8 +146,8 @@ class TrackingFamily:
 
     def __post_init__(self) -> None:
         check_int("num_sensors", self.num_sensors, minimum=1, maximum=MAX_SENSORS)
-        object.__setattr__(self, "sigma_v", _check_range("sigma_v", self.sigma_v, 0.0, False))
-        object.__setattr__(self, "sigma_w", _check_range("sigma_w", self.sigma_w, 0.0, True))
+        object.__setattr__(self, "sigma_v", check_range("sigma_v", self.sigma_v))
+        object.__setattr__(self, "sigma_w", check_range("sigma_w", self.sigma_w, closed=True))
         check_int("horizon", self.horizon, minimum=1, maximum=10_000)
         check_int("budget", self.budget, minimum=0, maximum=self.num_sensors * self.horizon)
 
@@ -179,20 +165,6 @@ class TrackingFamily:
         lo, hi = self.sigma_v
         sigma_v = float(np.exp(rng.uniform(math.log(lo), math.log(hi))))
         return tracking_system(sigma_v, list(sigma_w), name="tracking-family")
-
-    def system(self, seed: int) -> LinearSystem:
-        """System number ``seed``: ``draw(numpy.random.default_rng(seed))``."""
-        return self.draw(np.random.default_rng(check_int("seed", seed, minimum=0)))
-
-    def scenario(self, seed: int) -> Scenario:
-        """System number ``seed`` with the family's budget and horizon (for the solvers)."""
-        return Scenario(
-            f"tracking-family-{seed}",
-            self.system(seed),
-            f"tracking family system {seed}",
-            budget=self.budget,
-            horizon=self.horizon,
-        )
 
 
 def _upper(a: np.ndarray) -> np.ndarray:
