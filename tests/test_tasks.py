@@ -339,3 +339,13 @@ def test_the_leaderboard_rows_cover_every_task_and_learner_with_three_seeds():
     ]
     assert missing == []
     assert {name for name, _ in seeds} == set(ALL)  # every task has learner rows
+    page = (path.parents[2] / "docs" / "benchmark.md").read_text(encoding="utf-8")
+    board = page.split("<!-- leaderboard:start -->", 1)[1]
+    assert f"({len(rows)} learner runs," in board  # rendered from these rows
+    for name in ALL:  # each task's table: random, heuristics, reference, learners
+        table = board.split(f"**{name}**", 1)[1].split("\n\n", 2)[1]
+        refs = tasks.get(name).references
+        for label in ["random", *refs.heuristics, refs.optimum.name]:
+            assert f"| {label} |" in table, (name, label)
+        for algo in {algo for task, algo in seeds if task == name}:
+            assert f"| {algo} |" in table and "3 seeds, 2,048 steps" in table, (name, algo)
