@@ -88,3 +88,22 @@ def test_the_stored_ieee118_matrix_matches_the_full_defenders_filter():
     attacked = np.argmax(subset_masks(system.M, 1, "attacker"), axis=1)
     expected = np.trace(P) + 0.01 * np.square(W[:, attacked]).sum(axis=0)
     np.testing.assert_allclose(L[row], expected, rtol=1e-10, atol=0.0)
+
+
+def test_the_payoff_command_stores_the_game_and_verify_refuses_a_stale_matrix(store, capsys):
+    from agents.bench.__main__ import main
+    from agents.bench.references import sensor_game
+    from fdia_env.tasks import spec
+
+    assert main(["payoff", "--task", TASK]) == 0
+    assert "wrote" in capsys.readouterr().out
+    sc = scenarios.get("ch5-game")
+    L = payoffs.stored_payoff(sc, 100.0, "independent", None)
+    assert np.array_equal(L, payoff_matrix(sc, 100.0))
+    stored = get(TASK).references
+    assert sensor_game(spec(TASK)).game_value == stored.game_value  # rebuilt == stored: passes
+    payoffs.write_payoff(L * (1 + 1e-6), sc, 100.0, "independent", None)
+    with pytest.raises(RuntimeError, match="stored payoff matrix differs"):
+        sensor_game(spec(TASK))
+    assert main(["payoff", "--task", "sparse/ch4-position-v0"]) == 2
+    assert "must be a sensor-game task" in capsys.readouterr().err

@@ -54,6 +54,17 @@ def test_training_env_rescales_as_train_py_nothing_0_optimum_1():
     assert type(useless).__name__ == "VecNormalize"
 
 
+def test_results_train_maskable_ppo_with_train_py_grid_hyperparameters():
+    from agents.config import Hyperparameters, resolved_hyperparameters
+    from agents.training import run_setup
+
+    setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
+    assert setup.algo == "MaskablePPO" and setup.normalize_reward
+    assert setup.env_kwargs["order"] == "plan"
+    ours = resolved_hyperparameters("MaskablePPO", sparse_grid.train_py_hyperparameters())
+    assert ours == resolved_hyperparameters("MaskablePPO", setup.hp)
+
+
 def test_plan_policy_picks_the_lowest_pair_not_yet_planned_batched():
     best = exhaustive("ch4-position", budget=2, horizon=3)
     policy = sparse_grid.plan_policy(best)

@@ -302,3 +302,50 @@ def test_the_catalogue_has_24_tasks_8_hard_and_both_players_of_every_family_with
     assert {family for family, _ in played} == set(FAMILIES)
     for family in ("sensor-game", "detection-game", "incomplete-information", "stealth"):
         assert {(family, "attacker"), (family, "defender")} <= played, family
+
+
+def test_the_branch_and_bound_policy_played_in_the_env_scores_one_exactly():
+    from baselines.sparse import branch_and_bound
+
+    task = tasks.get("sparse/ch4-random-v0")  # C(18, 10) sets: its reference is B&B's
+    assert task.references.optimum.name == "B&B (certified optimum)"
+    kw = task.env_kwargs
+    best = branch_and_bound(kw["scenario"], kw["budget"], kw["horizon"], kw["objective"])
+    assert best.proved_optimal
+    with task.make_env() as env:
+        result = evaluate(best.policy(), env, n_episodes=2, reference=1.0)
+    assert task.normalise(result.mean) == 1.0
+
+
+def test_the_leaderboard_rows_cover_every_task_and_learner_with_three_seeds():
+    """``results/bench/rows.json``: 3 seeds at one budget for each learner that fits a task."""
+    import json
+    from collections import defaultdict
+    from pathlib import Path
+
+    from experiments.bench.run import LEARNERS, applicable
+
+    path = Path(__file__).resolve().parents[1] / "results" / "bench" / "rows.json"
+    rows = json.loads(path.read_text(encoding="utf-8"))["rows"]
+    assert {r["timesteps"] for r in rows} == {2048}
+    seeds = defaultdict(set)
+    for r in rows:
+        seeds[r["task"], r["method"]].add(r["seed"])
+    missing = [
+        (name, algo, sorted(seeds[name, algo]))
+        for name in ALL
+        for algo in LEARNERS
+        if applicable(tasks.get(name), algo) and seeds[name, algo] != {0, 1, 2}
+    ]
+    assert missing == []
+    assert {name for name, _ in seeds} == set(ALL)  # every task has learner rows
+    page = (path.parents[2] / "docs" / "benchmark.md").read_text(encoding="utf-8")
+    board = page.split("<!-- leaderboard:start -->", 1)[1]
+    assert f"({len(rows)} learner runs," in board  # rendered from these rows
+    for name in ALL:  # each task's table: random, heuristics, reference, learners
+        table = board.split(f"**{name}**", 1)[1].split("\n\n", 2)[1]
+        refs = tasks.get(name).references
+        for label in ["random", *refs.heuristics, refs.optimum.name]:
+            assert f"| {label} |" in table, (name, label)
+        for algo in {algo for task, algo in seeds if task == name}:
+            assert f"| {algo} |" in table and "3 seeds, 2,048 steps" in table, (name, algo)

@@ -298,6 +298,18 @@ def training_env(
     )
 
 
+def train_py_hyperparameters() -> Any:
+    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets' sparse attack.
+
+    The algorithm's defaults (:data:`agents.config.ALGO_DEFAULTS`) with the grid presets' own
+    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py`` does.
+    """
+    from agents.config import SCENARIO_DEFAULTS, Hyperparameters, with_defaults
+
+    grid = SCENARIO_DEFAULTS[("sparse_attack_v0", "grid-ieee14")]
+    return with_defaults("MaskablePPO", Hyperparameters(), grid)
+
+
 def train_maskable(
     system: LinearSystem,
     inst: Instance,
@@ -308,21 +320,22 @@ def train_maskable(
 ) -> tuple[Any, list[tuple[int, float]], float]:
     """MaskablePPO in ``order``: ``(model, curve [(steps, return)], train seconds)``.
 
-    Trained as ``train.py`` trains on the grid presets: the algorithm's defaults and the
-    rewards rescaled so that attacking nothing returns 0 and ``reference`` 1
-    (:class:`agents.training.NormalizedReward`); without ``reference`` (or when it is no better
-    than attacking nothing), SB3's ``VecNormalize`` scales the rewards instead.
+    Trained as ``train.py`` trains on the grid presets: its hyperparameters there
+    (:func:`train_py_hyperparameters`) and the rewards rescaled so that attacking nothing
+    returns 0 and ``reference`` 1 (:func:`training_env`).
     """
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
     from agents.algos import build_model
-    from agents.config import Hyperparameters, algo_kwargs
+    from agents.config import algo_kwargs
 
     torch.set_num_threads(1)
     eval_env = make_env(system, inst, order)
     venv = training_env(system, inst, order, reference)
-    model = build_model("MaskablePPO", venv, algo_kwargs("MaskablePPO", Hyperparameters()), seed)
+    model = build_model(
+        "MaskablePPO", venv, algo_kwargs("MaskablePPO", train_py_hyperparameters()), seed
+    )
     every = max(1, budget.maskable_steps // budget.evals)
     curve: list[tuple[int, float]] = []
 
