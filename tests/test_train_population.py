@@ -228,6 +228,14 @@ def test_the_expected_opponent_env_pays_the_mix_s_exact_expected_payoff(side, ac
                 break
         assert done
         assert total == pytest.approx(expected[own], rel=1e-12, abs=1e-15)
+    # every strategy played is recorded with its exact value; the best one wins over a candidate
+    assert sorted(env.values) == list(range(7))
+    np.testing.assert_allclose([env.values[a] for a in range(7)], expected, rtol=1e-12)
+    best = int(np.argmax(expected))
+    assert env.best_strategy(best) == best and env.best_strategy((best + 1) % 7) == best
+    env.values = {}
+    assert env.value_of(3) == pytest.approx(expected[3], rel=1e-12)
+    assert env.best_strategy(3) == 3  # nothing better played
     env.close()
     with pytest.raises(ValueError, match="opponent must be a 1-D mix"):
         ExpectedOpponentEnv(get("sensor_game_v0", side).gym_id, kwargs, -probs)
