@@ -288,3 +288,14 @@ def test_the_game_command_trains_on_expected_rewards(tmp_path):
     config = json.loads((run.run_dir / "config.json").read_text())
     assert config["resolved"]["expected_rewards"] is True
     assert [h["timesteps"] for h in run.history] == [128]
+
+
+def test_the_sequential_format_s_meta_game_plays_both_pure_strategies(game):
+    """PSRO's meta-game in the sequential format holds L's entries of the populations' subsets."""
+    sequential = MatrixGame(
+        game.entries, {**game.env_kwargs, "action": "sequential"}, game.payoff, game.value
+    )
+    _, state = run(sequential, "psro", 4)
+    rows, cols = state.actions["defender"], state.actions["attacker"]
+    np.testing.assert_allclose(state.meta, game.payoff[np.ix_(rows, cols)], rtol=1e-12)
+    assert state.history[-1]["relative_nash_conv"] <= 1e-12  # the double oracle's equilibrium
