@@ -88,12 +88,12 @@ def test_the_table_shows_every_seed_and_the_game():
     }  # fmt: skip
     boxed = attacker | {
         "action": "box_shift", "scenario": "grid-ieee118", "learned": [0.0987, 0.0665],
-        "learned_mean": 0.0826, "optimum": 0.0987, "bound": 0.0987, "milp_seconds": 8.2,
-        "optimum_kind": "MILP, proved", "score": [1.0, 0.674],
+        "learned_mean": 0.0826, "optimum": 0.0987, "a_max": 0.05, "bound": 0.0987,
+        "milp_seconds": 8.2, "optimum_kind": "MILP, proved", "score": [1.0, 0.674],
     }  # fmt: skip
     table = format_rows([attacker, boxed], [game], [defender])
     assert (
-        "| grid-ieee118 | torch-ppo | 3 | 10 | 0.0987, 0.0665 | 0.0826 ± 0.3 | 1.70e-05 "
+        "| grid-ieee118 | torch-ppo | 3 | 0.05 | 10 | 0.0987, 0.0665 | 0.0826 ± 0.3 | 1.70e-05 "
         "| 0.0987 (0.0987; MILP, proved) | 8 | 100.0%, 67.4% | 4, 5 |"
     ) in table
     assert "| 8 | 0.001, 0.01 | 0.05095, 0.05950 | 0.05523 ± 0.05 | 0.05095 | 3, 4 |" in table
