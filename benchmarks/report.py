@@ -254,9 +254,10 @@ BENCHES_BY_NAME = (
     Bench(
         "backends",
         "backends.py",
-        (),
-        ("--quick",),
-        "the native vector env on numpy and on torch (CPU)",
+        ("--threads", "1"),
+        ("--quick", "--threads", "1"),
+        "the native vector env on numpy and on torch (CPU), one torch thread as numpy's one BLAS "
+        "thread (on a shared 2-core machine torch's default two threads wait on each other)",
         _backends,
     ),
     Bench(
