@@ -164,7 +164,7 @@ def _bnb(out: str) -> list[Row]:
     )
     return [
         (
-            "branch and bound, 300-pair meter-level DC IEEE 14, c = 5 (`bnb.py --parts 3`)",
+            "branch and bound, 300-pair meter-level DC IEEE 14, c = 5 (`bnb.py`)",
             f"{m[2]} in {m[4]} s ({m[1]})" if m else "",
             "C(300, 5) ≈ 2·10¹⁰ sets",
         )
@@ -399,13 +399,17 @@ def section(
 
 
 def readme_table(
-    results: list[tuple[Bench, str, str]], quick: bool, pending: list[str] | None = None
+    results: list[tuple[Bench, str, str]],
+    quick: bool,
+    pending: list[str] | None = None,
+    when: str | None = None,
 ) -> str:
-    """The README's performance table of this run, between its marker lines."""
+    """The README's performance table of this run (``when``: its date), between marker lines."""
+    when = when or time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     lines = [
         README_BEGIN,
         f"Written by `python benchmarks/report.py{' --quick' if quick else ''}` (`make bench`) on "
-        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; machine: "
+        f"{when}; machine: "
         f"{machine(threads='1')}. The full outputs are in "
         "[docs/benchmarks.md](docs/benchmarks.md).",
         "",
@@ -416,7 +420,9 @@ def readme_table(
     for bench, _, out in results:
         failed = out.startswith("(failed") or out.startswith("(did not")
         for what, figure, ref in bench.summary(out):
-            if failed:
+            if failed and figure:  # e.g. a script whose exit status says its target was missed
+                figure += f" (`{bench.script}` {out.splitlines()[0].strip('()')})"
+            elif failed:
                 figure, ref = f"`{bench.script}` failed in this run", ""
             elif not figure:
                 figure = f"not in `{bench.script}`'s output"

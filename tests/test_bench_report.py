@@ -79,6 +79,12 @@ def test_the_readme_table_is_rebuilt_from_the_run(tmp_path):
         [(vector, "python benchmarks/vector.py", "(failed with exit status 1)\nboom")], False
     )
     assert "`vector.py` failed in this run" in failed and "2.00" not in failed
+    # a script that prints its figures and exits 1 for a missed target keeps them, flagged
+    missed = report.readme_table(
+        [(vector, "python benchmarks/vector.py", f"(failed with exit status 1)\n{VECTOR_OUTPUT}")],
+        False,
+    )
+    assert "2.00× (50,000,000 env-steps/s) (`vector.py` failed with exit status 1)" in missed
 
 
 def test_every_benchmark_of_the_run_names_its_readme_figures():
