@@ -362,6 +362,10 @@ _GRID_GAME = ScenarioDefaults(
     when=_SEQUENTIAL,
 )
 GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57", "grid-ieee118")
+GAME_EXPECTED_REWARDS = ("grid-ieee14",)
+"""Sensor-game presets whose SB3 best responses train on the expected reward over the other
+side's mix by default (``train.py game --expected-rewards``): there the defender's strategies
+differ by a few % of the game value, below the noise of one sampled opponent per episode."""
 
 SCENARIO_DEFAULTS: dict[tuple[str, str], ScenarioDefaults] = {
     **{("sparse_attack_v0", name): _GRID_SPARSE for name in GRID_PRESETS},
@@ -584,6 +588,10 @@ class GameConfig:
     normalize_reward: bool | None = None
     """Train the best responses on rewards divided by the game value's size (evaluation stays
     on the raw rewards). Default: the scenario's (on for grid-ieee14)."""
+    expected_rewards: bool | None = None
+    """Pay each SB3 best response the expected reward over the other side's mix (the env
+    played against every strategy of its support) instead of one sampled draw per episode.
+    Default: the scenario's (on for grid-ieee14, :data:`GAME_EXPECTED_REWARDS`)."""
     run: tyro.conf.OmitArgPrefixes[RunSettings] = field(default_factory=RunSettings)
     """Run folder, seeding and output."""
     hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
@@ -591,6 +599,10 @@ class GameConfig:
 
     def __post_init__(self) -> None:
         check_choice("method", self.method, ("psro", "fsp", "ibr", "selfplay"))
+        if self.expected_rewards is not None and not isinstance(self.expected_rewards, bool):
+            raise TypeError(
+                f"{flag('expected_rewards')} must be true or false, got {self.expected_rewards!r}"
+            )
         check_env_kwargs_format(self.env_kwargs)
         for name in ("iterations", "steps_per_iteration", "final_eval_episodes"):
             check_number(name, getattr(self, name), *_AT_LEAST_1)

@@ -25,10 +25,12 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
+from agents.seeding import derived_seed
 from baselines.game import exploitability, solve_zero_sum
 from fdia_env.envs.policy import PolicyBase, repeat_action
 
@@ -266,6 +268,35 @@ class ConstantPolicy(PolicyBase):
     def act(self, observation: Any, deterministic: bool = False) -> np.ndarray:
         """``action`` (a 0-d array), or (B,) of it for a batched observation."""
         return repeat_action(np.array(self.action), observation)
+
+
+@dataclass
+class LearnedOracle:
+    """What every learned oracle shares: the run's settings, its folder and the trainables.
+
+    Subclasses (:class:`agents.selfplay.SB3Oracle`, :class:`agents.selfplay.TorchPPOOracle`,
+    :class:`agents.rllib.train.RLlibOracle`) add their learner's settings and write
+    :meth:`Oracle.learn` and :meth:`Oracle.save` with :meth:`seed` and :meth:`policy_path`.
+
+    Attributes:
+        cfg: The run's :class:`~agents.config.GameConfig`.
+        run_dir: The run folder.
+        entries: Each side's :class:`~agents.registry.Trainable`.
+        env_kwargs: The env's options.
+    """
+
+    cfg: Any
+    run_dir: Path
+    entries: dict[str, Any]
+    env_kwargs: dict[str, Any]
+
+    def seed(self, side: str, iteration: int) -> int:
+        """The seed of ``side``'s answer in ``iteration``, derived from the run's seed."""
+        return derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
+
+    def policy_path(self, side: str, index: int, suffix: str = ".json") -> Path:
+        """Where the ``index``-th policy of ``side`` is saved: ``policies/<side>_<index>``."""
+        return self.run_dir / "policies" / f"{side}_{index}{suffix}"
 
 
 class ExactOracle:

@@ -29,9 +29,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.algos import build_model
@@ -43,6 +45,7 @@ from agents.checkpoint import (
     save_model,
 )
 from agents.config import (
+    GAME_EXPECTED_REWARDS,
     TORCH_PPO,
     GameConfig,
     Hyperparameters,
@@ -61,6 +64,7 @@ from agents.population import (
     BestResponse,
     ConstantPolicy,
     ExactOracle,
+    LearnedOracle,
     MatrixGame,
     Oracle,
     PopulationState,
@@ -71,7 +75,14 @@ from agents.population import (
 from agents.registry import Reference, Trainable, game_names, get
 from agents.runs import run_prefix, write_json
 from agents.seeding import derived_seed, seed_everything
-from agents.training import RunSetup, check_env_kwargs, env_thunk, make_env, run_setup
+from agents.training import (
+    NormalizedReward,
+    RunSetup,
+    check_env_kwargs,
+    env_thunk,
+    make_env,
+    run_setup,
+)
 from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
 
@@ -81,6 +92,7 @@ if TYPE_CHECKING:
 STATE = "state.json"  # a game run folder that --resume can continue has it
 EXACT = "exact"  # --algo exact: the exact best response on the payoff matrix
 GAME_NUM_ENVS = 64  # torch-ppo best responses: members of the torch vector env
+EXPECTED_MAX_SUPPORT = 64  # expected rewards: at most this many env copies, else sampled
 
 
 @dataclass
@@ -112,6 +124,91 @@ class SelfPlayResult:
     interrupted: int | None = None
 
 
+class ExpectedOpponentEnv(gym.Env):
+    """A side's Gymnasium view against a mixed opponent, paid the mix's expected reward.
+
+    One copy of the view per pure strategy in the support of ``opponent`` (each copy's opponent
+    plays that strategy, :class:`~agents.population.ConstantPolicy`). Every action of the
+    learner is played in all copies, and the reward is the probability-weighted sum of the
+    copies' rewards: the exact expectation over the opponent's draw, where a view with a
+    sampled opponent (:class:`~fdia_env.envs.opponents.FixedMix`) pays one draw of it. The
+    expected return of every policy is the same in both, so the best response is the same; only
+    the learner's reward noise from the opponent's draw is gone. It costs one env step per
+    support strategy.
+
+    In the one-shot game the learner's observations and masks do not depend on the opponent's
+    action (it sees its own features and its own picks), so the copies stay in lockstep; every
+    reset seeds all copies alike (nature's draw of a typed game is then the same in each). In
+    the sequential format a round ends once both players have stopped, so a copy whose
+    opponent builds a shorter subset ends first: the learner has stopped by then (its only legal
+    action is stop in every copy), the ended copy is left alone, and the episode ends with the
+    last copy.
+
+    Args:
+        gym_id: The side's registered view (``fdia_env/SensorGameDefender-v0``, ...).
+        env_kwargs: The env's options.
+        opponent: (n,) the other side's mix over its actions.
+
+    Raises:
+        ValueError: For an ``opponent`` that is not a 1-D mix of probabilities.
+    """
+
+    def __init__(self, gym_id: str, env_kwargs: dict[str, Any], opponent: np.ndarray) -> None:
+        probs = np.asarray(opponent, dtype=np.float64)
+        if probs.ndim != 1 or not np.all(np.isfinite(probs)) or probs.min() < 0 or probs.sum() <= 0:
+            raise ValueError(f"opponent must be a 1-D mix of probabilities, got {opponent!r}")
+        support = np.flatnonzero(probs > 0)
+        self.weights = probs[support] / probs[support].sum()
+        self.copies = [
+            gym.make(gym_id, opponent=ConstantPolicy(int(a)), **env_kwargs) for a in support
+        ]
+        self.observation_space = self.copies[0].observation_space
+        self.action_space = self.copies[0].action_space
+        self._running = [True] * len(self.copies)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Reset every copy with one seed (drawn from this env's generator when None)."""
+        super().reset(seed=seed)
+        shared = int(self.np_random.integers(2**31 - 1))
+        outs = [env.reset(seed=shared, options=options) for env in self.copies]
+        self._running = [True] * len(self.copies)
+        return outs[0]
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Play ``action`` in every running copy; the reward is their probability-weighted sum.
+
+        Raises:
+            RuntimeError: After the episode ended (every copy has).
+        """
+        if not any(self._running):
+            raise RuntimeError("the episode has ended: call reset()")
+        reward, truncated, last = 0.0, False, None
+        for k, env in enumerate(self.copies):
+            if not self._running[k]:
+                continue
+            obs, r, term, trunc, info = env.step(action)
+            reward += self.weights[k] * float(r)
+            truncated = truncated or bool(trunc)
+            self._running[k] = not (term or trunc)
+            if last is None or self._running[k]:
+                last = (obs, info)
+        assert last is not None  # a running copy was stepped
+        ended = not any(self._running)
+        return last[0], reward, ended and not truncated, ended and truncated, last[1]
+
+    def action_masks(self) -> np.ndarray:
+        """The learner's legal actions now (the same in every running copy)."""
+        k = next((k for k, running in enumerate(self._running) if running), 0)
+        return self.copies[k].unwrapped.action_masks()
+
+    def close(self) -> None:
+        """Close every copy."""
+        for env in self.copies:
+            env.close()
+
+
 def learn_best_response(
     entry: Trainable,
     env_kwargs: dict[str, Any],
@@ -124,21 +221,32 @@ def learn_best_response(
     tb_dir: Path | None = None,
     callback: BaseCallback | None = None,
     reward_scale: float | None = None,
+    expected: bool = False,
 ) -> tuple[BaseAlgorithm, int]:
     """A fresh ``algo`` learner trained against the fixed mix ``opponent``, and its action.
 
     The learner plays ``entry``'s side; the action is its pure strategy (:func:`initial_action`).
     ``callback`` may end training early (as :class:`~agents.interrupt.StopTrainingCallback`).
     ``reward_scale``: train on the rewards divided by it (e.g. the game value's size).
+    ``expected``: pay the expected reward over the mix (:class:`ExpectedOpponentEnv`) instead
+    of one draw of it per episode, where the mix has at most :data:`EXPECTED_MAX_SUPPORT`
+    strategies (a wider one, e.g. the uniform mix of PSRO's first iteration, is sampled).
     """
     seed_everything(seed)
-    make = env_thunk(
-        entry.gym_id,
-        env_kwargs,
-        lambda: FixedMix(opponent, seed=derived_seed(seed, 1)),
-        monitor=True,
-        reward=None if reward_scale is None else (0.0, reward_scale),
-    )
+    if expected and np.count_nonzero(opponent) <= EXPECTED_MAX_SUPPORT:
+
+        def make() -> gym.Env:
+            env: gym.Env = Monitor(ExpectedOpponentEnv(entry.gym_id, env_kwargs, opponent))
+            return env if reward_scale is None else NormalizedReward(env, 0.0, reward_scale)
+
+    else:
+        make = env_thunk(
+            entry.gym_id,
+            env_kwargs,
+            lambda: FixedMix(opponent, seed=derived_seed(seed, 1)),
+            monitor=True,
+            reward=None if reward_scale is None else (0.0, reward_scale),
+        )
     vec_env = DummyVecEnv([make])
     model = build_model(algo, vec_env, kwargs, seed, device)
     if tb_dir is not None:  # a resumed iteration replaces the unfinished one's events
@@ -167,6 +275,27 @@ def game_setup(cfg: GameConfig) -> RunSetup:
     return run_setup(
         cfg.env, "attacker", cfg.scenario, cfg.env_kwargs, algo, cfg.hp, cfg.normalize_reward
     )
+
+
+def expected_rewards(cfg: GameConfig, algo: str) -> bool:
+    """Whether the best responses train on the expected reward over the other side's mix.
+
+    ``cfg.expected_rewards``, else the scenario's default (:data:`GAME_EXPECTED_REWARDS`); an
+    SB3 learner's option only.
+
+    Raises:
+        ValueError: For ``--expected-rewards`` with ``--algo exact`` or ``torch-ppo``.
+    """
+    if algo in (EXACT, TORCH_PPO):
+        if cfg.expected_rewards:
+            raise ValueError(
+                f"--expected-rewards applies to SB3 best responses (PPO, A2C, DQN, "
+                f"MaskablePPO), not --algo {algo}"
+            )
+        return False
+    if cfg.expected_rewards is not None:
+        return cfg.expected_rewards
+    return cfg.scenario in GAME_EXPECTED_REWARDS
 
 
 def game_prefix(cfg: GameConfig) -> str:
@@ -286,6 +415,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
     # are single sensors)
     n = {"defender": int(L.shape[0]), "attacker": int(L.shape[1])}
     scale = abs(value) if setup.normalize_reward and algo not in (EXACT, TORCH_PPO) else None
+    expected = expected_rewards(cfg, algo)
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
@@ -317,6 +447,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                 "env_kwargs": env_kwargs,
                 "hyperparameters": hyperparameters,
                 "reward_scale": scale,
+                "expected_rewards": expected,
                 "reference": {"name": reference.name, "value": value},
             },
         )
@@ -330,8 +461,9 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             oracle = TorchPPOOracle(cfg, run_dir, entries, env_kwargs, torch_config, stop)
         else:
             oracle = SB3Oracle(
-                cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop, scale
-            )
+                cfg, run_dir, entries, env_kwargs, algo, kwargs, hyperparameters, stop, scale,
+                expected,
+            )  # fmt: skip
         loop = _population_state(state, names, models, n)
         history = _iterate(cfg, run_dir, loop, oracle, game, stop, report)
         if not history:  # stopped before the first iteration finished
@@ -419,7 +551,8 @@ def _load_torch_policies(
     }
 
 
-class TorchPPOOracle:
+@dataclass
+class TorchPPOOracle(LearnedOracle):
     """Best responses learned by torch-ppo on the device (the ``torch-ppo`` oracle).
 
     Each answer trains a fresh :func:`~agents.torch_ppo.train_torch_ppo` policy for
@@ -429,25 +562,18 @@ class TorchPPOOracle:
     the current PPO iteration and drops the answer.
     """
 
-    def __init__(
-        self,
-        cfg: GameConfig,
-        run_dir: Path,
-        entries: dict[str, Trainable],
-        env_kwargs: dict[str, Any],
-        config: TorchPPOConfig,
-        stop: StopRequest,
-    ) -> None:
-        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
-        self.config, self.stop = config, stop
-        self.device = resolve_device(cfg.run.device)
+    config: TorchPPOConfig
+    stop: StopRequest
+
+    def __post_init__(self) -> None:
+        self.device = resolve_device(self.cfg.run.device)
 
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
         """A fresh torch-ppo policy's answer to ``opponent``, or None if a stop cut it short."""
         from agents.torch_ppo import make_torch_env, train_torch_ppo
 
         entry = self.entries[side]
-        seed = derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
+        seed = self.seed(side, iteration)
         mix = FixedMix(opponent, seed=derived_seed(seed, 1))
         venv = make_torch_env(
             entry.gym_id, self.config.num_envs, self.device, opponent=mix, **self.env_kwargs
@@ -464,36 +590,29 @@ class TorchPPOOracle:
         """Save the policy as ``policies/<side>_<index>.json``; returns the file's name."""
         from agents.torch_ppo import save_policy
 
-        path = self.run_dir / "policies" / f"{side}_{index}.json"
-        return save_policy(response.policy, path, self.config).name
+        return save_policy(response.policy, self.policy_path(side, index), self.config).name
 
 
-class SB3Oracle:
+@dataclass
+class SB3Oracle(LearnedOracle):
     """Best responses learned by a fresh stable-baselines3 learner each (the ``sb3`` oracle).
 
     Each answer trains ``algo`` for ``steps`` env steps on the side's Gymnasium view against
-    the other side's mix (seed derived from the run's, the iteration and the side), logs to
+    the other side's mix (seed derived from the run's, the iteration and the side; with
+    ``expected``, paid the expected reward over the mix, :class:`ExpectedOpponentEnv`), logs to
     ``tb/<side>_br_<iteration>``, and is saved as ``policies/<side>_<k>.json`` / ``.pt``.
     A stop request ends the learner at its next step and drops the answer.
     """
 
-    def __init__(
-        self,
-        cfg: GameConfig,
-        run_dir: Path,
-        entries: dict[str, Trainable],
-        env_kwargs: dict[str, Any],
-        algo: str,
-        kwargs: dict[str, Any],
-        hyperparameters: dict[str, Any],
-        stop: StopRequest,
-        reward_scale: float | None = None,
-    ) -> None:
-        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
-        self.algo, self.kwargs, self.hyperparameters = algo, kwargs, hyperparameters
-        self.stop = stop
-        self.reward_scale = reward_scale
-        self.callback = StopTrainingCallback(stop)
+    algo: str
+    kwargs: dict[str, Any]
+    hyperparameters: dict[str, Any]
+    stop: StopRequest
+    reward_scale: float | None = None
+    expected: bool = False
+
+    def __post_init__(self) -> None:
+        self.callback = StopTrainingCallback(self.stop)
 
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> BestResponse | None:
         """A fresh learner's answer to ``opponent``, or None if a stop request cut it short."""
@@ -504,17 +623,18 @@ class SB3Oracle:
             self.algo,
             self.kwargs,
             self.cfg.steps_per_iteration,
-            derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side)),
+            self.seed(side, iteration),
             self.cfg.run.device,
             self.run_dir / "tb" / f"{side}_br_{iteration:03d}",
             self.callback,
             self.reward_scale,
+            self.expected,
         )
         return None if self.stop.requested else BestResponse(model, action)
 
     def save(self, side: str, index: int, response: BestResponse) -> str:
         """Save the model as ``policies/<side>_<index>.json``; returns the file's name."""
-        path = self.run_dir / "policies" / f"{side}_{index}.json"
+        path = self.policy_path(side, index)
         return save_model(response.policy, path, self.algo, self.hyperparameters).name
 
 

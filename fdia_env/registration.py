@@ -346,6 +346,9 @@ for _entry in (
     EnvEntry(  # sparse_attack_v0 with the sequential format the default above 16 sensors
         "sparse_attack_v1", "fdia_env.sparse_attack_v1", {"attacker": "fdia_env/SparseAttack-v1"}
     ),
+    EnvEntry(  # sparse_attack_v1 with the plan-first order the sequential format's default
+        "sparse_attack_v2", "fdia_env.sparse_attack_v2", {"attacker": "fdia_env/SparseAttack-v2"}
+    ),
     EnvEntry(
         "stealth_attack_v0",
         "fdia_env.stealth.stealth_attack_v0",

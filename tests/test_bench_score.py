@@ -404,3 +404,44 @@ def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch(monkeypatch):
     monkeypatch.setattr(registration, "torch_ids", lambda: numpy_only)
     assert not applicable(get(TASK), "torch-ppo")  # its env without a torch backend
     assert applicable(get(TASK), "PPO")
+
+
+def test_torch_ppo_is_not_offered_on_a_sensor_game_over_more_than_62_sensors():
+    """Regression: the torch env failed at reset with a KeyError on IEEE 118's 304 meters."""
+    import dataclasses
+
+    from agents.torch_ppo import make_torch_env
+    from experiments.bench.run import applicable
+    from fdia_env.systems.tracking import tracking_system
+
+    game = get("sensor-game/ch5-game-attacker-v0")
+    for sensors, fits in ((62, True), (63, False)):
+        system = tracking_system(0.5, list(np.linspace(1.0, 3.0, sensors)))
+        kwargs = {"scenario": system, "power": 10.0, "max_subset_size": 1}
+        assert applicable(dataclasses.replace(game, env_kwargs=kwargs), "torch-ppo") is fits
+    env = make_torch_env(game.env_id, 2, "cpu", **kwargs)
+    with pytest.raises(ValueError, match=r"backend='torch' .* at most 62 sensors, got M = 63"):
+        env.reset(seed=0)
+    env.close()
+
+
+def test_the_tutorial_scores_a_policy_in_under_20_lines_of_code():
+    """Lines holding code in docs/tutorials/score_policy.py (no comments, docstrings, blanks)."""
+    import ast
+    import io
+    import tokenize
+
+    source = (ROOT / "docs" / "tutorials" / "score_policy.py").read_text(encoding="utf-8")
+    docstrings = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef)):
+            if ast.get_docstring(node) is not None:
+                first = node.body[0]
+                docstrings |= set(range(first.lineno, first.end_lineno + 1))
+    skip = {tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT}
+    code = set()
+    for token in tokenize.generate_tokens(io.StringIO(source).readline):
+        if token.type not in skip | {tokenize.ENDMARKER}:
+            code |= set(range(token.start[0], token.end[0] + 1))
+    assert 10 <= len(code - docstrings) < 20
+    assert "score_policy(task, LastSteps()" in source  # the user's own policy is what it scores

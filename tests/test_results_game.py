@@ -94,7 +94,7 @@ def test_quick_psro_exploitability_falls_by_half_or_more(quick):
 def test_quick_table_and_plot_are_written(quick):
     table, _, out = quick
     assert "| game-m10 | 1023 × 1023 |" in table
-    assert "3 × 2048 (PPO)" in table
+    assert "3 × 2048 (PPO)" in table  # sampled rewards on game-m10 (its default)
     png = out / "results_game_game_m10.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -117,3 +117,12 @@ def test_psro_against_exact_refuses_bad_input_before_training():
         game.psro_against_exact(game.PsroSetting("game-m10", 1, 10), seed=-1)
     with pytest.raises(ValueError, match="unknown scenario 'nope'"):
         game.psro_against_exact(game.PsroSetting("nope", 1, 10))
+
+
+def test_the_table_runs_some_rows_and_names_an_unknown_one():
+    with pytest.raises(ValueError, match="games must be some of game-m10, got \\['grid-ieee14'\\]"):
+        game.run(quick=True, games=["grid-ieee14"])  # the quick run has no grid row
+    with pytest.raises(ValueError, match="games must be some of game-m10, got \\[\\]"):
+        game.run(quick=True, games=[])
+    with pytest.raises(SystemExit):  # argparse names the choices
+        game.main(["--games", "nope"])

@@ -35,6 +35,36 @@ def test_plan_policy_replays_exs_set_exactly_in_the_learners_env():
     assert result.score == pytest.approx(1.0, rel=1e-12)
 
 
+def test_training_env_rescales_as_train_py_nothing_0_optimum_1():
+    from fdia_env.scenarios import get
+
+    best = exhaustive("ch4-position", budget=3, horizon=4)
+    inst = Instance("ieee14-rtu", 3, 4, "trace")
+    system = get("ch4-position").system
+    venv = sparse_grid.training_env(system, inst, reference=best.value)
+    (env,) = venv.envs
+    optimum = evaluate(sparse_grid.plan_policy(best), env, 1, seed=0, reference=1.0).mean
+    empty = exhaustive("ch4-position", budget=0, horizon=4)  # attacking nothing
+    nothing = evaluate(sparse_grid.plan_policy(empty), env, 1, seed=0, reference=1.0).mean
+    assert optimum == pytest.approx(1.0, abs=1e-12)
+    assert nothing == pytest.approx(0.0, abs=1e-12)
+    # without a reference (or one no better than nothing) SB3's running normalisation
+    assert type(sparse_grid.training_env(system, inst)).__name__ == "VecNormalize"
+    useless = sparse_grid.training_env(system, inst, reference=empty.value)
+    assert type(useless).__name__ == "VecNormalize"
+
+
+def test_results_train_maskable_ppo_with_train_py_grid_hyperparameters():
+    from agents.config import Hyperparameters, resolved_hyperparameters
+    from agents.training import run_setup
+
+    setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
+    assert setup.algo == "MaskablePPO" and setup.normalize_reward
+    assert setup.env_kwargs["order"] == "plan"
+    ours = resolved_hyperparameters("MaskablePPO", sparse_grid.train_py_hyperparameters())
+    assert ours == resolved_hyperparameters("MaskablePPO", setup.hp)
+
+
 def test_plan_policy_picks_the_lowest_pair_not_yet_planned_batched():
     best = exhaustive("ch4-position", budget=2, horizon=3)
     policy = sparse_grid.plan_policy(best)

@@ -10,6 +10,7 @@ from experiments.results.stealth import (
     format_rows,
     learned_attacker,
     learned_protection,
+    milp_reference,
     references,
     shift_payoffs,
     threshold_game,
@@ -53,6 +54,21 @@ def test_ieee118_reference_is_the_min_cut_shift_played_in_the_env():
         shift_payoffs(3, "grid-ieee118")
 
 
+def test_ieee118_milp_reference_is_certified_and_held_by_the_box_shift_actions():
+    ref = milp_reference(3, "grid-ieee118")
+    # 108 of the 117 states have a min-cut security index above 3 (skipped, their best shift
+    # is 0); of the 9 MILPs, bus 86's (state 85: meters 85, 86, 302) moves the most
+    assert ref["skipped_states"] == 108 and ref["proved"]
+    assert ref["milp_state"] == 85 and ref["milp_meters"] == [85, 86, 302]
+    assert ref["milp_shift"] == pytest.approx(0.10393482094640001, rel=1e-9)
+    assert ref["optimum"] == pytest.approx((1 - 0.05) * ref["milp_shift"], rel=1e-12)
+    assert ref["bound"] == pytest.approx(ref["optimum"], rel=1e-12)
+    assert ref["attained"]  # the MILP's c is a 0/1 direction: a box shift pays the optimum
+    assert 0.0 <= ref["random"] < 0.01 * ref["optimum"]
+    with pytest.raises(ValueError, match="action must be one of"):
+        learned_attacker(3, 8, [0], action="free")
+
+
 def test_the_table_shows_every_seed_and_the_game():
     attacker = {
         "algo": "torch-ppo", "scenario": "grid-ieee14", "budget": 3, "steps": 10,
@@ -70,7 +86,16 @@ def test_the_table_shows_every_seed_and_the_game():
         "concedes_mean": 0.055225, "concedes_ci95": 0.05, "value": 0.05095,
         "train_seconds": [3.0, 4.0],
     }  # fmt: skip
-    table = format_rows([attacker], [game], [defender])
+    boxed = attacker | {
+        "action": "box_shift", "scenario": "grid-ieee118", "learned": [0.0987, 0.0665],
+        "learned_mean": 0.0826, "optimum": 0.0987, "a_max": 0.05, "bound": 0.0987,
+        "milp_seconds": 8.2, "optimum_kind": "MILP, proved", "score": [1.0, 0.674],
+    }  # fmt: skip
+    table = format_rows([attacker, boxed], [game], [defender])
+    assert (
+        "| grid-ieee118 | torch-ppo | 3 | 0.05 | 10 | 0.0987, 0.0665 | 0.0826 ± 0.3 | 1.70e-05 "
+        "| 0.0987 (0.0987; MILP, proved) | 8 | 100.0%, 67.4% | 4, 5 |"
+    ) in table
     assert "| 8 | 0.001, 0.01 | 0.05095, 0.05950 | 0.05523 ± 0.05 | 0.05095 | 3, 4 |" in table
     row = (
         "| grid-ieee14 | torch-ppo | 3 | 10 | 0.0475, 0.0000 | 0.0238 ± 0.3 | 1.70e-05 "

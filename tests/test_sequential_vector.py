@@ -333,6 +333,39 @@ def test_sparse_attack_v1_defaults_to_the_sequential_format_above_16_sensors():
         gym.make("fdia_env/SparseAttack-v0")  # Gymnasium's notice for a superseded version
 
 
+def test_sparse_attack_v2_defaults_to_the_plan_first_order_above_16_sensors():
+    from baselines.sparse import sfs
+    from fdia_env import sparse_attack_v1, sparse_attack_v2
+    from fdia_env.envs.sequential import SequentialSetEnv, play_plan
+
+    grid = sparse_attack_v2.parallel_env(scenario="grid-ieee14")  # 34 meters, N = 6
+    assert isinstance(grid, SequentialSetEnv) and grid.order == "plan"
+    assert grid.action_space("attacker").n == 6 * 34 + 1
+    assert grid.metadata["name"] == grid.inner.metadata["name"] == "sparse_attack_v2"
+    # v1's time-major order and the other formats stay by name; the bitmask up to 16 sensors
+    assert sparse_attack_v2.parallel_env(scenario="grid-ieee14", order="time").order == "time"
+    assert sparse_attack_v1.parallel_env(scenario="grid-ieee14").order == "time"
+    multi = sparse_attack_v2.parallel_env(scenario="grid-ieee14", action="multibinary")
+    assert multi.attack.format == "multibinary"
+    assert sparse_attack_v2.parallel_env(scenario="ch4-position").attack.format == "bitmask"
+    assert sparse_attack_v2.parallel_env(scenario="ch4-position", action="sequential").order == (
+        "plan"
+    )
+    with pytest.raises(ValueError, match="order='plan' applies to action='sequential' only"):
+        sparse_attack_v2.parallel_env(scenario="ch4-position", order="plan")
+    # the same attack set returns the same value in v2's default and in v1's plan order
+    best = sfs("grid-ieee14", 3, 4)
+    plan = [[j + 1 for k, j in best.attacks if k == step] for step in range(4)]
+    kw = {"scenario": "grid-ieee14", "budget": 3, "horizon": 4}
+    v2 = play_plan(sparse_attack_v2.parallel_env(**kw), plan)
+    v1 = play_plan(sparse_attack_v1.parallel_env(**kw, order="plan"), plan)
+    assert v2 == v1 == pytest.approx(best.value, rel=1e-12)
+    venv = gym.make_vec("fdia_env/SparseAttack-v2", num_envs=2, scenario="grid-ieee14")
+    assert isinstance(venv, SequentialVectorEnv) and venv.single_action_space.n == 6 * 34 + 1
+    with pytest.warns(DeprecationWarning, match="SparseAttack-v1 is out of date"):
+        gym.make("fdia_env/SparseAttack-v1")
+
+
 @pytest.mark.parametrize(
     ("kwargs", "name"),
     [

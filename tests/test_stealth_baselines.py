@@ -137,6 +137,26 @@ def test_budgeted_attack_on_the_radial_bus(ieee14):
     assert budgeted_attack(ieee14, budget=2, a_max=0.5, target=6).value == 0.0
 
 
+def test_budgeted_attack_skips_states_whose_index_exceeds_the_budget(ieee14, ieee14_milp):
+    # only state 6 has a security index <= 3: the pruned search solves its MILP alone and
+    # finds the optimum over every state (0.5 / b of transformer 3, the doctest's 0.0881)
+    assert np.flatnonzero(ieee14_milp.lower_bounds <= 3).tolist() == [6]
+    pruned = budgeted_attack(ieee14, budget=3, a_max=0.5, indices=ieee14_milp)
+    assert pruned.target == 6 and pruned.meters == (6, 7, 32) and pruned.proved
+    assert pruned.value == pytest.approx(0.5 / ieee14.grid.network.b[18], rel=1e-9)
+    # a budget below every index: every state skipped, the certified optimum is 0
+    none = budgeted_attack(ieee14, budget=2, a_max=0.5, indices=ieee14_milp)
+    assert none.value == 0.0 and none.bound == 0.0 and not none.a.any()
+    cut = security_index(ieee14, method="mincut", protected=[32])
+    with pytest.raises(ValueError, match="indices were computed with protected meters"):
+        budgeted_attack(ieee14, budget=3, indices=cut)
+    with pytest.raises(ValueError, match="indices must be a SecurityIndex"):
+        budgeted_attack(ieee14, budget=3, indices=[3.0] * 13)
+    part = security_index(ieee14, method="mincut", states=[0, 6])
+    with pytest.raises(ValueError, match="indices must cover every state"):
+        budgeted_attack(ieee14, budget=3, indices=part)
+
+
 def _budget_brute(est, budget, a_max, t):
     best = 0.0
     for size in range(1, budget + 1):

@@ -377,14 +377,6 @@ def test_bad_input_is_a_value_error_naming_the_parameter():
         env.step({"attacker": np.array([np.nan, 0.0, 0.0], dtype=np.float32)})
     with pytest.raises(ValueError, match="backend must be one of"):
         gym.make_vec(GYM_ID, num_envs=2, vectorization_mode="vector_entry_point", backend="jax")
-    with pytest.raises(ValueError, match="backend='torch' runs action='bias' only"):
-        gym.make_vec(
-            GYM_ID,
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            backend="torch",
-            action="linear",
-        )
 
 
 # --- the torch backend of the native vector env (bias attack) -------------------------------
@@ -401,12 +393,15 @@ def _compare(out, tout):
 
 
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
-def test_torch_backend_equals_numpy_on_the_same_draws(dynamics, monkeypatch):
+@pytest.mark.parametrize("action", ["bias", "linear"])
+def test_torch_backend_equals_numpy_on_the_same_draws(dynamics, action, monkeypatch):
     torch = pytest.importorskip("torch")
     from fdia_env.backend import NUMPY
     from fdia_env.stealth.dynamic_model import DynamicModel
 
     kwargs = {"dynamics": dynamics, "horizon": 3, "on_detect": "end", "a_max": 3.0}
+    kwargs |= {"action": action}
+    shape = (3,) if action == "bias" else (3, 4)  # (T, b) on the 3 attacked rows
     runs = []
     for backend in ("numpy", "torch"):
         draws = np.random.default_rng(7)  # the same noise, in the same order, for both
@@ -420,7 +415,7 @@ def test_torch_backend_equals_numpy_on_the_same_draws(dynamics, monkeypatch):
             GYM_ID, num_envs=16, vectorization_mode="vector_entry_point", backend=backend, **kwargs
         )
         outs = [venv.reset(seed=0)]
-        acts = np.random.default_rng(1).uniform(-1, 1, (6, 16, 3)).astype(np.float32)
+        acts = np.random.default_rng(1).uniform(-1, 1, (6, 16, *shape)).astype(np.float32)
         for a in acts:  # across the ends of episodes (horizon, alarms) and their autoresets
             outs.append(venv.step(a if backend == "numpy" else torch.as_tensor(a)))
         runs.append(outs)
@@ -429,7 +424,10 @@ def test_torch_backend_equals_numpy_on_the_same_draws(dynamics, monkeypatch):
     for out, tout in zip(runs[0][1:], runs[1][1:], strict=True):
         _compare(out, tout)
     p = np.concatenate([o[4]["detection_probability"] for o in runs[0][1:]])
-    assert ((p > 0.05 + 1e-6) & (p < 1 - 1e-6)).sum() > 10  # the torch χ² tail was exercised
+    assert ((p > 0.05 + 1e-6) & (p < 1 - 1e-6)).sum() > 10  # the tails were exercised
+    if action == "linear":  # the covariance of the attack's effect grew: phi above the clean
+        phi = np.concatenate([o[4]["phi"] for o in runs[0][1:]])
+        assert (phi > runs[0][0][1]["phi"][0] + 1e-6).sum() > 10
     if dynamics == "sampled":
         assert any(o[4]["detected"].any() for o in runs[0][1:])
 

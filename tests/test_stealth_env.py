@@ -22,7 +22,7 @@ def est():
 
 
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
-@pytest.mark.parametrize("action", ["shift", "free"])
+@pytest.mark.parametrize("action", ["shift", "box_shift", "free"])
 def test_pettingzoo_api_and_seed(est, dynamics, action):
     make = lambda: stealth_attack_v0.parallel_env(  # noqa: E731
         scenario=est, dynamics=dynamics, action=action, horizon=3
@@ -91,6 +91,46 @@ def test_budgeted_attack_policy_reaches_the_milp_value(est):
     _, rewards, _, _, infos = env.step({"attacker": action})
     assert infos["attacker"]["phi"] == pytest.approx(best.value, rel=1e-6)
     assert rewards["attacker"] == pytest.approx((1 - ALPHA) * best.value, rel=1e-6)
+
+
+@pytest.mark.parametrize("a_max", [0.05, 0.5])
+def test_box_shift_optimum_over_every_action_is_the_milp_optimum(est, a_max):
+    """IEEE 14, budget 3: the best of all 8,191 box shifts pays (1 − α) · the MILP's shift.
+
+    At a_max = 0.05 pu the detectable (trimmed) shifts pay something (each over 1 % of the
+    optimum, the mean 11 %), at 0.5 pu almost nothing: neither beats the MILP's attack.
+    """
+    from fdia_env.stealth.vector import StealthVectorEnv
+
+    milp = budgeted_attack(est, budget=3, a_max=a_max, target=6)  # bus 7, certified
+    assert milp.proved and milp.value == pytest.approx(0.088075 * a_max / 0.5, rel=1e-6)
+    kwargs = {"budget": 3, "action": "box_shift", "a_max": a_max, "dynamics": "expected"}
+    bits = ((np.arange(1, 2**est.n)[:, None] >> np.arange(est.n)) & 1).astype(np.int8)
+    vec = StealthVectorEnv(bits.shape[0], scenario=est, **kwargs)
+    vec.reset(seed=0)
+    _, rewards, _, _, infos = vec.step(bits)
+    best = int(np.argmax(rewards))
+    assert rewards[best] == pytest.approx((1 - ALPHA) * milp.value, rel=1e-12)
+    assert infos["phi"][best] == pytest.approx(milp.value, rel=1e-12)
+    assert infos["meters_used"][best] == 3
+    dense = np.mean(rewards > 0.01 * rewards[best])
+    assert dense == 1.0 if a_max == 0.05 else dense < 0.001
+    # the fixed-magnitude shift of the same state pays the smaller (1 − α) · magnitude
+    env = stealth_attack_v0.parallel_env(scenario=est, **(kwargs | {"action": "shift"}))
+    env.reset(seed=0)
+    _, rewards, _, _, _ = env.step({"attacker": bits[best]})
+    assert rewards["attacker"] == pytest.approx((1 - ALPHA) * 0.05, rel=1e-12)
+
+
+def test_box_shift_scales_the_largest_injection_to_a_max(est):
+    env = stealth_attack_v0.parallel_env(scenario=est, budget=est.m, action="box_shift", a_max=0.3)
+    bits = np.zeros(est.n, dtype=np.int8)
+    bits[[2, 5]] = 1
+    a = env.injection(bits)
+    assert np.max(np.abs(a)) == pytest.approx(0.3, rel=1e-14)
+    c = est.K @ a
+    np.testing.assert_allclose(c, c[2] * bits, atol=1e-14)  # K H c = c: the shift is s · bits
+    assert not env.injection(np.zeros(est.n, dtype=np.int8)).any()  # no bit: no injection
 
 
 def test_sampled_detection_matches_the_exact_probability(est):

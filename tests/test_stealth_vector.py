@@ -20,9 +20,10 @@ def _vec(est, num_envs, **kwargs):
     )
 
 
-@pytest.mark.parametrize("action", ["shift", "free"])
+@pytest.mark.parametrize("action", ["shift", "box_shift", "free"])
 def test_expected_rewards_and_infos_equal_the_single_env(est, action):
     kwargs = {"budget": 5, "action": action, "dynamics": "expected", "protected": [3]}
+    kwargs |= {"a_max": 0.05} if action == "box_shift" else {}
     vec = _vec(est, 16, **kwargs)
     vec.reset(seed=0)
     vec.action_space.seed(1)
@@ -75,11 +76,12 @@ def _np(x):
     return x.detach().cpu().numpy() if hasattr(x, "detach") else np.asarray(x)
 
 
-@pytest.mark.parametrize("action", ["shift", "free"])
+@pytest.mark.parametrize("action", ["shift", "box_shift", "free"])
 def test_torch_backend_equals_numpy_in_expected_dynamics(est, action):
     torch = pytest.importorskip("torch")
     kwargs = {"budget": 5, "action": action, "dynamics": "expected", "protected": [3]}
     kwargs |= {"horizon": 2, "on_detect": "penalty", "penalty": 0.3, "magnitude": 0.005}
+    kwargs |= {"a_max": 0.02} if action == "box_shift" else {}
     vec, tvec = _vec(est, 64, **kwargs), _vec(est, 64, backend="torch", **kwargs)
     assert tvec.unwrapped.backend == "torch"
     obs, _ = vec.reset(seed=0)
@@ -91,7 +93,7 @@ def test_torch_backend_equals_numpy_in_expected_dynamics(est, action):
         actions = vec.action_space.sample()
         if action == "free":
             actions[:8] *= 0.01  # small injections: detection probabilities inside (α, 1)
-        dtype = torch.int8 if action == "shift" else torch.float32
+        dtype = torch.float32 if action == "free" else torch.int8
         out = vec.step(actions)
         tout = tvec.step(_tensor(actions, dtype))
         for want, got in zip(out[:4], tout[:4], strict=True):

@@ -254,3 +254,98 @@ def test_the_dynamic_stealth_bound_holds_for_every_bias_attack():
     assert total.max() <= best.bound
     assert total.max() <= best.value + 1e-12  # no sampled attack beats the best constant sign
     assert task.references.random.mean < best.value
+
+
+PROTECT = "stealth/ch4-position-dynamic-protect-defender-v0"
+
+
+def test_the_rotating_attacker_biases_one_sensor_per_step_in_turn():
+    from fdia_env.tasks.catalog import rotating_bias
+
+    policy = rotating_bias(3, 6)
+    steps_left = np.array([[1 - k / 6, 0, 0, 0] for k in range(6)], dtype=np.float32)
+    actions = policy.predict(steps_left)[0]
+    assert np.array_equal(np.argmax(actions, axis=1), [0, 1, 2, 0, 1, 2])
+    assert np.array_equal(actions.sum(axis=1), np.ones(6))
+
+
+def test_the_protecting_defender_optimum_is_played_and_no_sampled_sequence_beats_it():
+    from agents.bench.references import protection_returns, protection_schedule
+    from agents.bench.score import score_policy
+
+    task, spec = tasks.get(PROTECT), tasks.spec(PROTECT)
+    refs = task.references
+    assert (task.family, task.player, refs.objective) == ("stealth", "defender", "cost")
+    assert refs.optimum.certified and refs.optimum.name.endswith("4^6 protection sequences")
+    # the enumeration's best sequence: skip the protection at step 2 (sensor 2 attacked), so
+    # the bias there raises the detector's statistic and an alarm stops the attacker's payoff
+    best = score_policy(task, protection_schedule((1, 2, 0, 1, 2, 3), 3), (0,), episodes=1)
+    assert best.mean == pytest.approx(refs.optimum.value, rel=1e-12)
+    assert best.normalised == pytest.approx(1.0, abs=1e-9)
+    rng = np.random.default_rng(0)
+    sampled = [tuple(int(c) for c in rng.integers(0, 4, 6)) for _ in range(60)]
+    fixed = [(c,) * 6 for c in range(4)]
+    track = (1, 2, 3, 1, 2, 3)  # protect the sensor attacked at each step
+    returns = protection_returns(spec, [*sampled, *fixed, track])
+    assert returns.max() <= refs.optimum.value + 1e-12
+    assert returns[60:64].max() == pytest.approx(refs.heuristics["best fixed protection"], 1e-12)
+    assert returns[64] == pytest.approx(refs.heuristics["greedy protection"], rel=1e-12)
+    assert refs.random.mean < returns[60:64].max() < returns[64] < refs.optimum.value
+
+
+def test_the_catalogue_has_24_tasks_8_hard_and_both_players_of_every_family_with_two():
+    from fdia_env.tasks.task import FAMILIES
+
+    assert len(ALL) >= 24
+    assert len(tasks.names(difficulty="hard")) >= 8
+    played = {(t.family, t.player) for t in tasks.TASKS.values()}
+    assert {family for family, _ in played} == set(FAMILIES)
+    for family in ("sensor-game", "detection-game", "incomplete-information", "stealth"):
+        assert {(family, "attacker"), (family, "defender")} <= played, family
+
+
+def test_the_branch_and_bound_policy_played_in_the_env_scores_one_exactly():
+    from baselines.sparse import branch_and_bound
+
+    task = tasks.get("sparse/ch4-random-v0")  # C(18, 10) sets: its reference is B&B's
+    assert task.references.optimum.name == "B&B (certified optimum)"
+    kw = task.env_kwargs
+    best = branch_and_bound(kw["scenario"], kw["budget"], kw["horizon"], kw["objective"])
+    assert best.proved_optimal
+    with task.make_env() as env:
+        result = evaluate(best.policy(), env, n_episodes=2, reference=1.0)
+    assert task.normalise(result.mean) == 1.0
+
+
+def test_the_leaderboard_rows_cover_every_task_and_learner_with_three_seeds():
+    """``results/bench/rows.json``: 3 seeds at one budget for each learner that fits a task."""
+    import json
+    from collections import defaultdict
+    from pathlib import Path
+
+    from experiments.bench.run import LEARNERS, applicable
+
+    path = Path(__file__).resolve().parents[1] / "results" / "bench" / "rows.json"
+    rows = json.loads(path.read_text(encoding="utf-8"))["rows"]
+    assert {r["timesteps"] for r in rows} == {2048}
+    seeds = defaultdict(set)
+    for r in rows:
+        seeds[r["task"], r["method"]].add(r["seed"])
+    missing = [
+        (name, algo, sorted(seeds[name, algo]))
+        for name in ALL
+        for algo in LEARNERS
+        if applicable(tasks.get(name), algo) and seeds[name, algo] != {0, 1, 2}
+    ]
+    assert missing == []
+    assert {name for name, _ in seeds} == set(ALL)  # every task has learner rows
+    page = (path.parents[2] / "docs" / "benchmark.md").read_text(encoding="utf-8")
+    board = page.split("<!-- leaderboard:start -->", 1)[1]
+    assert f"({len(rows)} learner runs," in board  # rendered from these rows
+    for name in ALL:  # each task's table: random, heuristics, reference, learners
+        table = board.split(f"**{name}**", 1)[1].split("\n\n", 2)[1]
+        refs = tasks.get(name).references
+        for label in ["random", *refs.heuristics, refs.optimum.name]:
+            assert f"| {label} |" in table, (name, label)
+        for algo in {algo for task, algo in seeds if task == name}:
+            assert f"| {algo} |" in table and "3 seeds, 2,048 steps" in table, (name, algo)

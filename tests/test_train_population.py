@@ -166,3 +166,117 @@ def test_the_game_command_runs_torch_ppo_best_responses_and_resumes_them(tmp_pat
     rows, cols = state["populations"]["defender"], state["populations"]["attacker"]
     L = payoff_matrix("ch5-game")
     np.testing.assert_allclose(state["meta_payoff"], L[np.ix_(rows, cols)], rtol=1e-9)
+
+
+def test_the_learned_oracles_share_their_seeds_and_policy_files(tmp_path):
+    """SB3, torch-ppo and RLlib answers: one seed per (side, iteration), one file per policy."""
+    from types import SimpleNamespace
+
+    from agents.interrupt import StopRequest
+    from agents.population import LearnedOracle
+    from agents.rllib.train import RLlibOracle
+    from agents.seeding import derived_seed
+    from agents.selfplay import SB3Oracle, TorchPPOOracle
+
+    cfg = SimpleNamespace(run=SimpleNamespace(seed=7, device="cpu"))
+    stop = StopRequest()
+    oracles = [
+        SB3Oracle(cfg, tmp_path, {}, {}, "ppo", {}, {}, stop),
+        TorchPPOOracle(cfg, tmp_path, {}, {}, None, stop),
+        RLlibOracle(cfg, tmp_path, {}, {}),
+    ]
+    seeds = {(s, k): derived_seed(7, 1000 * k + SIDES.index(s)) for s in SIDES for k in range(3)}
+    assert len(set(seeds.values())) == 6  # every answer its own seed
+    for oracle in oracles:
+        assert isinstance(oracle, LearnedOracle)
+        assert {key: oracle.seed(*key) for key in seeds} == seeds
+        assert oracle.policy_path("defender", 4) == tmp_path / "policies" / "defender_4.json"
+    assert oracles[1].device == "cpu" and oracles[0].callback is not None
+    assert oracles[2].policy_path("attacker", 0, ".pt").name == "attacker_0.pt"
+
+
+# ------------------------------------------------------- expected rewards over the opponent mix
+
+
+@pytest.mark.parametrize("action", ["subset", "sequential"])
+@pytest.mark.parametrize("side", SIDES)
+def test_the_expected_opponent_env_pays_the_mix_s_exact_expected_payoff(side, action):
+    """Every learner action's reward is Σ_j p_j L[., j] (defender: −L), one copy per support."""
+    from agents.selfplay import ExpectedOpponentEnv
+    from fdia_env.envs.sequential import subset_actions
+
+    L = payoff_matrix("ch5-game")  # 7 x 7, defender rows
+    kwargs = {**get("sensor_game_v0", side).env_kwargs(None), "action": action}
+    probs = np.array([0.5, 0.0, 0.2, 0.0, 0.0, 0.3, 0.0])
+    env = ExpectedOpponentEnv(get("sensor_game_v0", side).gym_id, kwargs, probs)
+    assert len(env.copies) == 3 and env.weights.tolist() == [0.5, 0.2, 0.3]
+    expected = -(L @ probs) if side == "defender" else probs @ L
+    for own in range(7):
+        env.reset(seed=own)
+        if action == "subset":
+            steps = [own]
+        else:  # the subset built one sensor per decision, then stop
+            seq = env.copies[0].unwrapped
+            subset = seq.parallel.models[side].subsets[own]
+            # then stop, and wait (stop) until the opponent of every copy has stopped
+            steps = [*subset_actions(seq.parallel, side, subset), *[0] * 4]
+        total, done = 0.0, False
+        for a in steps:
+            _, reward, terminated, truncated, _ = env.step(a)
+            total, done = total + reward, terminated or truncated
+            if done:
+                break
+        assert done
+        assert total == pytest.approx(expected[own], rel=1e-12, abs=1e-15)
+    env.close()
+    with pytest.raises(ValueError, match="opponent must be a 1-D mix"):
+        ExpectedOpponentEnv(get("sensor_game_v0", side).gym_id, kwargs, -probs)
+
+
+def test_expected_rewards_default_to_the_scenario_s_and_apply_to_sb3_only():
+    from agents.config import GameConfig
+    from agents.selfplay import expected_rewards
+
+    assert expected_rewards(GameConfig(scenario="grid-ieee14"), "MaskablePPO") is True
+    assert expected_rewards(GameConfig(scenario="game-m10"), "PPO") is False
+    assert expected_rewards(GameConfig(), "PPO") is False
+    assert expected_rewards(GameConfig(expected_rewards=True), "PPO") is True
+    assert expected_rewards(GameConfig(scenario="grid-ieee14", expected_rewards=False), "PPO") is (
+        False
+    )
+    assert expected_rewards(GameConfig(scenario="grid-ieee14"), "exact") is False
+    with pytest.raises(ValueError, match=r"--expected-rewards applies to SB3 .* not --algo exact"):
+        expected_rewards(GameConfig(expected_rewards=True), "exact")
+    with pytest.raises(
+        TypeError, match=r"expected_rewards \(--expected-rewards\) must be true or false"
+    ):
+        GameConfig(expected_rewards="yes")
+
+
+def test_a_best_response_learned_on_expected_rewards_is_exact(game):
+    """PPO paid the expected reward over a 3-strategy mix answers it exactly on ch5-game."""
+    import torch
+
+    from agents.config import Hyperparameters, algo_kwargs
+    from agents.selfplay import learn_best_response
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small networks: one thread (as the game command's runs)
+    mix = np.array([0.5, 0.0, 0.2, 0.0, 0.0, 0.3, 0.0])
+    kwargs = algo_kwargs("PPO", Hyperparameters(n_steps=64, batch_size=32))
+    _, action = learn_best_response(
+        game.entries["defender"], game.env_kwargs, mix, "PPO", kwargs, 512, seed=0, expected=True
+    )
+    torch.set_num_threads(threads)
+    losses = game.payoff @ mix
+    assert losses[action] == losses.min()
+    assert np.sort(losses)[1] > losses.min() * 1.05  # a unique answer, 5 % better than the next
+
+
+def test_the_game_command_trains_on_expected_rewards(tmp_path):
+    run = run_game(tmp_path, "--method", "psro", "--algo", "PPO", "--iterations", "1",
+                   "--steps-per-iteration", "64", "--n-steps", "64", "--batch-size", "64",
+                   "--expected-rewards", "True")  # fmt: skip
+    config = json.loads((run.run_dir / "config.json").read_text())
+    assert config["resolved"]["expected_rewards"] is True
+    assert [h["timesteps"] for h in run.history] == [128]

@@ -4,6 +4,8 @@
   difference);
 - ``compute [--task T ...] [--pending]``: compute references and write them to
   ``fdia_env/tasks/references.json``;
+- ``payoff --task T``: build a sensor-game task's payoff matrix and store it with the task
+  references (``fdia_env.tasks.payoffs``; scoring then reads it instead of rebuilding it);
 - ``table [--page docs/benchmark.md]``: rewrite the page's table of tasks from the stored
   references;
 - ``score --task T --agent ...``: score an agent on a task (``agents.bench.score``; its own
@@ -34,6 +36,8 @@ def _parser() -> argparse.ArgumentParser:
         "--pending", action="store_true", help="the tasks without stored references"
     )
     compute.add_argument("--all", action="store_true", help="every defined task")
+    payoff = sub.add_parser("payoff", help="store a sensor-game task's payoff matrix")
+    payoff.add_argument("--task", action="append", required=True, help="a task (repeatable)")
     table = sub.add_parser("table", help="write the tasks table of docs/benchmark.md")
     table.add_argument("--page", default="docs/benchmark.md", help="the page to update")
     sub.add_parser("score", help="score an agent on a task (see score --help)", add_help=False)
@@ -114,6 +118,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             changed = write_table(Path(args.page))
             print(f"{args.page}: {'updated' if changed else 'unchanged'}")
+            return 0
+        if args.command == "payoff":
+            from agents.bench.references import write_stored_payoff
+            from fdia_env import tasks
+
+            for name in args.task:
+                print(f"{name}: wrote {write_stored_payoff(tasks.spec(name))}")
             return 0
         return _verify(args) if args.command == "verify" else _compute(args)
     except ValueError as error:

@@ -190,6 +190,7 @@ def sensor_game(spec: TaskSpec) -> References:
         L = payoff_matrix(
             parallel.scenario, attack.power, attack.allocation, attack.max_subset_size
         )
+        check_stored_payoff(spec.name, L, parallel.scenario, attack)
     finally:
         env.close()
     _, _, value = solve_zero_sum(L)
@@ -208,6 +209,43 @@ def sensor_game(spec: TaskSpec) -> References:
         game_value=own,
         **_stamp(),
     )
+
+
+def check_stored_payoff(name: str, L: np.ndarray, scenario: Any, attack: Any) -> None:
+    """Raise when a stored payoff of this game (``fdia_env.tasks.payoffs``) differs from ``L``.
+
+    Raises:
+        RuntimeError: When the stored matrix's shape differs or an entry differs by more than
+            1e-9 relative to the largest entry.
+    """
+    from fdia_env.tasks.payoffs import stored_payoff
+
+    stored = stored_payoff(scenario, attack.power, attack.allocation, attack.max_subset_size)
+    if stored is None:
+        return
+    scale = float(np.abs(L).max()) or 1.0
+    if stored.shape != L.shape or float(np.abs(stored - L).max()) > 1e-9 * scale:
+        raise RuntimeError(
+            f"{name}: the stored payoff matrix differs from the one rebuilt now; rewrite it with "
+            f"python -m agents.bench payoff --task {name}"
+        )
+
+
+def write_stored_payoff(spec: TaskSpec) -> Any:
+    """Build the payoff matrix of a sensor-game task and store it; the file's path."""
+    from baselines.game import payoff_matrix
+    from fdia_env.tasks.payoffs import write_payoff
+
+    if spec.family != "sensor-game":
+        raise ValueError(f"task must be a sensor-game task, got {spec.name!r} ({spec.family})")
+    env = make(spec)
+    try:
+        parallel = env.unwrapped.parallel
+        a = parallel.attack
+        L = payoff_matrix(parallel.scenario, a.power, a.allocation, a.max_subset_size)
+        return write_payoff(L, parallel.scenario, a.power, a.allocation, a.max_subset_size)
+    finally:
+        env.close()
 
 
 def incomplete_information(spec: TaskSpec) -> References:
@@ -379,6 +417,8 @@ def stealth(spec: TaskSpec) -> References:
     """The static env's references (below), or the dynamic env's (:func:`stealth_dynamic`)."""
     if spec.env_id == "fdia_env/StealthDynamic-v0":
         return stealth_dynamic(spec)
+    if spec.env_id == "fdia_env/StealthDynamicDefender-v0":
+        return stealth_protect(spec)
     return stealth_static(spec)
 
 
@@ -473,6 +513,93 @@ def stealth_dynamic(spec: TaskSpec) -> References:
                 spec, ScheduledPolicy(actions)
             )
     return _best_known(spec, heuristics, value, f"best of the 2^{r} constant-sign biases", bound)
+
+
+PROTECT_MAX_SEQUENCES = 100_000
+
+
+def protection_schedule(sequence: Any, sensors: int) -> Any:
+    """The defender's policy protecting sensor ``sequence[k] − 1`` at step k (0: none)."""
+    from fdia_env.stealth.dynamic_policy import ScheduledPolicy
+
+    table = np.zeros((len(sequence), sensors))
+    for k, choice in enumerate(sequence):
+        if choice:
+            table[k, choice - 1] = 1.0
+    return ScheduledPolicy(table)
+
+
+def protection_returns(spec: TaskSpec, sequences: list[tuple[int, ...]]) -> np.ndarray:
+    """The defender's return of each open-loop protection sequence (0 none, j sensor j − 1).
+
+    The env is deterministic (expected dynamics, a fixed attacker), so a sequence's return is
+    one episode's; a prefix shorter than the horizon returns its steps' sum.
+    """
+    env = make(spec)
+    try:
+        choices = np.eye(int(env.action_space.n), dtype=np.int8)
+        out = np.empty(len(sequences))
+        for i, sequence in enumerate(sequences):
+            env.reset(seed=0)
+            total = 0.0
+            for choice in sequence:
+                action = choices[choice - 1] if choice else np.zeros_like(choices[0])
+                total += float(env.step(action)[1])
+            out[i] = total
+    finally:
+        env.close()
+    return out
+
+
+def stealth_protect(spec: TaskSpec) -> References:
+    """The protecting defender of ``stealth_dynamic_v0``: the optimum by enumeration.
+
+    Against a fixed attacker in expected dynamics the env is deterministic, so the best policy
+    is the best open-loop sequence of protections (every policy plays one): each of the
+    ``(M + 1)^N`` sequences (no protection or one of the M sensors at each of the N steps) is
+    played and the best is the certified optimum. Heuristics: the best fixed protection (the
+    same choice at every step) and the greedy defender (each step the choice that maximises
+    the return so far, given its earlier choices).
+    """
+    import itertools
+
+    kw = spec.env_kwargs
+    if kw.get("defender") != "protect" or kw.get("protect_budget", 1) != 1:
+        raise ValueError(f"{spec.name}: the enumeration needs defender='protect', budget 1")
+    if kw.get("dynamics") != "expected":
+        raise ValueError(f"{spec.name}: the enumeration needs expected dynamics")
+    env = make(spec)
+    try:
+        M, horizon = int(env.action_space.n), int(env.unwrapped.parallel.horizon)
+    finally:
+        env.close()
+    if (M + 1) ** horizon > PROTECT_MAX_SEQUENCES:
+        raise ValueError(f"{spec.name}: {(M + 1) ** horizon:,} protection sequences are too many")
+    sequences = list(itertools.product(range(M + 1), repeat=horizon))
+    returns = protection_returns(spec, sequences)
+    best = sequences[int(np.argmax(returns))]
+    value = _play(spec, protection_schedule(best, M))
+    if not math.isclose(value, float(returns.max()), rel_tol=1e-9):
+        raise RuntimeError(f"{spec.name}: the best sequence played as a policy gives {value}")
+    fixed = max(protection_returns(spec, [(c,) * horizon for c in range(M + 1)]))
+    greedy: tuple[int, ...] = ()
+    for _ in range(horizon):
+        options = [(*greedy, c) for c in range(M + 1)]
+        greedy = options[int(np.argmax(protection_returns(spec, options)))]
+    heuristics = {
+        "best fixed protection": float(fixed),
+        "greedy protection": _play(spec, protection_schedule(greedy, M)),
+    }
+    name = f"exhaustive over the {M + 1}^{horizon} protection sequences"
+    return References(
+        objective="cost",
+        metric="return",
+        random=_random(spec),
+        heuristics=heuristics,
+        optimum=Optimum(value, name, True, value, 0.0),
+        game_value=None,
+        **_stamp(),
+    )
 
 
 def _best_known(

@@ -33,6 +33,7 @@ from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
 from agents.evaluate import Evaluation
 from agents.lifecycle import RunFolder, game_scores, run_name
 from agents.lifecycle import open_run as open_folder
+from agents.population import LearnedOracle
 from agents.registry import Trainable, game_names, get
 from agents.rllib import require_ray
 from agents.rllib.state import STATE, load_module, save_module
@@ -727,31 +728,25 @@ def learn_best_response_rllib(
         algo.stop()
 
 
-class RLlibOracle:
+class RLlibOracle(LearnedOracle):
     """Best responses learned by a fresh RLlib PPO learner each (the ``rllib`` oracle).
 
     Each answer is :func:`learn_best_response_rllib` (seed derived from the run's, the
     iteration and the side); it is saved as ``policies/<side>_<k>.pt`` (weights only).
     """
 
-    def __init__(
-        self, cfg: GameConfig, run_dir: Path, entries: dict[str, Any], env_kwargs: dict[str, Any]
-    ) -> None:
-        self.cfg, self.run_dir, self.entries, self.env_kwargs = cfg, run_dir, entries, env_kwargs
-
     def learn(self, side: str, opponent: np.ndarray, iteration: int) -> Any:
         """A fresh RLlib learner's answer to ``opponent`` (it runs to the end)."""
-        from agents.population import SIDES, BestResponse
+        from agents.population import BestResponse
 
-        seed = derived_seed(self.cfg.run.seed, 1000 * iteration + SIDES.index(side))
         policy, action, returns = learn_best_response_rllib(
-            self.entries[side], self.env_kwargs, opponent, self.cfg, seed
+            self.entries[side], self.env_kwargs, opponent, self.cfg, self.seed(side, iteration)
         )
         return BestResponse(policy, action, returns)
 
     def save(self, side: str, index: int, response: Any) -> dict[str, Any]:
         """Save the RL module's weights as ``policies/<side>_<index>.pt``; returns its record."""
-        return save_module(response.policy.module, self.run_dir / "policies" / f"{side}_{index}.pt")
+        return save_module(response.policy.module, self.policy_path(side, index, ".pt"))
 
 
 def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:

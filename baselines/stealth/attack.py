@@ -168,6 +168,7 @@ def budgeted_attack(
     target: int | None = None,
     protected: Any = None,
     time_limit: float | None = None,
+    indices: Any = None,
 ) -> StealthyAttack | None:
     """The undetectable attack on at most ``budget`` meters that moves ``target`` the most.
 
@@ -180,6 +181,12 @@ def budgeted_attack(
         protected: Meters the attacker cannot touch.
         time_limit: HiGHS seconds per state. A solve that stops there keeps its best attack
             and certifies an upper bound (``bound``; ``proved`` is then False).
+        indices: A :class:`~baselines.stealth.SecurityIndex` of this model with the same
+            protected meters (every state computed), to skip states: a state whose certified
+            lower bound exceeds ``budget`` has no undetectable attack on ``budget`` meters
+            that moves it (its best shift is 0), so its MILP is not solved. This is what makes
+            the search over every state of IEEE 118 finish: the MILP of such a state must prove
+            a zero optimum, which its relaxation bounds poorly.
 
     Returns:
         The attack (``value`` = ``c_target``, the shift of the target's estimate; 0 when the
@@ -188,7 +195,8 @@ def budgeted_attack(
 
     Raises:
         ValueError: Naming the parameter: a budget outside 1..m, a_max ≤ 0 or non-finite,
-            unknown meters or target.
+            unknown meters or target, ``indices`` of another model, protection or with
+            states not computed.
 
     Example:
         >>> from baselines.stealth import budgeted_attack
@@ -201,6 +209,9 @@ def budgeted_attack(
     bound = _a_max(est, a_max)
     prot = meter_indices(est, protected)
     targets = range(est.n) if target is None else [state_index(est, target, "target")]
+    if indices is not None:
+        lower = _index_bounds(est, indices, prot)
+        targets = [t for t in targets if lower[t] <= budget]
     start = time.perf_counter()
     best: tuple[float, int, np.ndarray] | None = None
     upper = 0.0
@@ -209,6 +220,8 @@ def budgeted_attack(
         upper = max(upper, limit)
         if best is None or value > best[0] + 1e-12:
             best = (value, t, c)
+    if best is None:  # every target skipped: no undetectable attack fits the budget
+        best = (0.0, 0 if target is None else state_index(est, target, "target"), np.zeros(est.n))
     value, t, c = best
     a = est.H @ c
     if value <= 0.0:
@@ -223,6 +236,25 @@ def budgeted_attack(
         seconds=time.perf_counter() - start,
         bound=max(float(upper), float(value)),
     )
+
+
+def _index_bounds(est: Any, indices: Any, prot: np.ndarray) -> np.ndarray:
+    """(n,) the certified lower bounds of ``indices``, checked to belong to this problem."""
+    from baselines.stealth.security_index import SecurityIndex
+
+    if not isinstance(indices, SecurityIndex):
+        raise ValueError(f"indices must be a SecurityIndex, got {type(indices).__name__}")
+    lower = np.asarray(indices.lower_bounds, dtype=np.float64)
+    if lower.shape != (est.n,) or tuple(indices.meters) != tuple(est.meters):
+        raise ValueError("indices must be the security index of this model (other meters)")
+    if tuple(indices.protected) != tuple(int(i) for i in prot):
+        raise ValueError(
+            f"indices were computed with protected meters {list(indices.protected)}, not "
+            f"{prot.tolist()}"
+        )
+    if np.isnan(lower).any():
+        raise ValueError("indices must cover every state (some were not computed)")
+    return lower
 
 
 def _budget_milp(

@@ -14,9 +14,9 @@ class StealthPolicy(PolicyBase):
     """Plays one fixed action at every step (the static attack is the same on every snapshot).
 
     Args:
-        action: For ``action="shift"``: the (n,) 0/1 bits of the states to shift; for
-            ``action="free"``: the (m,) injection over ``a_max``, entries in [-1, 1].
-        kind: ``"shift"`` or ``"free"``, the env's ``action`` option it plays.
+        action: For ``action="shift"`` or ``"box_shift"``: the (n,) 0/1 bits of the states to
+            shift; for ``action="free"``: the (m,) injection over ``a_max``, entries in [-1, 1].
+        kind: ``"shift"``, ``"box_shift"`` or ``"free"``, the env's ``action`` option it plays.
 
     Example:
         >>> policy = StealthPolicy([0, 1, 1], kind="shift")
@@ -25,15 +25,15 @@ class StealthPolicy(PolicyBase):
     """
 
     def __init__(self, action: Any, kind: str = "shift") -> None:
-        if kind not in ("shift", "free"):
-            raise ValueError(f"kind must be 'shift' or 'free', got {kind!r}")
+        if kind not in ("shift", "box_shift", "free"):
+            raise ValueError(f"kind must be 'shift', 'box_shift' or 'free', got {kind!r}")
         arr = np.asarray(action, dtype=np.float64).reshape(-1)
         if arr.size == 0 or not np.all(np.isfinite(arr)):
             raise ValueError(f"action must be a non-empty finite vector, got {action!r}")
-        if kind == "shift":
+        if kind in ("shift", "box_shift"):
             if not np.isin(arr, (0.0, 1.0)).all():
                 raise ValueError(
-                    "a 'shift' action holds 0/1 per state: this attack's state shift is not "
+                    f"a {kind!r} action holds 0/1 per state: this attack's state shift is not "
                     "0/1 (use kind='free' with the injection over a_max)"
                 )
             self.action = arr.astype(np.int8)

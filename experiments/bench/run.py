@@ -51,7 +51,11 @@ def applicable(task: Any, algo: str) -> bool:
         from agents.torch_ppo import make_torch_env
 
         try:  # the task's options may need a model without a torch implementation
-            make_torch_env(task.env_id, 1, "cpu", **dict(task.env_kwargs)).close()
+            env = make_torch_env(task.env_id, 1, "cpu", **dict(task.env_kwargs))
+            try:
+                env.reset(seed=0)  # (a sensor game over more than 62 sensors refuses here)
+            finally:
+                env.close()
         except (TypeError, ValueError):
             return False
         with task.make_env() as env:

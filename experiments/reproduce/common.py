@@ -6,13 +6,14 @@ import os
 import platform
 import statistics
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from baselines.sparse import SparseResult
+from experiments.markdown import table
 
 DEFAULT_OUTPUT = Path("docs/reproduction.md")
 DOC_TITLE = "# Reproduction of the literature's results"
@@ -80,13 +81,6 @@ def timed(
         result = run()
         times.append(time.perf_counter() - t0)
     return result, statistics.median(times)
-
-
-def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    """A markdown table."""
-    lines = ["| " + " | ".join(map(str, header)) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(map(str, row)) + " |" for row in rows]
-    return "\n".join(lines)
 
 
 def grid_table(grid: np.ndarray) -> str:

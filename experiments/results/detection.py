@@ -16,6 +16,7 @@ import gymnasium as gym
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
 from agents.evaluate import evaluate
+from experiments.markdown import table
 from experiments.results.common import write_rows
 
 SCENARIOS = ("ch3-static", "ch3-tracking")
@@ -74,17 +75,28 @@ def detection_separation(
 
 def format_detection(rows: list[dict]) -> str:
     """The rows as a Markdown table."""
-    lines = [
-        "| scenario | a² | random thresholds (return ± 95 % CI) | OBDD α (−Bayes cost) "
-        "| random's score | separates (≤ 80 %) |",
-        "|---|---|---|---|---|---|",
+    header = [
+        "scenario",
+        "a²",
+        "random thresholds (return ± 95 % CI)",
+        "OBDD α (−Bayes cost)",
+        "random's score",
+        "separates (≤ 80 %)",
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['scenario']} | {r['power']:g} | {r['random_mean']:.4g} ± {r['random_ci95']:.2g}"
-            f" | {r['obdd']:.4g} | {r['score']:.1%} | {'yes' if r['separates'] else 'no'} |"
-        )
-    return "\n".join(lines)
+    return table(
+        header,
+        [
+            [
+                r["scenario"],
+                f"{r['power']:g}",
+                f"{r['random_mean']:.4g} ± {r['random_ci95']:.2g}",
+                f"{r['obdd']:.4g}",
+                f"{r['score']:.1%}",
+                "yes" if r["separates"] else "no",
+            ]
+            for r in rows
+        ],
+    )
 
 
 def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:

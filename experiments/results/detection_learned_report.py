@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from experiments.markdown import table
 from experiments.results.common import mean_ci95
 
 GAME_SETTING = ("ch3-static", 1000.0)  # learned against learned
@@ -27,61 +28,84 @@ def _setting(row: dict[str, Any]) -> str:
 def format_tables(res: dict[str, Any]) -> str:
     """The four tables as Markdown."""
     out = ["**1a. Defender's best threshold against the preset attack** (exact, 1-D search)", ""]
-    out += [
-        "| setting | criterion | τ* | τ*'s reward | env's reward at τ* | OBDD α | OBDD's reward "
-        "| OBDD's score | random thresholds' score |",
-        "|---|---|---|---|---|---|---|---|---|",
+    header = ["setting", "criterion", "τ*", "τ*'s reward", "env's reward at τ*", "OBDD α"]
+    header += ["OBDD's reward", "OBDD's score", "random thresholds' score"]
+    rows = [
+        [
+            _setting(r),
+            r["criterion"],
+            f"{r['best_threshold']:.4g}",
+            f"{r['best_value']:.6g}",
+            f"{r['env_value']:.6g}",
+            f"{r['obdd_threshold']:.4g}",
+            f"{r['obdd_value']:.6g}",
+            f"{r['obdd_score']:.1%}",
+            f"{r['random_score']:.1%}",
+        ]
+        for r in res["defender_refs"]
     ]
-    for r in res["defender_refs"]:
-        out.append(
-            f"| {_setting(r)} | {r['criterion']} | {r['best_threshold']:.4g} "
-            f"| {r['best_value']:.6g} | {r['env_value']:.6g} | {r['obdd_threshold']:.4g} "
-            f"| {r['obdd_value']:.6g} | {r['obdd_score']:.1%} | {r['random_score']:.1%} |"
-        )
+    out.append(table(header, rows))
     out += [
         "",
         "**1b. Attacker's best response (p, Σ) to each fixed detector** "
         "(exact, multi-start search; preset: p1 = 0.85, c2-maximising Σ)",
         "",
     ]
-    out += [
-        "| setting | criterion | detector | τ | preset attack | best response | env's reward "
-        "| p* | Σ* | gain |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
+    header = ["setting", "criterion", "detector", "τ", "preset attack", "best response"]
+    header += ["env's reward", "p*", "Σ*", "gain"]
+    rows = []
     for r in res["attacker_refs"]:
         sigma = np.round(np.asarray(r["br_sigma"]), 1).tolist()
         note = " (always discards: constant)" if r["constant"] else ""
-        out.append(
-            f"| {_setting(r)} | {r['criterion']} | {r['detector']}{note} | {r['threshold']:.4g} "
-            f"| {r['preset_value']:.6g} | {r['br_value']:.6g} | {r['env_value']:.6g} "
-            f"| {r['br_probability']:g} | {sigma} | ×{r['br_gain']:.3f} |"
+        rows.append(
+            [
+                _setting(r),
+                r["criterion"],
+                f"{r['detector']}{note}",
+                f"{r['threshold']:.4g}",
+                f"{r['preset_value']:.6g}",
+                f"{r['br_value']:.6g}",
+                f"{r['env_value']:.6g}",
+                f"{r['br_probability']:g}",
+                sigma,
+                f"×{r['br_gain']:.3f}",
+            ]
         )
+    out.append(table(header, rows))
     out += ["", "**2. Learned attacker (SAC, MSE criterion) against each fixed detector**", ""]
-    out += [
-        "| setting | detector | steps | learned reward | learned p | best response "
-        "| learned's score | random attacks' score | preset's score |",
-        "|---|---|---|---|---|---|---|---|---|",
+    header = ["setting", "detector", "steps", "learned reward", "learned p", "best response"]
+    header += ["learned's score", "random attacks' score", "preset's score"]
+    rows = [
+        [
+            _setting(r),
+            r["detector"],
+            r["steps"],
+            _pm(r["learned"]),
+            _pm(r["learned_p"], ".3f"),
+            f"{r['br_value']:.5g}",
+            _pm(r["learned_score"], ".1%"),
+            f"{r['random_score']:.1%}",
+            f"{r['preset_value'] / r['br_value']:.1%}",
+        ]
+        for r in res["learned_attackers"]
     ]
-    for r in res["learned_attackers"]:
-        out.append(
-            f"| {_setting(r)} | {r['detector']} | {r['steps']} | {_pm(r['learned'])} "
-            f"| {_pm(r['learned_p'], '.3f')} | {r['br_value']:.5g} "
-            f"| {_pm(r['learned_score'], '.1%')} | {r['random_score']:.1%} "
-            f"| {r['preset_value'] / r['br_value']:.1%} |"
-        )
+    out.append(table(header, rows))
     out += ["", "**3. Learned defender (SAC, MSE criterion) against the preset attack**", ""]
-    out += [
-        "| setting | steps | learned reward | τ*'s reward | learned's score | OBDD α's score "
-        "| random thresholds' score |",
-        "|---|---|---|---|---|---|---|",
+    header = ["setting", "steps", "learned reward", "τ*'s reward", "learned's score"]
+    header += ["OBDD α's score", "random thresholds' score"]
+    rows = [
+        [
+            _setting(r),
+            r["steps"],
+            _pm(r["learned"]),
+            f"{r['best_value']:.6g}",
+            _pm(r["learned_score"], ".2%"),
+            f"{r['obdd_score']:.2%}",
+            f"{r['random_score']:.1%}",
+        ]
+        for r in res["learned_defenders"]
     ]
-    for r in res["learned_defenders"]:
-        out.append(
-            f"| {_setting(r)} | {r['steps']} | {_pm(r['learned'])} | {r['best_value']:.6g} "
-            f"| {_pm(r['learned_score'], '.2%')} | {r['obdd_score']:.2%} "
-            f"| {r['random_score']:.1%} |"
-        )
+    out.append(table(header, rows))
     if res["rounds"]:
         out += [
             "",
@@ -89,30 +113,8 @@ def format_tables(res: dict[str, Any]) -> str:
             f"({GAME_SETTING[0]} a²={GAME_SETTING[1]:g}, MSE; alternating SAC best "
             "responses from the learned defender of table 3)",
             "",
+            _rounds_table(res["rounds"]),
         ]
-        out += [
-            "| round | side | payoff against the other | its exact best response's | score "
-            "| counterpart against the same opponent | worst case over all attacks |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        rounds = sorted({(r["round"], r["side"]) for r in res["rounds"]}, key=_order)
-        for k, side in rounds:
-            rs = [r for r in res["rounds"] if r["round"] == k and r["side"] == side]
-            if k == 0:
-                out.append(
-                    f"| 0 | defender (table 3) | | | | | "
-                    f"{_pm(mean_ci95([r['worst_case'] for r in rs]))} |"
-                )
-                continue
-            cols = [_pm(mean_ci95([r[c] for r in rs])) for c in ("payoff", "best_response")]
-            score = _pm(mean_ci95([r["score"] for r in rs]), ".1%")
-            if side == "attacker":
-                other = f"preset attack: {_pm(mean_ci95([r['preset_payoff'] for r in rs]))}"
-                worst = ""
-            else:
-                other = f"OBDD α: {_pm(mean_ci95([r['obdd_payoff'] for r in rs]))}"
-                worst = _pm(mean_ci95([r["worst_case"] for r in rs]))
-            out.append(f"| {k} | {side} | {cols[0]} | {cols[1]} | {score} | {other} | {worst} |")
         mm = res.get("minimax")
         obdd_worst = res["obdd_worst_case"]
         line = f"OBDD α's worst case over all attacks: {obdd_worst:.6g}"
@@ -123,6 +125,29 @@ def format_tables(res: dict[str, Any]) -> str:
             )
         out += ["", line + "."]
     return "\n".join(out)
+
+
+def _rounds_table(records: list[dict[str, Any]]) -> str:
+    """Table 4: each round's learned side against the other, mean ± 95 % CI over seeds."""
+    header = ["round", "side", "payoff against the other", "its exact best response's", "score"]
+    header += ["counterpart against the same opponent", "worst case over all attacks"]
+    rows = []
+    for k, side in sorted({(r["round"], r["side"]) for r in records}, key=_order):
+        rs = [r for r in records if r["round"] == k and r["side"] == side]
+        if k == 0:
+            worst = _pm(mean_ci95([r["worst_case"] for r in rs]))
+            rows.append([0, "defender (table 3)", "", "", "", "", worst])
+            continue
+        cols = [_pm(mean_ci95([r[c] for r in rs])) for c in ("payoff", "best_response")]
+        score = _pm(mean_ci95([r["score"] for r in rs]), ".1%")
+        if side == "attacker":
+            other = f"preset attack: {_pm(mean_ci95([r['preset_payoff'] for r in rs]))}"
+            worst = ""
+        else:
+            other = f"OBDD α: {_pm(mean_ci95([r['obdd_payoff'] for r in rs]))}"
+            worst = _pm(mean_ci95([r["worst_case"] for r in rs]))
+        rows.append([k, side, cols[0], cols[1], score, other, worst])
+    return table(header, rows)
 
 
 def _order(key: tuple[int, str]) -> tuple[int, int]:

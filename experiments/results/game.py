@@ -13,10 +13,12 @@ exploitabilities, docs/math.md §5), relative to the game value; the target is a
 
 from __future__ import annotations
 
+import argparse
 import json
 import platform
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +27,7 @@ import numpy as np
 
 from agents.config import GameConfig, Hyperparameters, RunSettings
 from agents.plots import exploitability_curve
-from agents.selfplay import game_algo, game_setup, run_selfplay
+from agents.selfplay import expected_rewards, game_algo, game_setup, run_selfplay
 from baselines.game import exploitability, payoff_matrix, solve_double_oracle, solve_zero_sum
 from experiments.results.common import write_rows
 from fdia_env._validation import check_int
@@ -172,6 +174,7 @@ def psro_against_exact(
         "scenario": setting.scenario,
         "algo": game_algo(cfg),
         "action": game_setup(cfg).env_kwargs.get("action", "subset"),
+        "expected_rewards": expected_rewards(cfg, game_algo(cfg)),
         "iterations": setting.iterations,
         "steps_per_br": setting.steps,
         "seed": seed,
@@ -220,7 +223,8 @@ def format_game(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         first = r["first_iteration_at_target"]
         lines.append(
-            f"| {r['scenario']} | {r['iterations']} × {r['steps_per_br']} ({r['algo']}) "
+            f"| {r['scenario']} | {r['iterations']} × {r['steps_per_br']} ({r['algo']}"
+            f"{', expected rewards' if r.get('expected_rewards') else ''}) "
             f"| {r['history'][0]['relative_nash_conv']:.2%} | {r['best_relative_nash_conv']:.2%} "
             f"| {r['final_relative_nash_conv']:.2%} | {first if first else 'not reached'} "
             f"| max abs error {r['meta_max_abs_error']:.1e} | {r['psro_seconds']:.0f} s |"
@@ -246,10 +250,32 @@ def format_game(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
-    """The ``game`` table (Markdown); ``quick``: 3 PSRO iterations on game-m10, 2,048 steps."""
+def run(
+    quick: bool = False,
+    seed: int = 0,
+    out: Path | None = None,
+    games: Sequence[str] | None = None,
+) -> str:
+    """The ``game`` table (Markdown); ``quick``: 3 PSRO iterations on game-m10, 2,048 steps.
+
+    Args:
+        quick: The reduced run.
+        seed: Seed of the PSRO runs.
+        out: Folder for ``game.json`` (the rows run) and the plots (none written when None).
+        games: Only these rows (names of :data:`GAMES`; None: all of the run's).
+
+    Raises:
+        ValueError: For a game that is not a row of the table (listing the rows).
+    """
+    settings = QUICK if quick else FULL
+    if games is not None:
+        names = [s.scenario for s in settings]
+        unknown = [g for g in games if g not in names]
+        if unknown or not games:
+            raise ValueError(f"games must be some of {', '.join(names)}, got {list(games)!r}")
+        settings = tuple(s for s in settings if s.scenario in games)
     start = time.perf_counter()
-    rows = [psro_against_exact(s, seed) for s in (QUICK if quick else FULL)]
+    rows = [psro_against_exact(s, seed) for s in settings]
     if out is not None:
         write_rows(out / "game.json", rows)
         for r in rows:
@@ -259,3 +285,22 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
         format_game(rows)
         + f"\n\nWall time {time.perf_counter() - start:.0f} s (seed {seed}; {machine})."
     )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m experiments.results.game [--games ...]``: the table, or some of its rows."""
+    parser = argparse.ArgumentParser(
+        prog="python -m experiments.results.game",
+        description="PSRO with learned best responses against the exact equilibrium.",
+    )
+    parser.add_argument("--games", nargs="+", choices=GAMES, default=None, help="rows to run")
+    parser.add_argument("--quick", action="store_true", help="reduced run")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the PSRO runs")
+    parser.add_argument("--out", type=Path, default=None, help="folder for JSON rows and plots")
+    args = parser.parse_args(argv)
+    print(run(args.quick, args.seed, args.out, args.games), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -25,6 +25,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from agents.evaluate import RandomPolicy
 from baselines.sparse import branch_and_bound, sfs
+from experiments.markdown import table
 from experiments.results.common import mean_ci95, write_rows
 from fdia_env._validation import check_int
 from fdia_env.envs.grid_family import GridFamily
@@ -247,19 +248,27 @@ def summarize(name: str, scores: np.ndarray, sfs_suboptimal: np.ndarray) -> dict
 
 def format_general(rows: list[dict[str, Any]], n: int, n_sub: int) -> str:
     """The summary rows as a Markdown table."""
-    lines = [
-        f"| policy | score on {n} held-out systems (mean ± 95 % CI) | systems ≥ 99 % "
-        f"| worst | on the {n_sub} where SFS < 99 % |",
-        "|---|---|---|---|---|",
+    header = [
+        "policy",
+        f"score on {n} held-out systems (mean ± 95 % CI)",
+        "systems ≥ 99 %",
+        "worst",
+        f"on the {n_sub} where SFS < 99 %",
     ]
+    lines = []
     for r in rows:
         sub = r["sfs_suboptimal_mean"]
         on_sub = "none" if sub != sub else f"{sub:.1%} ± {r['sfs_suboptimal_ci95']:.1%}"
         lines.append(
-            f"| {r['policy']} | {r['mean']:.1%} ± {r['ci95']:.1%} | {r['at_least_99']:.0%} "
-            f"| {r['min']:.1%} | {on_sub} |"
+            [
+                r["policy"],
+                f"{r['mean']:.1%} ± {r['ci95']:.1%}",
+                f"{r['at_least_99']:.0%}",
+                f"{r['min']:.1%}",
+                on_sub,
+            ]
         )
-    return "\n".join(lines)
+    return table(header, lines)
 
 
 def plot(

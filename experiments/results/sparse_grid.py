@@ -6,9 +6,10 @@ objective Φ = tr or log det of ``P[K+N|K+N]``): SFS, SBS, SFS-SS and DP
 not proved within its time limit, the best set found and the certified upper bound), and two
 learners trained on the identical instance, 3 seeds each: sb3-contrib's MaskablePPO (the
 project's SB3 model, :func:`agents.algos.build_model` with the defaults of
-:data:`agents.config.ALGO_DEFAULTS`; SB3's ``VecNormalize`` scales its rewards, as torch-ppo
-scales its own) and the torch PPO (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's
-defaults). Both play the env's own sequential format in the plan-first order
+:data:`agents.config.ALGO_DEFAULTS`, its rewards rescaled as ``train.py`` rescales them on the
+grid presets: attacking nothing 0, the optimum 1) and the torch PPO
+(:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's defaults; it scales its own
+rewards). Both play the env's own sequential format in the plan-first order
 (``gymnasium.make("fdia_env/SparseAttack-v1", action="sequential", order="plan")``: masked picks
 of sensor-time pairs, then stop, then the plan plays out; torch PPO on its native vector env),
 since the bitmask ``Discrete(2**M)`` is too large for these learners at M = 14 and, above 16
@@ -27,6 +28,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -254,26 +256,86 @@ def replay_native(result: Any, system: LinearSystem, inst: Instance) -> float:
         env.close()
 
 
-def train_maskable(
-    system: LinearSystem, inst: Instance, budget: Budget, seed: int, order: str = ORDER
-) -> tuple[Any, list[tuple[int, float]], float]:
-    """MaskablePPO in ``order``: ``(model, curve [(steps, return)], train seconds)``."""
-    import torch
-    from stable_baselines3.common.callbacks import BaseCallback
+def _nothing_return(env: Any) -> float:
+    """The return of attacking nothing in the learners' env (stop at every decision)."""
+    env.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        _, reward, terminated, truncated, _ = env.step(0)
+        total += float(reward)
+        done = terminated or truncated
+    return total
+
+
+def training_env(
+    system: LinearSystem, inst: Instance, order: str = ORDER, reference: float | None = None
+) -> Any:
+    """MaskablePPO's training env of ``inst``: one member, its rewards rescaled.
+
+    As ``train.py`` on the grid presets (:class:`agents.training.NormalizedReward`): an
+    episode attacking nothing returns 0 and one reaching ``reference`` returns 1. Without
+    ``reference``, or when it is no better than attacking nothing, SB3's ``VecNormalize``
+    scales the rewards instead.
+    """
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from agents.algos import build_model
-    from agents.config import Hyperparameters, algo_kwargs
+    from agents.training import NormalizedReward
 
-    torch.set_num_threads(1)
-    eval_env = make_env(system, inst, order)
-    venv = VecNormalize(
+    if reference is not None:
+        probe = make_env(system, inst, order)
+        nothing = _nothing_return(probe)
+        probe.close()
+        scale = abs(reference - nothing)
+        if scale > 1e-12 * max(1.0, abs(reference)):
+            return DummyVecEnv(
+                [lambda: NormalizedReward(make_env(system, inst, order), nothing, scale)]
+            )
+    return VecNormalize(
         DummyVecEnv([lambda: make_env(system, inst, order)]),
         norm_obs=False,
         norm_reward=True,
         gamma=1.0,
     )
-    model = build_model("MaskablePPO", venv, algo_kwargs("MaskablePPO", Hyperparameters()), seed)
+
+
+def train_py_hyperparameters() -> Any:
+    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets' sparse attack.
+
+    The algorithm's defaults (:data:`agents.config.ALGO_DEFAULTS`) with the grid presets' own
+    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py`` does.
+    """
+    from agents.config import SCENARIO_DEFAULTS, Hyperparameters, with_defaults
+
+    grid = SCENARIO_DEFAULTS[("sparse_attack_v0", "grid-ieee14")]
+    return with_defaults("MaskablePPO", Hyperparameters(), grid)
+
+
+def train_maskable(
+    system: LinearSystem,
+    inst: Instance,
+    budget: Budget,
+    seed: int,
+    order: str = ORDER,
+    reference: float | None = None,
+) -> tuple[Any, list[tuple[int, float]], float]:
+    """MaskablePPO in ``order``: ``(model, curve [(steps, return)], train seconds)``.
+
+    Trained as ``train.py`` trains on the grid presets: its hyperparameters there
+    (:func:`train_py_hyperparameters`) and the rewards rescaled so that attacking nothing
+    returns 0 and ``reference`` 1 (:func:`training_env`).
+    """
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from agents.algos import build_model
+    from agents.config import algo_kwargs
+
+    torch.set_num_threads(1)
+    eval_env = make_env(system, inst, order)
+    venv = training_env(system, inst, order, reference)
+    model = build_model(
+        "MaskablePPO", venv, algo_kwargs("MaskablePPO", train_py_hyperparameters()), seed
+    )
     every = max(1, budget.maskable_steps // budget.evals)
     curve: list[tuple[int, float]] = []
 
@@ -349,7 +411,7 @@ def order_study(
         greedy = ratio(sfs(*args).value, best, inst.objective)
         for order in orders:
             for seed in seeds:
-                _, curve, secs = train_maskable(system, inst, budget, seed, order)
+                _, curve, secs = train_maskable(system, inst, budget, seed, order, best)
                 score = ratio(curve[-1][1], best, inst.objective)
                 row = {"instance": inst.label, "order": order, "seed": seed}
                 row.update(sfs=greedy, score=score, seconds=secs)
@@ -374,7 +436,8 @@ def run_instance(
     env.close()
     solve_seconds = time.perf_counter() - t0
     learners: dict[str, Any] = {}
-    for name, trainer in (("MaskablePPO", train_maskable), ("torch-ppo", train_torch)):
+    trainers = (("MaskablePPO", partial(train_maskable, reference=opt)), ("torch-ppo", train_torch))
+    for name, trainer in trainers:
         runs = []
         for s in seeds:
             _, curve, secs = trainer(system, inst, budget, s)

@@ -19,6 +19,14 @@ optimum:
 
 Every seed's figure is reported, with the mean and its 95 % CI.
 
+Box-shift rows (``action="box_shift"``: the same bits, shifted as far as ``a_max`` allows) are
+scored against the MILP optimum of the budgeted stealthy attack (:func:`milp_reference`:
+:func:`baselines.stealth.budgeted_attack` over every state, proved; on IEEE 118 the states
+whose min-cut security index exceeds the budget are skipped), which the action space holds on
+both grids (the MILP's c is a 0/1 direction). On IEEE 14 the enumeration of every box shift
+confirms that no detectable (trimmed) one pays more; on IEEE 118 detectable box shifts are not
+enumerated, so a learner could in principle score above 100 %.
+
 Protection rows: the protection game's value (double oracle, certified by its gap) against what
 simple protections concede to a best-responding attacker (:func:`baselines.stealth.
 protection_exploitability`): protecting the meters of the unprotected optimal attack, and the
@@ -43,11 +51,20 @@ ENUMERABLE = 16
 """Largest number of states whose shift vectors are enumerated (2^16 − 1 actions)."""
 
 
-def _env_kwargs(budget: int, scenario: str = SCENARIO) -> dict[str, Any]:
+A_MAX = 0.5
+"""Largest injection per meter (pu) of the box-shift rows and of the MILP they are scored by."""
+ACTIONS = ("shift", "box_shift")
+
+
+def _env_kwargs(
+    budget: int, scenario: str = SCENARIO, action: str = "shift", a_max: float = A_MAX
+) -> dict[str, Any]:
+    size = {"magnitude": MAGNITUDE} if action == "shift" else {"a_max": a_max}
     return {
         "scenario": scenario,
         "budget": budget,
-        "magnitude": MAGNITUDE,
+        "action": action,
+        **size,
         "dynamics": "expected",
         "horizon": 1,
     }
@@ -109,10 +126,77 @@ def references(budget: int, scenario: str = SCENARIO, seed: int = 0) -> dict[str
     }
 
 
-def _payoff(budget: int, action: np.ndarray, scenario: str = SCENARIO) -> float:
+def milp_reference(
+    budget: int,
+    scenario: str = SCENARIO,
+    time_limit: float | None = None,
+    seed: int = 0,
+    a_max: float = A_MAX,
+) -> dict[str, Any]:
+    """The MILP optimum of the budgeted stealthy attack, as the box-shift env pays it.
+
+    :func:`baselines.stealth.budgeted_attack` (``a_max``, pu) over every state: the
+    exact MILP over every shift c (not only 0/1 directions). On a grid with more than
+    :data:`ENUMERABLE` states the states whose minimum-cut security index exceeds the budget
+    are skipped (no undetectable attack on ``budget`` meters moves them; the cut is exact with
+    every branch flow and bus injection metered, as on the presets). The env pays an
+    undetectable attack ``(1 − α) · shift``, so the optimum is ``(1 − α)`` times the MILP's
+    value, and its certified bound ``(1 − α)`` times the MILP's bound. The MILP's attack is
+    played in the env as a box shift when its c is a 0/1 direction (``attained``): then the
+    env's action space holds the MILP optimum. Random play: the mean over every non-zero box
+    shift (IEEE 14) or over 4,096 uniform ones.
+    """
+    from baselines.stealth import budgeted_attack, security_index
+    from fdia_env.stealth.vector import StealthVectorEnv
+
+    venv = StealthVectorEnv(1, **_env_kwargs(budget, scenario, "box_shift", a_max))
+    est = venv.env.estimation
+    start = time.perf_counter()
+    index = security_index(est, method="mincut") if est.n > ENUMERABLE else None
+    attack = budgeted_attack(est, budget, a_max=a_max, indices=index, time_limit=time_limit)
+    seconds = time.perf_counter() - start
+    keep = 1.0 - est.alpha
+    c = np.asarray(attack.c)
+    top = float(np.max(np.abs(c))) if c.size else 0.0
+    bits = (np.abs(c) > 0.5 * top).astype(np.int8)
+    played = float(_payoffs(venv, bits[None, :])[0]) if top > 0.0 else 0.0
+    binary = top > 0.0 and np.allclose(np.abs(c), top * bits, rtol=0.0, atol=1e-9 * top)
+    if est.n <= ENUMERABLE:
+        draws = ((np.arange(1, 2**est.n)[:, None] >> np.arange(est.n)) & 1).astype(np.int8)
+    else:
+        draws = np.random.default_rng(seed).integers(0, 2, (4096, est.n)).astype(np.int8)
+        draws = draws[draws.any(axis=1)]
+    skipped = 0 if index is None else int(np.sum(index.lower_bounds > budget))
+    return {
+        "optimum": keep * attack.value,
+        "bound": keep * float(attack.bound),
+        "proved": attack.proved,
+        "a_max": a_max,
+        "milp_shift": attack.value,
+        "milp_state": attack.target,
+        "milp_meters": list(attack.meters),
+        "milp_seconds": seconds,
+        "skipped_states": skipped,
+        "attained": bool(binary and abs(played - keep * attack.value) <= 1e-9),
+        "optimum_kind": (
+            f"MILP, {'proved' if attack.proved else 'bound ' + format(keep * attack.bound, '.4f')}"
+            f": state {attack.target}, meters {list(attack.meters)}"
+            + (f", {skipped} states skipped by min cut" if skipped else "")
+        ),
+        "random": float(np.mean(_payoffs(venv, draws))),
+    }
+
+
+def _payoff(
+    budget: int,
+    action: np.ndarray,
+    scenario: str = SCENARIO,
+    kind: str = "shift",
+    a_max: float = A_MAX,
+) -> float:
     from fdia_env.stealth import stealth_attack_v0
 
-    env = stealth_attack_v0.parallel_env(**_env_kwargs(budget, scenario))
+    env = stealth_attack_v0.parallel_env(**_env_kwargs(budget, scenario, kind, a_max))
     env.reset(seed=0)
     _, rewards, *_ = env.step({"attacker": np.asarray(action, dtype=np.int8)})
     return float(rewards["attacker"])
@@ -135,13 +219,15 @@ class _ShiftBox:
     resets the batch after it (its noise generator runs on) and thresholds the Gaussian action.
     """
 
-    def __init__(self, budget: int, scenario: str, num_envs: int) -> None:
+    def __init__(
+        self, budget: int, scenario: str, num_envs: int, kind: str = "shift", a_max: float = A_MAX
+    ) -> None:
         import gymnasium as gym
 
         from fdia_env.stealth.vector import StealthVectorEnv
 
         self.inner = StealthVectorEnv(
-            num_envs, backend="torch", device="cpu", **_env_kwargs(budget, scenario)
+            num_envs, backend="torch", device="cpu", **_env_kwargs(budget, scenario, kind, a_max)
         )
         n = self.inner.env.estimation.n
         self.num_envs, self.backend, self.device = num_envs, "torch", "cpu"
@@ -161,14 +247,22 @@ class _ShiftBox:
         self.inner.close()
 
 
-def _train(algo: str, budget: int, steps: int, seed: int, scenario: str) -> tuple[Any, float]:
+def _train(
+    algo: str,
+    budget: int,
+    steps: int,
+    seed: int,
+    scenario: str,
+    kind: str = "shift",
+    a_max: float = A_MAX,
+) -> tuple[Any, float]:
     """Train ``algo`` for ``steps`` env steps; (its deterministic shift action, train seconds)."""
     if algo == "torch-ppo":
         import torch
 
         from agents.torch_ppo import TorchPPOConfig, train_torch_ppo
 
-        venv = _ShiftBox(budget, scenario, TORCH_ENVS)
+        venv = _ShiftBox(budget, scenario, TORCH_ENVS, kind, a_max)
         config = TorchPPOConfig(total_timesteps=steps, num_envs=TORCH_ENVS, num_steps=4)
         torch.set_num_threads(1)
         result = train_torch_ppo(venv, config, seed=seed)  # type: ignore[arg-type]
@@ -181,7 +275,7 @@ def _train(algo: str, budget: int, steps: int, seed: int, scenario: str) -> tupl
 
     import fdia_env  # noqa: F401 - registers the ids
 
-    env = gym.make("fdia_env/StealthAttack-v0", **_env_kwargs(budget, scenario))
+    env = gym.make("fdia_env/StealthAttack-v0", **_env_kwargs(budget, scenario, kind, a_max))
     start = time.perf_counter()
     model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, seed=seed, verbose=0)
     model.learn(total_timesteps=steps)
@@ -193,7 +287,14 @@ def _train(algo: str, budget: int, steps: int, seed: int, scenario: str) -> tupl
 
 
 def learned_attacker(
-    budget: int, steps: int, seeds: list[int], scenario: str = SCENARIO, algo: str = "PPO"
+    budget: int,
+    steps: int,
+    seeds: list[int],
+    scenario: str = SCENARIO,
+    algo: str = "PPO",
+    action: str = "shift",
+    time_limit: float | None = None,
+    a_max: float = A_MAX,
 ) -> dict[str, Any]:
     """A learner's payoff per seed against random play and the optimum (see the module docstring).
 
@@ -205,24 +306,37 @@ def learned_attacker(
         algo: ``"PPO"`` (stable-baselines3, ``MultiBinary`` shifts) or ``"torch-ppo"``
             (:mod:`agents.torch_ppo` on the torch native vector env, 64 members, a Gaussian
             policy over ``Box(-1, 1, (n,))`` whose positive entries are the shifted states).
+        action: The env's ``"shift"`` (of :data:`MAGNITUDE`, scored by :func:`references`)
+            or ``"box_shift"`` (as far as ``a_max`` = :data:`A_MAX` allows, scored by the MILP
+            optimum of the budgeted stealthy attack, :func:`milp_reference`).
+        time_limit: HiGHS seconds per state of that MILP (``None``: solved to optimality).
+        a_max: The box shift's largest injection per meter (pu), the MILP's bound.
 
     Raises:
-        ValueError: For an ``algo`` other than those of :data:`ALGOS`.
+        ValueError: For an ``algo`` other than those of :data:`ALGOS`, an ``action`` other
+            than those of :data:`ACTIONS`.
     """
     if algo not in ALGOS:
         raise ValueError(
             f"algo must be one of {list(ALGOS)}, got {algo!r} (MaskablePPO does not apply: the "
             "stealth env offers no action mask)"
         )
-    ref = references(budget, scenario)
+    if action not in ACTIONS:
+        raise ValueError(f"action must be one of {list(ACTIONS)}, got {action!r}")
+    if action == "shift":
+        ref = references(budget, scenario)
+    else:
+        ref = milp_reference(budget, scenario, time_limit, a_max=a_max)
     learned, seconds = [], []
     for seed in seeds:
-        action, secs = _train(algo, budget, steps, seed, scenario)
+        bits, secs = _train(algo, budget, steps, seed, scenario, action, a_max)
         seconds.append(secs)
-        learned.append(_payoff(budget, action, scenario))
+        learned.append(_payoff(budget, bits, scenario, action, a_max))
     mean, ci = mean_ci95(learned)
     best = ref["optimum"]
     return {
+        **{k: v for k, v in ref.items() if k not in ("optimum", "optimum_kind", "random")},
+        "action": action,
         "algo": algo,
         "scenario": scenario,
         "budget": budget,
@@ -541,6 +655,8 @@ def format_rows(
         "| optimum | learned / optimum per seed | train s per seed |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
+    boxed = [r for r in attackers if r.get("action") == "box_shift"]
+    attackers = [r for r in attackers if r.get("action") != "box_shift"]
     for r in attackers:
         per = ", ".join(f"{v:.4f}" for v in r["learned"])
         ratio = ", ".join(f"{s:.1%}" for s in r["score"])
@@ -551,6 +667,26 @@ def format_rows(
             f"{r['learned_mean']:.4f} ± {r['learned_ci95']:.2g} | {r['random']:.2e} | "
             f"{r['optimum']:.4f} ({r['optimum_kind']}) | {ratio} | {secs} |"
         )
+    if boxed:
+        lines += [
+            "",
+            "Attacker against the MILP optimum (box shifts, expected dynamics; the env pays "
+            "(1 − α) · shift for an undetectable attack):",
+            "",
+            "| grid | learner | budget | a_max (pu) | steps | learned per seed (rad) | mean ± 95 % "
+            "CI | random | MILP optimum (bound) | MILP s | learned / optimum per seed "
+            "| train s per seed |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in boxed:
+            lines.append(
+                f"| {r['scenario']} | {r['algo']} | {r['budget']} | {r.get('a_max', A_MAX):g} | "
+                f"{r['steps']:,} | {', '.join(f'{v:.4f}' for v in r['learned'])} | "
+                f"{r['learned_mean']:.4f} ± {r['learned_ci95']:.2g} | {r['random']:.2e} | "
+                f"{r['optimum']:.4f} ({r['bound']:.4f}; {r['optimum_kind']}) | "
+                f"{r['milp_seconds']:.0f} | {', '.join(f'{v:.1%}' for v in r['score'])} | "
+                f"{', '.join(f'{v:.0f}' for v in r['train_seconds'])} |"
+            )
     lines += [
         "",
         "Protection game (IEEE 14, a_max = 0.5 pu; damage in rad a best-responding attacker gets):",
@@ -610,7 +746,9 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
 
     The full run (its budgets fit one session on 2 shared cores): 3 seeds of each learner for
     the attacker (budget 3): SB3 PPO on IEEE 14 (4,096 and 8,192 steps) and IEEE 118 (2,048
-    steps), torch PPO on IEEE 14 and IEEE 118 (16,384 and 65,536 steps each); 3 seeds
+    steps), torch PPO on IEEE 14 and IEEE 118 (16,384 and 65,536 steps each); against the
+    MILP, box shifts: torch PPO on both grids at ``a_max`` 0.5 and 0.05 (65,536 steps), SB3
+    PPO on IEEE 118 at 0.05 (2,048 steps); 3 seeds
     of 1,024 steps for the threshold defender, the two protection games, and 3 seeds of 1,024
     steps for the learned protection (attacker budget 3, one meter protected).
     """
@@ -630,6 +768,13 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
             learned_attacker(3, 16384, seeds, "grid-ieee118", algo="torch-ppo"),
             learned_attacker(3, 65536, seeds, "grid-ieee118", algo="torch-ppo"),
         ]
+        box = {"algo": "torch-ppo", "action": "box_shift"}
+        for grid in (SCENARIO, "grid-ieee118"):
+            for a_max in (A_MAX, 0.05):
+                attackers.append(learned_attacker(3, 65536, seeds, grid, a_max=a_max, **box))
+        attackers.append(
+            learned_attacker(3, 2048, seeds, "grid-ieee118", action="box_shift", a_max=0.05)
+        )
         defenders = [learned_defender(3, 1024, seeds)]
         protections = [protection_rows(3, 1), protection_rows(5, 2)]
         protectors = [learned_protection(3, 1, 1024, seeds)]

@@ -170,7 +170,17 @@ class SubsetChoice:
     batch_backends = ("numpy", "torch")
 
     def _batch_tables(self, xp: Any) -> None:
-        """The subsets' masks and bitmasks on the backend ``xp`` (once per backend change)."""
+        """The subsets' masks and bitmasks on the backend ``xp`` (once per backend change).
+
+        Raises:
+            ValueError: Naming ``backend`` on torch with more than 62 sensors (the bitmasks are
+                int64 there; numpy keeps larger ones as Python ints).
+        """
+        if getattr(xp, "name", None) == "torch" and self.M > 62:
+            raise ValueError(
+                "backend='torch' holds sensor subsets as int64 bitmasks, so at most 62 sensors, "
+                f"got M = {self.M}; use backend='numpy'"
+            )
         self._masks = xp.asarray(self._masks_np)
         self._bits_arr = xp.asarray(bit_array(self.bits, self.M))  # <= 16 sensors: int64
 

@@ -47,7 +47,6 @@ import scipy.linalg
 
 from fdia_env._validation import check_choice
 from fdia_env.detection.gchisq import gchisq_tails
-from fdia_env.kalman import psd_sqrt
 from fdia_env.kalman.linalg import mT
 
 
@@ -197,23 +196,6 @@ def _moments(lam: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
         m[:, i] = tails(lam, tau, dof)
         dof[i] = 1.0
     return p, m
-
-
-def truncated_moments(
-    A: np.ndarray, C: np.ndarray, tau: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The pieces of ``E[y y' 1{y'Ay <= τ}]`` and ``E[y y' 1{y'Ay > τ}]`` for ``y ~ N(0, C)``.
-
-    Returns:
-        ``(p, T, m0, m1)``: ``p = (P(D0), P(D1))``; ``T = L V`` (nz, nz); ``m0``, ``m1`` (nz,)
-        with ``E[y y' 1{D_j}] = T diag(m_j) T'``; every entry of p, m0, m1 in [0, 1] and
-        accurate relative to its size (module docstring).
-    """
-    L = psd_sqrt(C)
-    B = L.T @ A @ L
-    lam, V = np.linalg.eigh(0.5 * (B + B.T))
-    p, m = _moments(np.clip(lam, 0.0, None), tau)
-    return p, L @ V, m[0], m[1]
 
 
 def hypotheses(

@@ -313,11 +313,6 @@ def _map(x: float | np.ndarray, weights: np.ndarray, which: int) -> np.ndarray:
     return out
 
 
-def quadratic_sf(threshold: float, A: np.ndarray, cov: np.ndarray) -> float:
-    """``P(y' A y > threshold)`` for ``y ~ N(0, cov)`` and PSD ``A``."""
-    return quadratic_tails(threshold, A, cov)[1]
-
-
 def quadratic_tails(threshold: float, A: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
     """``(P(y' A y <= threshold), P(y' A y > threshold))`` for ``y ~ N(0, cov)``, PSD ``A``.
 

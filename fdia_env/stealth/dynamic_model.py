@@ -23,10 +23,11 @@ clean filter's error (covariance ``P_f``, the filtered steady state, orthogonal 
   ``Σ̃ = T Σ T' + Σ_b``), its tail computed by Imhof's integral.
 
 Everything is batched over B members (arrays with a leading batch axis): the single env is a
-batch of one. The bias attack also runs on torch tensors (``xp``, a torch backend of
-:mod:`fdia_env.backend`: the native vector env's ``backend="torch"``), its χ² tail by
-:func:`fdia_env.stealth.torch_ops.ncx2_sf`; the linear attack's tail is a numerical integral
-per member, numpy only. See docs/guide/stealth.md ("Dynamic").
+batch of one. Both attacks also run on torch tensors (``xp``, a torch backend of
+:mod:`fdia_env.backend`: the native vector env's ``backend="torch"``): the bias attack's χ²
+tail by :func:`fdia_env.stealth.torch_ops.ncx2_sf`; the linear attack's filter, covariances and
+eigenvalues in torch, its tail (Imhof's numerical integral, one per member) by scipy on the
+CPU, as numpy computes it. See docs/guide/stealth.md ("Dynamic").
 """
 
 from __future__ import annotations
@@ -91,6 +92,7 @@ class DynamicModel:
             "Qh": _psd_sqrt(sys.Q),
             "Rh": np.linalg.cholesky(sys.R),
             "Pfh": _psd_sqrt(Pf),
+            "eye": np.eye(H.shape[0]),
             "clean": float(np.trace(Pf)),
         }
         for name, value in values.items():
@@ -119,7 +121,8 @@ class DynamicModel:
 
     def arrays(self, xp: Backend = NUMPY) -> dict[str, Any]:
         """The model's matrices on the backend ``xp`` (numpy: the attributes themselves)."""
-        names = ("F", "H", "K", "HF", "Abar", "Wz", "sigma", "Qh", "Rh", "Pfh", "rows", "free")
+        names = ("F", "H", "K", "HF", "Abar", "Wz", "sigma", "Qh", "Rh", "Pfh", "Pz", "rows")
+        names += ("free", "eye")
         if xp is NUMPY:
             return {name: getattr(self, name) for name in names}
         cache = self.__dict__.setdefault("_on", {})
@@ -190,7 +193,7 @@ class DynamicModel:
             rng: numpy Generator for the draws (torch: a ``torch.Generator`` of the device).
             free: (B, |S|) bool, the attacked rows each member's attacker may write this step
                 (default :attr:`free`; a defender's protection clears some).
-            xp: The arrays' backend (torch: the bias attack only; see the module docstring).
+            xp: The arrays' backend (see the module docstring).
 
         Returns:
             Arrays (B,): ``phi`` (trace of the error covariance given the attack), ``error``
@@ -200,11 +203,6 @@ class DynamicModel:
         """
         if xp is not NUMPY and free is not None:
             raise ValueError("free (a protecting defender's rows) runs on numpy only")
-        if xp is not NUMPY and self.action != "bias":
-            raise ValueError(
-                "action='linear' runs on numpy only: its detection probability is a numerical "
-                "integral per member (use backend='numpy')"
-            )
         mat = self.arrays(xp)
         B = actions.shape[0]
         acts = xp.clip(xp.asarray(actions, dtype=np.float64), -1.0, 1.0)
@@ -227,25 +225,29 @@ class DynamicModel:
             zt = z + dz if sampled else None
             phi = self.clean + (state["d"] ** 2).sum(1)
         else:
-            T, Sb = self._linear(acts, free)
-            eye = np.eye(self.m)
-            ImT = eye - T
-            M = ImT @ self.Pz @ ImT.transpose(0, 2, 1) + Sb
+            T, Sb = self._linear(acts, free, xp)
+            Pz = mat["Pz"]
+            ImT = mat["eye"] - T
+            M = ImT @ Pz @ _t(ImT) + Sb
             D = state["D"]
-            state["D"] = self.F @ D @ self.F.T + self.K @ M @ self.K.T
-            St = T @ self.Pz @ T.transpose(0, 2, 1) + Sb
-            G = self.Wz @ St @ self.Wz.T
-            mu = np.clip(np.linalg.eigvalsh((G + G.transpose(0, 2, 1)) / 2.0), 0.0, None)
+            state["D"] = mat["F"] @ D @ mat["F"].T + mat["K"] @ M @ mat["K"].T
+            St = T @ Pz @ _t(T) + Sb
+            G = mat["Wz"] @ St @ mat["Wz"].T
+            G = (G + _t(G)) / 2.0
+            if xp is NUMPY:
+                mu = np.clip(np.linalg.eigvalsh(G), 0.0, None)
+            else:
+                mu = xp.clip(xp.eigh(G)[0], 0.0, float("inf"))
             state["mu"][rows_b, slot] = mu
             with np.errstate(divide="ignore"):
-                kl = 0.5 * np.sum(mu - 1.0 - np.log(mu), axis=1)
+                kl = 0.5 * (mu - 1.0 - xp.log(mu)).sum(1)
             if sampled:
-                b = np.sqrt(np.diagonal(Sb, axis1=1, axis2=2)) * rng.standard_normal((B, self.m))
-                zt = np.einsum("bij,bj->bi", T, z) + b
-                state["d"] = d @ self.F.T + (z - zt) @ self.K.T
+                b = xp.sqrt(xp.diagonal(Sb)) * self._normal(xp, rng, (B, self.m))
+                zt = xp.einsum("bij,bj->bi", T, z) + b
+                state["d"] = d @ mat["F"].T + (z - zt) @ mat["K"].T
             else:
                 zt = None
-            phi = self.clean + np.trace(state["D"], axis1=1, axis2=2)
+            phi = self.clean + xp.trace(state["D"])
         state["k"] = k
         filled = xp.minimum(k, self.window)
         threshold = tau[rows_b, filled - 1]
@@ -262,8 +264,10 @@ class DynamicModel:
             mean = dof + total
         else:
             weights = state["mu"].reshape(B, -1)
-            p = np.array([_chi2_mix_sf(weights[i], threshold[i], alpha[i]) for i in range(B)])
-            mean = weights.sum(axis=1)
+            # Imhof's integral runs on the CPU (scipy) on every backend: numpy's own figures
+            w_np, x_np, a_np = (xp.to_numpy(v) for v in (weights, threshold, alpha))
+            p = xp.asarray(np.array([_chi2_mix_sf(w_np[i], x_np[i], a_np[i]) for i in range(B)]))
+            mean = weights.sum(1)
         if sampled:
             state["q"][rows_b, slot] = ((zt @ mat["Wz"].T) ** 2).sum(1)
             statistic = state["q"].sum(1)
@@ -290,17 +294,19 @@ class DynamicModel:
         return np.asarray(free, dtype=np.float64) * self.free
 
     def _linear(
-        self, acts: np.ndarray, free: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self, acts: Any, free: np.ndarray | None = None, xp: Backend = NUMPY
+    ) -> tuple[Any, Any]:
         """(B, m, m) T and Σ_b of (B, |S|, |S| + 1) actions (protected rows pass unchanged)."""
+        mat = self.arrays(xp)
         B, r = acts.shape[0], len(self.rows)
-        free = self._free(B, free)
-        T = np.broadcast_to(np.eye(self.m), (B, self.m, self.m)).copy()
-        TS = np.eye(r) + self.t_max * acts[:, :, :r] * free[:, :, None]
-        T[:, self.rows[:, None], self.rows[None, :]] = TS
-        Sb = np.zeros((B, self.m, self.m))
-        sb = self.b_max * np.abs(acts[:, :, r]) * self.sigma * free
-        Sb[:, self.rows, self.rows] = sb**2
+        allowed = self._free(B, free) if xp is NUMPY else mat["free"].to(acts.dtype)[None, :]
+        rows = mat["rows"]
+        T = xp.copy(xp.broadcast_to(mat["eye"], (B, self.m, self.m)))
+        TS = mat["eye"][:r, :r] + self.t_max * acts[:, :, :r] * allowed[:, :, None]
+        T[:, rows[:, None], rows[None, :]] = TS
+        Sb = xp.zeros((B, self.m, self.m))
+        sb = self.b_max * abs(acts[:, :, r]) * mat["sigma"] * allowed
+        Sb[:, rows, rows] = sb**2
         return T, Sb
 
     def injections(self, actions: Any, free: np.ndarray | None = None, xp: Backend = NUMPY) -> Any:
@@ -311,6 +317,11 @@ class DynamicModel:
         allowed = self._free(acts.shape[0], free) if xp is NUMPY else mat["free"].to(acts.dtype)
         inj[:, mat["rows"]] = self.a_max * mat["sigma"] * acts * allowed
         return inj
+
+
+def _t(x: Any) -> Any:
+    """The batch of matrices ``x`` (B, m, m), each transposed (numpy or torch)."""
+    return x.swapaxes(-1, -2) if isinstance(x, np.ndarray) else x.transpose(-1, -2)
 
 
 def chi2_mix_sf(weights: Any, x: float) -> float:

@@ -8,11 +8,12 @@ model as the single env (a batch of one there). Autoreset is Gymnasium's default
 reward 0). ``action="linear"`` computes each member's detection probability by a numerical
 integral (Imhof's), about 10–40 ms a member-step unless the window is strictly stealthy.
 
-``backend="torch", device="cpu" | "cuda"`` runs the bias attack (``action="bias"``, the
-default) on float64 tensors of that device: actions are tensors of the device, observations,
-rewards, flags and infos come back as tensors there; its expected dynamics equal numpy's to
-1e-10 and its sampled dynamics draw from a ``torch.Generator`` of the device (``seed`` an int
-or None). The linear attack runs on numpy only.
+``backend="torch", device="cpu" | "cuda"`` runs either attack (``action="bias"``, the default,
+or ``"linear"``) on float64 tensors of that device: actions are tensors of the device,
+observations, rewards, flags and infos come back as tensors there; its expected dynamics equal
+numpy's to 1e-10, and so do its sampled dynamics given the same draws (it draws them from a
+``torch.Generator`` of the device, ``seed`` an int or None). The linear attack's detection
+probability (Imhof's integral) is computed by scipy on the CPU for every backend.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
 
     Args:
         num_envs: B, 1..2**16.
-        backend: ``"numpy"`` (default) or ``"torch"`` (``action="bias"`` only).
+        backend: ``"numpy"`` (default) or ``"torch"``.
         device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
         **kwargs: Options of ``stealth_dynamic_v0.parallel_env`` (no ``render_mode``).
     """
@@ -45,11 +46,6 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         self._init_batch(num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs, backend, device)
         xp = self.xp
         self.model = self.env.model
-        if xp is not NUMPY and self.model.action != "bias":
-            raise ValueError(
-                "backend='torch' runs action='bias' only: the linear attack's detection "
-                "probability is a numerical integral per member (use backend='numpy')"
-            )
         self._alpha = xp.full(self.num_envs, float(self.env.alpha), dtype=np.float64)
         tau = np.repeat(self.env._tau[[self.env._default_rate()]], self.num_envs, axis=0)
         self._tau = xp.asarray(tau)
@@ -143,8 +139,8 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthDynamicVectorEnv:
     """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthDynamic-v0"``.
 
     Raises:
-        ValueError: For an unknown backend, a device it cannot use, ``backend="torch"`` with
-            the linear attack, the defender's view, or a bad option.
+        ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
+            bad option.
     """
     backend, device = vector_options(kwargs, "dynamic stealth env")
     return StealthDynamicVectorEnv(num_envs, backend=backend, device=device, **kwargs)

@@ -19,7 +19,7 @@ from fdia_env.stealth.static import (
     static_estimation,
 )
 
-ACTIONS = ("shift", "free")
+ACTIONS = ("shift", "box_shift", "free")
 DYNAMICS = ("expected", "sampled")
 ON_DETECT = ("zero", "penalty", "end")
 DEFENDERS = (None, "threshold")
@@ -107,7 +107,7 @@ class StealthAttackEnv(StealthParallelEnv):
             else dataclasses.replace(est, alpha=a, lnr_threshold=sidak_threshold(a, est.m))
             for a in self.alphas
         ]
-        if self.action_kind == "shift":
+        if self.action_kind in ("shift", "box_shift"):
             act: spaces.Space = spaces.MultiBinary(est.n)
         else:
             act = spaces.Box(-1.0, 1.0, shape=(est.m,), dtype=np.float32)
@@ -125,12 +125,16 @@ class StealthAttackEnv(StealthParallelEnv):
     def injection(self, action: Any) -> np.ndarray:
         """(m,) the injection an action makes: shift or free, protected meters zeroed, trimmed.
 
-        The attacker holds ``budget`` meters: when the action would corrupt more, only the
-        ``budget`` largest ``|a_i|`` (ties: the lower position) are written.
+        ``"box_shift"`` scales the shift ``H bits`` so that its largest ``|a_i|`` is ``a_max``
+        (:func:`box_scale`). The attacker holds ``budget`` meters: when the action would corrupt
+        more, only the ``budget`` largest ``|a_i|`` (ties: the lower position) are written.
         """
         est = self.estimation
         if self.action_kind == "shift":
             a = est.H @ (self.magnitude * np.asarray(action, dtype=np.float64).reshape(est.n))
+        elif self.action_kind == "box_shift":
+            a = est.H @ np.asarray(action, dtype=np.float64).reshape(est.n)
+            a = a * box_scale(a[None, :], self.a_max)[0]
         else:
             a = self.a_max * np.clip(np.asarray(action, dtype=np.float64).reshape(est.m), -1, 1)
         a[self.protected] = 0.0
@@ -235,6 +239,16 @@ class StealthAttackEnv(StealthParallelEnv):
         fig.tight_layout()
         canvas.draw()
         return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def box_scale(a: np.ndarray, a_max: float) -> np.ndarray:
+    """(B, 1) the factor that brings each row of (B, m) ``a`` to ``max_i |a_i| = a_max`` (0: 1).
+
+    ``action="box_shift"``'s shift ``c = s · bits``: the largest one whose injection ``H c``
+    stays inside the meters' bound, ``s = a_max / max_i |(H bits)_i|``.
+    """
+    size = np.max(np.abs(a), axis=1, keepdims=True)
+    return a_max / np.where(size > 0.0, size, a_max)
 
 
 def _check_alphas(alphas: Any) -> tuple[float, ...]:

@@ -15,9 +15,13 @@ the single agent ``"attacker"``. Each step is a fresh measurement snapshot.
 
 ``action="shift"`` (default): ``MultiBinary(n)``; bit j shifts state j's estimate by
 ``magnitude`` radians, i.e. ``a = H c`` with ``c = magnitude · bits`` (only ``a = H c``
-shapes). ``action="free"``: ``Box(-1, 1, (m,))``, ``a = a_max · action`` (a learner can discover
-that only ``a = H c`` is safe). Either way protected meters get no injection, and when ``a``
-would corrupt more than ``budget`` meters only the ``budget`` largest ``|a_i|`` are written.
+shapes). ``action="box_shift"``: the same ``MultiBinary(n)`` bits, shifted as far as the meters'
+bound allows, ``c = s · bits`` with ``s = a_max / max_i |(H bits)_i|`` (the largest injection is
+``a_max``): the budgeted stealthy attack of ``baselines.stealth.budgeted_attack`` (an exact MILP
+over every shift c) restricted to 0/1 directions. ``action="free"``: ``Box(-1, 1, (m,))``,
+``a = a_max · action`` (a learner can discover that only ``a = H c`` is safe). Every way,
+protected meters get no injection, and when ``a`` would corrupt more than ``budget`` meters only
+the ``budget`` largest ``|a_i|`` are written.
 
 ## Observation Space
 
@@ -45,7 +49,8 @@ first alarm with ``on_detect="end"`` (sampled). Truncates after ``max_cycles``.
 
 ``scenario`` (a grid case or preset, ``"grid-ieee14"`` default, a ``GridModel``, an (m, n) H or
 a :class:`~fdia_env.stealth.StaticEstimation`), ``budget`` (meters, default 6), ``horizon``,
-``action`` (``"shift"`` | ``"free"``), ``magnitude`` (rad, 0.05), ``a_max`` (pu, 0.5),
+``action`` (``"shift"`` | ``"box_shift"`` | ``"free"``), ``magnitude`` (rad, 0.05, ``"shift"``),
+``a_max`` (pu, 0.5, ``"box_shift"`` and ``"free"``),
 ``dynamics`` (``"sampled"`` | ``"expected"``), ``test`` (``"chi2"`` | ``"lnr"``), ``alpha``
 (0.05, or the given StaticEstimation's; another value re-thresholds that model),
 ``on_detect`` (``"zero"`` | ``"penalty"`` | ``"end"``), ``penalty`` (1.0), ``protected``
@@ -65,7 +70,8 @@ Infos (the same keys at reset and every step): ``phi`` (the last damage), ``step
 
 ## Version History
 
-- v0: initial release.
+- v0: initial release; ``action="box_shift"`` added later (the default and the other actions
+  unchanged).
 
 ## Example
 

@@ -46,7 +46,8 @@ class StealthVectorEnv(StealthVectorBase):
         est = self.env.estimation
         L = np.linalg.cholesky(est.R)
         diag_L = np.diag(L).copy() if not np.any(L - np.diag(np.diag(L))) else None
-        self._HT = xp.asarray(est.H.T * self.env.magnitude)  # (n, m): bits @ HT = H c
+        scale = self.env.magnitude if self.env.action_kind == "shift" else 1.0
+        self._HT = xp.asarray(est.H.T * scale)  # (n, m): bits @ HT = H c (box_shift: H bits)
         self._KT = xp.asarray(est.K.T)
         self._diag_L = None if diag_L is None else xp.asarray(diag_L)
         self._LT = xp.asarray(L.T)
@@ -64,13 +65,16 @@ class StealthVectorEnv(StealthVectorBase):
         """(B, m) injections of (B, d) actions: as the single env's ``injection``, batched."""
         env, xp = self.env, self.xp
         acts = xp.asarray(actions, dtype=np.float64)
-        if env.action_kind == "shift":
-            a = acts @ self._HT
-        else:
+        if env.action_kind == "free":
             a = env.a_max * xp.clip(acts, -1.0, 1.0)
+        else:
+            a = acts @ self._HT
+        if env.action_kind == "box_shift":  # as env.box_scale: largest |a_i| = a_max
+            size = self._row_max(abs(a))
+            a = a * (env.a_max / xp.where(size > 0.0, size, env.a_max))
         a[:, self._protected] = 0.0
         size = abs(a)
-        scale = size.max(1, keepdims=True) if xp is NUMPY else size.amax(1, keepdim=True)
+        scale = self._row_max(size)
         a[size <= 1e-12 * xp.maximum(scale, 1e-300)] = 0.0
         if env.budget < a.shape[1]:
             if xp is NUMPY:
@@ -151,6 +155,10 @@ class StealthVectorEnv(StealthVectorBase):
         return obs, reward, terminated, truncated, infos
 
     # --- the estimator's functions on the batch (numpy: the model's own methods) ---------
+    def _row_max(self, x: Any) -> Any:
+        """(B, 1) each row's largest entry."""
+        return x.max(1, keepdims=True) if self.xp is NUMPY else x.amax(1, keepdim=True)
+
     def _max_abs(self, x: Any) -> Any:
         return np.max(np.abs(x), axis=1) if self.xp is NUMPY else x.abs().amax(1)
 

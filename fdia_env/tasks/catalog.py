@@ -20,6 +20,7 @@ DETECTION_DEFENDER = "fdia_env/DetectionDefender-v0"
 DETECTION_ATTACKER = "fdia_env/DetectionAttacker-v0"
 STEALTH_ATTACKER = "fdia_env/StealthAttack-v0"
 STEALTH_DYNAMIC = "fdia_env/StealthDynamic-v0"
+STEALTH_DYNAMIC_DEFENDER = "fdia_env/StealthDynamicDefender-v0"
 FAMILY_ID = "fdia_env/SystemFamily-v0"
 FAMILY_ENTRY_POINT = "fdia_env.envs.system_family:SystemFamilyEnv"
 
@@ -187,6 +188,45 @@ def _stealth_dynamic(instance: str, scenario: str, a_max: float, horizon: int) -
     )
 
 
+def rotating_bias(sensors: int, horizon: int) -> Any:
+    """The attacker that biases sensor ``k mod sensors`` by ``+a_max`` at step k (a schedule)."""
+    import numpy as np
+
+    from fdia_env.stealth.dynamic_policy import ScheduledPolicy
+
+    table = np.zeros((horizon, sensors))
+    table[np.arange(horizon), np.arange(horizon) % sensors] = 1.0
+    return ScheduledPolicy(table)
+
+
+def _stealth_protect(
+    instance: str, scenario: str, sensors: int, a_max: float, horizon: int
+) -> TaskSpec:
+    return TaskSpec(
+        f"stealth/{instance}-defender-v0",
+        "stealth",
+        "defender",
+        STEALTH_DYNAMIC_DEFENDER,
+        {
+            "scenario": scenario,
+            "action": "bias",
+            "a_max": a_max,
+            "horizon": horizon,
+            "dynamics": "expected",
+            "defender": "protect",
+            "protect_budget": 1,
+            "false_alarm_cost": 0.0,
+            "opponent": rotating_bias(sensors, horizon),
+        },
+        "fdia_env.stealth.stealth_dynamic_v0",
+        f"{scenario}: protect one sensor per step against an attacker that biases sensor "
+        f"k mod {sensors} by {a_max:g} innovation standard deviations at step k, for {horizon} "
+        "steps, under the windowed chi2 detector; minimise the attacker's expected undetected "
+        "error (an alarm stops its payoff, so letting a bias through can pay)",
+        episodes=10,
+    )
+
+
 def _family(instance: str, objective: str, first: int, count: int, **family: Any) -> TaskSpec:
     from fdia_env.envs.system_family import TrackingFamily
 
@@ -259,5 +299,6 @@ SPECS: tuple[TaskSpec, ...] = (
     _detection("ch3-tracking", "ch3-tracking", 7.5, "attacker"),
     _stealth("ieee14-b3", "grid-ieee14", 3),
     _stealth_dynamic("ch4-position-dynamic-bias", "ch4-position", 0.25, 10),
+    _stealth_protect("ch4-position-dynamic-protect", "ch4-position", 3, 1.0, 6),
     _family("tracking-m6", "trace", 1_000_000, 20, num_sensors=6, budget=4, horizon=4),
 )

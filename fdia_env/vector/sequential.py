@@ -44,9 +44,13 @@ from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSetEnv
 from fdia_env.vector import env as vector_env
 
-SEQUENTIAL_MODULES = ("fdia_env.sparse_attack_v0", "fdia_env.sparse_attack_v1")
-"""The modules whose ``action="sequential"`` has a native vector env (v1: also its default
-``"auto"``, which is the sequential format above 16 sensors)."""
+SEQUENTIAL_MODULES = (
+    "fdia_env.sparse_attack_v0",
+    "fdia_env.sparse_attack_v1",
+    "fdia_env.sparse_attack_v2",
+)
+"""The modules whose ``action="sequential"`` has a native vector env (v1 and v2: also their
+default ``"auto"``, which is the sequential format above 16 sensors)."""
 
 # the engine's per-member state, held for the members that do not commit at a decision
 _SIM_STATE = ("_comp", "_P", "_M", "consistent", "k", "nis", "phi", "x", "x_hat")
@@ -444,5 +448,6 @@ def make_vector(
 
 for _module in SEQUENTIAL_MODULES:
     vector_env.FORMAT_VECTOR_ENVS[(_module, "sequential")] = make_vector
-for _action in (None, "auto"):  # sparse_attack_v1's default: sequential above 16 sensors
-    vector_env.FORMAT_VECTOR_ENVS[("fdia_env.sparse_attack_v1", _action)] = make_vector
+for _module in SEQUENTIAL_MODULES[1:]:  # v1's and v2's default: sequential above 16 sensors
+    for _action in (None, "auto"):
+        vector_env.FORMAT_VECTOR_ENVS[(_module, _action)] = make_vector

@@ -57,6 +57,11 @@ PARAMS: dict[str, dict[str, st.SearchStrategy[Any]]] = {
         "budget": st.one_of(st.none(), st.integers(0, 12)),
         "illegal_action": st.sampled_from(["trim", "error", "noop"]),
     },
+    "sparse_attack_v2": {  # v1's options; the sequential format's order is "plan" by default
+        **_pick(*COMMON),
+        "budget": st.one_of(st.none(), st.integers(0, 12)),
+        "illegal_action": st.sampled_from(["trim", "error", "noop"]),
+    },
     "covariance_attack_v0": {
         **_pick(*COMMON),
         "power": power_values,

@@ -40,6 +40,7 @@ PLAYERS = ("attacker", "defender")
 ENVS = {
     "sparse_attack_v0": {"scenario": "ch4-position", "budget": 3, "horizon": 3},
     "sparse_attack_v1": {"scenario": "ch4-position", "budget": 3, "horizon": 3},
+    "sparse_attack_v2": {"scenario": "ch4-position", "budget": 3, "horizon": 3},
     "covariance_attack_v0": {"scenario": "ch2-pv-2", "horizon": 3, "power_mode": "budget"},
     "sensor_game_v0": {"scenario": "ch5-game", "rounds": 3},
     "detection_game_v0": {"scenario": "ch3-static", "horizon": 3},
