@@ -747,8 +747,8 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
     The full run (its budgets fit one session on 2 shared cores): 3 seeds of each learner for
     the attacker (budget 3): SB3 PPO on IEEE 14 (4,096 and 8,192 steps) and IEEE 118 (2,048
     steps), torch PPO on IEEE 14 and IEEE 118 (16,384 and 65,536 steps each); against the
-    MILP, box shifts: torch PPO on both grids at ``a_max`` 0.5 and 0.05 (65,536 steps), SB3
-    PPO on IEEE 118 at 0.05 (2,048 steps); 3 seeds
+    MILP, box shifts: torch PPO on both grids at ``a_max`` 0.5 and 0.05 (65,536 steps) and
+    at 0.05 (262,144 steps), SB3 PPO at 0.05 (4,096 steps on IEEE 14, 2,048 on IEEE 118); 3 seeds
     of 1,024 steps for the threshold defender, the two protection games, and 3 seeds of 1,024
     steps for the learned protection (attacker budget 3, one meter protected).
     """
@@ -772,9 +772,12 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
         for grid in (SCENARIO, "grid-ieee118"):
             for a_max in (A_MAX, 0.05):
                 attackers.append(learned_attacker(3, 65536, seeds, grid, a_max=a_max, **box))
-        attackers.append(
-            learned_attacker(3, 2048, seeds, "grid-ieee118", action="box_shift", a_max=0.05)
-        )
+        for grid in (SCENARIO, "grid-ieee118"):
+            attackers.append(learned_attacker(3, 262144, seeds, grid, a_max=0.05, **box))
+        for grid, steps in ((SCENARIO, 4096), ("grid-ieee118", 2048)):
+            attackers.append(
+                learned_attacker(3, steps, seeds, grid, action="box_shift", a_max=0.05)
+            )
         defenders = [learned_defender(3, 1024, seeds)]
         protections = [protection_rows(3, 1), protection_rows(5, 2)]
         protectors = [learned_protection(3, 1, 1024, seeds)]
