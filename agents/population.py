@@ -226,14 +226,16 @@ def grow_meta(
 
     Only the new row and column are played (one episode per pair: the payoff of two
     deterministic policies in the expected-dynamics game is exact; sampled dynamics would
-    need more). In the sequential format the opponent of a view plays subsets, so the
-    defender is played as its pure strategy (``actions["defender"]``, the subset its policy
-    builds) against the attacker's learned policy.
+    need more). In the sequential format each side is played as its pure strategy
+    (``actions``: the subset its answer builds) in the subset format, where every subset
+    pair pays as in the sequential one.
     """
     if env_kwargs.get("action") == "sequential":
         if actions is None:
-            raise ValueError("the sequential format's meta-game needs the defenders' actions")
-        policies = {**policies, "defender": [ConstantPolicy(a) for a in actions["defender"]]}
+            raise ValueError("the sequential format's meta-game needs both sides' actions")
+        policies = {side: [ConstantPolicy(a) for a in actions[side]] for side in SIDES}
+        env_kwargs = {k: v for k, v in env_kwargs.items() if k != "illegal_action"}
+        env_kwargs["action"] = "subset"
     m, k = len(policies["defender"]), len(policies["attacker"])
     out = np.zeros((m, k))
     out[: meta.shape[0], : meta.shape[1]] = meta

@@ -165,6 +165,10 @@ class ExpectedOpponentEnv(gym.Env):
         self.observation_space = self.copies[0].observation_space
         self.action_space = self.copies[0].action_space
         self._running = [True] * len(self.copies)
+        self._return = 0.0
+        self._first: int | None = None
+        self.values: dict[int, float] = {}
+        """The exact expected return of every pure strategy (subset index) the learner played."""
 
     def reset(
         self, *, seed: int | None = None, options: dict | None = None
@@ -174,6 +178,7 @@ class ExpectedOpponentEnv(gym.Env):
         shared = int(self.np_random.integers(2**31 - 1))
         outs = [env.reset(seed=shared, options=options) for env in self.copies]
         self._running = [True] * len(self.copies)
+        self._return, self._first = 0.0, None
         return outs[0]
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
@@ -196,7 +201,49 @@ class ExpectedOpponentEnv(gym.Env):
                 last = (obs, info)
         assert last is not None  # a running copy was stepped
         ended = not any(self._running)
+        self._return += reward
+        if self._first is None:
+            self._first = int(np.asarray(action).reshape(-1)[0])
+        if ended:
+            self.values[self._played()] = self._return
         return last[0], reward, ended and not truncated, ended and truncated, last[1]
+
+    def _played(self) -> int:
+        """The learner's pure strategy of the episode: its subset (its first action if one-shot)."""
+        view = self.copies[0].unwrapped
+        subsets = getattr(view, "first_subsets", None)  # the sequential format's view
+        if subsets is not None:
+            return int(subsets[-1])
+        assert self._first is not None
+        return self._first
+
+    def value_of(self, strategy: int) -> float:
+        """The exact expected return of the learner's pure strategy (one episode played).
+
+        In the sequential format the subset is built one pick per decision, then stop (and wait,
+        stop, until every copy's round has ended).
+        """
+        from fdia_env.envs.sequential import STOP, subset_actions
+
+        view = self.copies[0].unwrapped
+        if getattr(view, "first_subsets", None) is None:
+            actions = [int(strategy)]
+        else:
+            subset = view.parallel.models[view.agent].subsets[int(strategy)]
+            picks = subset_actions(view.parallel, view.agent, subset)
+            actions = [*picks, *[STOP] * (2 * (view.parallel.M + 1))]
+        self.reset(seed=0)
+        for action in actions:
+            *_, terminated, truncated, _ = self.step(action)
+            if terminated or truncated:
+                return self.values[int(strategy)]
+        raise RuntimeError(f"strategy {strategy} did not end its episode")
+
+    def best_strategy(self, candidate: int) -> int:
+        """``candidate`` unless a strategy played so far has a higher expected return."""
+        value = self.values[candidate] if candidate in self.values else self.value_of(candidate)
+        best = max(self.values, key=lambda a: self.values[a])
+        return best if self.values[best] > value else int(candidate)
 
     def action_masks(self) -> np.ndarray:
         """The learner's legal actions now (the same in every running copy)."""
@@ -231,6 +278,11 @@ def learn_best_response(
     ``expected``: pay the expected reward over the mix (:class:`ExpectedOpponentEnv`) instead
     of one draw of it per episode, where the mix has at most :data:`EXPECTED_MAX_SUPPORT`
     strategies (a wider one, e.g. the uniform mix of PSRO's first iteration, is sampled).
+    There every episode's return is the exact value of the subset the learner built, so in the
+    sequential format (whose meta-game plays each side's pure strategy,
+    :func:`agents.population.grow_meta`) the answer is the best subset the learner played
+    during training where it beats the final policy's own (:meth:`ExpectedOpponentEnv.
+    best_strategy`); the saved policy is the final one.
     """
     seed_everything(seed)
     if expected and np.count_nonzero(opponent) <= EXPECTED_MAX_SUPPORT:
@@ -252,10 +304,14 @@ def learn_best_response(
     if tb_dir is not None:  # a resumed iteration replaces the unfinished one's events
         model.set_logger(tensorboard(tb_dir, purge_from=0))
     model.learn(steps, callback=callback)
+    action = initial_action(model, entry, env_kwargs)
+    inner = vec_env.envs[0].unwrapped
+    if isinstance(inner, ExpectedOpponentEnv) and env_kwargs.get("action") == "sequential":
+        action = inner.best_strategy(action)  # the best subset the learner played
     vec_env.close()
     if tb_dir is not None:
         model.logger.close()
-    return model, initial_action(model, entry, env_kwargs)
+    return model, action
 
 
 def game_algo(cfg: GameConfig) -> str:

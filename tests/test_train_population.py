@@ -228,6 +228,14 @@ def test_the_expected_opponent_env_pays_the_mix_s_exact_expected_payoff(side, ac
                 break
         assert done
         assert total == pytest.approx(expected[own], rel=1e-12, abs=1e-15)
+    # every strategy played is recorded with its exact value; the best one wins over a candidate
+    assert sorted(env.values) == list(range(7))
+    np.testing.assert_allclose([env.values[a] for a in range(7)], expected, rtol=1e-12)
+    best = int(np.argmax(expected))
+    assert env.best_strategy(best) == best and env.best_strategy((best + 1) % 7) == best
+    env.values = {}
+    assert env.value_of(3) == pytest.approx(expected[3], rel=1e-12)
+    assert env.best_strategy(3) == 3  # nothing better played
     env.close()
     with pytest.raises(ValueError, match="opponent must be a 1-D mix"):
         ExpectedOpponentEnv(get("sensor_game_v0", side).gym_id, kwargs, -probs)
@@ -280,3 +288,14 @@ def test_the_game_command_trains_on_expected_rewards(tmp_path):
     config = json.loads((run.run_dir / "config.json").read_text())
     assert config["resolved"]["expected_rewards"] is True
     assert [h["timesteps"] for h in run.history] == [128]
+
+
+def test_the_sequential_format_s_meta_game_plays_both_pure_strategies(game):
+    """PSRO's meta-game in the sequential format holds L's entries of the populations' subsets."""
+    sequential = MatrixGame(
+        game.entries, {**game.env_kwargs, "action": "sequential"}, game.payoff, game.value
+    )
+    _, state = run(sequential, "psro", 4)
+    rows, cols = state.actions["defender"], state.actions["attacker"]
+    np.testing.assert_allclose(state.meta, game.payoff[np.ix_(rows, cols)], rtol=1e-12)
+    assert state.history[-1]["relative_nash_conv"] <= 1e-12  # the double oracle's equilibrium
