@@ -10,7 +10,7 @@ project's SB3 model, :func:`agents.algos.build_model` with the defaults of
 grid presets: attacking nothing 0, the optimum 1) and the torch PPO
 (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's defaults; it scales its own
 rewards). Both play the env's own sequential format in the plan-first order
-(``gymnasium.make("fdia_env/SparseAttack-v1", action="sequential", order="plan")``: masked picks
+(``gymnasium.make("fdia_env/SparseAttack-v2", action="sequential", order="plan")``: masked picks
 of sensor-time pairs, then stop, then the plan plays out; torch PPO on its native vector env),
 since the bitmask ``Discrete(2**M)`` is too large for these learners at M = 14 and, above 16
 sensors, the ``MultiBinary(M)`` action has no mask.
@@ -37,7 +37,7 @@ import numpy as np
 from experiments.results.common import mean_ci95, write_rows
 from fdia_env.systems import LinearSystem
 
-GYM_ID = "fdia_env/SparseAttack-v1"
+GYM_ID = "fdia_env/SparseAttack-v2"
 ORDER = "plan"
 """The sequential format's decision order the learners train in (docs/guide/sparse.md: why)."""
 
