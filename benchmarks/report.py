@@ -358,9 +358,9 @@ def run(bench: Bench, quick: bool, timeout: float) -> tuple[str, str]:
     except subprocess.TimeoutExpired:
         return " ".join(cmd), f"(did not finish within {timeout:.0f} s)"
     out = strip_machine(proc.stdout.rstrip())
-    if proc.returncode:
-        tail = "\n".join((proc.stdout + proc.stderr).rstrip().splitlines()[-15:])
-        out = f"(failed with exit status {proc.returncode})\n{tail}"
+    if proc.returncode:  # all it printed (its figures, if any), then the end of its errors
+        err = "\n".join(proc.stderr.rstrip().splitlines()[-15:])
+        out = "\n".join(t for t in (f"(failed with exit status {proc.returncode})", out, err) if t)
     return " ".join(cmd), f"{out}\n({time.perf_counter() - start:.0f} s)"
 
 

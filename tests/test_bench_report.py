@@ -35,6 +35,21 @@ def test_a_failing_benchmark_is_reported_not_hidden(tmp_path, monkeypatch):
     assert out.startswith("(failed with exit status 3)") and "partial" in out
 
 
+def test_a_script_that_exits_1_keeps_all_its_figures(tmp_path, monkeypatch):
+    # a script that exits 1 for a missed target (seq_throughput.py) and warns on stderr: every
+    # line it printed stays in the page (the README row is parsed from them), then its errors
+    (tmp_path / "benchmarks").mkdir()
+    script = (
+        "import sys\nfor i in range(30): print(f'figure {i}')\n"
+        "for i in range(30): print(f'warning {i}', file=sys.stderr)\nsys.exit(1)\n"
+    )
+    (tmp_path / "benchmarks" / "miss.py").write_text(script)
+    monkeypatch.setattr(report, "ROOT", tmp_path)
+    _, out = report.run(report.Bench("miss", "miss.py", (), (), "x"), quick=False, timeout=60)
+    assert out.startswith("(failed with exit status 1)\nfigure 0\n")
+    assert "figure 29" in out and "warning 29" in out and "warning 14" not in out
+
+
 VECTOR_OUTPUT = """machine: Some CPU, x86_64, 2 cores; 2026-01-01 00:00 UTC; clock: cpu
 fdia_env from .
      B  native (env-steps/s)  SyncVectorEnv  CartPole native  native/Sync  native/CartPole
