@@ -1,6 +1,7 @@
 """benchmarks/report.py: the generated section of the benchmarks page is replaced, not appended."""
 
 import importlib.util
+import re
 import sys
 from pathlib import Path
 
@@ -32,3 +33,96 @@ def test_a_failing_benchmark_is_reported_not_hidden(tmp_path, monkeypatch):
     bench = report.Bench("boom", "boom.py", (), (), "a failing script")
     _, out = report.run(bench, quick=False, timeout=60)
     assert out.startswith("(failed with exit status 3)") and "partial" in out
+
+
+def test_a_script_that_exits_1_keeps_all_its_figures(tmp_path, monkeypatch):
+    # a script that exits 1 for a missed target (seq_throughput.py) and warns on stderr: every
+    # line it printed stays in the page (the README row is parsed from them), then its errors
+    (tmp_path / "benchmarks").mkdir()
+    script = (
+        "import sys\nfor i in range(30): print(f'figure {i}')\n"
+        "for i in range(30): print(f'warning {i}', file=sys.stderr)\nsys.exit(1)\n"
+    )
+    (tmp_path / "benchmarks" / "miss.py").write_text(script)
+    monkeypatch.setattr(report, "ROOT", tmp_path)
+    _, out = report.run(report.Bench("miss", "miss.py", (), (), "x"), quick=False, timeout=60)
+    assert out.startswith("(failed with exit status 1)\nfigure 0\n")
+    assert "figure 29" in out and "warning 29" in out and "warning 14" not in out
+
+
+VECTOR_OUTPUT = """machine: Some CPU, x86_64, 2 cores; 2026-01-01 00:00 UTC; clock: cpu
+fdia_env from .
+     B  native (env-steps/s)  SyncVectorEnv  CartPole native  native/Sync  native/CartPole
+  1024             8,000,000         20,000       10,000,000       400.0x            0.80x
+ 65536            50,000,000            nan       25,000,000         nanx            2.00x
+targets: native/Sync >= 50x at B = 1024; native/CartPole >= 1.5x at B = 65536"""
+
+
+def test_one_machine_line_for_the_whole_run(tmp_path, monkeypatch):
+    # the scripts' own "machine:" lines are dropped: the page names the machine once
+    (tmp_path / "benchmarks").mkdir()
+    (tmp_path / "benchmarks" / "v.py").write_text(f"print({VECTOR_OUTPUT!r})\n")
+    monkeypatch.setattr(report, "ROOT", tmp_path)
+    bench = report.Bench("v", "v.py", (), (), "vector", report.BENCHES_BY_NAME[2].summary)
+    cmd, out = report.run(bench, quick=False, timeout=60)
+    assert "machine:" not in out and "fdia_env from" not in out and "2.00x" in out
+    text = report.section([(bench, cmd, out), (bench, cmd, out)], False)
+    assert text.count("machine:") == 1
+
+
+def test_the_readme_table_is_rebuilt_from_the_run(tmp_path):
+    # every row comes from this run's output, with the reference's rate of the same run; a
+    # rerun replaces the table, so a figure of an earlier run cannot survive
+    vector = next(b for b in report.BENCHES if b.name == "vector")
+    readme = tmp_path / "README.md"
+    readme.write_text(
+        f"# x\n\n## Performance\n\nProse.\n\n{report.README_BEGIN}\n| old | 9.99× | |\n"
+        f"{report.README_END}\n\n## Next\n"
+    )
+    table = report.readme_table([(vector, "python benchmarks/vector.py", VECTOR_OUTPUT)], False)
+    report.write_page(readme, table, report.README_BEGIN, report.README_END)
+    text = readme.read_text()
+    assert "9.99" not in text and "Prose." in text and text.endswith("## Next\n")
+    rows = [line for line in text.splitlines() if line.startswith("| native")]
+    assert rows[0].split(" | ")[1:] == [
+        "2.00× (50,000,000 env-steps/s)",
+        "CartPole native 25,000,000 env-steps/s |",
+    ]
+    assert "400.0×" in text and "`SyncVectorEnv` 20,000 env-steps/s" in text
+    assert "machine:" in text and text.count(report.README_BEGIN) == 1
+    failed = report.readme_table(
+        [(vector, "python benchmarks/vector.py", "(failed with exit status 1)\nboom")], False
+    )
+    assert "`vector.py` failed in this run" in failed and "2.00" not in failed
+    # a script that prints its figures and exits 1 for a missed target keeps them, flagged
+    missed = report.readme_table(
+        [(vector, "python benchmarks/vector.py", f"(failed with exit status 1)\n{VECTOR_OUTPUT}")],
+        False,
+    )
+    assert "2.00× (50,000,000 env-steps/s) (`vector.py` failed with exit status 1)" in missed
+
+
+def test_every_benchmark_of_the_run_names_its_readme_figures():
+    # each benchmark contributes rows; an output without its figures says so, never blank
+    for bench in report.BENCHES:
+        rows = bench.summary("")
+        assert rows, bench.name
+        table = report.readme_table([(bench, "cmd", "unrelated output")], False)
+        assert table.count(f"not in `{bench.script}`'s output") == len(rows), bench.name
+
+
+FIGURE = re.compile(r"\d(?:[\d,.]*\d)?\s?(?:×|x\b|steps/s|µs|ms\b|%|s\b)")
+
+
+def test_no_figure_outside_the_generated_sections():
+    # the page's and the README performance section's figures all lie between the markers that
+    # make bench rewrites
+    page = (ROOT / "docs" / "benchmarks.md").read_text()
+    head, rest = page.split(report.BEGIN)
+    outside = head + rest.split(report.END)[1]
+    readme = (ROOT / "README.md").read_text()
+    section = readme.split("## Performance at a glance")[1].split("\n## ")[0]
+    before, after = section.split(report.README_BEGIN)
+    outside += before + after.split(report.README_END)[1]
+    assert FIGURE.findall(outside) == []
+    assert FIGURE.findall("took 1.5× and 12 s, 30 %, 165 µs") == ["1.5×", "12 s", "30 %", "165 µs"]

@@ -167,13 +167,18 @@ def test_torch_ncx2_tail_equals_scipy():
     torch = pytest.importorskip("torch")
     from scipy import stats
 
-    from fdia_env.stealth.torch_ops import ncx2_sf
+    from fdia_env.stealth.torch_ops import ncx2_sf, ncx2_sf_series
 
     lam = np.concatenate([[0.0, 1e-12], np.geomspace(1e-8, 7e3, 300)])
     for dof in (1, 2, 21, 186):
         x = float(stats.chi2.isf(0.05, dof))
-        got = ncx2_sf(x, dof, torch.as_tensor(lam)).numpy()
-        np.testing.assert_allclose(got, stats.ncx2.sf(x, dof, lam), rtol=0, atol=1e-12)
+        want = stats.ncx2.sf(x, dof, lam)
+        got = ncx2_sf_series(x, dof, torch.as_tensor(lam)).numpy()  # the other devices' series
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        x_all = torch.full((lam.size,), x, dtype=torch.float64)
+        on_cpu = ncx2_sf(x_all, dof, torch.as_tensor(lam))  # scipy's own figures
+        assert on_cpu.dtype == torch.float64
+        np.testing.assert_array_equal(on_cpu.numpy(), np.clip(want, 0.0, 1.0))
 
 
 def test_defender_is_refused_by_the_native_vector_env(est):

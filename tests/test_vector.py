@@ -581,3 +581,31 @@ def test_reset_without_seed_keeps_each_members_generator_as_sync_does(case):
     for a, b, s in zip(first, second, sync, strict=True):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(a, s, rtol=1e-6, atol=1e-7)
+
+
+def test_torch_cpu_members_share_the_history_table_too():
+    # torch on the CPU uses the same host table (its tensors are views of its arrays): the same
+    # observations and rewards as numpy, bit for bit, and torch tensors out
+    torch = pytest.importorskip("torch")
+    envs = {
+        backend: gym.make_vec(
+            "fdia_env/SparseAttack-v0",
+            num_envs=32,
+            vectorization_mode="vector_entry_point",
+            backend=backend,
+            objective="logdet",
+        )
+        for backend in ("numpy", "torch")
+    }
+    obs = {k: env.reset(seed=3)[0] for k, env in envs.items()}
+    np.testing.assert_array_equal(obs["torch"].numpy(), obs["numpy"])
+    rng = np.random.default_rng(3)
+    for t in range(15):
+        a = rng.integers(0, 8, size=32)
+        out_n = envs["numpy"].step(a)
+        out_t = envs["torch"].step(torch.as_tensor(a))
+        assert isinstance(out_t[0], torch.Tensor) and isinstance(out_t[1], torch.Tensor)
+        np.testing.assert_array_equal(out_t[0].numpy(), out_n[0], err_msg=f"step {t}")
+        np.testing.assert_array_equal(out_t[1].numpy(), out_n[1], err_msg=f"step {t}")
+        np.testing.assert_array_equal(out_t[4]["phi"].numpy(), out_n[4]["phi"])
+    assert envs["torch"].sim.shares_histories and envs["numpy"].sim.shares_histories

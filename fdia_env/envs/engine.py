@@ -121,13 +121,14 @@ class BatchedSimulation:
             self._start_comp = c(np.array(self._start2)[:, None])
             if jtab is not None:
                 self._jcomp = c(np.stack([jtab[:, 0, 0], jtab[:, 0, 1], jtab[:, 1, 1]]))
-        # expected 2-state dynamics on numpy: members share the covariance of a shared history
+        # expected 2-state dynamics on the CPU: members share the covariance of a shared history
+        # (the table lives on the host: torch CPU tensors are its arrays' views, no copies)
         self._c: Any = None  # (3, B) components of P when the history table is not used
         self._node: Any = None  # (B,) int32 node of each member in the history table, or None
         self._history: HistoryTable | None = None
-        self._share = (
-            self.fast and not self.sampled and xp is NUMPY and jtab is not None and M <= 10
-        )
+        on_cpu = xp is NUMPY or getattr(xp.device, "type", None) == "cpu"
+        self._share = self.fast and not self.sampled and on_cpu and jtab is not None and M <= 10
+        self._host = xp.to_numpy  # a backend array as numpy (a view on the CPU)
         if self.sampled:  # the sampled reset's constants: start factor, or warm-up gains
             warmup = self.spec.warmup
             root = psd_sqrt(P_start if warmup == "steady" else system.P0)
@@ -170,13 +171,15 @@ class BatchedSimulation:
 
     def _leave_history(self) -> None:
         """The members' components out of the history table, which the batch stops using."""
-        self._c = self._history.comps.take(self._node, axis=1)
+        self._c = self.xp.asarray(self._history.comps.take(self._node, axis=1))
         self._node = None
 
     @property
     def P(self) -> Any:
         """(B, n, n) filter covariances."""
-        comp = self._c if self._node is None else self._history.comps.take(self._node, axis=1)
+        comp = self._c
+        if self._node is not None:
+            comp = self.xp.asarray(self._history.comps.take(self._node, axis=1))
         if comp is not None:
             a, b, d = comp
             P = self.xp.empty((self.B, 2, 2))
@@ -352,7 +355,7 @@ class BatchedSimulation:
                 self.x_hat = xp.zeros((B, n))
         else:
             if self._node is not None:
-                self._node[where] = 0
+                self._node[self._host(where)] = 0
             elif self._c is not None:
                 self._c[:, where] = self._start_comp
             else:
@@ -438,7 +441,7 @@ class BatchedSimulation:
             self._restart_steady(used, active)
         if self._node is not None:
             if leak is None and used.ndim == 1 and (self._clean or self.all_consistent()):
-                if self._history_step(used, active):
+                if self._history_step(self._host(used), active):
                     self.k += 1
                     self.phi = self._measure_all()
                     return self.phi
@@ -466,6 +469,8 @@ class BatchedSimulation:
         table does not grow with the histories past the window's end.
         """
         node = self._node
+        if active is not None:
+            active = self._host(active)
         if active is not None and not active.all():
             node = np.where(active, node, 0).astype(np.int32)
         child = self._history.step(node, used)
@@ -684,7 +689,7 @@ class BatchedSimulation:
     def _measure_all(self) -> Any:
         xp = self.xp
         if self._node is not None:  # Φ of each member's node
-            return self._history.phi.take(self._node)
+            return xp.asarray(self._history.phi.take(self._node))
         if self.sampled:
             if self.value_override is not None:  # the detection game's fixed Bayes costs
                 return self.value_override
@@ -712,10 +717,11 @@ class BatchedSimulation:
         n = self.system.n
         out[0] = xp.take(self._steps_left, self.k)  # (horizon − k) / horizon, looked up
         if self._node is not None:  # each member's node's features, gathered
-            if out.dtype == np.float32:
-                np.take(self._history.feats, self._node, axis=1, out=out[1:4], mode="clip")
+            rows = self._host(out[1:4])  # contiguous rows: on torch (CPU) a view of them
+            if rows.dtype == np.float32:
+                np.take(self._history.feats, self._node, axis=1, out=rows, mode="clip")
             else:
-                out[1:4] = self._history.feats64.take(self._node, axis=1)
+                rows[...] = self._history.feats64.take(self._node, axis=1)
             col = 4
         elif self._c is not None and (self._clean or self.all_consistent()):
             a, b, d = self._c

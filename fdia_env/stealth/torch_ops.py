@@ -7,7 +7,9 @@ mass left out is below 1e-30. P at the window's first j comes from its power ser
 space), the others from the recurrence ``P(a + 1, y) = P(a, y) − y^a e^{−y} / Γ(a + 1)``:
 ``torch.special.gammaincc`` itself is off by up to 3e-10 where a ≈ y > 20, which the
 numpy backend's scipy is not. It agrees with scipy's ``stats.ncx2.sf`` to about 1e-14 absolute
-(the test compares them over λ in [0, 7e3]).
+(the test compares them over λ in [0, 7e3]). On the CPU :func:`ncx2_sf` calls scipy itself on
+the tensors' memory (the numpy backend's own figures): the series costs about 0.27 s for 975
+tails of IEEE 118's test (λ up to 6e3) where scipy takes 1 ms; other devices run the series.
 
 >>> import torch
 >>> from scipy import stats
@@ -32,6 +34,9 @@ _CHUNK = 1 << 22
 def ncx2_sf(x: Any, dof: Any, lam: torch.Tensor) -> torch.Tensor:
     """``P[χ²_dof(λ) > x]`` for every entry of ``lam`` (float64, any device).
 
+    On the CPU this is scipy's ``stats.ncx2.sf`` (as the numpy backend computes it); on other
+    devices the Poisson series of :func:`ncx2_sf_series` (see the module docstring).
+
     Args:
         x: The threshold, > 0: a float, or an (N,) tensor (one per entry of ``lam``).
         dof: Degrees of freedom, >= 1: an int, or an (N,) tensor.
@@ -40,6 +45,19 @@ def ncx2_sf(x: Any, dof: Any, lam: torch.Tensor) -> torch.Tensor:
     Returns:
         (N,) float64 tail probabilities in [0, 1].
     """
+    if lam.device.type != "cpu":
+        return ncx2_sf_series(x, dof, lam)
+    from scipy import stats
+
+    def host(v: Any) -> Any:
+        return v.detach().to(torch.float64).numpy() if isinstance(v, torch.Tensor) else v
+
+    tail = stats.ncx2.sf(host(x), host(dof), host(lam))
+    return torch.clamp(torch.as_tensor(tail, dtype=torch.float64).reshape(lam.shape), 0.0, 1.0)
+
+
+def ncx2_sf_series(x: Any, dof: Any, lam: torch.Tensor) -> torch.Tensor:
+    """:func:`ncx2_sf` by the Poisson series in torch on ``lam``'s device (module docstring)."""
     lam = lam.to(torch.float64)
     out = torch.empty_like(lam)
     if lam.numel() == 0:

@@ -4,7 +4,11 @@
 vectorization_mode="vector_entry_point")`` returns :class:`FdiaVectorEnv`. Member ``i`` follows
 the single env exactly: reset with ``seed`` gives member ``i`` the seed ``seed + i`` (as
 ``SyncVectorEnv`` does), expected dynamics are deterministic, and sampled dynamics draw each
-member's noise from its own generator in the single env's order.
+member's noise from its own generator in the single env's order. For the 2-state models in
+expected dynamics (numpy, and torch on the CPU) the members are nodes of a table of the attack
+histories reached (:mod:`fdia_env.envs.history`), computed by the single env's own kernel:
+observations, rewards and Φ then equal the single env's bit for bit (until a bias reaches a
+filter; after that, and for the other models, to round-off).
 
 Autoreset follows Gymnasium's rules: ``autoreset_mode=AutoresetMode.NEXT_STEP`` (default, as
 ``SyncVectorEnv``) resets a finished member on the next ``step`` (its action is ignored, reward 0,
