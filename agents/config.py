@@ -78,16 +78,10 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
     # agents/torch_ppo.py: env, buffer and policy on the device; n_steps per member per rollout
     # (one rollout = num_envs × n_steps steps), 4 minibatches per epoch
     "torch-ppo": {
+        **{k: v for k, v in _PPO.items() if k != "batch_size"},  # 4 minibatches per epoch
         "learning_rate": 3e-3,
-        "gamma": 1.0,
         "n_steps": 12,
         "n_epochs": 4,
-        "ent_coef": 0.01,
-        "gae_lambda": 0.95,
-        "clip_range": 0.2,
-        "lr_schedule": "linear",
-        "net_arch": (64, 64),
-        "stop_prob": None,
     },
 }
 

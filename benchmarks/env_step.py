@@ -39,9 +39,8 @@ def parallel_runner(dynamics: str):
     return run
 
 
-def gym_runner(dynamics: str):
-    env = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", dynamics=dynamics)
-    actions = np.random.default_rng(0).integers(0, 8, size=100_000)
+def gym_loop(env: gym.Env, actions: np.ndarray):
+    """A loop of ``steps`` steps of a Gymnasium env playing ``actions`` in turn."""
 
     def run(steps: int) -> None:
         env.reset(seed=0)
@@ -51,20 +50,16 @@ def gym_runner(dynamics: str):
                 env.reset()
 
     return run
+
+
+def gym_runner(dynamics: str):
+    env = gym.make("fdia_env/SparseAttack-v0", scenario="ch4-position", dynamics=dynamics)
+    return gym_loop(env, np.random.default_rng(0).integers(0, 8, size=100_000))
 
 
 def cartpole_runner():
     env = gym.make("CartPole-v1")  # Gymnasium's own single env, through the same make()
-    actions = np.random.default_rng(0).integers(0, 2, size=100_000)
-
-    def run(steps: int) -> None:
-        env.reset(seed=0)
-        for i in range(steps):
-            _, _, term, trunc, _ = env.step(int(actions[i % actions.size]))
-            if term or trunc:
-                env.reset()
-
-    return run
+    return gym_loop(env, np.random.default_rng(0).integers(0, 2, size=100_000))
 
 
 def filterpy_runner():

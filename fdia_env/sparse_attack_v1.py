@@ -59,51 +59,78 @@ Discrete(8)
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable
+
 from fdia_env import sparse_attack_v0
 from fdia_env._validation import check_int
 from fdia_env.attacks.sparse import MAX_SENSORS
 from fdia_env.envs.factory import aec_views, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.sequential import SequentialSetEnv
-from fdia_env.scenarios import Scenario, resolve
-from fdia_env.systems import LinearSystem
+from fdia_env.scenarios import resolve
 
 NAME = "sparse_attack_v1"
 
 
-def parallel_env(
-    scenario: str | Scenario | LinearSystem = "ch4-position",
-    budget: int | None = None,
-    horizon: int | None = None,
-    objective: str = "trace",
-    reward_mode: str = "terminal",
-    dynamics: str = "expected",
-    warmup: int | str | None = None,
-    render_mode: str | None = None,
-    max_cycles: int | None = None,
-    illegal_action: str = "trim",
-    action: str = "auto",
-    order: str = "time",
-) -> FdiaParallelEnv | SequentialSetEnv:
+def sequential_above_16(
+    name: str, order: str | None, doc: str
+) -> Callable[..., FdiaParallelEnv | SequentialSetEnv]:
+    """``sparse_attack_v0.parallel_env`` with ``action="auto"`` sequential above 16 sensors.
+
+    The factory of v1 and v2 (they differ by ``order``'s default only). The returned function
+    has v0's signature (its parameters, read by ``inspect.signature``), ``order``'s default
+    replaced.
+
+    Args:
+        name: The env's name (``metadata["name"]``).
+        order: The default decision order of the sequential format; None: ``"plan"`` in the
+            sequential format and ``"time"`` (no order) in the others.
+        doc: The function's docstring.
+
+    Returns:
+        The module's ``parallel_env``.
+    """
+    base = inspect.signature(sparse_attack_v0.parallel_env)
+    signature = base.replace(
+        parameters=[
+            p.replace(default=order, annotation="str | None" if order is None else p.annotation)
+            if p.name == "order"
+            else p
+            for p in base.parameters.values()
+        ]
+    )
+
+    def parallel_env(*args: object, **kwargs: object) -> FdiaParallelEnv | SequentialSetEnv:
+        bound = signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        kw = bound.arguments
+        sc = kw["scenario"] = resolve(kw["scenario"])
+        # the attack model checks the budget too; here first, before its truth is tested
+        c = check_int("budget", scenario_default(sc, "budget", kw["budget"]), minimum=0)
+        if kw["action"] == "auto" and sc.system.M > MAX_SENSORS and c:
+            kw["action"] = "sequential"  # (a budget of 0 has no decision to make: v0's format)
+        if kw["order"] is None:
+            kw["order"] = "plan" if kw["action"] == "sequential" else "time"
+        env = sparse_attack_v0.parallel_env(**kw)
+        env.metadata["name"] = name
+        if isinstance(env, SequentialSetEnv):
+            env.inner.metadata["name"] = name
+        return env
+
+    parallel_env.__signature__ = signature  # type: ignore[attr-defined]
+    parallel_env.__doc__ = doc
+    return parallel_env
+
+
+parallel_env = sequential_above_16(
+    NAME,
+    "time",
     """The PettingZoo ``ParallelEnv``: ``sparse_attack_v0``'s, sequential above 16 sensors.
 
     Arguments as :func:`fdia_env.sparse_attack_v0.parallel_env`; ``action="auto"`` resolves
     to ``"sequential"`` for more than 16 sensors and a budget of at least 1 (see the module
     docstring).
-    """
-    sc = resolve(scenario)
-    # the attack model checks the budget too; here first, before its truth is tested
-    c = check_int("budget", scenario_default(sc, "budget", budget), minimum=0)
-    if action == "auto" and sc.system.M > MAX_SENSORS and c:
-        action = "sequential"  # (a budget of 0 has no decision to make: v0's format)
-    env = sparse_attack_v0.parallel_env(
-        sc, budget, horizon, objective, reward_mode, dynamics, warmup, render_mode, max_cycles,
-        illegal_action, action, order,
-    )  # fmt: skip
-    env.metadata["name"] = NAME
-    if isinstance(env, SequentialSetEnv):
-        env.inner.metadata["name"] = NAME
-    return env
-
-
+    """,
+)
 raw_env, env = aec_views(parallel_env)

@@ -61,51 +61,19 @@ Discrete(8)
 
 from __future__ import annotations
 
-from fdia_env import sparse_attack_v1
-from fdia_env._validation import check_int
-from fdia_env.attacks.sparse import MAX_SENSORS
-from fdia_env.envs.factory import aec_views, scenario_default
-from fdia_env.envs.parallel import FdiaParallelEnv
-from fdia_env.envs.sequential import SequentialSetEnv
-from fdia_env.scenarios import Scenario, resolve
-from fdia_env.systems import LinearSystem
+from fdia_env.envs.factory import aec_views
+from fdia_env.sparse_attack_v1 import sequential_above_16
 
 NAME = "sparse_attack_v2"
 
-
-def parallel_env(
-    scenario: str | Scenario | LinearSystem = "ch4-position",
-    budget: int | None = None,
-    horizon: int | None = None,
-    objective: str = "trace",
-    reward_mode: str = "terminal",
-    dynamics: str = "expected",
-    warmup: int | str | None = None,
-    render_mode: str | None = None,
-    max_cycles: int | None = None,
-    illegal_action: str = "trim",
-    action: str = "auto",
-    order: str | None = None,
-) -> FdiaParallelEnv | SequentialSetEnv:
+parallel_env = sequential_above_16(
+    NAME,
+    None,
     """The PettingZoo ``ParallelEnv``: ``sparse_attack_v1``'s, plan-first by default.
 
     Arguments as :func:`fdia_env.sparse_attack_v1.parallel_env`, except ``order``: None
     (default) is ``"plan"`` in the sequential format (``action="sequential"``, or ``"auto"``
     above 16 sensors with a budget of at least 1) and ``"time"`` (no order) in the others.
-    """
-    sc = resolve(scenario)
-    c = check_int("budget", scenario_default(sc, "budget", budget), minimum=0)
-    sequential = action == "sequential" or (action == "auto" and sc.system.M > MAX_SENSORS and c)
-    if order is None:
-        order = "plan" if sequential else "time"
-    env = sparse_attack_v1.parallel_env(
-        sc, budget, horizon, objective, reward_mode, dynamics, warmup, render_mode, max_cycles,
-        illegal_action, action, order,
-    )  # fmt: skip
-    env.metadata["name"] = NAME
-    if isinstance(env, SequentialSetEnv):
-        env.inner.metadata["name"] = NAME
-    return env
-
-
+    """,
+)
 raw_env, env = aec_views(parallel_env)
