@@ -10,7 +10,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import tyro
 
@@ -203,16 +203,12 @@ def main(argv: Sequence[str] | None = None) -> object:
 
         run = train_torch_ppo_run(cfg)
         learned = next(iter(run.evaluations.values()))
-        print(
+        return _summary(
+            run,
             f"\ntorch-ppo {cfg.agent} on {learned.env_id}, {run.timesteps} steps in "
             f"{run.train_seconds:.1f} s ({run.timesteps / max(run.train_seconds, 1e-9):,.0f} "
-            f"env-steps/s, {run.num_envs} envs on {run.device}, seed {cfg.run.seed})"
-            + (" (resumed)" if run.resumed else "")
-            + (" (interrupted)" if run.interrupted else "")
+            f"env-steps/s, {run.num_envs} envs on {run.device}, seed {cfg.run.seed})",
         )
-        print(f"  run folder: {run.run_dir}")
-        print(format_table(run.evaluations))
-        return run
     if isinstance(cfg, GameConfig):
         if rllib:
             from agents.rllib.train import selfplay_rllib as run_selfplay
@@ -225,25 +221,21 @@ def main(argv: Sequence[str] | None = None) -> object:
         last = game.history[-1]
         if "nash_conv" not in last:  # a continuous game (RLlib self-play): no exact matrix game
             returns = ", ".join(f"{k} {v:.6g}" for k, v in last["agent_returns"].items())
-            print(
+            return _summary(
+                game,
                 f"\nSELFPLAY (RLlib PPO) on {cfg.env}: {last['timesteps']} steps in "
-                f"{game.train_seconds:.0f} s (seed {cfg.run.seed}); last mean returns: {returns}"
+                f"{game.train_seconds:.0f} s (seed {cfg.run.seed}); last mean returns: {returns}",
+                marks=(),
             )
-            print(f"  run folder: {game.run_dir}")
-            print(format_table(game.evaluations))
-            return game
-        print(
+        return _summary(
+            game,
             f"\n{game.method.upper()}{' (RLlib PPO)' if rllib else ''} on {cfg.env}: "
-            f"{len(game.history)} iterations"
-            + (" (interrupted)" if game.interrupted else "")
-            + ", "
-            f"{last['timesteps']} steps in {game.train_seconds:.0f} s (seed {cfg.run.seed}); "
+            f"{len(game.history)} iterations",
+            f", {last['timesteps']} steps in {game.train_seconds:.0f} s (seed {cfg.run.seed}); "
             f"NashConv {last['nash_conv']:.4g} = {last['relative_nash_conv']:.2%} of the value "
-            f"{game.value:.6g}"
+            f"{game.value:.6g}",
+            marks=("interrupted",),
         )
-        print(f"  run folder: {game.run_dir}")
-        print(format_table(game.evaluations))
-        return game
 
     if rllib:
         from agents.rllib.train import train_rllib
@@ -252,30 +244,43 @@ def main(argv: Sequence[str] | None = None) -> object:
         learned = next(iter(result.evaluations.values()))
         last = result.history[-1]["agent_returns"] if result.history else {}
         returns = ", ".join(f"{k} {v:.6g}" for k, v in last.items())
-        print(
+        return _summary(
+            result,
             f"\nRLlib PPO {cfg.agent} on {learned.env_id}, {result.timesteps} steps in "
-            f"{len(result.history)} iterations, {result.train_seconds:.0f} s (seed {cfg.run.seed})"
-            + (" (resumed)" if result.resumed else "")
-            + (" (interrupted)" if result.interrupted else "")
-            + (f"; last iteration's mean return: {returns}" if returns else "")
+            f"{len(result.history)} iterations, {result.train_seconds:.0f} s (seed {cfg.run.seed})",
+            f"; last iteration's mean return: {returns}" if returns else "",
         )
-        print(f"  run folder: {result.run_dir}")
-        print(format_table(result.evaluations))
-        return result
 
     from agents.training import train
 
     result = train(cfg)
     learned = next(iter(result.evaluations.values()))
-    print(
+    return _summary(
+        result,
         f"\n{learned.policy} {cfg.agent} on {learned.env_id}, {result.model.num_timesteps} "
-        f"steps in {result.train_seconds:.0f} s (seed {cfg.run.seed})"
-        + (" (resumed)" if result.resumed else "")
-        + (" (interrupted)" if result.interrupted else "")
+        f"steps in {result.train_seconds:.0f} s (seed {cfg.run.seed})",
     )
-    print(f"  run folder: {result.run_dir}")
-    print(format_table(result.evaluations))
-    return result
+
+
+def _summary(
+    run: Any, headline: str, tail: str = "", marks: tuple[str, ...] = ("resumed", "interrupted")
+) -> Any:
+    """Print a finished run's headline, its run folder and evaluations; return the run.
+
+    Args:
+        run: The run's result (``run_dir``, ``evaluations`` and the flags named in ``marks``).
+        headline: The summary line's start.
+        tail: The summary line's end, after the marks.
+        marks: The run's boolean attributes shown as `` (name)`` where true.
+
+    Returns:
+        ``run``.
+    """
+    shown = "".join(f" ({mark})" for mark in marks if getattr(run, mark))
+    print(headline + shown + tail)
+    print(f"  run folder: {run.run_dir}")
+    print(format_table(run.evaluations))
+    return run
 
 
 def _backend_of(run_dir: Path) -> str:
