@@ -278,3 +278,23 @@ def test_same_step_autoreset_restarts_only_the_members_that_ended(est, backend):
 def test_autoreset_mode_disabled_is_a_value_error_naming_it(est):
     with pytest.raises(ValueError, match="autoreset_mode must be"):
         _vec(est, 2, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
+
+
+@pytest.mark.parametrize("env_id", [GYM_ID, "fdia_env/StealthDynamic-v0"])
+def test_train_py_torch_ppo_trains_on_the_stealth_envs(tmp_path, env_id):
+    # before: train.py knew no stealth env, and their vector envs refused SAME_STEP autoreset
+    pytest.importorskip("torch")
+    import json
+
+    import train
+
+    args = ["attacker", "--env", env_id, "--algo", "torch-ppo", "--num-envs", "8"]
+    args += ["--total-timesteps", "200", "--eval-freq", "0", "--final-eval-episodes", "3"]
+    result = train.main([*args, "--no-progress-bar", "--runs-root", str(tmp_path)])
+    assert result.timesteps == 288  # 3 iterations of 8 members x 12 steps
+    scores = json.loads((result.run_dir / "scores.json").read_text())
+    assert (result.run_dir / "model.json").is_file()
+    learned = scores["evaluations"]["learned (torch-ppo)"]
+    assert learned["env_id"] == env_id and learned["n_episodes"] == 3
+    assert np.isfinite(learned["mean"]) and learned["mean"] >= 0.0  # damage or 0 when caught
+    assert learned["reference"] is None  # train.py has no reference for the stealth envs
