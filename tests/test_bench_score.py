@@ -406,6 +406,15 @@ def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch(monkeypatch):
     assert applicable(get(TASK), "PPO")
 
 
+def test_sac_and_dqn_are_offered_only_for_their_kind_of_action_space():
+    """Regression: SAC was offered on a stealth task whose actions are MultiBinary."""
+    from experiments.bench.run import applicable
+
+    assert not applicable(get("stealth/ieee14-b3-v0"), "SAC")  # MultiBinary(13) actions
+    assert applicable(get("stealth/ch4-position-dynamic-bias-v0"), "SAC")  # Box actions
+    assert not applicable(get("stealth/ch4-position-dynamic-bias-v0"), "DQN")
+
+
 def test_torch_ppo_is_not_offered_on_a_sensor_game_over_more_than_62_sensors():
     """Regression: the torch env failed at reset with a KeyError on IEEE 118's 304 meters."""
     import dataclasses

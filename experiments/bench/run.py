@@ -65,7 +65,15 @@ def applicable(task: Any, algo: str) -> bool:
         )
     if entry is None:
         return algo in ("PPO", "A2C")
-    return algo in entry.algorithms
+    if algo not in entry.algorithms:
+        return False
+    if algo in ("SAC", "DQN"):  # one kind of action space; the task's options may change it
+        from gymnasium import spaces
+
+        with task.make_env() as env:
+            space = env.action_space
+        return isinstance(space, spaces.Box if algo == "SAC" else spaces.Discrete)
+    return True
 
 
 def train_sb3(
