@@ -334,7 +334,9 @@ class Trainable:
         scenarios: Scenario preset → its default env kwargs (the first preset is the default).
         algorithms: stable-baselines3 algorithms that fit the action space (first = default).
         reference: Analytic reference of a built env, ``f(parallel_env)`` or, for games,
-            ``f(parallel_env, agent)`` (see :class:`Reference`).
+            ``f(parallel_env, agent)`` (see :class:`Reference`); None for an env trained
+            without one (the stealth envs: their optima are scored by
+            ``experiments/results/stealth.py``).
         game: Whether the env is a two-player game (score: exploitability; self-play applies).
         masked: Whether the agent has illegal actions (``env.action_masks()``).
     """
@@ -343,7 +345,7 @@ class Trainable:
     agent: str
     scenarios: Mapping[str, Mapping[str, Any]]
     algorithms: tuple[str, ...]
-    reference: Callable[..., Reference | None]
+    reference: Callable[..., Reference | None] | None
     game: bool = False
     masked: bool = False
 
@@ -415,6 +417,8 @@ class Trainable:
 
     def reference_of(self, env: gym.Env) -> Reference | None:
         """The analytic reference of a built view (None where none applies)."""
+        if self.reference is None:
+            return None
         if self.game:
             return self.reference(parallel_of(env), self.agent)
         return self.reference(parallel_of(env))
@@ -544,3 +548,16 @@ register(
         detection_reference,
     )
 )
+
+# the stealthy attacks: trained without a reference here; the static env's free injection
+# (a Box: every algorithm, torch-ppo included; --env-kwargs action '"box_shift"' for PPO/A2C)
+register(
+    Trainable(
+        "stealth_attack_v0",
+        "attacker",
+        {"grid-ieee14": {"action": "free"}, "grid-ieee118": {"action": "free"}},
+        BOX_ALGORITHMS,
+        None,
+    )
+)
+register(Trainable("stealth_dynamic_v0", "attacker", {"ch4-position": {}}, BOX_ALGORITHMS, None))

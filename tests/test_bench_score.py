@@ -398,8 +398,8 @@ def test_torch_ppo_is_offered_only_where_the_env_runs_on_torch(monkeypatch):
     assert applicable(get(TASK), "torch-ppo")
     assert not applicable(get("system-family/tracking-m6-v0"), "torch-ppo")  # no vector env
     assert applicable(get("system-family/tracking-m6-v0"), "PPO")
-    typed = get("incomplete-information/ch5-game-informed-attacker-v0")  # typed attack: numpy only
-    assert typed.env_id in registration.torch_ids() and not applicable(typed, "torch-ppo")
+    typed = get("incomplete-information/ch5-game-informed-attacker-v0")  # typed: torch too
+    assert typed.env_id in registration.torch_ids() and applicable(typed, "torch-ppo")
     numpy_only = tuple(i for i in registration.torch_ids() if i != get(TASK).env_id)
     monkeypatch.setattr(registration, "torch_ids", lambda: numpy_only)
     assert not applicable(get(TASK), "torch-ppo")  # its env without a torch backend

@@ -184,3 +184,117 @@ def test_torch_ncx2_tail_equals_scipy():
 def test_defender_is_refused_by_the_native_vector_env(est):
     with pytest.raises(ValueError, match="plays the attacker alone"):
         _vec(est, 2, defender="threshold")
+
+
+def _stacked(final, ended):
+    """The ended members' rows of ``final_obs`` (numpy: an object array; torch: a tensor)."""
+    rows = np.flatnonzero(_np(ended))
+    return np.stack(list(final[rows])) if isinstance(final, np.ndarray) else _np(final)[rows]
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+@pytest.mark.parametrize(
+    ("gym_id", "kwargs"),
+    [
+        (GYM_ID, {"budget": 5, "action": "free", "horizon": 2, "dynamics": "expected"}),
+        ("fdia_env/StealthDynamic-v0", {"horizon": 3, "dynamics": "expected"}),
+    ],
+)
+def test_same_step_autoreset_equals_next_step_and_a_manual_reset(est, gym_id, kwargs, backend):
+    if backend == "torch":
+        pytest.importorskip("torch")
+    kwargs = kwargs | ({"scenario": est} if gym_id == GYM_ID else {})
+    make = {"num_envs": 6, "vectorization_mode": "vector_entry_point", "backend": backend}
+    same = gym.make_vec(gym_id, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **make, **kwargs)
+    ref = gym.make_vec(gym_id, **make, **kwargs)  # NEXT_STEP, reset by hand at each episode end
+    assert same.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    same.reset(seed=0)
+    ref.reset(seed=0)
+    space = same.unwrapped.single_action_space
+    acts = np.random.default_rng(2).uniform(-0.3, 0.3, (7, 6, *space.shape)).astype(np.float32)
+    ends = 0
+    for a in acts:  # two whole episodes and part of a third
+        a = a if backend == "numpy" else _tensor(a)
+        obs, rew, term, trunc, info = same.step(a)
+        robs, rrew, rterm, rtrunc, rinfo = ref.step(a)
+        for got, want in zip((rew, term, trunc), (rrew, rterm, rtrunc), strict=True):
+            np.testing.assert_array_equal(_np(got), _np(want))
+        if not _np(rterm).any():
+            np.testing.assert_array_equal(_np(obs), _np(robs))
+            assert "final_obs" not in info
+            continue
+        ends += 1
+        assert _np(rterm).all()  # expected dynamics, one horizon: every member ends together
+        np.testing.assert_array_equal(_stacked(info["final_obs"], info["_final_obs"]), _np(robs))
+        np.testing.assert_array_equal(_np(info["_final_info"]), _np(rterm))
+        for key, want in rinfo.items():
+            np.testing.assert_array_equal(_np(info["final_info"][key]), _np(want), err_msg=key)
+        robs, rinfo = ref.reset()  # the manual reset the same-step mode does itself
+        np.testing.assert_array_equal(_np(obs), _np(robs))
+        assert _np(obs)[:, 0].tolist() == [1.0] * 6
+        for key, want in rinfo.items():
+            np.testing.assert_array_equal(_np(info[key]), _np(want), err_msg=key)
+    assert ends == len(acts) // kwargs["horizon"]
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_same_step_autoreset_restarts_only_the_members_that_ended(est, backend):
+    if backend == "torch":
+        pytest.importorskip("torch")
+    vec = _vec(
+        est,
+        512,
+        budget=3,
+        action="free",
+        a_max=0.05,
+        horizon=4,
+        on_detect="end",
+        backend=backend,
+        autoreset_mode="SameStep",
+    )
+    vec.reset(seed=1)
+    a = np.full((512, est.m), 0.4, dtype=np.float32)
+    a = a if backend == "numpy" else _tensor(a)
+    k = np.zeros(512, dtype=np.int64)  # each member's step within its episode
+    partial = 0
+    for _ in range(9):
+        obs, rew, term, trunc, info = vec.step(a)
+        ended, k = _np(term) | _np(trunc), k + 1
+        final = _np(info["final_info"]["detected"]) if ended.any() else np.zeros(512, bool)
+        np.testing.assert_array_equal(ended, final | (k >= 4))  # an alarm or the horizon
+        assert not _np(rew)[~ended & _np(info["detected"])].any()  # live members: no alarm
+        if ended.any():
+            last = _stacked(info["final_obs"], info["_final_obs"])
+            np.testing.assert_allclose(last[:, 0], (4 - k[ended]) / 4)
+            assert (_np(info["final_info"]["step"])[ended] == k[ended]).all()
+        partial += 0 < ended.sum() < 512
+        k[ended] = 0
+        np.testing.assert_array_equal(_np(info["step"]), k)
+        np.testing.assert_allclose(_np(obs)[:, 0], (4 - k) / 4)
+        assert _np(obs)[ended, 1:].tolist() == [[0.0, 0.0]] * int(ended.sum())
+    assert partial >= 3  # members ended at different steps (alarms) and restarted alone
+
+
+def test_autoreset_mode_disabled_is_a_value_error_naming_it(est):
+    with pytest.raises(ValueError, match="autoreset_mode must be"):
+        _vec(est, 2, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
+
+
+@pytest.mark.parametrize("env_id", [GYM_ID, "fdia_env/StealthDynamic-v0"])
+def test_train_py_torch_ppo_trains_on_the_stealth_envs(tmp_path, env_id):
+    # before: train.py knew no stealth env, and their vector envs refused SAME_STEP autoreset
+    pytest.importorskip("torch")
+    import json
+
+    import train
+
+    args = ["attacker", "--env", env_id, "--algo", "torch-ppo", "--num-envs", "8"]
+    args += ["--total-timesteps", "200", "--eval-freq", "0", "--final-eval-episodes", "3"]
+    result = train.main([*args, "--no-progress-bar", "--runs-root", str(tmp_path)])
+    assert result.timesteps == 288  # 3 iterations of 8 members x 12 steps
+    scores = json.loads((result.run_dir / "scores.json").read_text())
+    assert (result.run_dir / "model.json").is_file()
+    learned = scores["evaluations"]["learned (torch-ppo)"]
+    assert learned["env_id"] == env_id and learned["n_episodes"] == 3
+    assert np.isfinite(learned["mean"]) and learned["mean"] >= 0.0  # damage or 0 when caught
+    assert learned["reference"] is None  # train.py has no reference for the stealth envs

@@ -213,10 +213,10 @@ TORCH_ENVS = 64
 class _ShiftBox:
     """The torch native vector env's attacker with a ``Box(-1, 1, (n,))`` action (bit j = a_j > 0).
 
-    :func:`agents.torch_ppo.train_torch_ppo` needs ``Discrete`` or ``Box`` actions and
-    ``SAME_STEP`` autoreset; the stealth vector env has ``MultiBinary`` shifts and ``NEXT_STEP``.
-    With one snapshot per episode (``horizon=1``) every member ends each step, so the adapter
-    resets the batch after it (its noise generator runs on) and thresholds the Gaussian action.
+    :func:`agents.torch_ppo.train_torch_ppo` needs ``Discrete`` or ``Box`` actions; the
+    stealth env's shifts are ``MultiBinary``. The env runs in ``SAME_STEP`` autoreset (with one
+    snapshot per episode, ``horizon=1``, every member ends and restarts each step); the adapter
+    thresholds the Gaussian action.
     """
 
     def __init__(
@@ -227,11 +227,15 @@ class _ShiftBox:
         from fdia_env.stealth.vector import StealthVectorEnv
 
         self.inner = StealthVectorEnv(
-            num_envs, backend="torch", device="cpu", **_env_kwargs(budget, scenario, kind, a_max)
+            num_envs,
+            backend="torch",
+            device="cpu",
+            autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+            **_env_kwargs(budget, scenario, kind, a_max),
         )
         n = self.inner.env.estimation.n
         self.num_envs, self.backend, self.device = num_envs, "torch", "cpu"
-        self.metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}
+        self.metadata = self.inner.metadata
         self.single_observation_space = self.inner.single_observation_space
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (n,), dtype=np.float32)
 
@@ -239,9 +243,7 @@ class _ShiftBox:
         return self.inner.reset(seed=seed)
 
     def step(self, actions: Any) -> tuple:
-        _, reward, terminated, truncated, info = self.inner.step((actions > 0).to(int))
-        obs, _ = self.inner.reset()
-        return obs, reward, terminated, truncated, info
+        return self.inner.step((actions > 0).to(int))
 
     def close(self) -> None:
         self.inner.close()

@@ -96,8 +96,8 @@ class TypedSubsetAttack(SubsetAttack):
         max_subset_size: As :class:`~fdia_env.attacks.subset.SubsetAttack`.
     """
 
-    # nature's draw uses the members' numpy generators: no torch implementation (yet)
-    batch_backends = ("numpy",)
+    # nature's draw: the members' numpy generators, or torch's one device generator
+    batch_backends = ("numpy", "torch")
 
     name = "typed_subset"
     reset_options = (TYPE_OPTION,)
@@ -179,16 +179,28 @@ class TypedSubsetAttack(SubsetAttack):
     # --- batched -------------------------------------------------------------------------------
     def batch_draw_nature(
         self,
-        rngs: list[np.random.Generator],
-        where: np.ndarray | None = None,
+        rngs: list[np.random.Generator] | Any,
+        where: Any = None,
         options: dict[str, Any] | None = None,
     ) -> None:
         """Nature's draw of the type of the members ``where`` (all when None) with ``priors``.
 
         Member ``i`` takes one uniform from ``rngs[i]`` even when ``options["attacker_type"]``
-        forces the type, so that the episode's other draws do not depend on forcing it.
+        forces the type, so that the episode's other draws do not depend on forcing it. On
+        torch, ``rngs`` is the device's one ``torch.Generator``: it draws B uniforms (one per
+        member, kept only ``where``), so the types equal numpy's in distribution, and exactly
+        when forced.
         """
         forced = (options or {}).get(TYPE_OPTION)
+        if not isinstance(rngs, list):  # torch: one generator draws for every member
+            xp = self.xp
+            u = xp.uniform(rngs, self._batch)
+            if forced is None:
+                drawn = xp.minimum(xp.searchsorted(self._cdf, u), self.n_types - 1)
+            else:
+                drawn = xp.full(self._batch, self.type_of(forced), dtype=xp.int64)
+            self.b_type = drawn if where is None else xp.where(where, drawn, self.b_type)
+            return
         members = range(self._batch) if where is None else np.flatnonzero(where)
         types = []
         for i in members:
@@ -203,7 +215,15 @@ class TypedSubsetAttack(SubsetAttack):
         """(B, M [+ S]) the defender's last subsets, then (informed) each member's type."""
         if not self.informed:
             return self.b_opponent
-        return np.hstack([self.b_opponent, self._eye[self.b_type]])
+        if isinstance(self.b_opponent, np.ndarray):  # numpy, or the batch of one
+            return np.hstack([self.b_opponent, self._eye[self.b_type]])
+        xp, M = self.xp, self.M  # torch: the one-hot rows of a device copy of the identity
+        if getattr(self, "_eye_xp", None) is not xp:
+            self._eye_b, self._eye_xp = xp.asarray(self._eye), xp
+        out = xp.empty((self._batch, M + self.n_types))
+        out[:, :M] = self.b_opponent
+        out[:, M:] = xp.take(self._eye_b, self.b_type)
+        return out
 
     def batch_private_info(self) -> dict[str, np.ndarray]:
         """``type``: (B,) each member's type index (in the attacker's infos only)."""

@@ -5,7 +5,10 @@ vectorization_mode="vector_entry_point", **options)`` (the options of
 :func:`fdia_env.stealth.stealth_dynamic_v0.parallel_env`). The members run the same batched
 model as the single env (a batch of one there). Autoreset is Gymnasium's default
 ``NEXT_STEP``: the step after an episode's last one resets that member (its action is ignored,
-reward 0). ``action="linear"`` computes each member's detection probability by a numerical
+reward 0); ``autoreset_mode=AutoresetMode.SAME_STEP`` resets it in the same step, with the last
+observation and info in ``infos["final_obs"]`` / ``infos["final_info"]`` (what
+:func:`agents.torch_ppo.make_torch_env` asks for; see :mod:`fdia_env.stealth.vector_base`).
+``action="linear"`` computes each member's detection probability by a numerical
 integral (Imhof's), about 10–40 ms a member-step unless the window is strictly stealthy.
 
 ``backend="torch", device="cpu" | "cuda"`` runs either attack (``action="bias"``, the default,
@@ -21,6 +24,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
@@ -37,13 +41,22 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         num_envs: B, 1..2**16.
         backend: ``"numpy"`` (default) or ``"torch"``.
         device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP`` (see
+            :mod:`fdia_env.stealth.vector_base`).
         **kwargs: Options of ``stealth_dynamic_v0.parallel_env`` (no ``render_mode``).
     """
 
     def __init__(
-        self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
+        self,
+        num_envs: int,
+        backend: str = "numpy",
+        device: Any = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
     ) -> None:
-        self._init_batch(num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs, backend, device)
+        self._init_batch(
+            num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs, backend, device, autoreset_mode
+        )
         xp = self.xp
         self.model = self.env.model
         self._alpha = xp.full(self.num_envs, float(self.env.alpha), dtype=np.float64)
@@ -57,9 +70,13 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         xp, B = self.xp, self.num_envs
         self._seed(seed)
         self._state = self.model.new_state(B, xp)
-        everyone = xp.ones(B, dtype=np.bool_)
-        self.model.restart(self._state, everyone, self._rng, self.env.dynamics == "sampled", xp)
         self._needs_reset[:] = False
+        return self._restart(xp.ones(B, dtype=np.bool_))
+
+    def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
+        """Start ``members`` afresh; the reset observation and info (rows of ``members``)."""
+        xp, B = self.xp, self.num_envs
+        self.model.restart(self._state, members, self._rng, self.env.dynamics == "sampled", xp)
         obs = xp.zeros((B, 4), dtype=np.float32)
         obs[:, 0] = 1.0
         clean = xp.full(B, self.model.clean, dtype=np.float64)
@@ -67,7 +84,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         return obs, self._infos(clean, clean, zero > 0, zero, zero, self._tau[:, 0], zero)
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
-        """One filter step for every member (members that ended last step are reset instead)."""
+        """One filter step for every member (NEXT_STEP: those that ended last step reset)."""
         env, B, xp = self.env, self.num_envs, self.xp
         if xp is NUMPY:
             acts = check_batch_actions(self.single_action_space, actions, B, "attacker")
@@ -105,7 +122,8 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         obs[:, 1] = xp.astype(detected, np.float32)
         obs[:, 2] = xp.minimum(ratio, MAX_RATIO)
         obs[:, 3] = xp.minimum(xp.log(xp.maximum(phi / self.model.clean, 1.0)), MAX_LOG_ERROR)
-        self._needs_reset = terminated | truncated
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._needs_reset = terminated | truncated
         infos = self._infos(
             phi,
             xp.where(live, out["error"], self.model.clean),
@@ -115,6 +133,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
             xp.where(live, out["threshold"], self._tau[:, 0]),
             xp.where(live, out["kl"], 0.0),
         )
+        obs, infos = self._autoreset(obs, infos, terminated | truncated)
         return obs, reward, terminated, truncated, infos
 
     def _infos(self, phi, error, detected, p, statistic, threshold, kl) -> dict[str, Any]:
@@ -142,5 +161,7 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthDynamicVectorEnv:
         ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
             bad option.
     """
-    backend, device = vector_options(kwargs, "dynamic stealth env")
-    return StealthDynamicVectorEnv(num_envs, backend=backend, device=device, **kwargs)
+    backend, device, autoreset = vector_options(kwargs, "dynamic stealth env")
+    return StealthDynamicVectorEnv(
+        num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs
+    )

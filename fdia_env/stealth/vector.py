@@ -4,7 +4,9 @@
 vectorization_mode="vector_entry_point", **options)`` (the options of
 :func:`fdia_env.stealth.stealth_attack_v0.parallel_env`). Autoreset is Gymnasium's default
 ``NEXT_STEP``: the step after an episode's last one resets that member (its action is ignored,
-reward 0).
+reward 0); ``autoreset_mode=AutoresetMode.SAME_STEP`` resets it in the same step, with the last
+observation and info in ``infos["final_obs"]`` / ``infos["final_info"]`` (what
+:func:`agents.torch_ppo.make_torch_env` asks for; see :mod:`fdia_env.stealth.vector_base`).
 
 ``backend="torch", device="cpu" | "cuda"`` runs the same step on float64 tensors of that
 device: actions are tensors of the device, observations, rewards, flags and infos come back as
@@ -19,6 +21,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
@@ -35,13 +38,22 @@ class StealthVectorEnv(StealthVectorBase):
         num_envs: B, 1..2**20.
         backend: ``"numpy"`` (default) or ``"torch"`` (see the module docstring).
         device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP`` (see
+            :mod:`fdia_env.stealth.vector_base`).
         **kwargs: Options of ``stealth_attack_v0.parallel_env`` (no ``render_mode``).
     """
 
     def __init__(
-        self, num_envs: int, backend: str = "numpy", device: Any = None, **kwargs: Any
+        self,
+        num_envs: int,
+        backend: str = "numpy",
+        device: Any = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
     ) -> None:
-        self._init_batch(num_envs, StealthAttackEnv, MAX_NUM_ENVS, kwargs, backend, device)
+        self._init_batch(
+            num_envs, StealthAttackEnv, MAX_NUM_ENVS, kwargs, backend, device, autoreset_mode
+        )
         xp = self.xp
         est = self.env.estimation
         L = np.linalg.cholesky(est.R)
@@ -89,10 +101,14 @@ class StealthVectorEnv(StealthVectorBase):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        xp = self.xp
         self._seed(seed)
-        self._k[:] = 0
         self._needs_reset[:] = False
+        return self._restart(self.xp.ones(self.num_envs, dtype=np.bool_))
+
+    def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
+        """Start ``members`` afresh; the reset observation and info (rows of ``members``)."""
+        xp = self.xp
+        self._k = xp.where(members, 0, self._k)
         obs = xp.zeros((self.num_envs, 3), dtype=np.float32)
         obs[:, 0] = 1.0
         zero = xp.zeros(self.num_envs)
@@ -105,7 +121,7 @@ class StealthVectorEnv(StealthVectorBase):
         return self.xp.normal(self._rng, (self.num_envs, self.env.estimation.m))
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
-        """One snapshot for every member (members that ended last step are reset instead)."""
+        """One snapshot for every member (NEXT_STEP: members that ended last step reset instead)."""
         env, est, xp, B = self.env, self.env.estimation, self.xp, self.num_envs
         if xp is NUMPY:
             check_batch_actions(self.single_action_space, actions, B, "attacker")
@@ -143,7 +159,6 @@ class StealthVectorEnv(StealthVectorBase):
         obs[:, 0] = (env.horizon - self._k) / env.horizon
         obs[:, 1] = xp.astype(detected, np.float32)
         obs[:, 2] = xp.where(live, xp.minimum(statistic / est.threshold, MAX_RATIO), 0.0)
-        self._needs_reset = terminated | truncated
         used = (a != 0).sum(1)
         infos = self._infos(
             xp.where(live, damage, 0.0),
@@ -152,6 +167,9 @@ class StealthVectorEnv(StealthVectorBase):
             xp.where(live, statistic, 0.0),
             xp.where(live, used, 0),
         )
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._needs_reset = terminated | truncated
+        obs, infos = self._autoreset(obs, infos, terminated | truncated)
         return obs, reward, terminated, truncated, infos
 
     # --- the estimator's functions on the batch (numpy: the model's own methods) ---------
@@ -222,5 +240,7 @@ def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
         ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
             bad option.
     """
-    backend, device = vector_options(kwargs, "stealth env")
-    return StealthVectorEnv(num_envs, backend=backend, device=device, **kwargs)
+    backend, device, autoreset = vector_options(kwargs, "stealth env")
+    return StealthVectorEnv(
+        num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs
+    )

@@ -1,8 +1,16 @@
-"""What the two stealth native vector envs share: the constructor, seeding, the entry options.
+"""What the two stealth native vector envs share: the constructor, seeding, autoreset, options.
 
 :class:`StealthVectorBase` is the base of :class:`~fdia_env.stealth.vector.StealthVectorEnv`
 and :class:`~fdia_env.stealth.dynamic_vector.StealthDynamicVectorEnv`; :func:`vector_options`
 reads the options of their ``vector_entry_point`` that are not the env's own.
+
+Autoreset follows Gymnasium's rules, as the Kalman-filter native vector env's:
+``autoreset_mode=AutoresetMode.NEXT_STEP`` (the default) resets a finished member on the next
+``step`` (its action is ignored, reward 0, not terminated); ``SAME_STEP`` resets it in the same
+step: the step returns its fresh observation and reset info, and puts the last observation and
+info in ``infos["final_obs"]`` and ``infos["final_info"]`` (masks ``_final_obs`` and
+``_final_info``). On numpy ``final_obs`` is an object array (None where a member did not end);
+on torch it is a (B, d) tensor, zeros where a member did not end.
 """
 
 from __future__ import annotations
@@ -27,9 +35,17 @@ class StealthVectorBase(VectorEnv):
     xp: Backend = NUMPY
 
     def _init_batch(
-        self, num_envs: int, env_cls: type, maximum: int, kwargs: dict, backend: str, device: Any
+        self,
+        num_envs: int,
+        env_cls: type,
+        maximum: int,
+        kwargs: dict,
+        backend: str,
+        device: Any,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
     ) -> None:
         """Resolve the backend, check ``num_envs``, build the single env and the batched spaces."""
+        self.metadata = {"autoreset_mode": check_autoreset_mode(autoreset_mode)}
         self.xp = get_backend(backend, device)
         self.backend, self.device = self.xp.name, self.xp.device
         if kwargs.get("render_mode") is not None:
@@ -62,13 +78,78 @@ class StealthVectorBase(VectorEnv):
             )
         self._rng = self._generator(int(seed))
 
+    @property
+    def autoreset_mode(self) -> AutoresetMode:
+        """Gymnasium's autoreset mode of this env (also in ``metadata["autoreset_mode"]``)."""
+        return self.metadata["autoreset_mode"]
 
-def vector_options(kwargs: dict, label: str) -> tuple[str, Any]:
-    """Pop the entry point's own options from ``kwargs``; ``(backend, device)``.
+    def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
+        """Start ``members`` (bool (B,)) afresh; the batch's reset observation and reset info.
+
+        Only the rows of ``members`` of what it returns are used.
+        """
+        raise NotImplementedError
+
+    def _autoreset(self, obs: Any, infos: dict[str, Any], ended: Any) -> tuple[Any, dict]:
+        """The step's ``(obs, infos)`` after the finishing of ``ended`` members.
+
+        ``NEXT_STEP``: unchanged (they reset on the next step). ``SAME_STEP``: the ``ended``
+        members restart now; their rows of ``obs`` and of each info become the reset ones, and
+        the step's go in ``final_obs`` / ``final_info`` (see the module docstring).
+        """
+        xp = self.xp
+        if self.autoreset_mode != AutoresetMode.SAME_STEP or not xp.any(ended):
+            return obs, infos
+        if xp is NUMPY:
+            final: Any = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(ended):
+                final[i] = obs[i].copy()
+        else:  # torch has no object arrays: a (B, d) tensor, zeros where not ended
+            final = xp.where(ended[:, None], obs, 0.0)
+        final_info: dict[str, Any] = {}
+        for key, value in infos.items():
+            if not key.startswith("_"):
+                final_info[key] = xp.astype(xp.where(ended, value, 0), value.dtype)
+                final_info["_" + key] = xp.copy(ended)
+        fresh_obs, fresh = self._restart(xp.copy(ended))
+        out = {
+            key: value if key.startswith("_") else xp.where(ended, fresh[key], value)
+            for key, value in infos.items()
+        }
+        out.update(
+            final_obs=final,
+            _final_obs=xp.copy(ended),
+            final_info=final_info,
+            _final_info=xp.copy(ended),
+        )
+        return xp.where(ended[:, None], fresh_obs, obs), out
+
+
+def check_autoreset_mode(autoreset_mode: Any) -> AutoresetMode:
+    """``autoreset_mode`` as an :class:`~gymnasium.vector.AutoresetMode` (NEXT_STEP or SAME_STEP).
+
+    Raises:
+        ValueError: Naming ``autoreset_mode`` for an unknown mode or ``DISABLED``.
+    """
+    try:
+        mode = AutoresetMode(autoreset_mode)
+    except ValueError:
+        mode = None
+    if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        raise ValueError(
+            f"autoreset_mode must be AutoresetMode.NEXT_STEP or SAME_STEP (or "
+            f"'NextStep' / 'SameStep'), got {autoreset_mode!r}"
+        )
+    return mode
+
+
+def vector_options(kwargs: dict, label: str) -> tuple[str, Any, AutoresetMode]:
+    """Pop the entry point's own options from ``kwargs``; ``(backend, device, autoreset_mode)``.
 
     Raises:
         ValueError: For the defender's view (the native vector env plays the attacker alone) or
-            an autoreset mode other than ``NEXT_STEP``; ``label`` names the env.
+            an autoreset mode other than ``NEXT_STEP`` and ``SAME_STEP``; ``label`` names the
+            env.
     """
     backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
     agent = kwargs.pop("agent", "attacker")
@@ -78,7 +159,5 @@ def vector_options(kwargs: dict, label: str) -> tuple[str, Any]:
             f"the {label}'s native vector env plays the attacker alone (defender=None); use "
             "vectorization_mode='sync' for the defender's view"
         )
-    autoreset = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    if autoreset not in (AutoresetMode.NEXT_STEP, "next_step", "NextStep"):
-        raise ValueError(f"autoreset_mode must be NEXT_STEP here, got {autoreset!r}")
-    return backend, device
+    autoreset = check_autoreset_mode(kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP))
+    return backend, device, autoreset

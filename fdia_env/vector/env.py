@@ -212,6 +212,7 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
                 f"device draws for every member), got a list of {len(seed)}"
             )
         check_reset_args(seed, options, self.attack.reset_options)
+        self.attack.check_reset_options(dict(options or {}))
         super().reset(seed=None if seed is None else int(seed))
         if seed is not None or self._generator is None:
             self._generator = self.xp.generator(None if seed is None else int(seed))
@@ -231,10 +232,11 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.sim.reset(None)
         self.attack.batch_reset(B)
         self.defense.batch_reset(B)
-        if xp is NUMPY:  # models with nature's draws (the typed sensor game) are numpy-only
-            # nature's draws (the sensor game's type); options force them for this reset only:
-            # an autoreset draws them, as SyncVectorEnv's autoreset calls reset() without options
-            self.attack.batch_draw_nature(self._rngs, None, dict(options or {}))
+        # nature's draws (the sensor game's type), from each member's generator on numpy, the
+        # device generator on torch; options force them for this reset only: an autoreset
+        # draws them, as SyncVectorEnv's autoreset calls reset() without options
+        rngs = self._rngs if xp is NUMPY else self._generator
+        self.attack.batch_draw_nature(rngs, None, dict(options or {}))
         self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._det_info = {
             key: xp.full(B, value, dtype=np.dtype(type(value)))
@@ -247,8 +249,8 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
         self.sim.reset(where)
         self.attack.batch_reset(self.num_envs, where)
         self.defense.batch_reset(self.num_envs, where)
-        if self.xp is NUMPY:
-            self.attack.batch_draw_nature(self._rngs, where)
+        rngs = self._rngs if self.xp is NUMPY else self._generator
+        self.attack.batch_draw_nature(rngs, where)
         for key, value in self._det_defaults.items():
             self._det_info[key][where] = value
 

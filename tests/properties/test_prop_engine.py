@@ -1,13 +1,16 @@
 """Property: one engine behind every face.
 
 Random configurations of every Kalman-filter env (every scenario family incl. a grid preset, both
-dynamics, every action format, every attack × defense pair of ``fdia_v0``, random actions,
-batch sizes and seeds): the single env (through Gymnasium's ``SyncVectorEnv``), the native vector
-env on numpy and on torch (CPU) give the same observations, rewards, terminations, truncations
-and infos. numpy equals the single env bit for bit while its members share the history table
-(2-state models in expected dynamics until a bias reaches a filter), to round-off otherwise;
+dynamics, every action format incl. the sparse attacker's sequential, masked format of
+``sparse_attack_v1``/``v2`` in both orders, the typed (incomplete-information) sensor game, every
+attack × defense pair of ``fdia_v0``, random (masked) actions, batch sizes and seeds): the single
+env (through Gymnasium's ``SyncVectorEnv``), the native vector env on numpy and on torch (CPU)
+give the same observations, rewards, terminations, truncations and infos. numpy equals the
+single env bit for bit while its members share the history table (2-state models in expected
+dynamics until a bias reaches a filter), to round-off otherwise;
 torch equals numpy to 1e-10 in expected dynamics and in distribution in sampled dynamics (its
-own device generator).
+own device generator; the typed sensor game's types too, so member by member only under a
+degenerate prior).
 """
 
 from __future__ import annotations
@@ -47,6 +50,24 @@ def _sparse(draw, window):
     )
 
 
+def _sequential(draw, window):
+    # the sparse attacker's sequential, masked format (its own native vector env), in both
+    # orders, on v1 and v2 (v2: the same env with order="plan" by default)
+    scenario = draw(st.sampled_from([*SMALL, GRID]))
+    return (
+        draw(st.sampled_from(["fdia_env.sparse_attack_v1", "fdia_env.sparse_attack_v2"])),
+        "attacker",
+        {
+            "scenario": scenario,
+            "action": "sequential",
+            "order": draw(st.sampled_from(["time", "plan"])),
+            "budget": draw(st.integers(1, window)),
+            "objective": draw(st.sampled_from(["trace", "logdet"])),
+            "horizon": window,
+        },
+    )
+
+
 def _covariance(draw, window):
     return (
         "fdia_env.covariance_attack_v0",
@@ -70,8 +91,10 @@ def _sensor_game(draw, window):
     }
     if draw(st.booleans()):
         kwargs["allocation"] = draw(st.sampled_from(["independent", "dependent"]))
-    else:  # incomplete information: nature draws the attacker's type
+    else:  # incomplete information: nature draws the attacker's type (torch: from its own
+        # generator, so member by member against numpy only under a degenerate prior)
         kwargs["types"] = ("independent", "dependent")
+        kwargs["priors"] = draw(st.sampled_from([(0.5, 0.5), (1.0, 0.0), (0.0, 1.0)]))
     return "fdia_env.sensor_game_v0", draw(st.sampled_from(["attacker", "defender"])), kwargs
 
 
@@ -121,6 +144,7 @@ FAMILIES = {
     "sparse": _sparse,
     "covariance": _covariance,
     "sensor_game": _sensor_game,
+    "sequential": _sequential,
     "detection_game": _detection_game,
     "fdia": _composed,
 }
@@ -200,6 +224,11 @@ def assert_same_infos(native, sync, where, exact):
             np.testing.assert_allclose(n, s, rtol=1e-9, atol=1e-9, err_msg=f"{where}/{key}")
 
 
+def _engine(native):
+    """The engine of a native vector env (the sequential format's wraps an FdiaVectorEnv)."""
+    return getattr(native, "inner", native).sim
+
+
 def _check_native_equals_single(module, agent, kwargs, B, seed, pure):
     # bit for bit while the native env's members share the history table (2-state expected
     # dynamics, no bias reached a filter: the single env's own kernel computes every node); to
@@ -218,8 +247,8 @@ def _check_native_equals_single(module, agent, kwargs, B, seed, pure):
     native = make_vector(module, B, agent=agent, opponent=opp, **kwargs)
     obs_s, info_s = sync.reset(seed=seed)
     obs_n, info_n = native.reset(seed=seed)
-    exact = native.sim.shares_histories
-    if kwargs["dynamics"] == "expected" and native.sim.system.n == 2:
+    exact = _engine(native).shares_histories
+    if kwargs["dynamics"] == "expected" and _engine(native).system.n == 2:
         assert exact, "a 2-state expected-dynamics env starts in the history table"
     if exact:
         np.testing.assert_array_equal(obs_n, obs_s)
@@ -228,12 +257,14 @@ def _check_native_equals_single(module, agent, kwargs, B, seed, pure):
     assert_same_infos(info_n, info_s, "reset", exact)
     rng = np.random.default_rng(seed)
     window = kwargs.get("horizon", kwargs.get("rounds", 1))
+    if kwargs.get("action") == "sequential":  # up to budget + 1 decisions per time step
+        window *= kwargs["budget"] + 2
     trace = []
     for t in range(2 * window + 1):  # through an autoreset
         actions = _actions(sync.single_action_space, rng, B, info_s.get("action_mask"))
         out_s = sync.step(actions)
         out_n = native.step(actions)
-        exact = native.sim.shares_histories  # once off, off until the next full reset
+        exact = _engine(native).shares_histories  # once off, off until the next full reset
         where = f"step {t}"
         if exact:
             np.testing.assert_array_equal(out_n[0], out_s[0], err_msg=where)
@@ -265,7 +296,8 @@ def _check_torch_equals_numpy(module, agent, kwargs, B, seed, opp, trace):
 
 
 def _torch_capable(module, kwargs):
-    return not (module.endswith("sensor_game_v0") and "types" in kwargs)
+    # a typed sensor game's types come from torch's generator: equal only when nature is sure
+    return "types" not in kwargs or max(kwargs["priors"]) == 1.0
 
 
 @pytest.mark.parametrize("family", sorted(FAMILIES))
