@@ -46,7 +46,7 @@ from baselines.sparse.bound import (
 from baselines.sparse.dp import dp
 from baselines.sparse.greedy import sfs_ss
 from baselines.sparse.problem import Pair, SparseProblem, make_problem
-from baselines.sparse.result import SparseResult
+from baselines.sparse.result import SparseResult, result_of
 from baselines.sparse.split import split_bound
 from baselines.sparse.tail import TailTable, enumeration_size, tail_child_bounds
 from fdia_env.scenarios import Scenario
@@ -394,13 +394,11 @@ def branch_and_bound(
     value = problem.evaluate(pairs)
     if proved:
         bound = value
-    result = SparseResult(
-        value=value,
-        attacks=tuple(pairs),
-        solver="bnb",
-        horizon=problem.horizon,
-        num_sensors=problem.M,
-        objective=objective,
+    result = result_of(
+        problem,
+        pairs,
+        "bnb",
+        value,
         evaluations=search.nodes,
         upper_bound=bound,
         nodes=search.nodes,

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from baselines.sparse.problem import Pair, make_problem
-from baselines.sparse.result import SparseResult
+from baselines.sparse.result import SparseResult, result_of
 from fdia_env.kalman import information_update, predict_cov
 from fdia_env.kalman import objective as phi_of
 from fdia_env.scenarios import Scenario
@@ -93,12 +93,4 @@ def dp(
         r = int(choice[k, left])
         pairs += [(k, int(i)) for i in ranking[:r]]
         left -= r
-    return SparseResult(
-        value=problem.evaluate(pairs),
-        attacks=tuple(pairs),
-        solver="dp",
-        horizon=N,
-        num_sensors=M,
-        objective=objective,
-        evaluations=evaluations,
-    )
+    return result_of(problem, pairs, "dp", evaluations=evaluations)

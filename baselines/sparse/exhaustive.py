@@ -32,7 +32,7 @@ import numpy as np
 
 from baselines.sparse.algebra import CovarianceAlgebra, algebra_for
 from baselines.sparse.problem import Pair, SparseProblem, make_problem
-from baselines.sparse.result import SparseResult
+from baselines.sparse.result import SparseResult, result_of
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -272,12 +272,4 @@ def exhaustive(
             )
     search = _FrontierSearch(problem, algebra_for(sys.F, sys.Q, objective, fast), chunk_rows)
     _, pairs = search.run()
-    return SparseResult(
-        value=problem.evaluate(pairs),
-        attacks=tuple(pairs),
-        solver="exs",
-        horizon=problem.horizon,
-        num_sensors=problem.M,
-        objective=objective,
-        evaluations=math.comb(problem.size, problem.budget),
-    )
+    return result_of(problem, pairs, "exs", evaluations=math.comb(problem.size, problem.budget))

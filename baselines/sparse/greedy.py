@@ -11,7 +11,7 @@ import numpy as np
 
 from baselines.sparse import lowrank
 from baselines.sparse.problem import Pair, SparseProblem, make_problem
-from baselines.sparse.result import SparseResult
+from baselines.sparse.result import SparseResult, result_of
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
@@ -39,25 +39,6 @@ def _toggle_each(problem: SparseProblem, attacked: np.ndarray, flats: np.ndarray
     rows = np.arange(len(flats))
     masks[rows, flats] = ~masks[rows, flats]
     return problem.evaluate_masks(masks.reshape(-1, problem.horizon, problem.M))
-
-
-def _result(
-    problem: SparseProblem,
-    pairs: list[Pair],
-    solver: str,
-    evaluations: int,
-    order: list[Pair] | None = None,
-) -> SparseResult:
-    return SparseResult(
-        value=problem.evaluate(pairs),
-        attacks=tuple(pairs),
-        solver=solver,
-        horizon=problem.horizon,
-        num_sensors=problem.M,
-        objective=problem.objective,
-        order=None if order is None else tuple(order),
-        evaluations=evaluations,
-    )
 
 
 def _sfs_order(problem: SparseProblem) -> tuple[list[Pair], int]:
@@ -101,7 +82,7 @@ def sfs(
     """
     problem = make_problem(system_or_scenario, budget, horizon, objective)
     order, evaluations = _sfs_order(problem)
-    return _result(problem, order, "sfs", evaluations, order=order)
+    return result_of(problem, order, "sfs", order=order, evaluations=evaluations)
 
 
 def sbs(
@@ -133,7 +114,7 @@ def sbs(
         evaluations += len(candidates)
         attacked[candidates[int(np.argmax(values))]] = False
     pairs = [_pair(problem, f) for f in np.flatnonzero(attacked)]
-    return _result(problem, pairs, "sbs", evaluations)
+    return result_of(problem, pairs, "sbs", evaluations=evaluations)
 
 
 def sfs_ss(
@@ -183,4 +164,4 @@ def sfs_ss(
         attacked[:] = False
         attacked[chosen] = True
     pairs = [_pair(problem, f) for f in chosen]
-    return _result(problem, pairs, "sfs_ss", evaluations)
+    return result_of(problem, pairs, "sfs_ss", evaluations=evaluations)

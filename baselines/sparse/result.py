@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baselines.sparse.problem import Pair
+from baselines.sparse.problem import Pair, SparseProblem
 
 if TYPE_CHECKING:
     from baselines.sparse.policy import SparsePolicy
@@ -140,3 +140,37 @@ class SparseResult:
         from baselines.sparse.policy import SparsePolicy
 
         return SparsePolicy.from_result(self, action=action)
+
+
+def result_of(
+    problem: SparseProblem,
+    pairs: list[Pair],
+    solver: str,
+    value: float | None = None,
+    order: list[Pair] | None = None,
+    **fields: Any,
+) -> SparseResult:
+    """The :class:`SparseResult` of attacking ``pairs`` on ``problem``.
+
+    Args:
+        problem: The instance solved (its horizon, number of sensors and objective).
+        pairs: The attack set, ``(step, sensor)`` pairs.
+        solver: The solver's name.
+        value: Φ of ``pairs`` when the solver has it; None: recomputed by
+            :meth:`SparseProblem.evaluate`.
+        order: The pairs in pick order, where the solver has one.
+        **fields: The other :class:`SparseResult` fields (``evaluations``, ``upper_bound``, …).
+
+    Returns:
+        The result.
+    """
+    return SparseResult(
+        value=problem.evaluate(pairs) if value is None else value,
+        attacks=tuple(pairs),
+        solver=solver,
+        horizon=problem.horizon,
+        num_sensors=problem.M,
+        objective=problem.objective,
+        order=None if order is None else tuple(order),
+        **fields,
+    )
