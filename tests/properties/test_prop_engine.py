@@ -11,6 +11,11 @@ dynamics until a bias reaches a filter), to round-off otherwise;
 torch equals numpy to 1e-10 in expected dynamics and in distribution in sampled dynamics (its
 own device generator; the typed sensor game's types too, so member by member only under a
 degenerate prior).
+
+Without a native vector env (checked against ``SyncVectorEnv`` only, whose members equal single
+envs seeded ``seed + i``): the sensor game's sequential format (``make_vector`` refuses it, naming
+SyncVectorEnv) and the system-family env. The stealth envs' defender views have none either (see
+tests/test_stealth*.py).
 """
 
 from __future__ import annotations
@@ -389,3 +394,57 @@ def test_kernel_of_the_single_env_equals_the_engine_step(scenario, objective, wa
         np.testing.assert_allclose(fast.M, engine.M, rtol=1e-10, atol=1e-14)
         np.testing.assert_allclose(fast.features(), engine.features(), rtol=1e-9, atol=1e-9)
         assert fast.consistent == engine.consistent
+
+
+# --- formats without a native vector env: SyncVectorEnv against the single envs ------------------
+def _family_env():
+    from fdia_env.envs.system_family import SystemFamilyEnv, TrackingFamily
+
+    family = TrackingFamily(num_sensors=4, budget=2, horizon=3)
+    return SystemFamilyEnv(family=family, system_seeds=range(5), objective="trace")
+
+
+GAME = "fdia_env.sensor_game_v0"
+GAME_SEQUENTIAL = {"scenario": "ch4-position", "power": 25.0, "rounds": 2, "action": "sequential"}
+NO_NATIVE = {
+    # the sensor game's sequential, masked format (one sensor per decision)
+    "sensor_game_sequential": (
+        lambda: make_single_agent(GAME, "attacker", **GAME_SEQUENTIAL),
+        (GAME, GAME_SEQUENTIAL),
+    ),
+    # the system-family env (a random tracking system at every reset): no native vector env
+    "system_family": (_family_env, None),
+}
+
+
+@pytest.mark.parametrize("case", sorted(NO_NATIVE))
+def test_formats_without_a_native_vector_env_run_in_sync_vector_env(case):
+    # the native vector env refuses them (naming the way out); SyncVectorEnv's members equal
+    # single envs seeded seed + i, stepped with the same (masked) random actions
+    make, native = NO_NATIVE[case]
+    if native is not None:
+        with pytest.raises(ValueError, match="not available in the native vector env"):
+            make_vector(native[0], 2, **native[1])
+    B, seed = 3, 11
+    sync = SyncVectorEnv([make] * B, autoreset_mode=AutoresetMode.NEXT_STEP)
+    singles = [make() for _ in range(B)]
+    obs, info = sync.reset(seed=seed)
+    for i, env in enumerate(singles):
+        o, _ = env.reset(seed=seed + i)
+        np.testing.assert_array_equal(obs[i], o)
+    rng = np.random.default_rng(seed)
+    ended = np.zeros(B, bool)
+    for t in range(12):
+        masks = info.get("action_mask")
+        actions = _actions(sync.single_action_space, rng, B, masks)
+        obs, reward, term, trunc, info = sync.step(actions)
+        for i, env in enumerate(singles):
+            if ended[i]:  # NEXT_STEP: this step reset the member
+                o, _ = env.reset()
+                np.testing.assert_array_equal(obs[i], o, err_msg=f"{case} reset {t}")
+                ended[i] = False
+                continue
+            o, r, te, tr, _ = env.step(actions[i])
+            np.testing.assert_array_equal(obs[i], o, err_msg=f"{case} step {t}")
+            assert reward[i] == r and term[i] == te and trunc[i] == tr, (case, t, i)
+            ended[i] = te or tr
