@@ -609,3 +609,25 @@ def test_torch_cpu_members_share_the_history_table_too():
         np.testing.assert_array_equal(out_t[1].numpy(), out_n[1], err_msg=f"step {t}")
         np.testing.assert_array_equal(out_t[4]["phi"].numpy(), out_n[4]["phi"])
     assert envs["torch"].sim.shares_histories and envs["numpy"].sim.shares_histories
+
+
+def test_every_torch_id_builds_resets_and_steps_on_torch():
+    # each id the registry lists with the torch backend, at its defaults: the native vector env
+    # on torch (CPU) accepts it and gives (B, d) observations and finite rewards
+    torch = pytest.importorskip("torch")
+    from fdia_env.registration import torch_ids
+
+    for env_id in torch_ids():
+        env = gym.make_vec(
+            env_id, num_envs=2, vectorization_mode="vector_entry_point", backend="torch"
+        )
+        obs, _ = env.reset(seed=0)
+        assert tuple(obs.shape) == (2, *env.single_observation_space.shape), env_id
+        env.single_action_space.seed(0)
+        action = np.stack([env.single_action_space.sample() for _ in range(2)])
+        if isinstance(env.single_action_space, gym.spaces.Discrete):  # a legal one per member
+            mask = np.asarray(env.action_masks())
+            action = np.array([np.flatnonzero(m)[0] for m in mask])
+        out = env.step(torch.as_tensor(action))
+        assert torch.isfinite(out[1]).all(), env_id
+        env.close()
