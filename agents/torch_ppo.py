@@ -151,6 +151,7 @@ class TorchPPOConfig:
             hidden=tuple(hp["net_arch"]),
             num_minibatches=min(4, num_envs * hp["n_steps"]),
             stop_prob=hp.get("stop_prob"),
+            norm_obs=hp.get("norm_obs", True),
         )
 
     @property

@@ -15,8 +15,15 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py lives at the root
 
 import train
-from agents.config import SCENARIO_DEFAULTS, Hyperparameters, scenario_defaults, with_defaults
+from agents.config import (
+    SCENARIO_DEFAULTS,
+    Hyperparameters,
+    resolved_hyperparameters,
+    scenario_defaults,
+    with_defaults,
+)
 from agents.registry import get
+from agents.torch_ppo import TorchPPOConfig
 from agents.training import NormalizedReward, null_return, run_setup
 from baselines.game import exploitability
 from baselines.sparse import exhaustive
@@ -35,8 +42,11 @@ def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
     setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
     assert setup.algo == "MaskablePPO" and setup.normalize_reward
     assert setup.env_kwargs == {"scenario": "grid-ieee14", "action": "sequential", "order": "plan"}
-    assert SCENARIO_DEFAULTS["sparse_attack_v0", "grid-ieee14"].hyperparameters == {}
-    assert setup.hp == Hyperparameters()  # the algorithm's own defaults (stop_prob unset)
+    # torch-ppo's observation normalisation is off there; nothing else leaves the defaults
+    assert SCENARIO_DEFAULTS["sparse_attack_v0", "grid-ieee14"].hyperparameters == {
+        "norm_obs": False
+    }
+    assert setup.hp == Hyperparameters()  # MaskablePPO's own defaults (norm_obs not its own)
     # the time-major order (the env's default) leaves the table
     timed = run_setup(
         "sparse_attack_v0", "attacker", "grid-ieee14", {"order": '"time"'}, None,
@@ -182,3 +192,20 @@ def test_torch_ppo_takes_stop_prob_from_the_hyperparameters():
     logits = result.policy.model.actor[-1].bias.detach()
     probs = torch.softmax(logits, 0)
     assert float(probs[0]) == pytest.approx(0.9, abs=1e-6)  # the bias: 0.9 to stop
+
+
+def test_torch_ppo_on_a_grid_preset_trains_without_observation_normalisation():
+    hp = Hyperparameters()
+    setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, "torch-ppo", hp)
+    assert setup.hp.norm_obs is False
+    resolved = resolved_hyperparameters("torch-ppo", setup.hp)
+    assert TorchPPOConfig.from_hyperparameters(resolved, 1024, 8).norm_obs is False
+    # the algorithm's default elsewhere, and the command line wins over the table
+    assert resolved_hyperparameters("torch-ppo", hp)["norm_obs"] is True
+    given = Hyperparameters(norm_obs=True)
+    kept = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, "torch-ppo", given)
+    assert kept.hp.norm_obs is True
+    with pytest.raises(ValueError, match="norm_obs does not apply to MaskablePPO"):
+        resolved_hyperparameters("MaskablePPO", given)
+    with pytest.raises(TypeError, match="norm_obs"):
+        Hyperparameters(norm_obs="yes")
