@@ -299,7 +299,7 @@ def native_vector_env(env: gym.Env, num_envs: int) -> Any:
             made with options its native vector env does not support.
     """
     from fdia_env.envs.parallel import FdiaParallelEnv
-    from fdia_env.envs.sequential import SequentialSetEnv
+    from fdia_env.envs.sequential import SequentialSetEnv, SequentialSubsetEnv
     from fdia_env.registration import ENVS, GYM_IDS
 
     view = env.unwrapped
@@ -311,6 +311,10 @@ def native_vector_env(env: gym.Env, num_envs: int) -> Any:
         from fdia_env.vector.sequential import SequentialVectorEnv
 
         return SequentialVectorEnv(parallel, num_envs)
+    if isinstance(parallel, SequentialSubsetEnv):  # the sensor game's sequential format
+        from fdia_env.vector.sequential_game import SequentialGameVectorEnv
+
+        return SequentialGameVectorEnv(parallel, num_envs, agent=agent, opponent=view.opponent)
     if entry.kalman if entry is not None else isinstance(parallel, FdiaParallelEnv):
         from fdia_env.vector import FdiaVectorEnv
 
@@ -534,6 +538,11 @@ def evaluate(
             player = policy
         view = getattr(env, "unwrapped", env)
         if hasattr(view, "subset_player") and view.is_subset_policy(player):
+            if num_envs is not None:
+                raise ValueError(
+                    f"num_envs={num_envs}: a subset-format mix plays the sequential format one "
+                    "episode at a time; pass num_envs=None"
+                )
             player = view.subset_player(player)  # a subset mix in the sequential format
         ref = _as_reference(reference, env)
         types: list[int] = []

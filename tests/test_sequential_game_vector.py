@@ -163,3 +163,20 @@ def test_illegal_actions_and_bad_input():
         make_vector("fdia_env.sensor_game_v0", 2, agent="spy", **GAME)
     with pytest.raises(ValueError, match="num_envs"):
         make_vector("fdia_env.sensor_game_v0", 0, **GAME)
+
+
+@pytest.mark.parametrize("agent", ["attacker", "defender"])
+def test_evaluate_plays_the_format_batched_on_its_native_vector_env(agent):
+    # agents.evaluate's num_envs path: the same episodes (seeds seed + i) as one by one
+    from agents.evaluate import evaluate
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = gym.make(IDS[agent], **{**GAME, "rounds": 2})
+        one_by_one = evaluate("random", env, n_episodes=6, seed=3)
+        batched = evaluate("random", env, n_episodes=6, seed=3, num_envs=4)
+    assert np.ptp(one_by_one.returns) > 0  # the episodes differ
+    np.testing.assert_allclose(batched.returns, one_by_one.returns, rtol=1e-9, atol=1e-12)
+    n = len(env.unwrapped.parallel.models[agent].subsets)
+    with pytest.raises(ValueError, match="num_envs=4: a subset-format mix plays the sequential"):
+        evaluate(FixedMix.uniform(n), env, n_episodes=2, num_envs=4)
