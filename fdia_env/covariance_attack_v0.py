@@ -69,11 +69,19 @@ Terminates after ``horizon`` steps (default 1). No truncation.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from fdia_env.attacks import CovarianceAttack
 from fdia_env.defenses import UnawareFilter
-from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
+from fdia_env.envs.factory import (
+    EPISODE_ORDER,
+    aec_views,
+    episode_spec,
+    scenario_default,
+    with_episode_parameters,
+)
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -81,31 +89,18 @@ from fdia_env.systems import LinearSystem
 NAME = "covariance_attack_v0"
 
 
+@with_episode_parameters("scenario", "power", "structure", "power_mode", "weight", *EPISODE_ORDER)
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch2-position",
     power: float | None = None,
     structure: str = "full",
     power_mode: str = "per_step",
     weight: np.ndarray | None = None,
-    horizon: int | None = None,
-    objective: str = "trace",
-    reward_mode: str = "terminal",
-    dynamics: str = "expected",
-    warmup: int | str | None = None,
     render_mode: str | None = None,
-    max_cycles: int | None = None,
+    **episode: Any,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
-    sc, spec = episode_spec(
-        scenario,
-        horizon=horizon,
-        max_cycles=max_cycles,
-        default_horizon=1,
-        warmup=warmup,
-        objective=objective,
-        reward_mode=reward_mode,
-        dynamics=dynamics,
-    )
+    sc, spec = episode_spec(scenario, default_horizon=1, **episode)
     attack = CovarianceAttack(
         scenario_default(sc, "power", power),
         structure=structure,
@@ -113,7 +108,13 @@ def parallel_env(
         weight=weight,
     )
     return FdiaParallelEnv(
-        sc, attack, UnawareFilter(), spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles
+        sc,
+        attack,
+        UnawareFilter(),
+        spec,
+        render_mode=render_mode,
+        name=NAME,
+        max_cycles=episode["max_cycles"],
     )
 
 

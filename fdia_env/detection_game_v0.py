@@ -76,7 +76,7 @@ import numpy as np
 from fdia_env.attacks.probabilistic import ProbabilisticAttack
 from fdia_env.defenses.detector import ThresholdDetector
 from fdia_env.detection.attack import c2_optimal_pbb
-from fdia_env.envs.factory import aec_views, episode_spec
+from fdia_env.envs.factory import aec_views, episode_spec, with_episode_parameters
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.policy import PolicyBase, repeat_action
 from fdia_env.envs.simulation import Simulation
@@ -88,6 +88,21 @@ from fdia_env.systems import LinearSystem
 NAME = "detection_game_v0"
 
 
+@with_episode_parameters(
+    "scenario",
+    "power",
+    "statistic",
+    "on_detect",
+    "assumed_sigma",
+    "criterion",
+    "horizon",
+    "warmup",
+    "objective",
+    "reward_mode",
+    "dynamics",
+    "render_mode",
+    "max_cycles",
+)
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch3-static",
     power: float = 100.0,
@@ -95,27 +110,14 @@ def parallel_env(
     on_detect: str = "discard",
     assumed_sigma: np.ndarray | None = None,
     criterion: str = "mse",
-    horizon: int | None = None,
-    warmup: int | str | None = None,
-    objective: str = "trace",
-    reward_mode: str = "terminal",
-    dynamics: str = "expected",
     render_mode: str | None = None,
-    max_cycles: int | None = None,
+    **episode: Any,
 ) -> FdiaParallelEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring)."""
-    sc, spec = episode_spec(
-        scenario,
-        horizon=horizon,
-        max_cycles=max_cycles,
-        default_horizon=1,
-        warmup=_warmup(scenario, warmup),
-        objective=objective,
-        reward_mode=reward_mode,
-        dynamics=dynamics,
-    )
+    episode["warmup"] = _warmup(scenario, episode["warmup"])
+    sc, spec = episode_spec(scenario, default_horizon=1, **episode)
     static = _is_static(sc.system)
-    if dynamics == "expected" and not static and spec.horizon > 1:
+    if spec.dynamics == "expected" and not static and spec.horizon > 1:
         raise ValueError(
             f"horizon must be 1 with dynamics='expected' in the tracking setting (after one "
             f"detection the estimation error is no longer Gaussian), got {spec.horizon} (from "
@@ -134,7 +136,13 @@ def parallel_env(
         criterion=criterion,
     )
     env = FdiaParallelEnv(
-        sc, attack, defense, spec, render_mode=render_mode, name=NAME, max_cycles=max_cycles
+        sc,
+        attack,
+        defense,
+        spec,
+        render_mode=render_mode,
+        name=NAME,
+        max_cycles=episode["max_cycles"],
     )
     env.default_sigma = sigma
     env.default_p1 = float(sc.extra.get("p1", 0.85))

@@ -67,7 +67,12 @@ from fdia_env.attacks.subset import SubsetAttack
 from fdia_env.defenses import DefenseModel, PerfectDetection, UnawareFilter
 from fdia_env.defenses.detector import ThresholdDetector
 from fdia_env.defenses.selection import SensorSelection
-from fdia_env.envs.factory import aec_views, episode_spec
+from fdia_env.envs.factory import (
+    EPISODE_ORDER,
+    aec_views,
+    episode_spec,
+    with_episode_parameters,
+)
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
@@ -129,34 +134,24 @@ def _model(kind: str, value: Any, registry: dict[str, type], kwargs: dict | None
     return value
 
 
+@with_episode_parameters(
+    "scenario", "attack", "defense", "attack_kwargs", "defense_kwargs", *EPISODE_ORDER
+)
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch4-position",
     attack: str | AttackModel = "sparse",
     defense: str | DefenseModel = "perfect_detection",
     attack_kwargs: dict | None = None,
     defense_kwargs: dict | None = None,
-    horizon: int | None = None,
-    objective: str = "trace",
-    reward_mode: str = "terminal",
-    dynamics: str = "expected",
-    warmup: int | str | None = None,
     render_mode: str | None = None,
-    max_cycles: int | None = None,
+    **episode: Any,
 ) -> FdiaParallelEnv:
     """Compose a scenario, an attack model, a defense model and an episode spec.
 
     Models are given by name (with ``*_kwargs``) or as instances; names: attacks
     ``ATTACKS``, defenses ``DEFENSES``.
     """
-    sc, spec = episode_spec(
-        scenario,
-        horizon=horizon,
-        max_cycles=max_cycles,
-        warmup=warmup,
-        objective=objective,
-        reward_mode=reward_mode,
-        dynamics=dynamics,
-    )
+    sc, spec = episode_spec(scenario, **episode)
     for kind, kwargs in (("attack", attack_kwargs), ("defense", defense_kwargs)):
         _check_kwargs(kind, kwargs)
     if isinstance(attack, str):  # model parameters the preset defines, unless given
@@ -171,7 +166,7 @@ def parallel_env(
         spec,
         render_mode=render_mode,
         name=NAME,
-        max_cycles=max_cycles,
+        max_cycles=episode["max_cycles"],
     )
 
 

@@ -329,7 +329,7 @@ for _entry in (
         "fdia_env.covariance_attack_v0",
         {"attacker": "fdia_env/CovarianceAttack-v0"},
     ),
-    EnvEntry(
+    EnvEntry(  # action="sequential": fdia_env.vector.sequential_game (both views)
         "sensor_game_v0",
         "fdia_env.sensor_game_v0",
         {

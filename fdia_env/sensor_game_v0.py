@@ -51,8 +51,9 @@ played, so every pair of subsets of the subset format is reachable and pays the 
 (``"trim"``, default, and ``"noop"``; an illegal stop or a waiting player's pick is ignored).
 The observation ``Box`` adds M entries (1 = picked by the player this round). The Gymnasium
 views take ``opponent=`` a policy of the subset format (default the uniform mix), asked once
-per round as in the subset format. See ``fdia_env.envs.sequential``; not in the native vector
-env.
+per round as in the subset format. See ``fdia_env.envs.sequential``. The native vector env
+(``gymnasium.make_vec(..., vectorization_mode="vector_entry_point", action="sequential")``,
+numpy or torch) is :class:`fdia_env.vector.sequential_game.SequentialGameVectorEnv`.
 
 ## Observation Space
 

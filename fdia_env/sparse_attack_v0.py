@@ -102,11 +102,19 @@ Terminates after N steps. No truncation.
 
 from __future__ import annotations
 
+from typing import Any
+
 from fdia_env._validation import check_choice
 from fdia_env.attacks import SparseAttack
 from fdia_env.attacks.sparse import ACTION_FORMATS
 from fdia_env.defenses import PerfectDetection
-from fdia_env.envs.factory import aec_views, episode_spec, scenario_default
+from fdia_env.envs.factory import (
+    EPISODE_ORDER,
+    aec_views,
+    episode_spec,
+    scenario_default,
+    with_episode_parameters,
+)
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.sequential import ORDERS, SequentialSetEnv
 from fdia_env.scenarios import Scenario
@@ -115,25 +123,23 @@ from fdia_env.systems import LinearSystem
 NAME = "sparse_attack_v0"
 
 
+@with_episode_parameters("scenario", "budget", *EPISODE_ORDER, "illegal_action", "action", "order")
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch4-position",
     budget: int | None = None,
-    horizon: int | None = None,
-    objective: str = "trace",
-    reward_mode: str = "terminal",
-    dynamics: str = "expected",
-    warmup: int | str | None = None,
     render_mode: str | None = None,
-    max_cycles: int | None = None,
     illegal_action: str = "trim",
     action: str = "auto",
     order: str = "time",
+    **episode: Any,
 ) -> FdiaParallelEnv | SequentialSetEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring).
 
     ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSetEnv``
     over the ``"multibinary"`` env (see the module docstring's Action Space), its decisions in
-    ``order`` (``"time"``, or ``"plan"``: the pairs of the whole horizon first).
+    ``order`` (``"time"``, or ``"plan"``: the pairs of the whole horizon first). The episode
+    parameters (``horizon``, ``objective``, ...) are those of
+    :data:`fdia_env.envs.factory.EPISODE_PARAMETERS`.
 
     Raises:
         ValueError: For ``order="plan"`` with another format than ``"sequential"`` (and for any
@@ -149,26 +155,13 @@ def parallel_env(
         inner = parallel_env(
             scenario,
             budget,
-            horizon,
-            objective,
-            reward_mode,
-            dynamics,
-            warmup,
-            render_mode,
-            max_cycles,
+            render_mode=render_mode,
             illegal_action="error",
             action="multibinary",
+            **episode,
         )
         return SequentialSetEnv(inner, illegal_action=illegal_action, order=order)
-    sc, spec = episode_spec(
-        scenario,
-        horizon=horizon,
-        max_cycles=max_cycles,
-        warmup=warmup,
-        objective=objective,
-        reward_mode=reward_mode,
-        dynamics=dynamics,
-    )
+    sc, spec = episode_spec(scenario, **episode)
     attack = SparseAttack(
         scenario_default(sc, "budget", budget), action=action, illegal_action=illegal_action
     )
@@ -179,7 +172,7 @@ def parallel_env(
         spec,
         render_mode=render_mode,
         name=NAME,
-        max_cycles=max_cycles,
+        max_cycles=episode["max_cycles"],
     )
 
 

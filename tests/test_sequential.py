@@ -474,13 +474,18 @@ def test_sensor_game_sequential_illegal_actions():
         sensor_game_v0.parallel_env(illegal_action="error")
     with pytest.raises(ValueError, match="illegal_action must be one of"):
         sensor_game_v0.parallel_env(action="sequential", illegal_action="x")
-    with pytest.raises(ValueError, match="not available in the native vector env"):
-        gym.make_vec(
-            "fdia_env/SensorGameAttacker-v0",
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            action="sequential",
-        )
+    # the native vector env of the format (tests/test_sequential_game_vector.py) applies the
+    # same rule
+    native = gym.make_vec(
+        "fdia_env/SensorGameAttacker-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        action="sequential",
+        illegal_action="error",
+    )
+    native.reset(seed=0)
+    with pytest.raises(ValueError, match="the attacker's set is empty"):
+        native.step(np.array([1, 0]))
 
 
 def test_sensor_game_sequential_pettingzoo_api_and_aec_mask():

@@ -29,7 +29,7 @@ from gymnasium.vector import AutoresetMode
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
-from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
+from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
 MAX_NUM_ENVS = 1 << 16
 
@@ -149,19 +149,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
             "threshold": xp.astype(threshold, np.float64),
             "kl": xp.astype(kl, np.float64),
         }
-        mask = xp.ones(self.num_envs, dtype=np.bool_)
-        info.update({f"_{k}": mask for k in list(info)})
-        return info
+        return self._all_members(info)
 
 
-def make_vector(num_envs: int, **kwargs: Any) -> StealthDynamicVectorEnv:
-    """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthDynamic-v0"``.
-
-    Raises:
-        ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
-            bad option.
-    """
-    backend, device, autoreset = vector_options(kwargs, "dynamic stealth env")
-    return StealthDynamicVectorEnv(
-        num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs
-    )
+make_vector = entry_point(StealthDynamicVectorEnv, "dynamic stealth env")

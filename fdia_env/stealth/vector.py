@@ -26,7 +26,7 @@ from gymnasium.vector import AutoresetMode
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
-from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
+from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
 MAX_NUM_ENVS = 1 << 20
 
@@ -228,19 +228,7 @@ class StealthVectorEnv(StealthVectorBase):
             "statistic": xp.astype(statistic, np.float64),
             "meters_used": xp.astype(used, np.int64),
         }
-        mask = xp.ones(self.num_envs, dtype=np.bool_)
-        info.update({f"_{k}": mask for k in list(info)})
-        return info
+        return self._all_members(info)
 
 
-def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
-    """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthAttack-v0"``.
-
-    Raises:
-        ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
-            bad option.
-    """
-    backend, device, autoreset = vector_options(kwargs, "stealth env")
-    return StealthVectorEnv(
-        num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs
-    )
+make_vector = entry_point(StealthVectorEnv, "stealth env")

@@ -15,6 +15,7 @@ on torch it is a (B, d) tensor, zeros where a member did not end.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -77,6 +78,12 @@ class StealthVectorBase(VectorEnv):
                 f"generator), got {seed!r}"
             )
         self._rng = self._generator(int(seed))
+
+    def _all_members(self, info: dict[str, Any]) -> dict[str, Any]:
+        """``info`` with Gymnasium's all-true mask ``_key`` for each of its keys."""
+        mask = self.xp.ones(self.num_envs, dtype=np.bool_)
+        info.update({f"_{k}": mask for k in list(info)})
+        return info
 
     @property
     def autoreset_mode(self) -> AutoresetMode:
@@ -141,6 +148,31 @@ def check_autoreset_mode(autoreset_mode: Any) -> AutoresetMode:
             f"'NextStep' / 'SameStep'), got {autoreset_mode!r}"
         )
     return mode
+
+
+def entry_point(env_cls: type[StealthVectorBase], label: str) -> Callable[..., Any]:
+    """Gymnasium's ``vector_entry_point`` for ``env_cls``: ``make_vector(num_envs, **kwargs)``.
+
+    Args:
+        env_cls: The native vector env class (its constructor takes ``num_envs``, ``backend``,
+            ``device``, ``autoreset_mode`` and the single env's keyword arguments).
+        label: The env as error messages name it (e.g. ``"stealth env"``).
+
+    Returns:
+        The entry point; it raises ``ValueError`` for an unknown backend, a device it cannot
+        use, the defender's view, or a bad option.
+    """
+
+    def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorBase:
+        backend, device, autoreset = vector_options(kwargs, label)
+        return env_cls(num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs)
+
+    make_vector.__doc__ = (
+        f"Gymnasium ``vector_entry_point`` of the {label}: ``{env_cls.__name__}`` × num_envs.\n\n"
+        "Raises:\n    ValueError: For an unknown backend, a device it cannot use, the "
+        "defender's view, or a bad option.\n"
+    )
+    return make_vector
 
 
 def vector_options(kwargs: dict, label: str) -> tuple[str, Any, AutoresetMode]:

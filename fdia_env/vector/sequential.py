@@ -56,7 +56,56 @@ default ``"auto"``, which is the sequential format above 16 sensors)."""
 _SIM_STATE = ("_comp", "_P", "_M", "consistent", "k", "nis", "phi", "x", "x_hat")
 
 
-class SequentialVectorEnv(gym.vector.VectorEnv):
+class PartialStep:
+    """Hold some members of a batch through an engine step: save their state, put it back.
+
+    For a native vector env whose members take their window steps at different decisions (the
+    engine and the models step the whole batch); the class needs ``xp``, ``num_envs``,
+    ``attack`` and ``defense``.
+    """
+
+    xp: Any
+    num_envs: int
+    attack: Any
+    defense: Any
+
+    def _save(self, sim: Any) -> dict[str, Any]:
+        """Copies of the engine's and the models' per-member state (before a partial step)."""
+        xp = self.xp
+        if getattr(sim, "_lr_on", False):  # the low-rank form is shared by the batch: off
+            sim._lr_on = False
+        state = {name: getattr(sim, name, None) for name in _SIM_STATE}
+        if state["_M"] is None:  # M is P while no bias leaked
+            state["_M"] = sim.P
+        saved = {name: None if v is None else xp.copy(v) for name, v in state.items()}
+        saved["_clean"] = sim._clean
+        for who, model in (("attack", self.attack), ("defense", self.defense)):
+            for name, value in vars(model).items():
+                if name.startswith("b_") and _batched(value, self.num_envs):
+                    saved[f"{who}.{name}"] = xp.copy(value)
+        return saved
+
+    def _restore(self, sim: Any, saved: dict[str, Any], held: Any) -> None:
+        """Put the held members' state back (the stepping members keep the new one)."""
+        xp = self.xp
+        for name in _SIM_STATE:
+            old, new = saved[name], getattr(sim, name, None)
+            if old is None or new is None:
+                continue
+            if name == "_comp":  # (3, B) components
+                setattr(sim, name, xp.where(held[None, :], old, new))
+            else:
+                setattr(sim, name, xp.where(_expand(held, new.ndim), old, new))
+        sim._clean = bool(saved["_clean"] and sim._clean)
+        for key, old in saved.items():
+            if "." in key:
+                who, name = key.split(".", 1)
+                model = self.attack if who == "attack" else self.defense
+                new = getattr(model, name)
+                setattr(model, name, xp.where(_expand(held, new.ndim), old, new))
+
+
+class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
     """B members of the sparse attacker's sequential format, as batched numpy or torch.
 
     Args:
@@ -323,41 +372,6 @@ class SequentialVectorEnv(gym.vector.VectorEnv):
         if not self.plan_first:  # "time": the next step's set starts empty
             self._chosen = self._chosen & held[:, None]
         return reward, done, truncated
-
-    def _save(self, sim: Any) -> dict[str, Any]:
-        """Copies of the engine's and the models' per-member state (before a partial step)."""
-        xp = self.xp
-        if getattr(sim, "_lr_on", False):  # the low-rank form is shared by the batch: off
-            sim._lr_on = False
-        state = {name: getattr(sim, name, None) for name in _SIM_STATE}
-        if state["_M"] is None:  # M is P while no bias leaked
-            state["_M"] = sim.P
-        saved = {name: None if v is None else xp.copy(v) for name, v in state.items()}
-        saved["_clean"] = sim._clean
-        for who, model in (("attack", self.attack), ("defense", self.defense)):
-            for name, value in vars(model).items():
-                if name.startswith("b_") and _batched(value, self.num_envs):
-                    saved[f"{who}.{name}"] = xp.copy(value)
-        return saved
-
-    def _restore(self, sim: Any, saved: dict[str, Any], held: Any) -> None:
-        """Put the held members' state back (the stepping members keep the new one)."""
-        xp = self.xp
-        for name in _SIM_STATE:
-            old, new = saved[name], getattr(sim, name, None)
-            if old is None or new is None:
-                continue
-            if name == "_comp":  # (3, B) components
-                setattr(sim, name, xp.where(held[None, :], old, new))
-            else:
-                setattr(sim, name, xp.where(_expand(held, new.ndim), old, new))
-        sim._clean = bool(saved["_clean"] and sim._clean)
-        for key, old in saved.items():
-            if "." in key:
-                who, name = key.split(".", 1)
-                model = self.attack if who == "attack" else self.defense
-                new = getattr(model, name)
-                setattr(model, name, xp.where(_expand(held, new.ndim), old, new))
 
     # --- observations --------------------------------------------------------------------------
     def _observe(self) -> Any:

@@ -2,20 +2,20 @@
 
 Random configurations of every Kalman-filter env (every scenario family incl. a grid preset, both
 dynamics, every action format incl. the sparse attacker's sequential, masked format of
-``sparse_attack_v1``/``v2`` in both orders, the typed (incomplete-information) sensor game, every
-attack × defense pair of ``fdia_v0``, random (masked) actions, batch sizes and seeds): the single
-env (through Gymnasium's ``SyncVectorEnv``), the native vector env on numpy and on torch (CPU)
-give the same observations, rewards, terminations, truncations and infos. numpy equals the
-single env bit for bit while its members share the history table (2-state models in expected
-dynamics until a bias reaches a filter), to round-off otherwise;
-torch equals numpy to 1e-10 in expected dynamics and in distribution in sampled dynamics (its
-own device generator; the typed sensor game's types too, so member by member only under a
-degenerate prior).
+``sparse_attack_v1``/``v2`` in both orders, the typed (incomplete-information) sensor game, the
+sensor game's sequential, masked format (both players, ``max_subset_size``, a subset-format
+opponent asked once per round), every attack × defense pair of ``fdia_v0``, random (masked)
+actions, batch sizes and seeds): the single env (through Gymnasium's ``SyncVectorEnv``), the
+native vector env on numpy and on torch (CPU) give the same observations, rewards, terminations,
+truncations and infos. numpy equals the single env bit for bit while its members share the
+history table (2-state models in expected dynamics until a bias reaches a filter), to round-off
+otherwise; torch equals numpy to 1e-10 in expected dynamics and in distribution in sampled
+dynamics (its own device generator; the typed sensor game's types too, so member by member only
+under a degenerate prior).
 
 Without a native vector env (checked against ``SyncVectorEnv`` only, whose members equal single
-envs seeded ``seed + i``): the sensor game's sequential format (``make_vector`` refuses it, naming
-SyncVectorEnv) and the system-family env. The stealth envs' defender views have none either (see
-tests/test_stealth*.py).
+envs seeded ``seed + i``): the system-family env. The stealth envs' defender views have none
+either (see tests/test_stealth*.py).
 """
 
 from __future__ import annotations
@@ -103,6 +103,15 @@ def _sensor_game(draw, window):
     return "fdia_env.sensor_game_v0", draw(st.sampled_from(["attacker", "defender"])), kwargs
 
 
+def _sensor_game_sequential(draw, window):
+    # the sensor game's sequential, masked format: one sensor per decision, both players
+    module, agent, kwargs = _sensor_game(draw, window)
+    kwargs["action"] = "sequential"
+    kwargs["max_subset_size"] = draw(st.sampled_from([None, 1, 2]))
+    kwargs["illegal_action"] = draw(st.sampled_from(["trim", "noop"]))
+    return module, agent, kwargs
+
+
 def _detection_game(draw, window):
     scenario = draw(st.sampled_from(["ch3-tracking", "ch3-static", "ch2-pv-2"]))
     return (
@@ -149,6 +158,7 @@ FAMILIES = {
     "sparse": _sparse,
     "covariance": _covariance,
     "sensor_game": _sensor_game,
+    "sensor_game_sequential": _sensor_game_sequential,
     "sequential": _sequential,
     "detection_game": _detection_game,
     "fdia": _composed,
@@ -164,7 +174,7 @@ def configs(draw, family: str):
     if kwargs["dynamics"] == "sampled" and "objective" in kwargs:
         kwargs["objective"] = "trace"  # a sampled error has no log-determinant
     kwargs["reward_mode"] = draw(st.sampled_from(["terminal", "shaped", "per_step"]))
-    if family != "sensor_game" and kwargs["scenario"] != GRID:
+    if not family.startswith("sensor_game") and kwargs["scenario"] != GRID:
         static = kwargs["scenario"] == "ch3-static"  # no steady state: F = I, Q = 0
         kwargs["warmup"] = draw(st.sampled_from([None, 0, 2] + ([] if static else ["steady"])))
     if family == "detection_game" and kwargs["dynamics"] == "expected":
@@ -192,6 +202,8 @@ def _opponent(module, agent, kwargs, pure):
     if not others or not isinstance(parallel.action_space(others[0]), gym.spaces.Discrete):
         return None  # none, or the module's default (a fixed action)
     n = int(parallel.action_space(others[0]).n)
+    if hasattr(parallel, "models"):  # the sequential sensor game: a policy over the subsets
+        n = len(parallel.models[others[0]].subsets)
     if not pure:
         return FixedMix.uniform(n)
     probs = np.zeros(n)
@@ -263,7 +275,7 @@ def _check_native_equals_single(module, agent, kwargs, B, seed, pure):
     rng = np.random.default_rng(seed)
     window = kwargs.get("horizon", kwargs.get("rounds", 1))
     if kwargs.get("action") == "sequential":  # up to budget + 1 decisions per time step
-        window *= kwargs["budget"] + 2
+        window *= kwargs["budget"] + 2 if "budget" in kwargs else native.M + 2
     trace = []
     for t in range(2 * window + 1):  # through an autoreset
         actions = _actions(sync.single_action_space, rng, B, info_s.get("action_mask"))
@@ -404,27 +416,17 @@ def _family_env():
     return SystemFamilyEnv(family=family, system_seeds=range(5), objective="trace")
 
 
-GAME = "fdia_env.sensor_game_v0"
-GAME_SEQUENTIAL = {"scenario": "ch4-position", "power": 25.0, "rounds": 2, "action": "sequential"}
 NO_NATIVE = {
-    # the sensor game's sequential, masked format (one sensor per decision)
-    "sensor_game_sequential": (
-        lambda: make_single_agent(GAME, "attacker", **GAME_SEQUENTIAL),
-        (GAME, GAME_SEQUENTIAL),
-    ),
     # the system-family env (a random tracking system at every reset): no native vector env
-    "system_family": (_family_env, None),
+    "system_family": _family_env,
 }
 
 
 @pytest.mark.parametrize("case", sorted(NO_NATIVE))
 def test_formats_without_a_native_vector_env_run_in_sync_vector_env(case):
-    # the native vector env refuses them (naming the way out); SyncVectorEnv's members equal
-    # single envs seeded seed + i, stepped with the same (masked) random actions
-    make, native = NO_NATIVE[case]
-    if native is not None:
-        with pytest.raises(ValueError, match="not available in the native vector env"):
-            make_vector(native[0], 2, **native[1])
+    # SyncVectorEnv's members equal single envs seeded seed + i, stepped with the same (masked)
+    # random actions
+    make = NO_NATIVE[case]
     B, seed = 3, 11
     sync = SyncVectorEnv([make] * B, autoreset_mode=AutoresetMode.NEXT_STEP)
     singles = [make() for _ in range(B)]
