@@ -535,7 +535,7 @@ def test_resume_without_a_saved_state_names_what_is_missing(tmp_path, capsys):
                       "--runs-root", str(tmp_path)]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert "nothing to resume" in err and "rllib_state.json" in err
-    assert "sparse_attack_v0-rllib-PPO-s0" in err
+    assert "sparse_attack_v2-rllib-PPO-s0" in err
 
 
 def test_sigint_stops_after_the_iteration_and_leaves_a_resumable_state(local_ray, tmp_path, capsys):
