@@ -37,26 +37,14 @@ MAX_NUM_ENVS = 1 << 16
 class StealthDynamicVectorEnv(StealthVectorBase):
     """B copies of the attacker's view, stepped as one batch (see the module docstring).
 
-    Args:
-        num_envs: B, 1..2**16.
-        backend: ``"numpy"`` (default) or ``"torch"``.
-        device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
-        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP`` (see
-            :mod:`fdia_env.stealth.vector_base`).
-        **kwargs: Options of ``stealth_dynamic_v0.parallel_env`` (no ``render_mode``).
+    Args: as :class:`~fdia_env.stealth.vector_base.StealthVectorBase`, B up to 2**16 and
+    ``**kwargs`` the options of ``stealth_dynamic_v0.parallel_env``.
     """
 
-    def __init__(
-        self,
-        num_envs: int,
-        backend: str = "numpy",
-        device: Any = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        self._init_batch(
-            num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs, backend, device, autoreset_mode
-        )
+    env_cls = StealthDynamicEnv
+    max_num_envs = MAX_NUM_ENVS
+
+    def _init_state(self) -> None:
         xp = self.xp
         self.model = self.env.model
         self._alpha = xp.full(self.num_envs, float(self.env.alpha), dtype=np.float64)
