@@ -9,11 +9,10 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_step_actions
-from fdia_env.envs.parallel import RENDER_MODES
 from fdia_env.scenarios import resolve
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.dynamic_model import ACTIONS, DynamicModel
-from fdia_env.stealth.env import DEFAULT_ALPHAS, DYNAMICS, ON_DETECT, _check_alphas
+from fdia_env.stealth.env import DYNAMICS, ON_DETECT
 from fdia_env.stealth.static import check_alpha
 
 MAX_RATIO = 10.0
@@ -78,14 +77,7 @@ class StealthDynamicEnv(StealthParallelEnv):
         self.alpha = check_alpha(alpha)
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
         self.penalty = check_cost("penalty", penalty)
-        if render_mode is not None:
-            check_choice("render_mode", render_mode, RENDER_MODES)
-        self.render_mode = render_mode
-        if defender not in DEFENDERS:
-            raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
-        self.defender = defender
-        self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
-        self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
+        self._init_players(render_mode, defender, DEFENDERS, alphas, false_alarm_cost)
         self.protect_budget = check_int(
             "protect_budget", protect_budget, minimum=1, maximum=system.M
         )
