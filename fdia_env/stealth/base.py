@@ -10,7 +10,7 @@ implements:
 - ``_restart()``: draws at the start of an episode (default: none);
 - ``_observe()`` and ``_info()``: one agent's observation and info;
 - ``step(actions)``: the model's step, then :meth:`_finish_step` for the PettingZoo tail;
-- ``_render_line()`` and ``_render_rgb()``: the ``"ansi"`` line and the ``"rgb_array"`` frame.
+- ``_render_line()`` and ``_draw(fig)``: the ``"ansi"`` line and the ``"rgb_array"`` frame's plot.
 """
 
 from __future__ import annotations
@@ -207,7 +207,19 @@ class StealthParallelEnv(ParallelEnv):
     def _render_line(self) -> str:  # pragma: no cover - every subclass defines it
         raise NotImplementedError
 
-    def _render_rgb(self) -> np.ndarray:  # pragma: no cover - every subclass defines it
+    def _render_rgb(self) -> np.ndarray:
+        """The ``"rgb_array"`` frame: :meth:`_draw`'s plot as (256, 640, 3) uint8 pixels."""
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(8, 3.2), dpi=80)
+        canvas = FigureCanvasAgg(fig)
+        self._draw(fig)
+        fig.tight_layout()
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def _draw(self, fig: Any) -> None:  # pragma: no cover - every subclass defines it
         raise NotImplementedError
 
     def close(self) -> None:

@@ -223,13 +223,8 @@ class StealthDynamicEnv(StealthParallelEnv):
             f"g/τ = {last['statistic'] / last['threshold']:.3f}  detected: {last['detected']}\n"
         )
 
-    def _render_rgb(self) -> np.ndarray:
-        """The ``"rgb_array"`` frame: the error trace and the statistic over the steps."""
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(8, 3.2), dpi=80)
-        canvas = FigureCanvasAgg(fig)
+    def _draw(self, fig: Any) -> None:
+        """The ``"rgb_array"`` frame's plot: the error trace and the statistic over the steps."""
         left, right = fig.subplots(1, 2)
         steps = np.arange(1, len(self._history) + 1)
         hist = np.array(self._history).reshape(-1, 2)
@@ -244,9 +239,6 @@ class StealthDynamicEnv(StealthParallelEnv):
         right.set_ylabel("g / τ")
         right.legend(loc="upper left")
         fig.suptitle(f"step {self._k}/{self.horizon}, detected: {self._last['detected']}")
-        fig.tight_layout()
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
 def _sensor_positions(system: Any, sensors: Any, param: str, *, default_all: bool) -> np.ndarray:

@@ -214,21 +214,13 @@ class StealthAttackEnv(StealthParallelEnv):
             f"shift = {self._last['phi']:.6g}  detected: {self._last['detected']}\n"
         )
 
-    def _render_rgb(self) -> np.ndarray:
-        """The ``"rgb_array"`` frame: the injection per meter."""
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(8, 3.2), dpi=80)
-        canvas = FigureCanvasAgg(fig)
+    def _draw(self, fig: Any) -> None:
+        """The ``"rgb_array"`` frame's plot: the injection per meter."""
         ax = fig.subplots()
         ax.bar(np.arange(self.estimation.m), self._last_a)
         ax.set_xlabel("meter")
         ax.set_ylabel("injection (pu)")
         ax.set_title(f"step {self._k}/{self.horizon}, detected: {self._last['detected']}")
-        fig.tight_layout()
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
 def box_scale(a: np.ndarray, a_max: float) -> np.ndarray:
