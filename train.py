@@ -31,7 +31,8 @@ DESCRIPTION = "\n\n".join(
         "evaluations.jsonl, scores.json, learning_curve.png) and prints the learned policy, the "
         "analytic answer and random play, scored by one evaluation loop (agents.evaluate).",
         "Examples: "
-        "python train.py attacker --env sparse_attack_v0 --algo MaskablePPO; "
+        "python train.py attacker --algo MaskablePPO (the sparse attack's newest version, "
+        "sparse_attack_v2; an older one by name: --env sparse_attack_v0); "
         "python train.py attacker --scenario grid-ieee14 (the sequential format, with the "
         "scenario's defaults: agents.config.SCENARIO_DEFAULTS); "
         "python train.py game --scenario grid-ieee14; "

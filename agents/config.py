@@ -364,13 +364,15 @@ _GRID_GAME = ScenarioDefaults(
     when=_SEQUENTIAL,
 )
 GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57", "grid-ieee118")
+SPARSE_ENVS = ("sparse_attack_v2", "sparse_attack_v1", "sparse_attack_v0")
+"""The sparse attack's versions train.py trains, the newest (its default env) first."""
 GAME_EXPECTED_REWARDS = ("grid-ieee14",)
 """Sensor-game presets whose SB3 best responses train on the expected reward over the other
 side's mix by default (``train.py game --expected-rewards``): there the defender's strategies
 differ by a few % of the game value, below the noise of one sampled opponent per episode."""
 
 SCENARIO_DEFAULTS: dict[tuple[str, str], ScenarioDefaults] = {
-    **{("sparse_attack_v0", name): _GRID_SPARSE for name in GRID_PRESETS},
+    **{(env, name): _GRID_SPARSE for env in SPARSE_ENVS for name in GRID_PRESETS},
     ("sensor_game_v0", "grid-ieee14"): _GRID_GAME,
 }
 """Per (env, scenario preset): ``train.py``'s defaults there (docs/guide/training.md lists them).
@@ -509,8 +511,9 @@ class TrainConfig:
     In a two-player env the other player is fixed (``--opponent``).
     """
 
-    env: str = "sparse_attack_v0"
-    """Registered env (a bad name lists the valid ones)."""
+    env: str = SPARSE_ENVS[0]
+    """Registered env (a bad name lists the valid ones); the sparse attacker's default is its
+    newest version, the older ones by name (sparse_attack_v0, sparse_attack_v1)."""
     scenario: str | None = None
     """Scenario preset (default: the env's first: ch4-position, ch2-position, ch5-game)."""
     env_kwargs: dict[str, str] = field(default_factory=dict)
@@ -628,7 +631,7 @@ class SweepConfig:
     (results.csv, results.json) in its run folder.
     """
 
-    env: str = "sparse_attack_v0"
+    env: str = SPARSE_ENVS[0]
     """Registered env (a bad name lists the valid ones)."""
     agent: Literal["attacker", "defender", "both"] = "attacker"
     """The learning player(s); both: self-play of a two-player game."""

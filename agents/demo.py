@@ -32,6 +32,7 @@ import fdia_env  # noqa: F401 - registers the Gymnasium ids
 from baselines.sparse import exhaustive, make_problem, sfs
 from fdia_env import scenarios
 from fdia_env.scenarios import Scenario
+from fdia_env.tasks.task import make_pinned
 
 ENV_ID = "fdia_env/SparseAttack-v0"
 PRESET = "ch4-random"
@@ -116,13 +117,10 @@ class Instance:
 
     def make_env(self) -> _ScaledReward:
         """The training env: sequential format, rewards in units of ``unattacked``."""
-        env = gym.make(
-            ENV_ID,
-            scenario=self.scenario,
-            budget=self.budget,
-            horizon=self.horizon,
-            action="sequential",
-        )
+        # pinned to v0 (the README's figures were made there; its sequential format's order
+        # is the time-major one), built like a benchmark task's pinned env: no out-of-date notice
+        kwargs = {"budget": self.budget, "horizon": self.horizon, "action": "sequential"}
+        env = make_pinned(ENV_ID, None, {"scenario": self.scenario, **kwargs})
         return _ScaledReward(env, self.unattacked)
 
 

@@ -30,7 +30,7 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -49,11 +49,37 @@ from agents.runs import (
 )
 from agents.seeding import derived_seed
 
+if TYPE_CHECKING:
+    from agents.evaluate import Evaluation
+
 SCORES = "scores.json"
 
 
 def _silent(line: str) -> None:
     return None
+
+
+@dataclass
+class RunResult:
+    """What a training driver (torch PPO, RLlib) returns; each adds its policy, keyword-only.
+
+    Attributes:
+        run_dir: The run folder.
+        evaluations: Final evaluations by row name, as printed and in scores.json.
+        history: Records during training (evaluations, or one per iteration).
+        timesteps: Env steps trained.
+        train_seconds: Wall time of training (across resumes).
+        resumed: Whether the run continued a saved state.
+        interrupted: The signal that stopped training early, or None.
+    """
+
+    run_dir: Path
+    evaluations: dict[str, Evaluation]
+    history: list[dict[str, Any]] = field(default_factory=list)
+    timesteps: int = 0
+    train_seconds: float = 0.0
+    resumed: bool = False
+    interrupted: int | None = None
 
 
 @dataclass

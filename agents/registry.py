@@ -7,9 +7,9 @@ analytic optimum of a built env, against which :func:`agents.evaluate.evaluate` 
 Adding an env is one :func:`register` call (e.g. ``detection_game_v0`` with the OBDD threshold
 as its reference).
 
->>> entry = get("sparse_attack_v0")
+>>> entry = get("sparse_attack_v2")
 >>> entry.gym_id, entry.algorithms
-('fdia_env/SparseAttack-v0', ('MaskablePPO', 'PPO', 'A2C', 'DQN'))
+('fdia_env/SparseAttack-v2', ('MaskablePPO', 'PPO', 'A2C', 'DQN'))
 >>> round(entry.reference_of(entry.make()).value, 4)
 0.0328
 """
@@ -25,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 
 import fdia_env  # noqa: F401 - registers the Gymnasium ids
-from agents.config import GRID_PRESETS, SCENARIO_DEFAULTS
+from agents.config import GRID_PRESETS, SCENARIO_DEFAULTS, SPARSE_ENVS
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.sequential import SequentialSetEnv
 from fdia_env.registration import get_env
@@ -329,7 +329,7 @@ class Trainable:
     the table of environments (:data:`fdia_env.registration.ENVS`).
 
     Attributes:
-        env: Registry name (the PettingZoo module name, e.g. ``"sparse_attack_v0"``).
+        env: Registry name (the PettingZoo module name, e.g. ``"sparse_attack_v2"``).
         agent: ``"attacker"`` or ``"defender"``.
         scenarios: Scenario preset → its default env kwargs (the first preset is the default).
         algorithms: stable-baselines3 algorithms that fit the action space (first = default).
@@ -504,16 +504,20 @@ _COVARIANCE_SCENARIOS = {
 # allocation is left to the env's default ("independent"): a typed game (types=...) takes none
 _GAME_SCENARIOS = {"ch5-game": {"power": 100.0}, "game-m10": {"power": 100.0}, "grid-ieee14": {}}
 
-register(
-    Trainable(
-        "sparse_attack_v0",
-        "attacker",
-        _SPARSE_SCENARIOS,
-        MASKED_ALGORITHMS,
-        sparse_reference,
-        masked=True,
+# the newest version first (train.py's default env); the older ones stay by name, so their
+# run folders resume and their results can be retrained (each version's Version History says
+# what changed: the defaults of the action format and the decision order, nothing else)
+for _sparse in SPARSE_ENVS:
+    register(
+        Trainable(
+            _sparse,
+            "attacker",
+            _SPARSE_SCENARIOS,
+            MASKED_ALGORITHMS,
+            sparse_reference,
+            masked=True,
+        )
     )
-)
 register(
     Trainable(
         "covariance_attack_v0",

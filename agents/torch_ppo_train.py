@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -34,8 +33,8 @@ from agents.config import (
     resolve_device,
     resolved_hyperparameters,
 )
-from agents.evaluate import Evaluation, evaluate
-from agents.lifecycle import open_run
+from agents.evaluate import evaluate
+from agents.lifecycle import RunResult, open_run
 from agents.registry import get
 from agents.runs import read_jsonl, write_jsonl
 from agents.seeding import derived_seed, seed_everything
@@ -56,31 +55,20 @@ CHECKPOINT = "checkpoints/state.json"
 
 
 @dataclass
-class TorchPPORun:
-    """What :func:`train_torch_ppo_run` returns.
+class TorchPPORun(RunResult):
+    """What :func:`train_torch_ppo_run` returns, with :class:`~agents.lifecycle.RunResult`'s fields.
+
+    ``history`` holds the evaluations during training (evaluations.jsonl).
 
     Attributes:
-        run_dir: The run folder.
         policy: The trained policy (SB3-style ``predict``).
-        evaluations: Final evaluations by row name, as printed and in scores.json.
-        history: Evaluations during training (evaluations.jsonl).
-        timesteps: Env steps trained.
-        train_seconds: Wall time of the training loop.
         device: The torch device it ran on.
         num_envs: Members of the vector env.
-        interrupted: The signal that stopped training early, or None.
     """
 
-    run_dir: Path
-    policy: TorchPolicy
-    evaluations: dict[str, Evaluation]
-    history: list[dict[str, Any]] = field(default_factory=list)
-    timesteps: int = 0
-    train_seconds: float = 0.0
-    device: str = "cpu"
-    num_envs: int = TORCH_PPO_NUM_ENVS
-    resumed: bool = False
-    interrupted: int | None = None
+    policy: TorchPolicy = field(kw_only=True)
+    device: str = field(default="cpu", kw_only=True)
+    num_envs: int = field(default=TORCH_PPO_NUM_ENVS, kw_only=True)
 
 
 def torch_ppo_config(cfg: TrainConfig) -> tuple[TorchPPOConfig, dict[str, Any]]:
@@ -222,13 +210,13 @@ def train_torch_ppo_run(
         )
         return TorchPPORun(
             run_dir,
-            result.policy,
             rows,
             history,
             result.timesteps,
             result.train_seconds,
-            device,
-            config.num_envs,
-            resumed=resume is not None,
-            interrupted=stop.signum,
+            resume is not None,
+            stop.signum,
+            policy=result.policy,
+            device=device,
+            num_envs=config.num_envs,
         )

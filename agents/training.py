@@ -56,6 +56,7 @@ from agents.checkpoint import (
     save_replay_buffer,
 )
 from agents.config import (
+    SPARSE_ENVS,
     TORCH_PPO,
     Hyperparameters,
     TrainConfig,
@@ -528,11 +529,11 @@ class NormalizedReward(gym.Wrapper):
 
 
 def null_return(entry: Trainable, env: gym.Env) -> float:
-    """The return of doing nothing: the sparse attacker attacking no sensor (else 0).
+    """The return of doing nothing: the sparse attacker (any version) attacking no sensor (else 0).
 
     Played in ``env`` (its own format: the stop action, the empty bitmask or zeros).
     """
-    if entry.env != "sparse_attack_v0":
+    if entry.env not in SPARSE_ENVS:
         return 0.0
     space = env.action_space
     nothing = np.zeros(space.shape, space.dtype) if space.shape else 0

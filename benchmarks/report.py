@@ -44,14 +44,28 @@ def _find(pattern: str, text: str) -> re.Match | None:
     return re.search(pattern, text, re.MULTILINE)
 
 
+def _row(
+    out: str, what: str, pattern: str, figure: str, ref_pattern: str = "", reference: str = ""
+) -> Row:
+    """A README row read from a script's output (a pattern that does not match: empty cell).
+
+    ``figure`` and ``reference`` are formats of the match ``m`` of ``pattern`` and
+    ``ref_pattern`` (none: the same match), e.g. ``"{m[1]}×"``.
+    """
+    m = _find(pattern, out)
+    r = _find(ref_pattern, out) if ref_pattern else m
+    return (what, figure.format(m=m) if m else "", reference.format(m=r) if r else "")
+
+
 def _single_view(out: str) -> list[Row]:
-    r = _find(r"view / CartPole-v1: ([\d.]+)x", out)
-    ref = _find(r"gymnasium\.make CartPole-v1\s+([\d,]+) steps/s", out)
     return [
-        (
+        _row(
+            out,
             "Gymnasium single view vs `CartPole-v1` (`single_view.py --clock cpu`; target ≥ 0.3×)",
-            f"{r[1]}×" if r else "",
-            f"`CartPole-v1` {ref[1]} steps/s" if ref else "",
+            r"view / CartPole-v1: ([\d.]+)x",
+            "{m[1]}×",
+            r"gymnasium\.make CartPole-v1\s+([\d,]+) steps/s",
+            "`CartPole-v1` {m[1]} steps/s",
         )
     ]
 
@@ -88,87 +102,87 @@ def _vector(out: str) -> list[Row]:
 
 
 def _train_fps(out: str) -> list[Row]:
-    r = _find(r"SparseAttack-v0 / CartPole-v1: ([\d.]+%) of CPU-time rate", out)
-    ref = _find(r"^PPO on CartPole-v1\s+([\d,]+)\s+([\d,]+)", out)
     return [
-        (
+        _row(
+            out,
             "SB3 PPO's steps/s on the single view vs on `CartPole-v1` (`train_fps.py`, CPU time; "
             "target ≥ 90 %)",
-            r[1].replace("%", " %") if r else "",
-            f"PPO on `CartPole-v1` {ref[2]} steps/s (CPU)" if ref else "",
+            r"SparseAttack-v0 / CartPole-v1: ([\d.]+)% of CPU-time rate",
+            "{m[1]} %",
+            r"^PPO on CartPole-v1\s+([\d,]+)\s+([\d,]+)",
+            "PPO on `CartPole-v1` {m[2]} steps/s (CPU)",
         )
     ]
 
 
 def _env_step(out: str) -> list[Row]:
-    view = _find(r"^gymnasium\.make view \(expected\)\s+([\d,]+) steps/s", out)
-    cart = _find(r"^gymnasium\.make CartPole-v1\s+([\d,]+) steps/s", out)
-    vs_rps = _find(r"^parallel env / rps_v2:\s+([\d.]+)x", out)
-    rps = _find(r"^pettingzoo rps_v2 parallel\s+([\d,]+) steps/s", out)
     return [
-        (
+        _row(
+            out,
             "`gymnasium.make` view, expected dynamics (`env_step.py`; target 50,000 steps/s)",
-            f"{view[1]} steps/s" if view else "",
-            f"`CartPole-v1` {cart[1]} steps/s" if cart else "",
+            r"^gymnasium\.make view \(expected\)\s+([\d,]+) steps/s",
+            "{m[1]} steps/s",
+            r"^gymnasium\.make CartPole-v1\s+([\d,]+) steps/s",
+            "`CartPole-v1` {m[1]} steps/s",
         ),
-        (
+        _row(
+            out,
             "parallel env vs PettingZoo's `rps_v2` (same script; target ≥ 3×)",
-            f"{vs_rps[1]}×" if vs_rps else "",
-            f"`rps_v2` {rps[1]} steps/s" if rps else "",
+            r"^parallel env / rps_v2:\s+([\d.]+)x",
+            "{m[1]}×",
+            r"^pettingzoo rps_v2 parallel\s+([\d,]+) steps/s",
+            "`rps_v2` {m[1]} steps/s",
         ),
     ]
 
 
 def _backends(out: str) -> list[Row]:
-    rows = []
-    for case in ("ch4-position, expected", "ch4-position, sampled"):
-        m = _find(rf"^{case}\s+65536\s+([\d,]+)\s+([\d,]+)\s+([\d.]+)x", out)
-        rows.append(
-            (
-                f"native vector env, torch (CPU) vs numpy, {case}, B = 65,536 (`backends.py`)",
-                f"{m[3]}×" if m else "",
-                f"numpy {m[1]} env-steps/s" if m else "",
-            )
+    return [
+        _row(
+            out,
+            f"native vector env, torch (CPU) vs numpy, {case}, B = 65,536 (`backends.py`)",
+            rf"^{case}\s+65536\s+([\d,]+)\s+([\d,]+)\s+([\d.]+)x",
+            "{m[3]}×",
+            reference="numpy {m[1]} env-steps/s",
         )
-    return rows
+        for case in ("ch4-position, expected", "ch4-position, sampled")
+    ]
 
 
 def _grid(out: str) -> list[Row]:
-    m = _find(r"^grid-ieee118 native B=256: ([\d,]+) µs per member-step", out)
-    sync = _find(r"^grid-ieee118\s+([\d,]+)\s+([\d,]+)\s+([\d,]+)", out)
     return [
-        (
+        _row(
+            out,
             "native vector env on grid-ieee118, B = 256 (`grid.py --vector-only`)",
-            f"{m[1]} µs per member-step" if m else "",
-            f"`SyncVectorEnv` B = 64 {sync[2]} env-steps/s" if sync else "",
+            r"^grid-ieee118 native B=256: ([\d,]+) µs per member-step",
+            "{m[1]} µs per member-step",
+            r"^grid-ieee118\s+([\d,]+)\s+([\d,]+)\s+([\d,]+)",
+            "`SyncVectorEnv` B = 64 {m[2]} env-steps/s",
         )
     ]
 
 
 def _sparse(out: str) -> list[Row]:
-    m = _find(r"^EXS\s+18\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)×", out)
     return [
-        (
+        _row(
+            out,
             "EXS, ch4-position at size 18 (`sparse.py`)",
-            f"{m[1]} s, {m[3]}× faster than the literature" if m else "",
-            f"the literature's Matlab: {m[2]} s" if m else "",
+            r"^EXS\s+18\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)×",
+            "{m[1]} s, {m[3]}× faster than the literature",
+            reference="the literature's Matlab: {m[2]} s",
         )
     ]
 
 
 def _bnb(out: str) -> list[Row]:
-    m = _find(
+    what, figure, _ = _row(
+        out,
+        "branch and bound, 300-pair meter-level DC IEEE 14, c = 5 (`bnb.py`)",
         r"dc-ieee14-50 \(50 meters, N = 6\) (\w+): .*?(proved optimal|gap [\d.]+ %), "
         r"(\d+) nodes, ([\d.]+) s",
-        out,
+        "{m[2]} in {m[4]} s ({m[1]})",
     )
-    return [
-        (
-            "branch and bound, 300-pair meter-level DC IEEE 14, c = 5 (`bnb.py`)",
-            f"{m[2]} in {m[4]} s ({m[1]})" if m else "",
-            "C(300, 5) ≈ 2·10¹⁰ sets",
-        )
-    ]
+    return [(what, figure, "C(300, 5) ≈ 2·10¹⁰ sets")]
 
 
 def _seq(out: str) -> list[Row]:
@@ -196,18 +210,20 @@ def _game(out: str) -> list[Row]:
 
 
 def _stealth(out: str) -> list[Row]:
-    m = _find(r"min cut, all (\d+) states: ([\d.]+) s", out)
-    v = _find(r"B = 4,096, expected: ([\d,]+) env-steps/s .*?SyncVectorEnv B = 64: ([\d,]+)", out)
+    vector = r"B = 4,096, expected: ([\d,]+) env-steps/s .*?SyncVectorEnv B = 64: ([\d,]+)"
     return [
-        (
+        _row(
+            out,
             "security indices of every IEEE 118 state by minimum cut (`stealth.py`; target ≤ 60 s)",
-            f"{m[2]} s for {m[1]} states" if m else "",
-            "",
+            r"min cut, all (\d+) states: ([\d.]+) s",
+            "{m[2]} s for {m[1]} states",
         ),
-        (
+        _row(
+            out,
             "static stealth env's native vector env on grid-ieee118, B = 4,096, expected",
-            f"{v[1]} env-steps/s" if v else "",
-            f"`SyncVectorEnv` B = 64 {v[2]} env-steps/s" if v else "",
+            vector,
+            "{m[1]} env-steps/s",
+            reference="`SyncVectorEnv` B = 64 {m[2]} env-steps/s",
         ),
     ]
 

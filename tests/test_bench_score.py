@@ -454,3 +454,27 @@ def test_the_tutorial_scores_a_policy_in_under_20_lines_of_code():
             code |= set(range(token.start[0], token.end[0] + 1))
     assert 10 <= len(code - docstrings) < 20
     assert "score_policy(task, LastSteps()" in source  # the user's own policy is what it scores
+
+
+def test_a_run_of_another_sparse_version_is_accepted_only_where_the_env_is_the_same():
+    from types import SimpleNamespace
+
+    from agents.bench.agents import check_trained_on
+
+    grid = {"scenario": "grid-ieee14", "budget": 2, "horizon": 1}
+    pinned = SimpleNamespace(  # a task pinned to v0 above 16 sensors: MultiBinary(34)
+        name="sparse/grid-v0", env_id="fdia_env/SparseAttack-v0", env_kwargs=grid,
+        module="fdia_env.sparse_attack_v0",
+    )  # fmt: skip
+    # v2's default there is the sequential format's plan-first order: another env
+    with pytest.raises(ValueError, match="trained on fdia_env/SparseAttack-v2, but task"):
+        check_trained_on("run", "fdia_env/SparseAttack-v2", grid, pinned)
+    check_trained_on("run", "fdia_env/SparseAttack-v2", {**grid, "action": "multibinary"}, pinned)
+    plan = SimpleNamespace(**{**vars(pinned), "env_kwargs": {**grid, "action": "sequential"}})
+    with pytest.raises(ValueError, match="trained on fdia_env/SparseAttack-v2"):  # v0: "time"
+        check_trained_on("run", "fdia_env/SparseAttack-v2", grid, plan)
+    plan.env_kwargs["order"] = "plan"
+    check_trained_on("run", "fdia_env/SparseAttack-v2", grid, plan)
+    # another env altogether stays refused
+    with pytest.raises(ValueError, match="trained on fdia_env/CovarianceAttack-v0"):
+        check_trained_on("run", "fdia_env/CovarianceAttack-v0", {}, pinned)

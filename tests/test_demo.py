@@ -60,3 +60,15 @@ def test_bad_options_are_refused_naming_the_option(capsys):
     with pytest.raises(SystemExit):
         demo.main(["--steps", "0"])
     assert "--steps must be at least 1" in capsys.readouterr().err
+
+
+def test_the_demo_env_is_v0_time_major_without_the_out_of_date_notice(instance):
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env = instance.make_env()
+    with env:
+        assert env.spec.id == "fdia_env/SparseAttack-v0"
+        assert env.action_space.n == 11  # the time-major order: M + 1 = 10 sensors + stop
+    assert not any("is out of date" in str(w.message) for w in caught)

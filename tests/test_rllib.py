@@ -535,7 +535,7 @@ def test_resume_without_a_saved_state_names_what_is_missing(tmp_path, capsys):
                       "--runs-root", str(tmp_path)]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert "nothing to resume" in err and "rllib_state.json" in err
-    assert "sparse_attack_v0-rllib-PPO-s0" in err
+    assert "sparse_attack_v2-rllib-PPO-s0" in err
 
 
 def test_sigint_stops_after_the_iteration_and_leaves_a_resumable_state(local_ray, tmp_path, capsys):
@@ -630,16 +630,18 @@ def test_resume_with_other_options_lists_each_difference(one_iteration_run, tmp_
 
 
 # RLlib's masked PPO module on the sequential action format: one small PPO iteration of the
-# sensor game's two masked players with illegal_action="error", so a single action outside
-# either mask would stop the test
+# sensor game's two masked players, and of the sparse attacker in the plan-first order
+# (sparse_attack_v2's default: Discrete(N·M + 1) pairs, then the plan plays out), with
+# illegal_action="error", so a single action outside a mask would stop the test
 @pytest.mark.parametrize(
-    ("name", "env_config", "policies"),
+    ("name", "env_config", "policies", "mask_size"),
     [
-        ("sensor_game_v0", {"rounds": 2}, {"attacker", "defender"}),
+        ("sensor_game_v0", {"rounds": 2}, {"attacker", "defender"}, 4),  # M + 1, M = 3
+        ("sparse_attack_v2", {"budget": 2, "horizon": 2}, {"attacker"}, 7),  # N·M + 1 = 2·3 + 1
     ],
 )
 def test_plain_ppo_config_trains_on_the_sequential_format_within_the_mask(
-    local_ray, name, env_config, policies
+    local_ray, name, env_config, policies, mask_size
 ):
     from ray.rllib.algorithms.ppo import PPOConfig
 
@@ -670,6 +672,6 @@ def test_plain_ppo_config_trains_on_the_sequential_format_within_the_mask(
         for module_id in policies or ["default_policy"]:
             module = algo.get_module(module_id)
             assert isinstance(module, MaskedPPOTorchRLModule) and module._keys is not None
-            assert module.observation_space["action_mask"].shape == (4,)  # M + 1, M = 3
+            assert module.observation_space["action_mask"].shape == (mask_size,)
     finally:
         algo.stop()

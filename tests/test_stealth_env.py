@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -414,3 +416,14 @@ def test_parallel_env_takes_the_options_of_the_env_class():
     assert env.budget == 2 and env.alphas == (0.01, 0.1)
     with pytest.raises(TypeError, match="budgett"):
         stealth_attack_v0.parallel_env(budgett=2)
+
+
+@pytest.mark.parametrize("name", ["stealth_attack_v0", "stealth_dynamic_v0"])
+def test_rgb_array_frame_of_both_stealth_envs(name):
+    module = importlib.import_module(f"fdia_env.stealth.{name}")
+    env = module.parallel_env(render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step({a: env.action_space(a).sample() for a in env.agents})
+    frame = env.render()
+    assert frame.shape == (256, 640, 3) and frame.dtype == np.uint8
+    assert frame.min() < 100 < 250 <= frame.max()  # a plot: dark marks on a white page

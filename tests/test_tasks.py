@@ -349,3 +349,31 @@ def test_the_leaderboard_rows_cover_every_task_and_learner_with_three_seeds():
             assert f"| {label} |" in table, (name, label)
         for algo in {algo for task, algo in seeds if task == name}:
             assert f"| {algo} |" in table and "3 seeds, 2,048 steps" in table, (name, algo)
+
+
+def test_a_pinned_older_version_builds_without_the_out_of_date_notice(monkeypatch):
+    import warnings
+
+    import gymnasium
+
+    task = tasks.get("sparse/ch4-position-v0")
+    assert task.env_id == "fdia_env/SparseAttack-v0"  # pinned: v2 is newer
+    with warnings.catch_warnings(record=True) as direct:
+        warnings.simplefilter("always")
+        gymnasium.make(task.env_id, **task.env_kwargs).close()
+    assert any("is out of date" in str(w.message) for w in direct)
+    make = gymnasium.make
+
+    def make_and_warn(*args, **kwargs):  # another deprecation while the env is built
+        warnings.warn("some other notice", DeprecationWarning, stacklevel=2)
+        return make(*args, **kwargs)
+
+    with warnings.catch_warnings(record=True) as pinned:
+        warnings.simplefilter("always")
+        task.make_env().close()
+        monkeypatch.setattr(gymnasium, "make", make_and_warn)
+        task.make_env().close()
+    assert not any("is out of date" in str(w.message) for w in pinned)
+    assert [str(w.message) for w in pinned if w.category is DeprecationWarning] == [
+        "some other notice"
+    ]

@@ -285,7 +285,7 @@ def test_cli_trains_and_writes_scores(tmp_path, capsys):
             "--eval-freq", "30000", "--runs-root", str(tmp_path / "runs"),
         ]
     )  # fmt: skip
-    assert run.run_dir.name.startswith("sparse_attack_v0-torch-ppo-s0-")
+    assert run.run_dir.name.startswith("sparse_attack_v2-torch-ppo-s0-")
     for name in ("config.json", "scores.json", "model.json", "model.pt", "evaluations.jsonl"):
         assert (run.run_dir / name).is_file(), name
     scores = json.loads((run.run_dir / "scores.json").read_text())

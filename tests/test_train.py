@@ -20,6 +20,7 @@ def run(tmp_path, *args):
     return train.main([*args, "--runs-root", str(tmp_path / "runs")])
 
 
+@pytest.mark.filterwarnings("error")  # the default env is the newest: no out-of-date notice
 def test_attacker_command_writes_a_complete_run_folder(tmp_path, capsys):
     result = run(
         tmp_path, "attacker", "--total-timesteps", "128", "--eval-freq", "64",
@@ -27,7 +28,7 @@ def test_attacker_command_writes_a_complete_run_folder(tmp_path, capsys):
     )  # fmt: skip
     run_dir = result.run_dir
     assert run_dir.parent == tmp_path / "runs"
-    assert run_dir.name.startswith("sparse_attack_v0-MaskablePPO-s0-")
+    assert run_dir.name.startswith("sparse_attack_v2-MaskablePPO-s0-")
     for name in ("config.json", "scores.json", "learning_curve.png", "model.json", "model.pt"):
         assert (run_dir / name).is_file(), name
     assert list((run_dir / "tb").glob("events.out.tfevents.*"))
@@ -38,7 +39,9 @@ def test_attacker_command_writes_a_complete_run_folder(tmp_path, capsys):
     scores = json.loads((run_dir / "scores.json").read_text())["evaluations"]
     assert {"learned (MaskablePPO)", "EXS", "random"} <= set(scores)
     assert scores["EXS"]["score"] == pytest.approx(1.0, rel=1e-12)
-    history = [json.loads(line) for line in (run_dir / "evaluations.jsonl").open()]
+    history = [
+        json.loads(line) for line in (run_dir / "evaluations.jsonl").read_text().splitlines()
+    ]
     assert [h["timesteps"] for h in history] == [64, 128]
     out = capsys.readouterr().out
     assert "reference (EXS)" in out and "learned (MaskablePPO)" in out and "100.00%" in out
@@ -109,6 +112,25 @@ def test_resume_refuses_different_options(tmp_path):
                 *TINY_PPO)  # fmt: skip
     with pytest.raises(ValueError, match="n-steps: saved 64, given 32"):
         run(tmp_path, "attacker", "--resume", "--run-dir", str(first.run_dir), "--n-steps", "32")
+
+
+def test_a_run_of_an_older_sparse_version_still_resumes(tmp_path):
+    args = ["--algo", "PPO", "--eval-freq", "0", "--checkpoint-freq", "64", *TINY, *TINY_PPO]
+    first = run(tmp_path, "attacker", "--env", "sparse_attack_v0", *args,
+                "--total-timesteps", "64")  # fmt: skip
+    assert first.run_dir.name.startswith("sparse_attack_v0-PPO-s0-")
+    # the latest run of the default env (the newest version) is another prefix
+    with pytest.raises(ValueError, match=r"no run folder .*sparse_attack_v2-PPO-s0-\*"):
+        run(tmp_path, "attacker", "--resume", *args)
+    # by name, or by its folder (whose saved options, the env's name included, are the defaults)
+    second = run(tmp_path, "attacker", "--env", "sparse_attack_v0", "--resume", *args,
+                 "--total-timesteps", "128")  # fmt: skip
+    third = run(tmp_path, "attacker", "--resume", "--run-dir", str(first.run_dir), *args,
+                "--total-timesteps", "192")  # fmt: skip
+    assert second.run_dir == third.run_dir == first.run_dir
+    assert (second.model.num_timesteps, third.model.num_timesteps) == (128, 192)
+    config = json.loads((first.run_dir / "config.json").read_text())
+    assert config["config"]["env"] == "sparse_attack_v0"
 
 
 def test_an_existing_run_folder_is_an_error_without_resume(tmp_path):

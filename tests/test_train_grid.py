@@ -17,6 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py live
 import train
 from agents.config import (
     SCENARIO_DEFAULTS,
+    SPARSE_ENVS,
     Hyperparameters,
     resolved_hyperparameters,
     scenario_defaults,
@@ -76,6 +77,23 @@ def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
     assert plain.hp == Hyperparameters() and not plain.normalize_reward
 
 
+def test_every_sparse_version_has_the_table_and_the_same_null_return():
+    setups = [
+        run_setup(env, "attacker", "grid-ieee14", {}, None, Hyperparameters())
+        for env in SPARSE_ENVS
+    ]
+    assert SPARSE_ENVS[0] == "sparse_attack_v2"  # train.py's default env
+    assert all(s.env_kwargs == setups[-1].env_kwargs for s in setups)
+    assert all(s.algo == "MaskablePPO" and s.normalize_reward for s in setups)
+    shifts = []
+    for env in SPARSE_ENVS:
+        entry = get(env)
+        with entry.make("grid-ieee14", budget=2, horizon=1) as view:
+            shifts.append(null_return(entry, view))
+    assert shifts[0] > 0  # attacking nothing leaves the steady-state trace, in every version
+    assert shifts == [shifts[0]] * len(SPARSE_ENVS)
+
+
 def test_normalized_reward_maps_doing_nothing_to_0_and_the_optimum_to_1():
     kwargs = {"scenario": "grid-ieee14", "action": "sequential", "budget": 2, "horizon": 1}
     entry = get("sparse_attack_v0")
@@ -99,12 +117,13 @@ def test_normalized_reward_maps_doing_nothing_to_0_and_the_optimum_to_1():
         NormalizedReward(gym.make("fdia_env/SparseAttack-v0", **kwargs), 0.0, 0.0)
 
 
+@pytest.mark.filterwarnings("error::DeprecationWarning")  # the newest version: no notice
 def test_attacker_command_trains_on_grid_ieee14_with_the_table_defaults(tmp_path, capsys):
     result = run(
         tmp_path, "attacker", "--scenario", "grid-ieee14", "--env-kwargs", "budget", "2",
         "horizon", "1", "--total-timesteps", "64", *TINY, *TINY_PPO,
     )  # fmt: skip
-    assert result.run_dir.name.startswith("sparse_attack_v0-MaskablePPO-s0-")
+    assert result.run_dir.name.startswith("sparse_attack_v2-MaskablePPO-s0-")
     config = json.loads((result.run_dir / "config.json").read_text())["resolved"]
     assert config["env_kwargs"]["action"] == "sequential"
     assert config["env_kwargs"]["order"] == "plan"

@@ -386,7 +386,7 @@ def test_tensorboard_ranges_do_not_overlap_after_a_resume(tmp_path):
         (["--gamma", "5"], "gamma (--gamma) must be in (0, 1], got 5.0"),
         (["--gamma", "0"], "gamma (--gamma) must be in (0, 1], got 0.0"),
         (["--env-kwargs", "bogus", "3"], "--env-kwargs): unknown option(s) 'bogus'"),
-        (["--env-kwargs", "budget", "-3"], "--env-kwargs): fdia_env/SparseAttack-v0 rejected"),
+        (["--env-kwargs", "budget", "-3"], "--env-kwargs): fdia_env/SparseAttack-v2 rejected"),
         (["--env-kwargs", "scenario", "ch4-random"], "must not set scenario; pass it with"),
         (["--device", "gpu"], "device (--device) must be cpu, cuda, cuda:<index>, mps or auto"),
         (["--total-timesteps", "0"], "total_timesteps (--total-timesteps) must be >= 1"),
@@ -446,7 +446,7 @@ def test_the_largest_seed_trains(tmp_path):
     result = run(tmp_path, "attacker", *TINY_PPO, "--total-timesteps", "64", "--eval-freq", "32",
                  "--seed", str(2**32 - 1), *TINY)  # fmt: skip
     assert result.model.num_timesteps == 64 and result.run_dir.name.startswith(
-        "sparse_attack_v0-PPO-s4294967295-"
+        "sparse_attack_v2-PPO-s4294967295-"
     )
 
 

@@ -107,18 +107,61 @@ def _defaults(task: Any) -> dict[str, Any]:
     }
 
 
+# Versions of one env whose differences are only default options (the sparse attack's: the
+# action format and decision order, each version's Version History): a run trained on one
+# plays a task pinned to another when both build the same env.
+_DEFAULTS_ONLY_VERSIONS = re.compile(r"(fdia_env/SparseAttack|sparse_attack)[-_]v\d+")
+_VERSIONED_DEFAULTS = ("action", "order")
+
+
+def _built_as(env_id: str, env_kwargs: Any) -> Any:
+    """What defines an env's interface: its class, attack format, order and the player's spaces."""
+    from fdia_env.registration import GYM_IDS, get_env
+
+    module, agent = GYM_IDS[env_id] if env_id in GYM_IDS else (get_env(env_id).module, "attacker")
+    env = importlib.import_module(module).parallel_env(**dict(env_kwargs))
+    try:
+        inner = getattr(env, "inner", env)
+        return (
+            type(env).__name__,
+            inner.attack.format,
+            getattr(env, "order", None),
+            env.observation_space(agent),
+            env.action_space(agent),
+        )
+    finally:
+        env.close()
+
+
+def _same_env(env_id: str, env_kwargs: Any, task: Any) -> bool:
+    """Whether ``env_id`` is another version of the task's env that builds the same env."""
+    if not (
+        _DEFAULTS_ONLY_VERSIONS.fullmatch(str(env_id))
+        and _DEFAULTS_ONLY_VERSIONS.fullmatch(task.env_id)
+    ):
+        return False
+    try:
+        return _built_as(env_id, env_kwargs) == _built_as(task.env_id, task.env_kwargs)
+    except (KeyError, TypeError, ValueError):
+        return False  # options the other version does not take: not the same env
+
+
 def check_trained_on(
     source: str, env_id: str | None, env_kwargs: dict[str, Any], task: Any
 ) -> None:
     """Raise unless a checkpoint trained on ``env_id`` with ``env_kwargs`` fits ``task``.
 
     An option given on one side only is compared with the env's default; an option left at
-    None (the scenario's default) on either side is not compared.
+    None (the scenario's default) on either side is not compared. Another version of the
+    sparse attack than the task's is accepted where, with the run's and the task's options,
+    both build the same env (up to 16 sensors its versions are one env; above, their default
+    formats differ).
 
     Raises:
         ValueError: Naming ``agent``, the env id or the options that differ.
     """
-    if env_id is not None and env_id != task.env_id:
+    other_version = env_id is not None and env_id != task.env_id
+    if other_version and not _same_env(env_id, env_kwargs, task):
         raise ValueError(
             f"agent {source} was trained on {env_id}, but task {task.name} is played on "
             f"{task.env_id}: score it on a task of its env"
@@ -127,6 +170,8 @@ def check_trained_on(
     theirs, ours = _plain(dict(env_kwargs)), _plain(dict(task.env_kwargs))
     differ = []
     for key in sorted(set(theirs) | set(ours)):
+        if other_version and key in _VERSIONED_DEFAULTS:
+            continue  # compared as built: the versions' defaults differ, the envs do not
         a = theirs.get(key, _plain(defaults.get(key)))
         b = ours.get(key, _plain(defaults.get(key)))
         if a is None or b is None or a == b:

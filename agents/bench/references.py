@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from fdia_env.tasks.catalog import TaskSpec
-from fdia_env.tasks.task import GAP_HARD, Optimum, RandomReference, References
+from fdia_env.tasks.task import GAP_HARD, Optimum, RandomReference, References, make_pinned
 
 RANDOM_EPISODES = 200
 RANDOM_SEED = 0
@@ -74,13 +74,7 @@ def _play(spec: TaskSpec, policy: Any, episodes: int = 1) -> float:
 
 def make(spec: TaskSpec, **overrides: Any) -> Any:
     """The task's env (as :meth:`fdia_env.tasks.task.Task.make_env` builds it)."""
-    import gymnasium
-
-    kwargs = {**spec.env_kwargs, **overrides}
-    if spec.entry_point is None:
-        return gymnasium.make(spec.env_id, **kwargs)
-    env_spec = gymnasium.envs.registration.EnvSpec(spec.env_id, entry_point=spec.entry_point)
-    return gymnasium.make(env_spec, **kwargs)
+    return make_pinned(spec.env_id, spec.entry_point, {**spec.env_kwargs, **overrides})
 
 
 def _ratio(objective: str, value: float, to: float) -> float:

@@ -30,8 +30,7 @@ from typing import Any
 import numpy as np
 
 from agents.config import GameConfig, RunSettings, TrainConfig, parse_env_kwargs
-from agents.evaluate import Evaluation
-from agents.lifecycle import RunFolder, game_scores, run_name
+from agents.lifecycle import RunFolder, RunResult, game_scores, run_name
 from agents.lifecycle import open_run as open_folder
 from agents.population import LearnedOracle
 from agents.registry import Trainable, game_names, get
@@ -101,28 +100,16 @@ def env_config_of(
 
 
 @dataclass
-class RLlibTrainResult:
-    """What :func:`train_rllib` returns.
+class RLlibTrainResult(RunResult):
+    """What :func:`train_rllib` returns, with :class:`~agents.lifecycle.RunResult`'s fields.
+
+    ``history`` holds one record per RLlib iteration (steps, per-agent returns, seconds).
 
     Attributes:
-        run_dir: The run folder.
         policy: The learned policy (:class:`~agents.rllib.policy.RLlibPolicy`).
-        evaluations: Final evaluations by row name (learned, analytic answer, random).
-        history: One record per RLlib iteration (steps, per-agent returns, seconds).
-        timesteps: Env steps sampled.
-        train_seconds: Wall time of the iterations (across resumes).
-        resumed: Whether the run continued a saved state.
-        interrupted: The signal that stopped training early, or None.
     """
 
-    run_dir: Path
-    policy: Any
-    evaluations: dict[str, Evaluation]
-    history: list[dict[str, Any]] = field(default_factory=list)
-    timesteps: int = 0
-    train_seconds: float = 0.0
-    resumed: bool = False
-    interrupted: int | None = None
+    policy: Any = field(kw_only=True)
 
 
 def _iterate(
@@ -363,7 +350,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         algo.save_to_path(str((run_dir / "checkpoint").resolve()))
         run.folder.write_scores(_run_scores(run, history, steps, seconds), evaluations)
         return RLlibTrainResult(
-            run_dir, policy, evaluations, history, steps, seconds, run.resumed, stop.signum
+            run_dir, evaluations, history, steps, seconds, run.resumed, stop.signum, policy=policy
         )
 
 

@@ -10,7 +10,7 @@ implements:
 - ``_restart()``: draws at the start of an episode (default: none);
 - ``_observe()`` and ``_info()``: one agent's observation and info;
 - ``step(actions)``: the model's step, then :meth:`_finish_step` for the PettingZoo tail;
-- ``_render_line()`` and ``_render_rgb()``: the ``"ansi"`` line and the ``"rgb_array"`` frame.
+- ``_render_line()`` and ``_draw(fig)``: the ``"ansi"`` line and the ``"rgb_array"`` frame's plot.
 """
 
 from __future__ import annotations
@@ -42,6 +42,23 @@ def check_cost(name: str, value: Any) -> float:
     return float(value)
 
 
+DEFAULT_ALPHAS = (0.001, 0.01, 0.05, 0.1, 0.2)
+"""The defender's false-alarm rates (``defender="threshold"``)."""
+
+
+def check_alphas(alphas: Any) -> tuple[float, ...]:
+    """``alphas`` as a non-empty tuple of false-alarm rates in (0, 1) (``ValueError`` otherwise)."""
+    try:
+        values = [float(a) for a in alphas]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"alphas must be false-alarm rates in (0, 1), got {alphas!r}") from exc
+    if not values or any(
+        isinstance(a, bool) or not 0.0 < v < 1.0 for a, v in zip(alphas, values, strict=True)
+    ):
+        raise ValueError(f"alphas must be a non-empty list of rates in (0, 1), got {alphas!r}")
+    return tuple(values)
+
+
 class StealthParallelEnv(ParallelEnv):
     """The PettingZoo scaffolding of the stealth envs (see the module docstring)."""
 
@@ -57,6 +74,28 @@ class StealthParallelEnv(ParallelEnv):
     false_alarm_cost: float
     render_mode: str | None
     _k: int
+
+    def _init_players(
+        self,
+        render_mode: str | None,
+        defender: str | None,
+        defenders: tuple[str | None, ...],
+        alphas: Any,
+        false_alarm_cost: float,
+    ) -> None:
+        """Check and set the render mode and the defender's options (start of ``__init__``).
+
+        ``defender`` is one of ``defenders``; ``alphas`` its false-alarm rates (None:
+        :data:`DEFAULT_ALPHAS`).
+        """
+        if render_mode is not None:
+            check_choice("render_mode", render_mode, RENDER_MODES)
+        self.render_mode = render_mode
+        if defender not in defenders:
+            raise ValueError(f"defender must be one of {list(defenders)}, got {defender!r}")
+        self.defender = defender
+        self.alphas = check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
+        self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
 
     def _init_agents(
         self,
@@ -168,7 +207,19 @@ class StealthParallelEnv(ParallelEnv):
     def _render_line(self) -> str:  # pragma: no cover - every subclass defines it
         raise NotImplementedError
 
-    def _render_rgb(self) -> np.ndarray:  # pragma: no cover - every subclass defines it
+    def _render_rgb(self) -> np.ndarray:
+        """The ``"rgb_array"`` frame: :meth:`_draw`'s plot as (256, 640, 3) uint8 pixels."""
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(8, 3.2), dpi=80)
+        canvas = FigureCanvasAgg(fig)
+        self._draw(fig)
+        fig.tight_layout()
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def _draw(self, fig: Any) -> None:  # pragma: no cover - every subclass defines it
         raise NotImplementedError
 
     def close(self) -> None:

@@ -9,11 +9,10 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_step_actions
-from fdia_env.envs.parallel import RENDER_MODES
 from fdia_env.scenarios import resolve
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.dynamic_model import ACTIONS, DynamicModel
-from fdia_env.stealth.env import DEFAULT_ALPHAS, DYNAMICS, ON_DETECT, _check_alphas
+from fdia_env.stealth.env import DYNAMICS, ON_DETECT
 from fdia_env.stealth.static import check_alpha
 
 MAX_RATIO = 10.0
@@ -78,14 +77,7 @@ class StealthDynamicEnv(StealthParallelEnv):
         self.alpha = check_alpha(alpha)
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
         self.penalty = check_cost("penalty", penalty)
-        if render_mode is not None:
-            check_choice("render_mode", render_mode, RENDER_MODES)
-        self.render_mode = render_mode
-        if defender not in DEFENDERS:
-            raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
-        self.defender = defender
-        self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
-        self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
+        self._init_players(render_mode, defender, DEFENDERS, alphas, false_alarm_cost)
         self.protect_budget = check_int(
             "protect_budget", protect_budget, minimum=1, maximum=system.M
         )
@@ -231,13 +223,8 @@ class StealthDynamicEnv(StealthParallelEnv):
             f"g/τ = {last['statistic'] / last['threshold']:.3f}  detected: {last['detected']}\n"
         )
 
-    def _render_rgb(self) -> np.ndarray:
-        """The ``"rgb_array"`` frame: the error trace and the statistic over the steps."""
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(8, 3.2), dpi=80)
-        canvas = FigureCanvasAgg(fig)
+    def _draw(self, fig: Any) -> None:
+        """The ``"rgb_array"`` frame's plot: the error trace and the statistic over the steps."""
         left, right = fig.subplots(1, 2)
         steps = np.arange(1, len(self._history) + 1)
         hist = np.array(self._history).reshape(-1, 2)
@@ -252,9 +239,6 @@ class StealthDynamicEnv(StealthParallelEnv):
         right.set_ylabel("g / τ")
         right.legend(loc="upper left")
         fig.suptitle(f"step {self._k}/{self.horizon}, detected: {self._last['detected']}")
-        fig.tight_layout()
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
 def _sensor_positions(system: Any, sensors: Any, param: str, *, default_all: bool) -> np.ndarray:

@@ -29,7 +29,7 @@ from gymnasium.vector import AutoresetMode
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
-from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
+from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
 MAX_NUM_ENVS = 1 << 16
 
@@ -37,26 +37,14 @@ MAX_NUM_ENVS = 1 << 16
 class StealthDynamicVectorEnv(StealthVectorBase):
     """B copies of the attacker's view, stepped as one batch (see the module docstring).
 
-    Args:
-        num_envs: B, 1..2**16.
-        backend: ``"numpy"`` (default) or ``"torch"``.
-        device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
-        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP`` (see
-            :mod:`fdia_env.stealth.vector_base`).
-        **kwargs: Options of ``stealth_dynamic_v0.parallel_env`` (no ``render_mode``).
+    Args: as :class:`~fdia_env.stealth.vector_base.StealthVectorBase`, B up to 2**16 and
+    ``**kwargs`` the options of ``stealth_dynamic_v0.parallel_env``.
     """
 
-    def __init__(
-        self,
-        num_envs: int,
-        backend: str = "numpy",
-        device: Any = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        self._init_batch(
-            num_envs, StealthDynamicEnv, MAX_NUM_ENVS, kwargs, backend, device, autoreset_mode
-        )
+    env_cls = StealthDynamicEnv
+    max_num_envs = MAX_NUM_ENVS
+
+    def _init_state(self) -> None:
         xp = self.xp
         self.model = self.env.model
         self._alpha = xp.full(self.num_envs, float(self.env.alpha), dtype=np.float64)
@@ -149,19 +137,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
             "threshold": xp.astype(threshold, np.float64),
             "kl": xp.astype(kl, np.float64),
         }
-        mask = xp.ones(self.num_envs, dtype=np.bool_)
-        info.update({f"_{k}": mask for k in list(info)})
-        return info
+        return self._all_members(info)
 
 
-def make_vector(num_envs: int, **kwargs: Any) -> StealthDynamicVectorEnv:
-    """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthDynamic-v0"``.
-
-    Raises:
-        ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
-            bad option.
-    """
-    backend, device, autoreset = vector_options(kwargs, "dynamic stealth env")
-    return StealthDynamicVectorEnv(
-        num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs
-    )
+make_vector = entry_point(StealthDynamicVectorEnv, "dynamic stealth env")

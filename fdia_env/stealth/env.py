@@ -10,7 +10,6 @@ from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_step_actions
-from fdia_env.envs.parallel import RENDER_MODES
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.static import (
     StaticEstimation,
@@ -23,8 +22,6 @@ ACTIONS = ("shift", "box_shift", "free")
 DYNAMICS = ("expected", "sampled")
 ON_DETECT = ("zero", "penalty", "end")
 DEFENDERS = (None, "threshold")
-DEFAULT_ALPHAS = (0.001, 0.01, 0.05, 0.1, 0.2)
-"""The defender's false-alarm rates (``defender="threshold"``)."""
 MAX_RATIO = 10.0
 """Cap of the observed χ² statistic, in units of the threshold."""
 
@@ -93,14 +90,7 @@ class StealthAttackEnv(StealthParallelEnv):
         self.on_detect = check_choice("on_detect", on_detect, ON_DETECT)
         self.penalty = check_cost("penalty", penalty)
         self.protected = est.meter_positions(protected, "protected")
-        if render_mode is not None:
-            check_choice("render_mode", render_mode, RENDER_MODES)
-        self.render_mode = render_mode
-        if defender not in DEFENDERS:
-            raise ValueError(f"defender must be one of {list(DEFENDERS)}, got {defender!r}")
-        self.defender = defender
-        self.alphas = _check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
-        self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
+        self._init_players(render_mode, defender, DEFENDERS, alphas, false_alarm_cost)
         self._estimations = [
             est
             if a == est.alpha
@@ -224,21 +214,13 @@ class StealthAttackEnv(StealthParallelEnv):
             f"shift = {self._last['phi']:.6g}  detected: {self._last['detected']}\n"
         )
 
-    def _render_rgb(self) -> np.ndarray:
-        """The ``"rgb_array"`` frame: the injection per meter."""
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(8, 3.2), dpi=80)
-        canvas = FigureCanvasAgg(fig)
+    def _draw(self, fig: Any) -> None:
+        """The ``"rgb_array"`` frame's plot: the injection per meter."""
         ax = fig.subplots()
         ax.bar(np.arange(self.estimation.m), self._last_a)
         ax.set_xlabel("meter")
         ax.set_ylabel("injection (pu)")
         ax.set_title(f"step {self._k}/{self.horizon}, detected: {self._last['detected']}")
-        fig.tight_layout()
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
 def box_scale(a: np.ndarray, a_max: float) -> np.ndarray:
@@ -249,15 +231,3 @@ def box_scale(a: np.ndarray, a_max: float) -> np.ndarray:
     """
     size = np.max(np.abs(a), axis=1, keepdims=True)
     return a_max / np.where(size > 0.0, size, a_max)
-
-
-def _check_alphas(alphas: Any) -> tuple[float, ...]:
-    try:
-        values = [float(a) for a in alphas]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"alphas must be false-alarm rates in (0, 1), got {alphas!r}") from exc
-    if not values or any(
-        isinstance(a, bool) or not 0.0 < v < 1.0 for a, v in zip(alphas, values, strict=True)
-    ):
-        raise ValueError(f"alphas must be a non-empty list of rates in (0, 1), got {alphas!r}")
-    return tuple(values)

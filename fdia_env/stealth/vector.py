@@ -26,7 +26,7 @@ from gymnasium.vector import AutoresetMode
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
-from fdia_env.stealth.vector_base import StealthVectorBase, vector_options
+from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
 MAX_NUM_ENVS = 1 << 20
 
@@ -34,26 +34,14 @@ MAX_NUM_ENVS = 1 << 20
 class StealthVectorEnv(StealthVectorBase):
     """B copies of the attacker's view, stepped as one batch (see the module docstring).
 
-    Args:
-        num_envs: B, 1..2**20.
-        backend: ``"numpy"`` (default) or ``"torch"`` (see the module docstring).
-        device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
-        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP`` (see
-            :mod:`fdia_env.stealth.vector_base`).
-        **kwargs: Options of ``stealth_attack_v0.parallel_env`` (no ``render_mode``).
+    Args: as :class:`~fdia_env.stealth.vector_base.StealthVectorBase`, B up to 2**20 and
+    ``**kwargs`` the options of ``stealth_attack_v0.parallel_env``.
     """
 
-    def __init__(
-        self,
-        num_envs: int,
-        backend: str = "numpy",
-        device: Any = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        self._init_batch(
-            num_envs, StealthAttackEnv, MAX_NUM_ENVS, kwargs, backend, device, autoreset_mode
-        )
+    env_cls = StealthAttackEnv
+    max_num_envs = MAX_NUM_ENVS
+
+    def _init_state(self) -> None:
         xp = self.xp
         est = self.env.estimation
         L = np.linalg.cholesky(est.R)
@@ -228,19 +216,7 @@ class StealthVectorEnv(StealthVectorBase):
             "statistic": xp.astype(statistic, np.float64),
             "meters_used": xp.astype(used, np.int64),
         }
-        mask = xp.ones(self.num_envs, dtype=np.bool_)
-        info.update({f"_{k}": mask for k in list(info)})
-        return info
+        return self._all_members(info)
 
 
-def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorEnv:
-    """Gymnasium ``vector_entry_point`` of ``"fdia_env/StealthAttack-v0"``.
-
-    Raises:
-        ValueError: For an unknown backend, a device it cannot use, the defender's view, or a
-            bad option.
-    """
-    backend, device, autoreset = vector_options(kwargs, "stealth env")
-    return StealthVectorEnv(
-        num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs
-    )
+make_vector = entry_point(StealthVectorEnv, "stealth env")

@@ -15,6 +15,7 @@ on torch it is a (B, d) tensor, zeros where a member did not end.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -28,36 +29,50 @@ from fdia_env.backend import NUMPY, Backend, get_backend
 class StealthVectorBase(VectorEnv):
     """B copies of a stealth env's attacker view, stepped as one batch.
 
-    A subclass calls :meth:`_init_batch` first in its constructor, then builds its batch state.
+    A subclass names its single env (``env_cls``) and largest batch (``max_num_envs``), and
+    builds its batch state in :meth:`_init_state`, called once the single env and the batched
+    spaces are there.
+
+    Args:
+        num_envs: B, 1..``max_num_envs``.
+        backend: ``"numpy"`` (default) or ``"torch"``.
+        device: numpy: None or ``"cpu"``; torch: a ``torch.device`` or its string.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``SAME_STEP`` (see the module
+            docstring).
+        **kwargs: Options of the single env's ``parallel_env`` (no ``render_mode``).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
     xp: Backend = NUMPY
+    env_cls: type
+    max_num_envs: int
 
-    def _init_batch(
+    def __init__(
         self,
         num_envs: int,
-        env_cls: type,
-        maximum: int,
-        kwargs: dict,
-        backend: str,
-        device: Any,
+        backend: str = "numpy",
+        device: Any = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
     ) -> None:
-        """Resolve the backend, check ``num_envs``, build the single env and the batched spaces."""
         self.metadata = {"autoreset_mode": check_autoreset_mode(autoreset_mode)}
         self.xp = get_backend(backend, device)
         self.backend, self.device = self.xp.name, self.xp.device
         if kwargs.get("render_mode") is not None:
             raise ValueError("render_mode is not supported by the native vector env")
         kwargs.pop("render_mode", None)
-        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=maximum)
-        self.env = env_cls(**kwargs)
+        self.num_envs = check_int("num_envs", num_envs, minimum=1, maximum=self.max_num_envs)
+        self.env = self.env_cls(**kwargs)
         self.single_action_space = self.env.action_space("attacker")
         self.single_observation_space = self.env.observation_space("attacker")
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._rng = self._generator(None)
+        self._init_state()
+
+    def _init_state(self) -> None:
+        """Build the batch state (the subclass's)."""
+        raise NotImplementedError
 
     def _generator(self, seed: int | None) -> Any:
         """The batch's generator: numpy's, or a ``torch.Generator`` of the device."""
@@ -77,6 +92,12 @@ class StealthVectorBase(VectorEnv):
                 f"generator), got {seed!r}"
             )
         self._rng = self._generator(int(seed))
+
+    def _all_members(self, info: dict[str, Any]) -> dict[str, Any]:
+        """``info`` with Gymnasium's all-true mask ``_key`` for each of its keys."""
+        mask = self.xp.ones(self.num_envs, dtype=np.bool_)
+        info.update({f"_{k}": mask for k in list(info)})
+        return info
 
     @property
     def autoreset_mode(self) -> AutoresetMode:
@@ -141,6 +162,31 @@ def check_autoreset_mode(autoreset_mode: Any) -> AutoresetMode:
             f"'NextStep' / 'SameStep'), got {autoreset_mode!r}"
         )
     return mode
+
+
+def entry_point(env_cls: type[StealthVectorBase], label: str) -> Callable[..., Any]:
+    """Gymnasium's ``vector_entry_point`` for ``env_cls``: ``make_vector(num_envs, **kwargs)``.
+
+    Args:
+        env_cls: The native vector env class (its constructor takes ``num_envs``, ``backend``,
+            ``device``, ``autoreset_mode`` and the single env's keyword arguments).
+        label: The env as error messages name it (e.g. ``"stealth env"``).
+
+    Returns:
+        The entry point; it raises ``ValueError`` for an unknown backend, a device it cannot
+        use, the defender's view, or a bad option.
+    """
+
+    def make_vector(num_envs: int, **kwargs: Any) -> StealthVectorBase:
+        backend, device, autoreset = vector_options(kwargs, label)
+        return env_cls(num_envs, backend=backend, device=device, autoreset_mode=autoreset, **kwargs)
+
+    make_vector.__doc__ = (
+        f"Gymnasium ``vector_entry_point`` of the {label}: ``{env_cls.__name__}`` × num_envs.\n\n"
+        "Raises:\n    ValueError: For an unknown backend, a device it cannot use, the "
+        "defender's view, or a bad option.\n"
+    )
+    return make_vector
 
 
 def vector_options(kwargs: dict, label: str) -> tuple[str, Any, AutoresetMode]:
