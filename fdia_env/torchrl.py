@@ -12,7 +12,9 @@ Specs come from the env's Gymnasium spaces, with the batch (B,) in front:
 - ``"observation"``: ``Bounded`` float32 (B, d), the single env's features;
 - ``"action_mask"`` (masked players only: the sparse attack, also in its sequential format
   ``action="sequential"``, whose native vector env
-  :class:`~fdia_env.vector.sequential.SequentialVectorEnv` this serves the same way): bool
+  :class:`~fdia_env.vector.sequential.SequentialVectorEnv` this serves the same way, and the
+  sensor game's sequential format,
+  :class:`~fdia_env.vector.sequential_game.SequentialGameVectorEnv`): bool
   (B, A), True where legal, the key TorchRL's ``ActionMask`` transform and
   ``MaskedCategorical`` read;
 - ``"phi"``: float64 (B,), the estimation-error measure Φ after the step;
@@ -50,6 +52,7 @@ except ImportError as exc:  # pragma: no cover - the [clients] extra is installe
 
 from fdia_env.vector.env import FdiaVectorEnv
 from fdia_env.vector.sequential import SequentialVectorEnv
+from fdia_env.vector.sequential_game import SequentialGameVectorEnv
 
 __all__ = ["FdiaTorchRLEnv", "action_spec_of"]
 
@@ -225,9 +228,9 @@ class FdiaTorchRLEnv(EnvBase):
 
 def _vector_env(
     env: Any, num_envs: int, backend: str, device: Any, kwargs: dict[str, Any]
-) -> FdiaVectorEnv | SequentialVectorEnv:
+) -> FdiaVectorEnv | SequentialVectorEnv | SequentialGameVectorEnv:
     """The SAME_STEP native vector env of an id, or the given one after its checks."""
-    if isinstance(env, FdiaVectorEnv | SequentialVectorEnv):
+    if isinstance(env, FdiaVectorEnv | SequentialVectorEnv | SequentialGameVectorEnv):
         if kwargs or num_envs != 1 or backend != "torch" or device is not None:
             raise ValueError(
                 "num_envs, backend, device and env options apply to an id only; got them with "
@@ -272,7 +275,9 @@ def _vector_env(
         device=device,
         **kwargs,
     )
-    if not isinstance(venv, FdiaVectorEnv | SequentialVectorEnv):  # no batched implementation
+    if not isinstance(
+        venv, FdiaVectorEnv | SequentialVectorEnv | SequentialGameVectorEnv
+    ):  # no batched implementation
         raise ValueError(f"{env_id} has no native vector env; TorchRL's GymEnv serves it")
     return venv
 

@@ -180,3 +180,30 @@ def test_evaluate_plays_the_format_batched_on_its_native_vector_env(agent):
     n = len(env.unwrapped.parallel.models[agent].subsets)
     with pytest.raises(ValueError, match="num_envs=4: a subset-format mix plays the sequential"):
         evaluate(FixedMix.uniform(n), env, n_episodes=2, num_envs=4)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_torchrl_face_serves_the_format_with_its_action_mask(backend):
+    pytest.importorskip("torchrl")
+    from torchrl.envs.utils import check_env_specs
+
+    from fdia_env.torchrl import FdiaTorchRLEnv
+
+    env = FdiaTorchRLEnv(
+        IDS["defender"], num_envs=3, backend=backend, **{**GAME, "rounds": 2}
+    )  # fmt: skip
+    td = env.reset(seed=0)
+    assert td["action_mask"].shape == (3, 4) and td["observation"].shape == (3, 10)
+    check_env_specs(env, seed=0)
+    rollout = env.rollout(12, break_when_any_done=False)
+    assert int(rollout["next", "done"].sum()) >= 3  # every member ended an episode
+
+
+def test_maskable_ppo_trains_on_the_native_vector_env_through_the_sb3_adapter():
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    from fdia_env.vector.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(IDS["attacker"], 4, **{**GAME, "rounds": 2})
+    model = sb3_contrib.MaskablePPO("MlpPolicy", venv, n_steps=16, batch_size=32, seed=0)
+    model.learn(64)
+    assert model.num_timesteps == 64
