@@ -61,7 +61,7 @@ class PartialStep:
 
     For a native vector env whose members take their window steps at different decisions (the
     engine and the models step the whole batch); the class needs ``xp``, ``num_envs``,
-    ``attack`` and ``defense``.
+    ``attack`` and ``defense``. :meth:`_finish` ends such an env's step (its autoreset).
     """
 
     xp: Any
@@ -103,6 +103,39 @@ class PartialStep:
                 model = self.attack if who == "attack" else self.defense
                 new = getattr(model, name)
                 setattr(model, name, xp.where(_expand(held, new.ndim), old, new))
+
+    def _finish(self, reward: Any, done: Any, truncated: Any) -> tuple[Any, ...]:
+        """The step's return: observations and infos after the ended members' autoreset.
+
+        NEXT_STEP marks them to restart at the next step; SAME_STEP restarts them now, with
+        their last observation and infos under ``final_obs`` / ``final_info``. Needs the env's
+        ``autoreset_mode``, ``_observe``, ``_infos`` and ``_reset_members``.
+        """
+        xp, B = self.xp, self.num_envs
+        infos: dict[str, Any] = {}
+        ended = done | truncated
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._prev_done = ended
+            obs = self._observe()
+        else:
+            obs = self._observe()
+            if xp.any(ended):
+                if xp is NUMPY:
+                    final = np.full(B, None, dtype=object)
+                    for i in np.flatnonzero(ended):
+                        final[i] = obs[i].copy()
+                else:
+                    final = xp.where(ended[:, None], obs, 0.0)
+                infos = {
+                    "final_obs": final,
+                    "_final_obs": xp.copy(ended),
+                    "final_info": vector_env._masked(self._infos(), ended, xp),
+                    "_final_info": xp.copy(ended),
+                }
+                self._reset_members(xp.copy(ended))
+                obs = self._observe()
+        infos.update(self._infos())
+        return obs, reward, done, truncated, infos
 
 
 class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
@@ -284,30 +317,7 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
             truncated = truncated | (live & ~done & (self._decisions >= self.parallel.max_cycles))
         if self.max_episode_steps is not None:  # Gymnasium's TimeLimit, counted in decisions
             truncated = truncated | (live & (self._decisions >= self.max_episode_steps))
-        infos: dict[str, Any] = {}
-        ended = done | truncated
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._prev_done = ended
-            obs = self._observe()
-        else:
-            obs = self._observe()
-            if xp.any(ended):
-                if xp is NUMPY:
-                    final = np.full(B, None, dtype=object)
-                    for i in np.flatnonzero(ended):
-                        final[i] = obs[i].copy()
-                else:
-                    final = xp.where(ended[:, None], obs, 0.0)
-                infos = {
-                    "final_obs": final,
-                    "_final_obs": xp.copy(ended),
-                    "final_info": vector_env._masked(self._infos(), ended, xp),
-                    "_final_info": xp.copy(ended),
-                }
-                self._reset_members(xp.copy(ended))
-                obs = self._observe()
-        infos.update(self._infos())
-        return obs, reward, done, truncated, infos
+        return self._finish(reward, done, truncated)
 
     def _raise_illegal(self, actions: Any, legal: Any) -> None:
         i = int(self.xp.to_numpy(self.xp.flatnonzero(~legal))[0])

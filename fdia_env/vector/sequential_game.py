@@ -250,30 +250,7 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
                 self._new_rounds(going_on)
         if self.max_episode_steps is not None:  # Gymnasium's TimeLimit, counted in decisions
             truncated = truncated | (live & (self._decisions >= self.max_episode_steps))
-        infos: dict[str, Any] = {}
-        ended = done | truncated
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._prev_done = ended
-            obs = self._observe()
-        else:
-            obs = self._observe()
-            if xp.any(ended):
-                if xp is NUMPY:
-                    final = np.full(B, None, dtype=object)
-                    for i in np.flatnonzero(ended):
-                        final[i] = obs[i].copy()
-                else:
-                    final = xp.where(ended[:, None], obs, 0.0)
-                infos = {
-                    "final_obs": final,
-                    "_final_obs": xp.copy(ended),
-                    "final_info": vector_env._masked(self._infos(), ended, xp),
-                    "_final_info": xp.copy(ended),
-                }
-                self._reset_members(xp.copy(ended))
-                obs = self._observe()
-        infos.update(self._infos())
-        return obs, reward, done, truncated, infos
+        return self._finish(reward, done, truncated)
 
     def _arange_all(self) -> Any:
         """(1, M + 1): the actions 0..M."""
