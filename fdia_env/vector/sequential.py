@@ -61,7 +61,8 @@ class PartialStep:
 
     For a native vector env whose members take their window steps at different decisions (the
     engine and the models step the whole batch); the class needs ``xp``, ``num_envs``,
-    ``attack`` and ``defense``. :meth:`_finish` ends such an env's step (its autoreset).
+    ``attack`` and ``defense``. :meth:`_begin` opens such an env's step (its checked actions,
+    the next-step autoreset) and :meth:`_finish` ends it (the same-step autoreset).
     """
 
     xp: Any
@@ -103,6 +104,30 @@ class PartialStep:
                 model = self.attack if who == "attack" else self.defense
                 new = getattr(model, name)
                 setattr(model, name, xp.where(_expand(held, new.ndim), old, new))
+
+    def _begin(self, actions: Any, agent: str) -> tuple[Any, Any]:
+        """A step's checked actions (int64) and the (B,) members that play this decision.
+
+        The members that ended at the last step (NEXT_STEP) restart here; their actions are
+        ignored. Needs the env's ``_started``, ``_prev_done``, ``single_action_space`` and
+        ``_reset_members``.
+
+        Raises:
+            RuntimeError: Before the env's ``reset()``.
+            ValueError: For actions that are not one valid action of ``agent`` per member.
+        """
+        if not self._started:
+            raise RuntimeError("step() called before reset(): call reset() first")
+        xp, B = self.xp, self.num_envs
+        if xp is NUMPY:
+            actions = check_batch_actions(self.single_action_space, actions, B, agent)
+        else:
+            check_batch_tensor_actions(self.single_action_space, actions, B, agent, xp)
+        actions = xp.astype(actions, xp.int64)
+        resetting = self._prev_done
+        if xp.any(resetting):  # NEXT_STEP: their action is ignored; they start a new episode
+            self._reset_members(resetting)
+        return actions, ~resetting
 
     def _finish(self, reward: Any, done: Any, truncated: Any) -> tuple[Any, ...]:
         """The step's return: observations and infos after the ended members' autoreset.
@@ -274,18 +299,8 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
             ValueError: For actions that are not one integer in [0, M] per member, or (with
                 ``illegal_action="error"``) an action outside a member's mask.
         """
-        if not self._started:
-            raise RuntimeError("step() called before reset(): call reset() first")
+        actions, live = self._begin(actions, "attacker")
         xp, B = self.xp, self.num_envs
-        if xp is NUMPY:
-            actions = check_batch_actions(self.single_action_space, actions, B, "attacker")
-        else:
-            check_batch_tensor_actions(self.single_action_space, actions, B, "attacker", xp)
-            actions = xp.astype(actions, xp.int64)
-        resetting = self._prev_done
-        if xp.any(resetting):  # NEXT_STEP: their action is ignored; they start a new episode
-            self._reset_members(resetting)
-        live = ~resetting
         onehot = (actions[:, None] == self._arange) & live[:, None]  # (B, M): the picks
         closed = (self._left() <= 0) | self._playing
         legal = ~_any1(xp, onehot & (self._chosen | closed[:, None]))

@@ -31,8 +31,6 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from fdia_env.backend import NUMPY
-from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSubsetEnv, subset_actions
@@ -200,18 +198,8 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
             ValueError: For actions that are not one integer in [0, M] per member, or (with
                 ``illegal_action="error"``) an action outside a member's mask.
         """
-        if not self._started:
-            raise RuntimeError("step() called before reset(): call reset() first")
+        actions, live = self._begin(actions, self.agent)
         xp, B = self.xp, self.num_envs
-        if xp is NUMPY:
-            actions = check_batch_actions(self.single_action_space, actions, B, self.agent)
-        else:
-            check_batch_tensor_actions(self.single_action_space, actions, B, self.agent, xp)
-        actions = xp.astype(actions, xp.int64)
-        resetting = self._prev_done
-        if xp.any(resetting):  # NEXT_STEP: their action is ignored; they start a new episode
-            self._reset_members(resetting)
-        live = ~resetting
         mask = self.action_masks()
         legal = xp.sum(xp.astype(mask & (self._arange_all() == actions[:, None]), xp.int64), 1)
         legal = (legal > 0) | ~live
