@@ -60,9 +60,9 @@ class PartialStep:
     """Hold some members of a batch through an engine step: save their state, put it back.
 
     For a native vector env whose members take their window steps at different decisions (the
-    engine and the models step the whole batch); the class needs ``xp``, ``num_envs``,
-    ``attack`` and ``defense``. :meth:`_begin` opens such an env's step (its checked actions,
-    the next-step autoreset) and :meth:`_finish` ends it (the same-step autoreset).
+    engine and the models step the whole batch). :meth:`_adopt` sets what such an env takes
+    from its engine (``self.inner``) and single env, :meth:`_begin` opens its step (the checked
+    actions, the next-step autoreset) and :meth:`_finish` ends it (the same-step autoreset).
     """
 
     xp: Any
@@ -104,6 +104,50 @@ class PartialStep:
                 model = self.attack if who == "attack" else self.defense
                 new = getattr(model, name)
                 setattr(model, name, xp.where(_expand(held, new.ndim), old, new))
+
+    def _adopt(
+        self,
+        parallel: Any,
+        agent: str,
+        autoreset_mode: AutoresetMode | str,
+        max_episode_steps: int | None,
+        backend: str,
+    ) -> None:
+        """What a sequential vector env takes from its engine (``self.inner``) and single env.
+
+        The backend, batch, models, episode options and metadata, ``agent``'s batched spaces,
+        and the per-member decision counters.
+
+        Raises:
+            ValueError: For a bad ``autoreset_mode`` or ``max_episode_steps``.
+        """
+        inner = self.inner
+        self.xp = xp = inner.xp
+        self.num_envs = B = inner.num_envs
+        mode, self.max_episode_steps = vector_env.check_episode_options(
+            autoreset_mode, max_episode_steps
+        )
+        self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
+        self.render_mode = None
+        self.parallel, self.agent = parallel, agent
+        self.illegal_action = parallel.illegal_action
+        self.skip_forced = parallel.skip_forced
+        self.backend, self.device = inner.backend, inner.device
+        self.attack, self.defense = inner.attack, inner.defense
+        self.spec_episode = parallel.spec
+        self.M = parallel.M
+        self.single_observation_space = parallel.observation_space(agent)["observation"]
+        self.single_action_space = parallel.action_space(agent)
+        self.observation_space = batch_space(self.single_observation_space, B)
+        self.action_space = batch_space(self.single_action_space, B)
+        self._decisions = xp.zeros(B, dtype=xp.int64)
+        self._prev_done = xp.zeros(B, dtype=xp.bool)
+        self._started = False
+
+    @property
+    def autoreset_mode(self) -> AutoresetMode:
+        """Gymnasium's autoreset mode of this env (also in ``metadata["autoreset_mode"]``)."""
+        return self.metadata["autoreset_mode"]
 
     def _begin(self, actions: Any, agent: str) -> tuple[Any, Any]:
         """A step's checked actions (int64) and the (B,) members that play this decision.
@@ -199,41 +243,16 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self.inner = vector_env.FdiaVectorEnv(
             parallel.inner, num_envs, backend=backend, device=device
         )
-        self.xp = xp = self.inner.xp
-        self.num_envs = B = self.inner.num_envs
-        mode, self.max_episode_steps = vector_env.check_episode_options(
-            autoreset_mode, max_episode_steps
-        )
-        self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
-        self.render_mode = None
-        self.parallel = parallel
-        self.agent = "attacker"
-        self.illegal_action = parallel.illegal_action
-        self.skip_forced = parallel.skip_forced
-        self.backend, self.device = self.inner.backend, self.inner.device
-        self.attack, self.defense = self.inner.attack, self.inner.defense
-        self.spec_episode = parallel.spec
-        self.M = M = parallel.M
+        self._adopt(parallel, "attacker", autoreset_mode, max_episode_steps, backend)
+        xp, B, M = self.xp, self.num_envs, self.M
         self.budget = int(self.attack.budget)
         self.order, self.plan_first = parallel.order, parallel.plan_first
         self.horizon = N = parallel.horizon
-        self.single_observation_space = parallel.observation_space("attacker")["observation"]
-        self.single_action_space = parallel.action_space("attacker")
-        self.observation_space = batch_space(self.single_observation_space, B)
-        self.action_space = batch_space(self.single_action_space, B)
         self._slots = S = N * M if self.plan_first else M  # the pick actions 1..S
         self._arange = xp.asarray(np.arange(1, S + 1, dtype=np.int64))
         self._steps = xp.asarray(np.arange(N, dtype=np.int64))
         self._chosen = xp.zeros((B, S), dtype=xp.bool)  # "plan": (B, N·M), step-major
         self._playing = xp.zeros(B, dtype=xp.bool)  # "plan": the plan is committed
-        self._decisions = xp.zeros(B, dtype=xp.int64)
-        self._prev_done = xp.zeros(B, dtype=xp.bool)
-        self._started = False
-
-    @property
-    def autoreset_mode(self) -> AutoresetMode:
-        """Gymnasium's autoreset mode of this env (also in ``metadata["autoreset_mode"]``)."""
-        return self.metadata["autoreset_mode"]
 
     # --- reset ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):

@@ -29,7 +29,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
-from gymnasium.vector.utils import batch_space
 
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import attacker_reward
@@ -95,29 +94,13 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         self.inner = vector_env.FdiaVectorEnv(
             parallel.inner, num_envs, agent=agent, opponent=opponent, backend=backend, device=device
         )
-        self.xp = xp = self.inner.xp
-        self.num_envs = B = self.inner.num_envs
-        mode, self.max_episode_steps = vector_env.check_episode_options(
-            autoreset_mode, max_episode_steps
-        )
-        self.metadata = {"autoreset_mode": mode, "render_modes": [], "backend": backend}
-        self.render_mode = None
-        self.parallel = parallel
-        self.agent, self.other = agent, other
+        self._adopt(parallel, agent, autoreset_mode, max_episode_steps, backend)
+        xp, M = self.xp, self.M
+        self.other = other
         self.opponent = self.inner.opponent
-        self.illegal_action = parallel.illegal_action
-        self.skip_forced = parallel.skip_forced
-        self.backend, self.device = self.inner.backend, self.inner.device
-        self.attack, self.defense = self.inner.attack, self.inner.defense
-        self.spec_episode = parallel.spec
-        self.M = M = parallel.M
         self.max_picks = int(parallel.max_picks[agent])
         self.min_picks = int(parallel.min_picks[agent])
         self.drops = parallel.drops[agent]
-        self.single_observation_space = parallel.observation_space(agent)["observation"]
-        self.single_action_space = parallel.action_space(agent)
-        self.observation_space = batch_space(self.single_observation_space, B)
-        self.action_space = batch_space(self.single_action_space, B)
         self._arange = xp.asarray(np.arange(1, M + 1, dtype=np.int64))
         self._bits = xp.asarray(np.left_shift(1, np.arange(M, dtype=np.int64)))
         # the learner's subsets by bitmask: sorted codes and their subset indices
@@ -139,7 +122,6 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._opp_last = xp.asarray(np.array(last, dtype=np.int64))
         self._start_stopped = self.skip_forced and self.max_picks == 0
         self._reset_state()
-        self._started = False
 
     def _reset_state(self) -> None:
         xp, B = self.xp, self.num_envs
@@ -149,11 +131,6 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._t = xp.zeros(B, dtype=xp.int64)  # decisions taken in the round
         self._decisions = xp.zeros(B, dtype=xp.int64)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
-
-    @property
-    def autoreset_mode(self) -> AutoresetMode:
-        """Gymnasium's autoreset mode of this env (also in ``metadata["autoreset_mode"]``)."""
-        return self.metadata["autoreset_mode"]
 
     # --- reset ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
