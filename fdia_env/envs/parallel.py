@@ -194,7 +194,28 @@ class FdiaParallelEnv(ParallelEnv):
         check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
-        effect = self.attack.apply_checked(actions["attacker"])  # checked above
+        agents = self.agents
+        reward, done, truncated = self._advance(actions)
+        obs = {a: self._observe(a) for a in agents}
+        rewards = {"attacker": reward, "defender": -reward} if len(agents) == 2 else {}
+        if len(agents) == 1:
+            rewards[agents[0]] = reward if agents[0] == "attacker" else -reward
+        terminations = dict.fromkeys(agents, done)
+        truncations = dict.fromkeys(agents, truncated)
+        infos = self._infos(agents)
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminations, truncations, infos
+
+    def _advance(self, actions: dict[str, Any]) -> tuple[float, bool, bool]:
+        """The window step of :meth:`step` for actions already checked, without its outputs.
+
+        Returns the attacker's reward, termination and truncation (the episode ends here when
+        either is true). The observations and infos are those of :meth:`_observe` and
+        :meth:`_infos` afterwards; a wrapper that plays several window steps in one decision
+        (the sequential format's plan) reads them once, after the last.
+        """
+        effect = self.attack.apply_checked(actions["attacker"])
         filter_input = self.defense.apply_checked(actions.get("defender"), effect)
         self._last_effect = effect
         if not self.defense.passive:
@@ -204,21 +225,10 @@ class FdiaParallelEnv(ParallelEnv):
         phi = self.sim.step(filter_input, self.np_random)
         done = self.sim.k >= self.spec.horizon
         truncated = not done and self.max_cycles is not None and self.sim.k >= self.max_cycles
-        reward = attacker_reward(self.spec.reward_mode, phi, phi_prev, done)
-        agents = self.agents
-        obs = {a: self._observe(a) for a in agents}
-        rewards = {"attacker": reward, "defender": -reward} if len(agents) == 2 else {}
-        if len(agents) == 1:
-            rewards[agents[0]] = reward if agents[0] == "attacker" else -reward
-        terminations = dict.fromkeys(agents, done)
-        truncations = dict.fromkeys(agents, truncated)
-        infos = self._infos(agents)
         if done or truncated:
             self._done = True
             self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terminations, truncations, infos
+        return attacker_reward(self.spec.reward_mode, phi, phi_prev, done), done, truncated
 
     def _info(self) -> dict[str, Any]:
         """The step's info: the same keys at reset and at every step (see the class doc)."""
