@@ -146,6 +146,16 @@ def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
     return value
 
 
+def check_agent(agent: Any, possible_agents: list[str]) -> str:
+    """Return ``agent`` if it is one of the env's players, else raise ``ValueError`` naming them.
+
+    Any type is accepted (an unhashable one fails with the same message).
+    """
+    if not (isinstance(agent, str) and agent in possible_agents):
+        raise ValueError(f"agent must be one of {possible_agents}, got {agent!r}")
+    return agent
+
+
 def _fmt_shape(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
 

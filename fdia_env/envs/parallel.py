@@ -11,7 +11,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_choice, check_int
+from fdia_env._validation import check_agent, check_choice, check_int
 from fdia_env.attacks.base import AttackModel
 from fdia_env.defenses.base import DefenseModel
 from fdia_env.envs.actions import check_step_actions
@@ -148,16 +148,11 @@ class FdiaParallelEnv(ParallelEnv):
 
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
-        return self._observation_spaces[self._check_agent(agent)]
+        return self._observation_spaces[check_agent(agent, self.possible_agents)]
 
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object on every call)."""
-        return self._action_spaces[self._check_agent(agent)]
-
-    def _check_agent(self, agent: str) -> str:
-        if agent not in self._action_spaces:
-            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
-        return agent
+        return self._action_spaces[check_agent(agent, self.possible_agents)]
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         """Start an episode at the window start; ``seed`` makes every draw reproducible.
