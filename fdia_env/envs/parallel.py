@@ -25,6 +25,28 @@ RENDER_MODES = ("human", "ansi", "rgb_array")
 RENDER_FPS = 4
 
 
+def end_step(
+    env: Any, obs: dict, rewards: dict, infos: dict, done: bool, truncated: bool
+) -> tuple[dict, dict, dict, dict, dict]:
+    """The PettingZoo end of a step of ``env`` (this module's env or a stealth env).
+
+    The terminations and truncations of the live agents; when the episode ends, ``env`` is
+    closed (no live agents; the next :meth:`step` raises); ``render_mode="human"`` renders.
+
+    Returns:
+        ``(observations, rewards, terminations, truncations, infos)``.
+    """
+    agents = env.agents
+    terminations = dict.fromkeys(agents, done)
+    truncations = dict.fromkeys(agents, truncated)
+    if done or truncated:
+        env._done = True
+        env.agents = []
+    if env.render_mode == "human":
+        env.render()
+    return obs, rewards, terminations, truncations, infos
+
+
 def attacker_reward(mode: str, phi: Any, phi_prev: Any, done: Any, xp: Any = None) -> Any:
     """The attacker's reward for one step; the defender's is its negative (zero-sum).
 
@@ -205,15 +227,7 @@ class FdiaParallelEnv(ParallelEnv):
         rewards = {"attacker": reward, "defender": -reward} if len(agents) == 2 else {}
         if len(agents) == 1:
             rewards[agents[0]] = reward if agents[0] == "attacker" else -reward
-        terminations = dict.fromkeys(agents, done)
-        truncations = dict.fromkeys(agents, truncated)
-        infos = self._infos(agents)
-        if done or truncated:
-            self._done = True
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terminations, truncations, infos
+        return end_step(self, obs, rewards, self._infos(agents), done, truncated)
 
     def _info(self) -> dict[str, Any]:
         """The step's info: the same keys at reset and at every step (see the class doc)."""

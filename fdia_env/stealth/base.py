@@ -24,7 +24,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_agent, check_choice
-from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args, end_step
 
 
 class NoResetOptions:
@@ -172,14 +172,7 @@ class StealthParallelEnv(ParallelEnv):
         infos = self._per_agent(self._info())
         rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * alpha}
         rewards = {a: rewards[a] for a in agents}
-        terms = dict.fromkeys(agents, done)
-        truncs = dict.fromkeys(agents, truncated)
-        if done or truncated:
-            self._done = True
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terms, truncs, infos
+        return end_step(self, obs, rewards, infos, done, truncated)
 
     def state(self) -> np.ndarray:
         """Global state: the attacker's observation (the defender sees the same)."""
