@@ -50,13 +50,13 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from fdia_env._validation import check_int
+from fdia_env._validation import check_agent, check_int
 from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, attacker_reward, check_reset_args
-from fdia_env.envs.single_agent import Policy, check_agent, check_no_opponent, check_opponent
+from fdia_env.envs.single_agent import Policy, check_no_opponent, check_opponent
 from fdia_env.registration import ENVS, torch_ids
 
 # members of one vector env: every member holds (n, n) covariances, its features and, for the

@@ -30,10 +30,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from fdia_env._validation import check_agent
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSubsetEnv, subset_actions
-from fdia_env.envs.single_agent import Policy, check_agent
+from fdia_env.envs.single_agent import Policy
 from fdia_env.vector import env as vector_env
 from fdia_env.vector.sequential import PartialStep
 
