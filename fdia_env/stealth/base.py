@@ -23,7 +23,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_agent, check_choice
+from fdia_env._validation import check_agent, check_choice, check_int
 from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args, end_step
 
 
@@ -96,6 +96,18 @@ class StealthParallelEnv(ParallelEnv):
         self.defender = defender
         self.alphas = check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
         self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
+
+    def _init_episode(self, horizon: Any, max_cycles: Any, default_horizon: int) -> None:
+        """Check and set ``max_cycles`` and ``horizon`` (start of ``__init__``).
+
+        ``horizon`` None: PettingZoo's ``max_cycles`` when given, else ``default_horizon``.
+        """
+        self.max_cycles = (
+            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
+        )
+        if horizon is None:
+            horizon = default_horizon if self.max_cycles is None else self.max_cycles
+        self.horizon = check_int("horizon", horizon, minimum=1)
 
     def _init_agents(
         self,

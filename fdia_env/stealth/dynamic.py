@@ -65,12 +65,7 @@ class StealthDynamicEnv(StealthParallelEnv):
         if self.sensors.size == 0:
             raise ValueError("sensors must name at least one sensor to attack, got none")
         self.protected = _sensor_positions(system, protected, "protected", default_all=False)
-        self.max_cycles = (
-            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
-        )
-        if horizon is None:
-            horizon = DEFAULT_HORIZON if self.max_cycles is None else self.max_cycles
-        self.horizon = check_int("horizon", horizon, minimum=1)
+        self._init_episode(horizon, max_cycles, default_horizon=DEFAULT_HORIZON)
         window = check_int("window", window, minimum=1, maximum=1000)
         self.action_kind = check_choice("action", action, ACTIONS)
         self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
