@@ -926,6 +926,7 @@ def test_plan_playout_reads_the_wrapped_observation_once_and_hands_out_copies(mo
     assert obs["observation"][-(N * M + 1) :].sum() == pytest.approx(1 + 1 / 2)
     obs, rewards, term, _, infos = env.step({"attacker": STOP})  # the plan's 4 window steps
     assert reads == ["attacker"] and env.inner.sim.k == N and term["attacker"]
+    assert env.inner.agents == [] and env.agents == []  # both episodes over
     multi = sparse_attack_v0.parallel_env(action="multibinary", **kwargs)
     multi.reset(seed=0)
     total = 0.0

@@ -57,7 +57,7 @@ from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.attacks.subsets import SubsetChoice, game_sizes
 from fdia_env.envs.actions import check_action
-from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
+from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args, end_step
 from fdia_env.envs.policy import PolicyBase, observation_array
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario
@@ -379,6 +379,8 @@ class SequentialSetEnv(SequentialBase):
             reward, term, trunc = rewards["attacker"], terms["attacker"], truncs["attacker"]
         else:  # the set is in the action space and within the budget left: checked here
             reward, term, trunc = self.inner._advance({"attacker": current.copy()})
+            if term or trunc:  # the wrapped env's episode ends (its outputs: _played_out)
+                end_step(self.inner, {}, {}, {}, term, trunc)
         self._pending -= int(current.sum())
         self._remaining = int(self.attack.remaining)
         if not self.plan_first:
