@@ -376,8 +376,20 @@ GAME_EXPECTED_REWARDS = ("grid-ieee14",)
 side's mix by default (``train.py game --expected-rewards``): there the defender's strategies
 differ by a few % of the game value, below the noise of one sampled opponent per episode."""
 
+# The dc-ieee14-50 preset's sparse attack (300 pairs, c = 5, N = 6, trace; SFS stops at 98.5 %
+# of branch and bound's proved optimum): the grid presets' format and reward scale
+# (docs/results/sparse_grid.md, dc-ieee14-50).
+_DC_SPARSE = ScenarioDefaults(
+    env_kwargs=_PLAN_FIRST,
+    algo="MaskablePPO",
+    hyperparameters={"norm_obs": False},
+    normalize_reward=True,
+    when=_PLAN_FIRST,
+)
+
 SCENARIO_DEFAULTS: dict[tuple[str, str], ScenarioDefaults] = {
     **{(env, name): _GRID_SPARSE for env in SPARSE_ENVS for name in GRID_PRESETS},
+    **{(env, "dc-ieee14-50"): _DC_SPARSE for env in SPARSE_ENVS},
     ("sensor_game_v0", "grid-ieee14"): _GRID_GAME,
 }
 """Per (env, scenario preset): ``train.py``'s defaults there (docs/guide/training.md lists them).

@@ -495,6 +495,7 @@ _SPARSE_SCENARIOS = {
     "ch4-pv-case3": {"budget": 5, "horizon": 6, "objective": "logdet"},
     "ch4-random": {"budget": 10, "horizon": 6},
     **{name: {} for name in GRID_PRESETS},
+    "dc-ieee14-50": {},  # c = 5, N = 6 of the preset; the trace (the env's default objective)
 }
 _COVARIANCE_SCENARIOS = {
     "ch2-position": {"power": 3000.0},

@@ -146,6 +146,16 @@ def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
     return value
 
 
+def check_agent(agent: Any, possible_agents: list[str]) -> str:
+    """Return ``agent`` if it is one of the env's players, else raise ``ValueError`` naming them.
+
+    Any type is accepted (an unhashable one fails with the same message).
+    """
+    if not (isinstance(agent, str) and agent in possible_agents):
+        raise ValueError(f"agent must be one of {possible_agents}, got {agent!r}")
+    return agent
+
+
 def _fmt_shape(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
 
@@ -167,3 +177,47 @@ def check_power(name: str, value: Any, *, allow_zero: bool = False) -> float:
     if not ok:
         raise ValueError(f"{name} must satisfy {low} {name} <= {MAX_POWER:g}, got {value}")
     return value
+
+
+def check_positions(
+    name: str, value: Any, names: dict[str, int], count: int, kind: str
+) -> np.ndarray:
+    """Sorted unique positions named by ``value``: positions ``0..count−1`` or names.
+
+    Args:
+        name: The parameter's name, for the messages.
+        value: One position or name, or a collection of them.
+        names: Name → position of the items that have a name.
+        count: How many items there are.
+        kind: What an item is, in the messages (``"sensor"``, ``"meter"``).
+
+    Returns:
+        The (k,) int64 positions, sorted, without repeats.
+
+    Raises:
+        ValueError: Naming ``name``, for a value that is not a collection, an unknown name or
+            position, or an item that is neither a position nor a name.
+    """
+    if isinstance(value, (str, int, np.integer)):
+        value = [value]
+    try:
+        items = list(value)
+    except TypeError as exc:
+        raise ValueError(f"{name} must be a collection of {kind}s, got {value!r}") from exc
+    out = []
+    for item in items:
+        known = isinstance(item, (str, int, np.integer)) and not isinstance(item, bool)
+        if isinstance(item, str) and item in names:
+            out.append(names[item])
+        elif known and not isinstance(item, str) and 0 <= int(item) < count:
+            out.append(int(item))
+        elif known:
+            raise ValueError(
+                f"{name} holds an unknown {kind} {item!r}: {kind}s are positions "
+                f"0..{count - 1} or names such as {list(names)[:4]}"
+            )
+        else:
+            raise ValueError(
+                f"{name} must hold {kind} positions (0..{count - 1}) or names, got {item!r}"
+            )
+    return np.unique(np.array(out, dtype=np.int64))

@@ -907,3 +907,39 @@ def test_plan_order_reference_policy_plays_the_solver_set_in_the_env_format():
     assert total == pytest.approx(best.value, rel=1e-12)
     with pytest.raises(ValueError, match=r"attacks must be \(step, sensor\) pairs"):
         PlanOrderPolicy([(3, 0)], num_sensors=3, horizon=3)
+
+
+def test_plan_playout_reads_the_wrapped_observation_once_and_hands_out_copies(monkeypatch):
+    kwargs = dict(scenario="ch4-position", budget=2, horizon=4)
+    env = sparse_attack_v0.parallel_env(action="sequential", order="plan", **kwargs)
+    M, N = env.M, 4
+    reads: list[str] = []
+    observe = env.inner._observe
+    monkeypatch.setattr(env.inner, "_observe", lambda agent: reads.append(agent) or observe(agent))
+    obs, _ = env.reset(seed=0)
+    obs["attacker"]["action_mask"][:] = 0  # the caller's arrays, not the env's state
+    obs["attacker"]["observation"][:] = 7.0
+    assert env.action_mask().sum() == N * M + 1
+    reads.clear()
+    obs = env.step({"attacker": 1 + 2 * M + 1})[0]["attacker"]  # sensor 2 at window step 3
+    assert reads == [] and env.inner.sim.k == 0  # a pick plays no window step
+    assert obs["observation"][-(N * M + 1) :].sum() == pytest.approx(1 + 1 / 2)
+    obs, rewards, term, _, infos = env.step({"attacker": STOP})  # the plan's 4 window steps
+    assert reads == ["attacker"] and env.inner.sim.k == N and term["attacker"]
+    assert env.inner.agents == [] and env.agents == []  # both episodes over
+    multi = sparse_attack_v0.parallel_env(action="multibinary", **kwargs)
+    multi.reset(seed=0)
+    total = 0.0
+    for k in range(N):
+        a = np.zeros(M, dtype=np.int8)
+        a[1] = k == 2
+        out = multi.step({"attacker": a})
+        total += out[1]["attacker"]
+    assert rewards["attacker"] == pytest.approx(total, rel=1e-12, abs=0)
+    np.testing.assert_array_equal(
+        obs["attacker"]["observation"][: -(N * M + 1)], out[0]["attacker"]
+    )
+    assert infos["attacker"].keys() == out[4]["attacker"].keys()
+    for key, value in out[4]["attacker"].items():
+        np.testing.assert_array_equal(infos["attacker"][key], value)
+    assert obs["attacker"]["action_mask"].tolist() == [1] + [0] * (N * M)

@@ -11,7 +11,8 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from fdia_env import sensor_game_v0
 from fdia_env.envs.opponents import FixedMix
-from fdia_env.vector.sequential_game import SequentialGameVectorEnv, make_vector
+from fdia_env.vector.env import make_vector
+from fdia_env.vector.sequential_game import SequentialGameVectorEnv
 
 IDS = {"attacker": "fdia_env/SensorGameAttacker-v0", "defender": "fdia_env/SensorGameDefender-v0"}
 GAME = {"scenario": "ch5-game", "power": 1.0, "rounds": 3, "action": "sequential"}
@@ -155,8 +156,8 @@ def test_illegal_actions_and_bad_input():
         make_vector("fdia_env.sensor_game_v0", 2, **GAME).step(np.array([1, 1]))
     with pytest.raises(TypeError, match="parallel must be a SequentialSubsetEnv"):
         SequentialGameVectorEnv(sensor_game_v0.parallel_env(), 2)
-    with pytest.raises(ValueError, match=r"module must be 'fdia_env\.sensor_game_v0'"):
-        make_vector("fdia_env.sparse_attack_v0", 2, action="sequential")
+    with pytest.raises(ValueError, match="backend must be one of"):
+        make_vector("fdia_env.sensor_game_v0", 2, backend="jax", **GAME)
     with pytest.raises(ValueError, match="render_mode is not supported"):
         make_vector("fdia_env.sensor_game_v0", 2, render_mode="ansi", **GAME)
     with pytest.raises(ValueError, match="agent must be one of"):

@@ -444,3 +444,16 @@ def test_torch_backend_draws_its_own_noise_and_refuses_numpy_actions():
     rate = float(infos["detected"].double().mean())  # no attack: the detector's α
     assert abs(rate - 0.05) < 4 * np.sqrt(0.05 * 0.95 / 4000)
     assert torch.all(rewards[~infos["detected"]] > 0)
+
+
+def test_sensors_and_protected_take_positions_or_names_with_one_check():
+    """The dynamic env and the static model name sensors/meters through one check."""
+    env = stealth_dynamic_v0.parallel_env(dynamics="expected", sensors=["z2", 0, 0], protected=1)
+    np.testing.assert_array_equal(env.sensors, [0, 1])
+    np.testing.assert_array_equal(env.protected, [1])
+    with pytest.raises(ValueError, match=r"protected holds an unknown sensor 'nope'"):
+        stealth_dynamic_v0.parallel_env(protected=["nope"])
+    with pytest.raises(ValueError, match=r"sensors must hold sensor positions \(0\.\.2\)"):
+        stealth_dynamic_v0.parallel_env(sensors=[1.5])
+    with pytest.raises(ValueError, match="protected must be a collection of sensors"):
+        stealth_dynamic_v0.parallel_env(protected=2.5)

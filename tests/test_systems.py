@@ -146,13 +146,14 @@ def test_every_preset_builds_with_finite_valid_matrices(name):
 
 def test_scenario_names_cover_the_literature_table():
     """The eleven parameter sets of docs/math.md §6, in order, then game-m10 and the grids."""
-    literature = [n for n in scenarios.names() if not n.startswith(("grid-", "game-"))]
+    literature = [n for n in scenarios.names() if not n.startswith(("grid-", "game-", "dc-"))]
     assert [n for n in scenarios.names() if n not in literature] == [
         "game-m10",
         "grid-ieee14",
         "grid-ieee30",
         "grid-ieee57",
         "grid-ieee118",
+        "dc-ieee14-50",
     ]
     assert literature == [
         "ch2-position",

@@ -97,9 +97,13 @@ def assert_infos_equal(native, sync, where=""):
 
 
 def compare_with_sync(
-    env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEXT_STEP, exact=False, native=None
+    env_id, kwargs, B=5, steps=14, autoreset=AutoresetMode.NEXT_STEP, exact=True, native=None
 ):
-    """The native vector env against SyncVectorEnv of the single env (bit for bit if exact)."""
+    """The native vector env against SyncVectorEnv of the single env (bit for bit if exact).
+
+    Every numpy member equals its single env bit for bit (the single env is the engine's batch
+    of one and every per-member operation is independent of B), hence ``exact`` by default.
+    """
     native = native or gym.make_vec(
         env_id,
         num_envs=B,
@@ -288,7 +292,8 @@ def test_members_sharing_histories_equal_the_single_env_bit_for_bit(kwargs, auto
 
 def test_history_table_full_falls_back_to_the_closed_form():
     # a table that holds only the root and a few children: the engine leaves it at the step
-    # that would overflow it and goes on with the closed form on every member (to round-off)
+    # that would overflow it and goes on with the closed form on every member: the same
+    # kernel on component arrays, so still bit for bit
     native = gym.make_vec(
         "fdia_env/SparseAttack-v0", num_envs=16, vectorization_mode="vector_entry_point"
     )
@@ -330,10 +335,11 @@ def test_history_table_nodes_are_the_single_env_kernel():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_closed_form_2x2_update_equals_the_generic_information_update(seed):
-    # the one-division closed form of the 2-state kernel against (P_pred⁻¹ + J)⁻¹ by inverses,
-    # over random SPD covariances, PSD information sums (J = 0 included) and F with F[1,0] != 0
-    from fdia_env.envs.engine import info_update2_stacked
+def test_closed_form_2x2_update_is_the_float_kernel_and_the_generic_update(seed):
+    # the engine's 2-state update on (3, B) components: each member is the single env's float
+    # kernel bit for bit (whatever B), and equals (P_pred⁻¹ + J)⁻¹ by inverses to round-off,
+    # over random SPD covariances, PSD information sums (J = 0 included), F with F[1,0] != 0
+    from fdia_env.envs.engine import update2
     from fdia_env.kalman import information_update, predict_cov, small
 
     rng = np.random.default_rng(seed)
@@ -346,9 +352,14 @@ def test_closed_form_2x2_update_equals_the_generic_information_update(seed):
     Q = np.array([[0.3, 0.1], [0.1, 0.2]])
     comp = np.stack([P[:, 0, 0], P[:, 0, 1], P[:, 1, 1]])
     j = np.stack([J[:, 0, 0], J[:, 0, 1], J[:, 1, 1]])
-    C = small.predict_matrix2(small.to_mat2(F))
-    q = np.array(small.to_sym2(Q))
-    out = info_update2_stacked(comp, C, q, j.copy())
+    f, q = small.to_mat2(F), small.to_sym2(Q)
+    out = update2(comp, f, q, j)
+    for i in range(B):
+        p = tuple(float(v) for v in comp[:, i])
+        ji = tuple(float(v) for v in j[:, i])
+        assert tuple(out[:, i].tolist()) == small.info_update2(small.predict2(p, f, q), ji)
+        one = update2(comp[:, i : i + 1], f, q, j[:, i : i + 1])  # the batch of one
+        np.testing.assert_array_equal(one[:, 0], out[:, i])
     want = np.stack([information_update(predict_cov(P[i], F, Q), J[i][None]) for i in range(B)])
     got = np.stack([[[a, b], [b, d]] for a, b, d in out.T])
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)

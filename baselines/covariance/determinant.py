@@ -92,12 +92,7 @@ def det_optimal(
 ) -> CovarianceResult:
     """The bias covariance that maximises ``det(P[K|K] + W Σ W')`` under ``tr(Ω Σ) = a²``.
 
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`; the filter
-            is in steady state with every sensor.
-        power: a² > 0 (default: the scenario's).
-        weight: (nz, nz) power weighting Ω, symmetric positive definite (default
-            :func:`~fdia_env.systems.power_weight`).
+    Args: as :func:`~baselines.covariance.make_problem` (the system, a² and Ω).
 
     Returns:
         ``value = log det(P + W Σ W')`` (``result.det`` is the determinant). ``info`` holds the

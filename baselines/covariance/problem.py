@@ -107,7 +107,17 @@ def make_problem(
 ) -> CovarianceProblem:
     """Build a :class:`CovarianceProblem`.
 
-    ``power`` defaults to the preset's, Ω to :func:`~fdia_env.systems.power_weight`.
+    The solvers of :mod:`baselines.covariance` take these arguments first and pass them here.
+
+    Args:
+        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`; the filter
+            is in steady state with every sensor.
+        power: a² > 0 (default: the scenario's).
+        weight: (nz, nz) power weighting Ω, symmetric positive definite (default
+            :func:`~fdia_env.systems.power_weight`).
+
+    Returns:
+        The problem: the steady-state filter with every sensor, a² and Ω.
 
     Raises:
         ValueError: Naming the parameter: a power that is not a finite number > 0 (or missing

@@ -46,11 +46,7 @@ def dp(
 ) -> SparseResult:
     """DP over (budget spent, step) with the largest-information sensors attacked at each step.
 
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
-        budget: Sparsity budget c (default: the preset's).
-        horizon: Window length N (default: the preset's).
-        objective: ``"trace"`` or ``"logdet"``.
+    Args: as :func:`~baselines.sparse.make_problem` (the instance, c, N and Φ).
 
     Returns:
         The :class:`SparseResult`; ``evaluations`` counts the one-step candidates ``(s, r)``.

@@ -67,11 +67,7 @@ def sfs(
     ``c·M·N`` candidate evaluations at most. The pick order (``result.order``) is itself a
     strategy: its first ``b`` pairs are SFS's answer for every budget ``b <= c``.
 
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
-        budget: Sparsity budget c (default: the preset's).
-        horizon: Window length N (default: the preset's).
-        objective: ``"trace"`` or ``"logdet"``.
+    Args: as :func:`~baselines.sparse.make_problem` (the instance, c, N and Φ).
 
     Returns:
         The :class:`SparseResult`, with ``order`` the pairs in pick order.
@@ -96,11 +92,7 @@ def sbs(
     Each round restores the pair whose restoration lowers Φ least, until ``c`` pairs are left.
     About ``(M·N)²/2`` candidate evaluations.
 
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
-        budget: Sparsity budget c (default: the preset's).
-        horizon: Window length N (default: the preset's).
-        objective: ``"trace"`` or ``"logdet"``.
+    Args: as :func:`~baselines.sparse.make_problem` (the instance, c, N and Φ).
 
     Returns:
         The :class:`SparseResult` (``order`` is None).
@@ -131,11 +123,7 @@ def sfs_ss(
     the last position, otherwise move one position earlier. Stop once the first pick's position
     shows no improvement. Φ only increases, so the result is at least SFS's.
 
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
-        budget: Sparsity budget c (default: the preset's).
-        horizon: Window length N (default: the preset's).
-        objective: ``"trace"`` or ``"logdet"``.
+    Args: as :func:`~baselines.sparse.make_problem` (the instance, c, N and Φ).
 
     Returns:
         The :class:`SparseResult` (``order`` is None).

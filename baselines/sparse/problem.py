@@ -127,6 +127,17 @@ def make_problem(
 ) -> SparseProblem:
     """Build a :class:`SparseProblem`; ``budget``/``horizon`` default to the preset's values.
 
+    The solvers of :mod:`baselines.sparse` take these four arguments first and pass them here.
+
+    Args:
+        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
+        budget: Sparsity budget c (default: the preset's).
+        horizon: Window length N (default: the preset's).
+        objective: ``"trace"`` or ``"logdet"``.
+
+    Returns:
+        The problem: the system in steady state at K with every sensor, c, N and Φ.
+
     Raises:
         ValueError: Naming the parameter: a budget that is negative, not an integer or larger
             than ``M·N``; a horizon below 1; an unknown objective or scenario.

@@ -404,11 +404,7 @@ def upper_bound(
     the optimum) when every sensor's information is proportional to one matrix (scalar position
     sensors sharing H).
 
-    Args:
-        system_or_scenario: Preset name, :class:`Scenario` or :class:`LinearSystem`.
-        budget: Sparsity budget c (default: the preset's).
-        horizon: Window length N (default: the preset's).
-        objective: ``"trace"`` or ``"logdet"``.
+    Args: as :func:`~baselines.sparse.make_problem` (the instance, c, N and Φ).
 
     Returns:
         The bound on Φ (trace, or log-determinant).

@@ -90,6 +90,19 @@ def _raise(problem: SparseProblem, values: np.ndarray) -> np.ndarray:
         return np.where(np.isfinite(values), values + SAFETY * scale, values)
 
 
+def _information(
+    problem: SparseProblem, prev: np.ndarray, fixed_info: np.ndarray, free: np.ndarray
+) -> np.ndarray:
+    """(R, n, n) information at a step with every free sensor used, before any drop.
+
+    The prior predicted from the posterior ``prev``, plus ``fixed_info`` (the decided, used
+    sensors) and the information of the sensors still ``free``.
+    """
+    sys = problem.system
+    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
+    return info + np.einsum("rm,mij->rij", free.astype(float), sys.J)
+
+
 def last_step(
     problem: SparseProblem,
     factors: np.ndarray,
@@ -114,9 +127,7 @@ def last_step(
     sys = problem.system
     R_, M = free.shape
     nz = factors.shape[2]
-    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
-    info = info + np.einsum("rm,mij->rij", free.astype(float), sys.J)
-    P = spd_inv(info)
+    P = spd_inv(_information(problem, prev, fixed_info, free))
     U = factors.transpose(1, 0, 2).reshape(sys.n, M * nz)  # (n, M·nz)
     PU = P @ U  # (R, n, M·nz)
     G = sym(U.T @ PU)  # (R, M·nz, M·nz)
@@ -166,8 +177,7 @@ def two_steps(
     """
     sys = problem.system
     R_, M = free.shape
-    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
-    info = info + np.einsum("rm,mij->rij", free.astype(float), sys.J)
+    info = _information(problem, prev, fixed_info, free)
     out = np.full((R_, r + 1), -np.inf)
     for a in range(0, min(r, M) + 1):
         sets = combos(M, a)

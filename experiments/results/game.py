@@ -29,6 +29,7 @@ from agents.config import GameConfig, Hyperparameters, RunSettings
 from agents.plots import exploitability_curve
 from agents.selfplay import expected_rewards, game_algo, game_setup, run_selfplay
 from baselines.game import exploitability, payoff_matrix, solve_double_oracle, solve_zero_sum
+from experiments.markdown import table
 from experiments.results.common import write_rows
 from fdia_env._validation import check_int
 
@@ -200,54 +201,72 @@ def plot_row(row: dict[str, Any], path: Path) -> Path:
     return exploitability_curve(path, row["history"], row["lp_value"], title)
 
 
+EXACT_HEADER = (
+    "game", "strategies (def × att)", "LP value", "DO value", "abs(LP − DO) / v",
+    "DO iterations (support)", "DO wall", "LP wall",
+)  # fmt: skip
+PSRO_HEADER = (
+    "game", "PSRO iterations × steps per BR", "NashConv / v: first", "best", "last",
+    "first iteration ≤ 1 %", "meta-game vs exact entries", "PSRO wall",
+)  # fmt: skip
+ITERATION_HEADER = (
+    "iteration", "NashConv / v", "defender expl. / v", "attacker expl. / v",
+    "BR defender (gap / v)", "BR attacker (gap / v)", "wall",
+)  # fmt: skip
+
+
 def format_game(rows: list[dict[str, Any]]) -> str:
-    """The rows as two Markdown tables: the exact solvers, then PSRO per iteration."""
-    lines = [
-        "| game | strategies (def × att) | LP value | DO value | abs(LP − DO) / v "
-        "| DO iterations (support) | DO wall | LP wall |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['scenario']} | {r['strategies'][0]} × {r['strategies'][1]} "
-            f"| {r['lp_value']:.10g} | {r['do_value']:.10g} | {r['lp_do_relative_difference']:.1e} "
-            f"| {r['do_iterations']} ({r['do_support'][0]} + {r['do_support'][1]}) "
-            f"| {r['do_seconds']:.2f} s | {r['lp_seconds']:.2f} s |"
-        )
-    lines += [
-        "",
-        "| game | PSRO iterations × steps per BR | NashConv / v: first | best | last "
-        "| first iteration ≤ 1 % | meta-game vs exact entries | PSRO wall |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        first = r["first_iteration_at_target"]
-        lines.append(
-            f"| {r['scenario']} | {r['iterations']} × {r['steps_per_br']} ({r['algo']}"
-            f"{', expected rewards' if r.get('expected_rewards') else ''}) "
-            f"| {r['history'][0]['relative_nash_conv']:.2%} | {r['best_relative_nash_conv']:.2%} "
-            f"| {r['final_relative_nash_conv']:.2%} | {first if first else 'not reached'} "
-            f"| max abs error {r['meta_max_abs_error']:.1e} | {r['psro_seconds']:.0f} s |"
-        )
-    for r in rows:
-        lines += [
-            "",
-            f"PSRO on {r['scenario']}, per iteration (NashConv / v; learned actions and the gap "
-            "of each to an exact best response):",
-            "",
-            "| iteration | NashConv / v | defender expl. / v | attacker expl. / v "
-            "| BR defender (gap / v) | BR attacker (gap / v) | wall |",
-            "|---|---|---|---|---|---|---|",
+    """The rows as Markdown tables: the exact solvers, PSRO, then PSRO per iteration."""
+    exact = [
+        [
+            r["scenario"],
+            f"{r['strategies'][0]} × {r['strategies'][1]}",
+            f"{r['lp_value']:.10g}",
+            f"{r['do_value']:.10g}",
+            f"{r['lp_do_relative_difference']:.1e}",
+            f"{r['do_iterations']} ({r['do_support'][0]} + {r['do_support'][1]})",
+            f"{r['do_seconds']:.2f} s",
+            f"{r['lp_seconds']:.2f} s",
         ]
+        for r in rows
+    ]
+    psro = [
+        [
+            r["scenario"],
+            f"{r['iterations']} × {r['steps_per_br']} ({r['algo']}"
+            f"{', expected rewards' if r.get('expected_rewards') else ''})",
+            f"{r['history'][0]['relative_nash_conv']:.2%}",
+            f"{r['best_relative_nash_conv']:.2%}",
+            f"{r['final_relative_nash_conv']:.2%}",
+            r["first_iteration_at_target"] or "not reached",
+            f"max abs error {r['meta_max_abs_error']:.1e}",
+            f"{r['psro_seconds']:.0f} s",
+        ]
+        for r in rows
+    ]
+    parts = [
+        table(EXACT_HEADER, exact),
+        table(PSRO_HEADER, psro),
+    ]
+    for r in rows:
         v = abs(r["lp_value"])
-        for h in r["history"]:
-            lines.append(
-                f"| {h['iteration']} | {h['relative_nash_conv']:.2%} | {h['defender'] / v:.2%} "
-                f"| {h['attacker'] / v:.2%} | {h['br_defender']} ({h['br_gap_defender'] / v:.2%}) "
-                f"| {h['br_attacker']} ({h['br_gap_attacker'] / v:.2%}) "
-                f"| {h['train_seconds']:.0f} s |"
-            )
-    return "\n".join(lines)
+        per_iteration = [
+            [
+                h["iteration"],
+                f"{h['relative_nash_conv']:.2%}",
+                f"{h['defender'] / v:.2%}",
+                f"{h['attacker'] / v:.2%}",
+                f"{h['br_defender']} ({h['br_gap_defender'] / v:.2%})",
+                f"{h['br_attacker']} ({h['br_gap_attacker'] / v:.2%})",
+                f"{h['train_seconds']:.0f} s",
+            ]
+            for h in r["history"]
+        ]
+        parts.append(
+            f"PSRO on {r['scenario']}, per iteration (NashConv / v; learned actions and the gap "
+            "of each to an exact best response):\n\n" + table(ITERATION_HEADER, per_iteration)
+        )
+    return "\n\n".join(parts)
 
 
 def run(

@@ -51,12 +51,6 @@ def _ieee14_bus() -> LinearSystem:
     return grid_system("ieee14", sensors="bus")
 
 
-def _dc14_50() -> LinearSystem:
-    from baselines.sparse.testbeds import dc_grid14
-
-    return dc_grid14(50)
-
-
 def _preset(name: str) -> Callable[[], LinearSystem]:
     def build() -> LinearSystem:
         from fdia_env import scenarios
@@ -69,7 +63,11 @@ def _preset(name: str) -> Callable[[], LinearSystem]:
 # system key -> (description, sensors, builder)
 SYSTEMS: dict[str, tuple[str, str, Callable[[], LinearSystem]]] = {
     "ieee14-rtu": ("pandapower IEEE 14, one RTU per bus", "bus", _ieee14_bus),
-    "dc-ieee14-50": ("DC IEEE 14 testbed, 50 meters", "meter", _dc14_50),
+    "dc-ieee14-50": (
+        "dc-ieee14-50 preset (DC IEEE 14), 50 meters",
+        "meter",
+        _preset("dc-ieee14-50"),
+    ),
     "grid-ieee14": ("grid-ieee14 preset (pandapower), 34 meters", "meter", _preset("grid-ieee14")),
     "grid-ieee30": ("grid-ieee30 preset (pandapower), 71 meters", "meter", _preset("grid-ieee30")),
     "grid-ieee118": (

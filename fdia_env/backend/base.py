@@ -165,6 +165,15 @@ class Backend(ABC):
     def einsum(self, spec: str, *operands: Any) -> Any:
         """Einstein summation."""
 
+    def rows_times(self, a: Any, m: Any) -> Any:
+        """``a @ m`` for (B, w) rows ``a`` and a (w, n) matrix ``m``: (B, n).
+
+        numpy computes it one row at a time (a stacked product), so that a row's result does
+        not depend on B: one (B, w) @ (w, n) product is a BLAS gemm (gemv at B = 1) whose
+        rounding of a row depends on the number of rows. torch: one product.
+        """
+        return a @ m
+
     @abstractmethod
     def diagonal(self, a: Any) -> Any:
         """Diagonals of the last two axes, (..., n)."""

@@ -145,7 +145,7 @@ def batched_detection_step(
         P_prev = xp.broadcast_to(arrays.P0, (B, n, n))
         if draw is not None:
             x_hat = xp.broadcast_to(arrays.x0, (B, n))
-            x = x_hat + prior @ arrays.P0_root_T
+            x = x_hat + xp.rows_times(prior, arrays.P0_root_T)
     P_pred = predict_cov(P_prev, arrays.F, arrays.Q)  # the prior of this step's measurement
     Pxz = P_pred @ mT(H)
     Pzz0 = sym(H @ Pxz + R)
@@ -164,13 +164,15 @@ def batched_detection_step(
         info = {"p_false_alarm": p_fa, "p_detection": p_d, "threshold": thresholds}
         return DetectionStep(P_d0, cov, None, None, info)
     attacked, noise = draw(probability)
-    x_next = x @ mT(arrays.F) + arrays.Gu + noise[:, :n] @ arrays.Q_factor_T
-    z = x_next @ mT(H) + noise[:, n : n + nz] @ arrays.R_factor_T
+    rows = xp.rows_times  # member by member: each equals its batch of one (the single env)
+    x_next = rows(x, mT(arrays.F)) + arrays.Gu + rows(noise[:, :n], arrays.Q_factor_T)
+    z = rows(x_next, mT(H)) + rows(noise[:, n : n + nz], arrays.R_factor_T)
     bias = xp.einsum("bij,bj->bi", psd_sqrt(sigma), noise[:, n + nz :])
     z = z + bias * attacked[:, None]
-    x_pred = x_hat @ mT(arrays.F) + arrays.Gu
-    y = z - x_pred @ mT(H)
-    statistic = xp.einsum("bi,bij,bj->b", y, A, y)
+    x_pred = rows(x_hat, mT(arrays.F)) + arrays.Gu
+    y = z - rows(x_pred, mT(H))
+    # y' A y as two products (a three-operand einsum's order of a member depends on B)
+    statistic = xp.einsum("bi,bi->b", y, xp.einsum("bij,bj->bi", A, y))
     detected = statistic > thresholds
     info = {
         "attacked_now": attacked,

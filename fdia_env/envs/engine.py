@@ -4,13 +4,22 @@ Every face runs it: the native vector env with its batch, the single env
 (:class:`~fdia_env.envs.simulation.Simulation`) as a batch of one. The 2-state case without a
 leaking bias keeps each member as a node of a :class:`~fdia_env.envs.history.HistoryTable` on
 numpy in expected dynamics (members with the same attack history share one covariance, computed
-once by the single env's own kernel, so they equal the single env bit for bit) and otherwise runs
-a closed-form kernel on (3, B) component arrays (:func:`info_update2_stacked`; the single env's
-scalar kernel is :mod:`fdia_env.kalman.small`); everything else runs the generic batched
-functions of :mod:`fdia_env.kalman`. Large systems (n >= 40) that start at the
-steady state keep each expected covariance as the steady state plus a low-rank term in the
-sensor rows dropped so far (numpy backend; see :meth:`BatchedSimulation._init_low_rank`): an
-O(n² r) step instead of an n × n solve per member.
+once by the single env's own kernel) and otherwise runs that kernel on (3, B) component arrays
+(:func:`update2`: the single env's :mod:`fdia_env.kalman.small` applied elementwise);
+everything else runs the generic batched functions of :mod:`fdia_env.kalman`. Large systems
+(n >= 40) that start at the steady state keep each expected covariance as the steady state plus
+a low-rank term in the sensor rows dropped so far (numpy backend; see
+:meth:`BatchedSimulation._init_low_rank`): an O(n² r) step instead of an n × n solve per member.
+
+On numpy a member equals the single env (the batch of one) bit for bit: the 2-state kernels are
+one sequence of IEEE operations with numpy's logarithm, and every product a member goes through
+is computed member by member (``Backend.rows_times``, stacked products, two-operand einsums,
+batched LAPACK calls), since one (B, w) @ (w, n) BLAS product rounds a row differently at
+B = 1 (gemv) than at B > 1 (gemm). Two cases stay exact to round-off only: the low-rank form
+(each member padded to the batch's widest rank; the batch leaves the form when its widest
+member exceeds the cap, so a member's formula depends on the others) and information sums with
+an (M, n²) matrix above :data:`MEMBER_PRODUCT_SIZE` (one BLAS product for the batch: a gemv per
+member would read the matrix B times).
 
 The engine is written once against an array backend (:mod:`fdia_env.backend`): numpy arrays on
 the CPU, or torch tensors on one device (CPU or CUDA; float64 throughout). The only part that
@@ -43,11 +52,14 @@ from fdia_env.kalman import (
     predict_cov,
     psd_sqrt,
     small,
-    spd_inv,
     steady_state,
     sym,
 )
 from fdia_env.systems import LinearSystem
+
+# the largest (M, n²) sensor-information matrix summed member by member (grid-ieee14: 34 × 169,
+# grid-ieee30: 71 × 841); above it one BLAS product serves the batch
+MEMBER_PRODUCT_SIZE = 2**18
 
 
 def start_covariance(system: LinearSystem, spec: EpisodeSpec) -> np.ndarray:
@@ -115,8 +127,7 @@ class BatchedSimulation:
         else:
             jtab = self._jtab = None
         if self.fast:
-            self._C = c(small.predict_matrix2(small.to_mat2(system.F)))
-            self._q = c(np.array(small.to_sym2(system.Q)))
+            self._f2, self._q2 = small.to_mat2(system.F), small.to_sym2(system.Q)
             self._start2 = small.to_sym2(P_start)
             self._start_comp = c(np.array(self._start2)[:, None])
             if jtab is not None:
@@ -310,6 +321,10 @@ class BatchedSimulation:
         CWt = np.linalg.solve(Cinv_new, W_new.transpose(0, 2, 1))
         return sym(self._lr_Ps + W_new @ CWt)
 
+    def _update2(self, comp: Any, j: Any) -> Any:
+        """:func:`update2` with this system's F and Q."""
+        return update2(comp, self._f2, self._q2, j, self.xp)
+
     def _set_P(self, P: Any) -> None:
         if self.fast:
             self._comp = self.xp.stack([P[:, 0, 0], 0.5 * (P[:, 0, 1] + P[:, 1, 0]), P[:, 1, 1]])
@@ -377,7 +392,7 @@ class BatchedSimulation:
         """Draw the members' true states around the estimate, then run the warm-up steps."""
         xp, sys = self.xp, self.system
         x_hat = xp.broadcast_to(self._x0, (self.B, sys.n))
-        x = x_hat + self._normal(sys.n, where) @ self._start_root_T
+        x = x_hat + xp.rows_times(self._normal(sys.n, where), self._start_root_T)
         for W_T in self._warm_gains_T:  # warmup = int: clean steps with every sensor
             noise = self._normal(sys.n + sys.nz, where)
             x, x_hat, _ = self._propagate(x, x_hat, W_T, noise, None)
@@ -452,10 +467,8 @@ class BatchedSimulation:
             and not self.sampled
             and (self._clean or self.all_consistent())
         ):
-            # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components, one closed form
-            self._comp = info_update2_stacked(
-                self._comp, self._C, self._q, self._used_components(used)
-            )
+            # P[k|k] = ((F P F' + Q)⁻¹ + Σ_used J_i)⁻¹ on (3, B) components
+            self._comp = self._update2(self._comp, self._used_components(used))
         else:
             self._generic_step(used, leak, present, active)
         self.k += 1
@@ -575,12 +588,21 @@ class BatchedSimulation:
         return xp.stack([J[:, 0, 0], J[:, 0, 1], J[:, 1, 1]])
 
     def _used_information(self, used: Any) -> Any:
-        """(B, n, n) ``Σ_{i used} H_i' R_i⁻¹ H_i``."""
+        """(B, n, n) ``Σ_{i used} H_i' R_i⁻¹ H_i``.
+
+        Looked up in the table of every subset (M <= 16), else one (M,) × (M, n²) product per
+        member (a member's sum does not depend on B) while the (M, n²) matrix is small, else
+        one (B, M) × (M, n²) product for the batch (BLAS: a member's rounding depends on B).
+        """
         xp = self.xp
         if self._jtab is not None and used.ndim == 1:
             return xp.take(self._jtab, used, axis=0)
         mask = xp.astype(self._mask_of(used), xp.float64)
-        return (mask @ self._J_flat).reshape(-1, self.system.n, self.system.n)
+        if self._J_flat.shape[0] * self._J_flat.shape[1] <= MEMBER_PRODUCT_SIZE:
+            flat = xp.rows_times(mask, self._J_flat)
+        else:
+            flat = mask @ self._J_flat
+        return flat.reshape(-1, self.system.n, self.system.n)
 
     def _restart_steady(self, used: Any, active: Any) -> None:
         """P = M = the steady state of each member's subset (one cached DARE per subset)."""
@@ -603,23 +625,23 @@ class BatchedSimulation:
             self.x = x if active is None else xp.where(active[:, None], x, self.x)
 
     def _generic_step(self, used: Any, leak: Any, present: Any, active: Any) -> None:
-        xp, sys = self.xp, self.system
+        xp = self.xp
         mask = self._mask_of(used)
         P_prev, M_prev = self.P, self.M
         # P[k|k−1] = F P F' + Q; a random walk (F = I, the grid presets) skips the products
         P_new = self._low_rank_step(mask) if self._lr_on else None
         P_pred = None  # read by the full update and the sampled step's NIS only
-        if P_new is None or self.sampled:
+        if (P_new is None and not self.fast) or self.sampled:
             P_pred = P_prev + self._Q if self._F_identity else predict_cov(P_prev, self._F, self._Q)
-        if P_new is None:
-            # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹, the sum as one (B, M) × (M, n²) product,
-            # computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]: one LU solve instead of two inverses
-            # (I + P J is invertible: its eigenvalues are those of I + P^½ J P^½, all >= 1)
-            used_info = (xp.astype(mask, xp.float64) @ self._J_flat).reshape(-1, sys.n, sys.n)
-            if sys.n > 2:
-                P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
-            else:
-                P_new = spd_inv(spd_inv(P_pred) + used_info)
+        if P_new is None and self.fast:  # 2 states: the single env's kernel, on components
+            self._comp = self._update2(self._comp, self._used_components(used))
+            P_new = self.P
+        elif P_new is None:
+            # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹ computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]:
+            # one LU solve instead of two inverses (I + P J is invertible: its eigenvalues are
+            # those of I + P^½ J P^½, all >= 1)
+            used_info = self._used_information(used)
+            P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
         if present is None:
             leaking = None if self.all_consistent() else ~self.consistent
         else:
@@ -654,14 +676,15 @@ class BatchedSimulation:
             ``(x_next, x_hat_next, innovation)``.
         """
         n, nz = self.system.n, self.system.nz
-        x_next = x @ self._F.T + self._Gu + noise[:, :n] @ self._Q_factor_T
-        z = x_next @ self._H.T + noise[:, n : n + nz] @ self._R_factor_T
+        rows = self.xp.rows_times  # member by member: each equals its batch of one
+        x_next = rows(x, self._F.T) + self._Gu + rows(noise[:, :n], self._Q_factor_T)
+        z = rows(x_next, self._H.T) + rows(noise[:, n : n + nz], self._R_factor_T)
         if bias is not None:
             z = z + bias
-        x_pred = x_hat @ self._F.T + self._Gu
-        innovation = z - x_pred @ self._H.T
+        x_pred = rows(x_hat, self._F.T) + self._Gu
+        innovation = z - rows(x_pred, self._H.T)
         if W.ndim == 2:
-            return x_next, x_pred + innovation @ W, innovation
+            return x_next, x_pred + rows(innovation, W), innovation
         return x_next, x_pred + self.xp.einsum("bij,bj->bi", W, innovation), innovation
 
     def _sampled_step(self, mask, P_pred, W, leak, present, active) -> None:
@@ -695,14 +718,21 @@ class BatchedSimulation:
                 return self.value_override
             e = self.x - self.x_hat
             return xp.einsum("bi,bi->b", e, e)
-        if self._c is not None and (self._clean or self.all_consistent()):
-            a, b, d = self._c
+        if self.fast:  # small.trace2 / small.logdet2 of M's components (the single env's)
+            a, b, d = self._components_of_M()
             if self.spec.objective == "trace":
                 return a + d
             det = a * d - b * b
             with np.errstate(divide="ignore", invalid="ignore"):
                 return xp.where(det > 0, xp.log(det), -np.inf)
         return objective(self.M, self.spec.objective)
+
+    def _components_of_M(self) -> tuple[Any, Any, Any]:
+        """(a, b, d) of each member's M, (B,) each (2-state models)."""
+        if self._c is not None and (self._clean or self.all_consistent()):
+            return self._c[0], self._c[1], self._c[2]
+        M = self.M
+        return M[:, 0, 0], M[:, 0, 1], M[:, 1, 1]
 
     def features(self, out: Any) -> int:
         """Write the common features into the rows ``out[:f]`` of a (d, B) buffer.
@@ -723,17 +753,12 @@ class BatchedSimulation:
             else:
                 rows[...] = self._history.feats64.take(self._node, axis=1)
             col = 4
-        elif self._c is not None and (self._clean or self.all_consistent()):
-            a, b, d = self._c
+        elif self.fast:  # small.shape_features2 of M's components, in float64, then stored
+            a, b, d = self._components_of_M()
             a0, _, d0 = self._start2
-            # the observation is float32: numpy computes its transcendental parts so
-            xp.log_into(a * (1.0 / a0), out[1])
-            xp.log_into(d * (1.0 / d0), out[2])
-            xp.clip_(out[1:3], 30.0)
-            # the correlation in float64, then stored (a float32 ``out=`` of a float64 division
-            # runs numpy's buffered casting loop, several times slower)
-            out[3] = b / xp.sqrt(a * d)
-            xp.clip_(out[3], 1.0)
+            out[1] = xp.clip(xp.log(a / a0), -30.0, 30.0)
+            out[2] = xp.clip(xp.log(d / d0), -30.0, 30.0)
+            out[3] = xp.clip(b / xp.sqrt(a * d), -1.0, 1.0)
             col = 4
         else:
             M = self.M
@@ -753,37 +778,23 @@ class BatchedSimulation:
         return col
 
 
-def info_update2_stacked(comp: Any, C: Any, q: Any, j: Any) -> Any:
-    """``P[k|k] = ((F P F' + Q)⁻¹ + J)⁻¹`` for (3, B) components, in one closed form.
+def update2(comp: Any, f: small.Mat2, q: small.Sym2, j: Any, xp: Backend = NUMPY) -> Any:
+    """``P[k|k] = ((F P F' + Q)⁻¹ + J)⁻¹`` for (3, B) components, by the single env's kernel.
 
-    With ``A = F P F' + Q = [[a, b], [b, d]]``, ``δ = det A`` and
-    ``N = adj(A) + δ J = [[d + δ j11, δ j12 − b], [δ j12 − b, a + δ j22]]``,
-    ``(A⁻¹ + J)⁻¹ = δ adj(N) / det N``: one division per member instead of the two of
-    inverting twice (the same matrix; checked against the generic step by the tests).
+    :func:`~fdia_env.kalman.small.predict2` and :func:`~fdia_env.kalman.small.info_update2`
+    applied elementwise to the component arrays: the same IEEE operations in the same order as
+    on one member's Python floats, so each member equals the single env's float kernel bit for
+    bit, whatever B (the history table's nodes are computed the same way).
 
     Args:
         comp: (3, B) components of P[k−1|k−1] (numpy or torch).
-        C: (3, 3) prediction matrix of F (:func:`~fdia_env.kalman.small.predict_matrix2`).
-        q: (3,) components of Q.
-        j: (3, B) components of each member's ``Σ_used J_i``; overwritten.
+        f: (f11, f12, f21, f22) of F.
+        q: (a, b, d) components of Q.
+        j: (3, B) components of each member's ``Σ_used J_i``.
+        xp: The backend of the arrays.
 
     Returns:
         (3, B) components of P[k|k] (a new array).
     """
-    p = C @ comp
-    p += q[:, None]
-    a, b, d = p
-    delta = a * d
-    delta -= b * b  # det A
-    j *= delta
-    j[0] += d  # N11
-    j[1] -= b  # N12
-    j[2] += a  # N22
-    det = j[0] * j[2]
-    det -= j[1] * j[1]
-    delta /= det  # δ / det N
-    p[0] = j[2] * delta  # a, b, d are read no more: p holds the result
-    p[1] = j[1] * delta
-    p[1] *= -1.0
-    p[2] = j[0] * delta
-    return p
+    pred = small.predict2((comp[0], comp[1], comp[2]), f, q)
+    return xp.stack(small.info_update2(pred, (j[0], j[1], j[2])))

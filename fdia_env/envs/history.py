@@ -11,14 +11,14 @@ few gathers of B indices instead of the closed-form update and the features of B
 A node is computed with the single environment's own kernel, operation for operation
 (:func:`fdia_env.kalman.small.predict2`, :func:`~fdia_env.kalman.small.info_update2`,
 :func:`~fdia_env.kalman.small.shape_features2` and the objective, applied elementwise to the
-new nodes, the logarithms by :func:`math.log`): the native vector env's members therefore equal
-the single env bit for bit while the table holds them.
+new nodes, with numpy's logarithm as the single env's): the native vector env's members
+therefore equal the single env bit for bit while the table holds them.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -94,11 +94,9 @@ class HistoryTable:
         ids = np.arange(self.size, self.size + U)
         self.comps[:, ids] = comps
         a, b, d = comps
-        # small.shape_features2 and the objective, elementwise (its logs by math.log)
-        log = _logs(a / self._scale[0])
-        lv1 = np.minimum(np.maximum(log, -30.0), 30.0)
-        log = _logs(d / self._scale[2])
-        lv2 = np.minimum(np.maximum(log, -30.0), 30.0)
+        # small.shape_features2 and the objective, elementwise (the same numpy logarithm)
+        lv1 = np.minimum(np.maximum(np.log(a / self._scale[0]), -30.0), 30.0)
+        lv2 = np.minimum(np.maximum(np.log(d / self._scale[2]), -30.0), 30.0)
         corr = np.minimum(np.maximum(b / np.sqrt(a * d), -1.0), 1.0)
         self.feats64[:, ids] = np.stack([lv1, lv2, corr])
         self.feats[:, ids] = self.feats64[:, ids]
@@ -106,7 +104,8 @@ class HistoryTable:
             self.phi[ids] = a + d
         else:
             det = a * d - b * b
-            self.phi[ids] = [math.log(x) if x > 0 else -math.inf for x in det.tolist()]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                self.phi[ids] = np.where(det > 0, np.log(det), -math.inf)
         self.size += U
         return ids
 
@@ -133,12 +132,6 @@ class HistoryTable:
             self._child[new] = self._add(comps)
             child = self._child.take(key)
         return child
-
-
-def _logs(x: np.ndarray) -> np.ndarray:
-    """``math.log`` of each entry (the single env's logarithm, bit for bit)."""
-    log: Callable[[float], float] = math.log
-    return np.array([log(v) for v in x.tolist()], dtype=np.float64)
 
 
 def _kernel(p: np.ndarray, f: small.Mat2, q: small.Sym2, j: np.ndarray) -> np.ndarray:

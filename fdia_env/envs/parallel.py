@@ -11,7 +11,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_choice, check_int
+from fdia_env._validation import check_agent, check_choice, check_int
 from fdia_env.attacks.base import AttackModel
 from fdia_env.defenses.base import DefenseModel
 from fdia_env.envs.actions import check_step_actions
@@ -23,6 +23,28 @@ from fdia_env.systems import LinearSystem
 
 RENDER_MODES = ("human", "ansi", "rgb_array")
 RENDER_FPS = 4
+
+
+def end_step(
+    env: Any, obs: dict, rewards: dict, infos: dict, done: bool, truncated: bool
+) -> tuple[dict, dict, dict, dict, dict]:
+    """The PettingZoo end of a step of ``env`` (this module's env or a stealth env).
+
+    The terminations and truncations of the live agents; when the episode ends, ``env`` is
+    closed (no live agents; the next :meth:`step` raises); ``render_mode="human"`` renders.
+
+    Returns:
+        ``(observations, rewards, terminations, truncations, infos)``.
+    """
+    agents = env.agents
+    terminations = dict.fromkeys(agents, done)
+    truncations = dict.fromkeys(agents, truncated)
+    if done or truncated:
+        env._done = True
+        env.agents = []
+    if env.render_mode == "human":
+        env.render()
+    return obs, rewards, terminations, truncations, infos
 
 
 def attacker_reward(mode: str, phi: Any, phi_prev: Any, done: Any, xp: Any = None) -> Any:
@@ -148,16 +170,11 @@ class FdiaParallelEnv(ParallelEnv):
 
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
-        return self._observation_spaces[self._check_agent(agent)]
+        return self._observation_spaces[check_agent(agent, self.possible_agents)]
 
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object on every call)."""
-        return self._action_spaces[self._check_agent(agent)]
-
-    def _check_agent(self, agent: str) -> str:
-        if agent not in self._action_spaces:
-            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
-        return agent
+        return self._action_spaces[check_agent(agent, self.possible_agents)]
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         """Start an episode at the window start; ``seed`` makes every draw reproducible.
@@ -194,7 +211,23 @@ class FdiaParallelEnv(ParallelEnv):
         check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
-        effect = self.attack.apply_checked(actions["attacker"])  # checked above
+        reward, done, truncated = self._advance(actions)
+        agents = self.agents
+        obs = {a: self._observe(a) for a in agents}
+        rewards = {"attacker": reward, "defender": -reward} if len(agents) == 2 else {}
+        if len(agents) == 1:
+            rewards[agents[0]] = reward if agents[0] == "attacker" else -reward
+        return end_step(self, obs, rewards, self._infos(agents), done, truncated)
+
+    def _advance(self, actions: dict[str, Any]) -> tuple[float, bool, bool]:
+        """The window step of :meth:`step` for actions already checked, without its outputs.
+
+        Returns the attacker's reward, termination and truncation; the caller ends the step
+        with :func:`end_step`. The observations and infos are those of :meth:`_observe` and
+        :meth:`_infos` afterwards; a wrapper that plays several window steps in one decision
+        (the sequential format's plan) reads them once, after the last.
+        """
+        effect = self.attack.apply_checked(actions["attacker"])
         filter_input = self.defense.apply_checked(actions.get("defender"), effect)
         self._last_effect = effect
         if not self.defense.passive:
@@ -204,21 +237,7 @@ class FdiaParallelEnv(ParallelEnv):
         phi = self.sim.step(filter_input, self.np_random)
         done = self.sim.k >= self.spec.horizon
         truncated = not done and self.max_cycles is not None and self.sim.k >= self.max_cycles
-        reward = attacker_reward(self.spec.reward_mode, phi, phi_prev, done)
-        agents = self.agents
-        obs = {a: self._observe(a) for a in agents}
-        rewards = {"attacker": reward, "defender": -reward} if len(agents) == 2 else {}
-        if len(agents) == 1:
-            rewards[agents[0]] = reward if agents[0] == "attacker" else -reward
-        terminations = dict.fromkeys(agents, done)
-        truncations = dict.fromkeys(agents, truncated)
-        infos = self._infos(agents)
-        if done or truncated:
-            self._done = True
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terminations, truncations, infos
+        return attacker_reward(self.spec.reward_mode, phi, phi_prev, done), done, truncated
 
     def _info(self) -> dict[str, Any]:
         """The step's info: the same keys at reset and at every step (see the class doc)."""

@@ -57,7 +57,7 @@ from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.attacks.subsets import SubsetChoice, game_sizes
 from fdia_env.envs.actions import check_action
-from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
+from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args, end_step
 from fdia_env.envs.policy import PolicyBase, observation_array
 from fdia_env.episode import EpisodeSpec
 from fdia_env.scenarios import Scenario
@@ -286,13 +286,23 @@ class SequentialSetEnv(SequentialBase):
         self._played = 0  # window steps played ("plan": > 0 once the plan is committed)
         self._box: np.ndarray | None = None
         self._info: dict[str, Any] = {}
+        # the decision's state, kept up to date by _refresh (each decision reads it several
+        # times: the step's check, the observation, MaskablePPO's action_masks)
+        self._pending = 0  # pairs in the set being built ("plan": in the steps not yet played)
+        self._remaining = 0  # the wrapped env's budget left
+        self._mask = np.zeros(slots + 1, dtype=np.int8)
+        self._obs = np.zeros(self._obs_spaces["attacker"]["observation"].shape, np.float32)
+        self._n_box = int(inner.observation_space("attacker").shape[0])
 
     def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
         """The first decision is the first pick of window step K+1 (``"plan"``: of the plan)."""
         self._chosen[:] = 0
         self._played = 0
+        self._pending = 0
         self._box = obs["attacker"]
         self._info = infos["attacker"]
+        self._obs[self._n_box : -1] = 0.0
+        self._played_out()
         return {"attacker": self._observe()}, {"attacker": dict(self._info)}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -307,19 +317,22 @@ class SequentialSetEnv(SequentialBase):
         action = actions["attacker"]
         check_action(self._action_space, action, "attacker")
         j = int(action)
-        mask = self.action_mask()
-        if not mask[j]:
+        if not self._mask[j]:
             if self.illegal_action == "error":
-                raise ValueError(self._illegal_message(j, mask))
+                raise ValueError(self._illegal_message(j, self.action_mask()))
             j = STOP
         reward, term, trunc = 0.0, False, False
         if j != STOP:
             self._flat[j - 1] = 1
+            self._obs[self._n_box + j - 1] = 1.0
+            self._pending += 1
+            self._refresh()
         if j == STOP or (self.skip_forced and self._forced()):
             reward, term, trunc = self._commit()
             while self.skip_forced and not (term or trunc) and self._forced():
                 r, term, trunc = self._commit()
                 reward += r
+            self._played_out()
         trunc = trunc or self._limit(term)
         obs = {"attacker": self._observe()}
         infos = {"attacker": dict(self._info)}
@@ -354,19 +367,52 @@ class SequentialSetEnv(SequentialBase):
         return self._chosen[self._played] if self.plan_first else self._chosen
 
     def _commit(self) -> tuple[float, bool, bool]:
-        """Take the window step with its set; (``"time"``) start an empty set."""
-        obs, rewards, terms, truncs, infos = self.inner.step({"attacker": self._current().copy()})
+        """Take the window step with its set; (``"time"``) start an empty set.
+
+        The wrapped env's observation and infos are read by :meth:`_played_out`, once the
+        decision's last window step is played (with ``render_mode="human"`` each step is the
+        wrapped env's full ``step``, which draws it).
+        """
+        current = self._current()
+        if self.inner.render_mode == "human":
+            _, rewards, terms, truncs, _ = self.inner.step({"attacker": current.copy()})
+            reward, term, trunc = rewards["attacker"], terms["attacker"], truncs["attacker"]
+        else:  # the set is in the action space and within the budget left: checked here
+            reward, term, trunc = self.inner._advance({"attacker": current.copy()})
+            if term or trunc:  # the wrapped env's episode ends (its outputs: _played_out)
+                end_step(self.inner, {}, {}, {}, term, trunc)
+        self._pending -= int(current.sum())
+        self._remaining = int(self.attack.remaining)
         if not self.plan_first:
             self._chosen[:] = 0
         self._played += 1
-        self._box = obs["attacker"]
-        self._info = infos["attacker"]
-        return float(rewards["attacker"]), bool(terms["attacker"]), bool(truncs["attacker"])
+        return float(reward), bool(term), bool(trunc)
+
+    def _played_out(self) -> None:
+        """Read the wrapped env's observation, infos and budget after its window steps."""
+        inner = self.inner
+        self._box = inner._observe("attacker")
+        self._info = inner._infos(["attacker"])["attacker"]
+        self._remaining = int(self.attack.remaining)  # (after a reset)
+        self._obs[: self._n_box] = self._box
+        if not self.plan_first:
+            self._obs[self._n_box : -1] = 0.0
+        self._refresh()
+
+    def _refresh(self) -> None:
+        """The mask and the observation's budget entry of the decision now."""
+        left = self._left()
+        self._obs[-1] = max(left, 0) / self.attack.budget
+        mask = self._mask
+        if left > 0 and not (self.plan_first and self._played):
+            np.equal(self._flat, 0, out=mask[1:])
+        else:
+            mask[1:] = 0
+        mask[STOP] = 1
 
     def _left(self) -> int:
         """Budget left after the set being built (``"plan"``: after its steps not yet played)."""
-        pending = self._chosen[self._played :] if self.plan_first else self._chosen
-        return int(self.attack.remaining) - int(pending.sum())
+        return self._remaining - self._pending
 
     def _forced(self) -> bool:
         """True when stop is the only legal action."""
@@ -376,12 +422,7 @@ class SequentialSetEnv(SequentialBase):
 
     def action_mask(self) -> np.ndarray:
         """(A,) int8: 1 = legal now (stop always; a new sensor or pair within the budget)."""
-        mask = np.empty(self._action_space.n, dtype=np.int8)
-        mask[STOP] = 1
-        mask[1:] = (
-            (self._flat == 0) & (self._left() > 0) & (self._played == 0 or not self.plan_first)
-        )
-        return mask
+        return self._mask.copy()
 
     def action_masks(self, agent: str = "attacker") -> np.ndarray:
         """Legal actions now (sb3-contrib's MaskablePPO convention)."""
@@ -389,11 +430,7 @@ class SequentialSetEnv(SequentialBase):
         return self.action_mask()
 
     def _observe(self) -> dict[str, np.ndarray]:
-        budget = self.attack.budget
-        box = np.concatenate(
-            [self._box, self._flat.astype(np.float32), [max(self._left(), 0) / budget]]
-        ).astype(np.float32)
-        return {"observation": box, "action_mask": self.action_mask()}
+        return {"observation": self._obs.copy(), "action_mask": self._mask.copy()}
 
 
 def plan_actions(env: SequentialSetEnv, plan: list[list[int]]) -> list[int]:

@@ -8,9 +8,10 @@ environments put a PettingZoo / Gymnasium face on it.
 
 One kernel runs outside the batch arrays: for the 2-state model in expected dynamics while no
 bias has reached the filter, the closed-form update of :mod:`fdia_env.kalman.small` on Python
-floats (the engine's own kernel, :func:`~fdia_env.envs.engine.info_update2_stacked`, on one
-member's arrays costs ~15x more per step); it hands its state to the engine at the first step it
-does not cover and is checked against the engine's step by the tests.
+floats (one member's arrays cost ~15x more per step). The engine's 2-state update
+(:func:`~fdia_env.envs.engine.update2`) is the same sequence of IEEE operations on component
+arrays, with the same (numpy's) logarithm, so the kernel equals the engine bit for bit; it hands
+its state to the engine at the first step it does not cover (tests/properties checks both).
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ from fdia_env.kalman import small
 from fdia_env.systems import LinearSystem
 
 __all__ = ["Simulation", "start_covariance"]
+
+# the most covariances whose features and log det the float kernel keeps (a few MB)
+MEMO_SIZE = 2**15
 
 
 class Simulation:
@@ -49,6 +53,7 @@ class Simulation:
             self._q2 = small.to_sym2(system.Q)
             self._start2 = small.to_sym2(self.P_start)
             self._j2: dict[int, small.Sym2] = {}
+            self._memo: dict[small.Sym2, tuple[list[float], float]] = {}
         n = system.n
         rows = 1 + n + n * (n - 1) // 2 + (1 if self.sampled else 0)
         self._rows = np.empty((rows, 1))  # float64: the features before the observation's cast
@@ -188,8 +193,22 @@ class Simulation:
         if self._p2 is not None:
             if self.spec.objective == "trace":
                 return small.trace2(self._p2)
-            return small.logdet2(self._p2)
+            return self._shape(self._p2)[1]
         return float(self.engine.phi[0])
+
+    def _shape(self, p2: small.Sym2) -> tuple[list[float], float]:
+        """(:func:`~fdia_env.kalman.small.shape_features2`, log det) of ``p2``, memoised.
+
+        Expected dynamics revisit the same covariances (a covariance is a function of the
+        attack history), and numpy's logarithm on a float costs about 0.2 µs a call, so each
+        covariance's logarithms are taken once (up to ``MEMO_SIZE`` covariances).
+        """
+        out = self._memo.get(p2)
+        if out is None:
+            out = (small.shape_features2(p2, self._start2), small.logdet2(p2))
+            if len(self._memo) < MEMO_SIZE:
+                self._memo[p2] = out
+        return out
 
     def features(self) -> list[float]:
         """Common observation features, order one (the same list until the state changes).
@@ -201,7 +220,7 @@ class Simulation:
             return self._features
         steps_left = (self.spec.horizon - self.k) / self.spec.horizon
         if self._p2 is not None:
-            out = [steps_left, *small.shape_features2(self._p2, self._start2)]
+            out = [steps_left, *self._shape(self._p2)[0]]
         else:
             self.engine.k[0] = self.k
             count = self.engine.features(self._rows)

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from fdia_env._validation import check_agent
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args
 from fdia_env.envs.policy import Policy
@@ -104,12 +105,6 @@ class SingleAgentEnv(gym.Env):
     def render(self) -> str | np.ndarray | None:
         """Delegate to the two-player env."""
         return self.parallel.render()
-
-
-def check_agent(agent: Any, possible_agents: list[str]) -> None:
-    """Raise ``ValueError`` unless ``agent`` is one of the env's players (any type accepted)."""
-    if not (isinstance(agent, str) and agent in possible_agents):
-        raise ValueError(f"agent must be one of {possible_agents}, got {agent!r}")
 
 
 def check_opponent(opponent: Any, space: spaces.Space) -> None:

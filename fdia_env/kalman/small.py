@@ -68,16 +68,21 @@ def trace2(p: Sym2) -> float:
 
 
 def logdet2(p: Sym2) -> float:
-    """``log det P`` (−inf if P is singular)."""
+    """``log det P`` (−inf if P is singular).
+
+    The logarithms here are numpy's (not :func:`math.log`, which differs in the last bit for a
+    few arguments): the batched engine takes them of whole arrays, and a member must equal the
+    single env's float kernel bit for bit.
+    """
     det = p[0] * p[2] - p[1] * p[1]
-    return math.log(det) if det > 0 else -math.inf
+    return float(np.log(det)) if det > 0 else -math.inf
 
 
 def shape_features2(p: Sym2, scale: Sym2) -> list[float]:
     """``[log(a / a0), log(d / d0), b / sqrt(a d)]``, the first two clipped to [−30, 30]."""
     a, b, d = p
-    lv1 = min(max(math.log(a / scale[0]), -30.0), 30.0)
-    lv2 = min(max(math.log(d / scale[2]), -30.0), 30.0)
+    lv1 = min(max(float(np.log(a / scale[0])), -30.0), 30.0)
+    lv2 = min(max(float(np.log(d / scale[2])), -30.0), 30.0)
     return [lv1, lv2, min(max(b / math.sqrt(a * d), -1.0), 1.0)]
 
 

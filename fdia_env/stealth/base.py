@@ -23,8 +23,8 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from fdia_env._validation import check_choice
-from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args
+from fdia_env._validation import check_agent, check_choice, check_int
+from fdia_env.envs.parallel import RENDER_FPS, RENDER_MODES, check_reset_args, end_step
 
 
 class NoResetOptions:
@@ -97,6 +97,18 @@ class StealthParallelEnv(ParallelEnv):
         self.alphas = check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)
         self.false_alarm_cost = check_cost("false_alarm_cost", false_alarm_cost)
 
+    def _init_episode(self, horizon: Any, max_cycles: Any, default_horizon: int) -> None:
+        """Check and set ``max_cycles`` and ``horizon`` (start of ``__init__``).
+
+        ``horizon`` None: PettingZoo's ``max_cycles`` when given, else ``default_horizon``.
+        """
+        self.max_cycles = (
+            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
+        )
+        if horizon is None:
+            horizon = default_horizon if self.max_cycles is None else self.max_cycles
+        self.horizon = check_int("horizon", horizon, minimum=1)
+
     def _init_agents(
         self,
         defender: str | None,
@@ -118,21 +130,16 @@ class StealthParallelEnv(ParallelEnv):
     # --- spaces -------------------------------------------------------------------------
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent`` (the same object on every call)."""
-        self._check_agent(agent)
+        check_agent(agent, self.possible_agents)
         return self._observation_space
 
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent`` (the same object on every call)."""
-        return self._action_spaces[self._check_agent(agent)]
-
-    def _check_agent(self, agent: str) -> str:
-        if agent not in self.possible_agents:
-            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
-        return agent
+        return self._action_spaces[check_agent(agent, self.possible_agents)]
 
     def action_masks(self, agent: str = "attacker") -> None:
         """No action mask (every action is legal)."""
-        self._check_agent(agent)
+        check_agent(agent, self.possible_agents)
         return None
 
     # --- episode ------------------------------------------------------------------------
@@ -177,14 +184,7 @@ class StealthParallelEnv(ParallelEnv):
         infos = self._per_agent(self._info())
         rewards = {"attacker": reward, "defender": -reward - self.false_alarm_cost * alpha}
         rewards = {a: rewards[a] for a in agents}
-        terms = dict.fromkeys(agents, done)
-        truncs = dict.fromkeys(agents, truncated)
-        if done or truncated:
-            self._done = True
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terms, truncs, infos
+        return end_step(self, obs, rewards, infos, done, truncated)
 
     def state(self) -> np.ndarray:
         """Global state: the attacker's observation (the defender sees the same)."""

@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env._validation import check_choice, check_int, check_positive
+from fdia_env._validation import check_choice, check_int, check_positions, check_positive
 from fdia_env.envs.actions import check_step_actions
 from fdia_env.scenarios import resolve
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
@@ -65,12 +65,7 @@ class StealthDynamicEnv(StealthParallelEnv):
         if self.sensors.size == 0:
             raise ValueError("sensors must name at least one sensor to attack, got none")
         self.protected = _sensor_positions(system, protected, "protected", default_all=False)
-        self.max_cycles = (
-            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
-        )
-        if horizon is None:
-            horizon = DEFAULT_HORIZON if self.max_cycles is None else self.max_cycles
-        self.horizon = check_int("horizon", horizon, minimum=1)
+        self._init_episode(horizon, max_cycles, default_horizon=DEFAULT_HORIZON)
         window = check_int("window", window, minimum=1, maximum=1000)
         self.action_kind = check_choice("action", action, ACTIONS)
         self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
@@ -246,26 +241,5 @@ def _sensor_positions(system: Any, sensors: Any, param: str, *, default_all: boo
     M = system.M
     if sensors is None:
         return np.arange(M) if default_all else np.zeros(0, dtype=np.int64)
-    if isinstance(sensors, (str, int, np.integer)):
-        sensors = [sensors]
     names = {s.name: i for i, s in enumerate(system.sensors) if s.name}
-    try:
-        items = list(sensors)
-    except TypeError as exc:
-        raise ValueError(f"{param} must be a collection of sensors, got {sensors!r}") from exc
-    out = []
-    for item in items:
-        if isinstance(item, str) and item in names:
-            out.append(names[item])
-        elif (
-            isinstance(item, (int, np.integer))
-            and not isinstance(item, bool)
-            and 0 <= int(item) < M
-        ):
-            out.append(int(item))
-        else:
-            raise ValueError(
-                f"{param} holds an unknown sensor {item!r}: sensors are positions 0..{M - 1} "
-                f"or names such as {list(names)[:4]}"
-            )
-    return np.unique(np.array(out, dtype=np.int64))
+    return check_positions(param, sensors, names, M, "sensor")

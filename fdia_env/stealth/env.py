@@ -69,12 +69,7 @@ class StealthAttackEnv(StealthParallelEnv):
             est = static_estimation(scenario, alpha=0.05 if alpha is None else alpha)
         self.estimation = est
         self.budget = check_int("budget", budget, minimum=1, maximum=est.m)
-        self.max_cycles = (
-            None if max_cycles is None else check_int("max_cycles", max_cycles, minimum=1)
-        )
-        if horizon is None:  # PettingZoo's episode length when given, else one snapshot
-            horizon = 1 if self.max_cycles is None else self.max_cycles
-        self.horizon = check_int("horizon", horizon, minimum=1)
+        self._init_episode(horizon, max_cycles, default_horizon=1)  # one snapshot
         self.action_kind = check_choice("action", action, ACTIONS)
         self.magnitude = check_positive("magnitude", magnitude)
         self.a_max = check_positive("a_max", a_max)

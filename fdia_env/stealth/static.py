@@ -38,7 +38,13 @@ from typing import Any
 import numpy as np
 from scipy import linalg, stats
 
-from fdia_env._validation import as_matrix, check_int, check_psd, check_symmetric
+from fdia_env._validation import (
+    as_matrix,
+    check_int,
+    check_positions,
+    check_psd,
+    check_symmetric,
+)
 
 TESTS = ("chi2", "lnr")
 """Bad-data tests: the χ² residual test and the largest-normalised-residual test."""
@@ -155,33 +161,8 @@ class StaticEstimation:
         """
         if meters is None:
             return np.zeros(0, dtype=np.int64)
-        if isinstance(meters, (str, int, np.integer)):
-            meters = [meters]
-        try:
-            items = list(meters)
-        except TypeError as exc:
-            raise ValueError(f"{param} must be a collection of meters, got {meters!r}") from exc
         where = {name: i for i, name in enumerate(self.meters)}
-        out = []
-        for item in items:
-            if isinstance(item, str) and item in where:
-                out.append(where[item])
-            elif (
-                isinstance(item, (int, np.integer))
-                and not isinstance(item, bool)
-                and 0 <= int(item) < self.m
-            ):
-                out.append(int(item))
-            elif isinstance(item, (str, int, np.integer)) and not isinstance(item, bool):
-                raise ValueError(
-                    f"{param} holds an unknown meter {item!r}: meters are positions "
-                    f"0..{self.m - 1} or names such as {list(self.meters)[:4]}"
-                )
-            else:
-                raise ValueError(
-                    f"{param} must hold meter positions (0..{self.m - 1}) or names, got {item!r}"
-                )
-        return np.unique(np.array(out, dtype=np.int64))
+        return check_positions(param, meters, where, self.m, "meter")
 
     def _z(self, name: str, z: Any) -> np.ndarray:
         arr = np.asarray(z, dtype=np.float64)

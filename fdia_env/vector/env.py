@@ -50,13 +50,13 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from fdia_env._validation import check_int
+from fdia_env._validation import check_agent, check_int
 from fdia_env.backend import NUMPY, get_backend
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, attacker_reward, check_reset_args
-from fdia_env.envs.single_agent import Policy, check_agent, check_no_opponent, check_opponent
+from fdia_env.envs.single_agent import Policy, check_no_opponent, check_opponent
 from fdia_env.registration import ENVS, torch_ids
 
 # members of one vector env: every member holds (n, n) covariances, its features and, for the
@@ -66,9 +66,11 @@ MAX_NUM_ENVS = 2**20
 MAX_NUM_ENVS_TORCH = 2**24
 
 FORMAT_VECTOR_ENVS: dict[tuple[str, Any], Callable[..., gym.vector.VectorEnv]] = {}
-"""(module, ``action``) → the maker of that action format's own native vector env, called by
-:func:`make_vector` with its arguments (:mod:`fdia_env.vector.sequential` adds the sparse
-attacker's ``"sequential"``)."""
+"""(module, ``action``) → that action format's own native vector env: a class, which
+:func:`make_vector` builds as it builds :class:`FdiaVectorEnv` (from the module's env, with the
+same arguments; :mod:`fdia_env.vector.sequential_game` adds the sensor game's
+``"sequential"``), or a maker of its own, called with :func:`make_vector`'s arguments
+(:mod:`fdia_env.vector.sequential` adds the sparse attacker's ``"sequential"``)."""
 
 
 class FdiaVectorEnv(gym.vector.VectorEnv):
@@ -470,14 +472,15 @@ def make_vector(
 
     ``backend`` and ``device`` choose numpy (default) or torch on a device (see
     :class:`FdiaVectorEnv`); they are checked before the env is built. The sparse attacker's
-    ``action="sequential"`` gets :class:`fdia_env.vector.sequential.SequentialVectorEnv`
-    (through :data:`FORMAT_VECTOR_ENVS`).
+    ``action="sequential"`` gets :class:`fdia_env.vector.sequential.SequentialVectorEnv`, the
+    sensor game's :class:`fdia_env.vector.sequential_game.SequentialGameVectorEnv` (through
+    :data:`FORMAT_VECTOR_ENVS`).
     """
     action = kwargs.get("action")
     # only a format name can select a native vector env of its own (anything else, e.g. an
     # array, goes on to the env, whose own check names the parameter)
     fmt = FORMAT_VECTOR_ENVS.get((module, action)) if isinstance(action, str | None) else None
-    if fmt is not None:  # a format with a native vector env of its own (e.g. "sequential")
+    if fmt is not None and not isinstance(fmt, type):  # a format's maker of its own
         return fmt(
             module, num_envs, agent, opponent, autoreset_mode, max_episode_steps, backend, device,
             **kwargs
@@ -495,16 +498,22 @@ def make_vector(
         )
     mod = importlib.import_module(module)
     parallel = mod.parallel_env(**kwargs)
-    if not isinstance(parallel, FdiaParallelEnv):  # e.g. the sparse attack's action="sequential"
-        raise ValueError(
-            f"action={kwargs.get('action')!r} is not available in the native vector env (it "
-            f"wraps the env as a {type(parallel).__name__}); use gymnasium.make_vec(..., "
-            "vectorization_mode='sync') or another action format"
-        )
-    check_agent(agent, parallel.possible_agents)
-    if opponent is None and hasattr(mod, "default_opponent") and len(parallel.possible_agents) > 1:
-        opponent = mod.default_opponent(parallel, agent)
-    return FdiaVectorEnv(
+    if fmt is None:
+        if not isinstance(parallel, FdiaParallelEnv):  # e.g. the sparse attack's "sequential"
+            raise ValueError(
+                f"action={kwargs.get('action')!r} is not available in the native vector env (it "
+                f"wraps the env as a {type(parallel).__name__}); use gymnasium.make_vec(..., "
+                "vectorization_mode='sync') or another action format"
+            )
+        check_agent(agent, parallel.possible_agents)
+        if (
+            opponent is None
+            and hasattr(mod, "default_opponent")
+            and len(parallel.possible_agents) > 1
+        ):
+            opponent = mod.default_opponent(parallel, agent)
+    # a format's own vector env class checks the env and its options itself
+    return (FdiaVectorEnv if fmt is None else fmt)(
         parallel,
         num_envs,
         agent=agent,

@@ -30,10 +30,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from fdia_env._validation import check_agent
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSubsetEnv, subset_actions
-from fdia_env.envs.single_agent import Policy, check_agent
+from fdia_env.envs.single_agent import Policy
 from fdia_env.vector import env as vector_env
 from fdia_env.vector.sequential import PartialStep
 
@@ -302,46 +303,5 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         return infos
 
 
-def make_vector(
-    module: str,
-    num_envs: int,
-    agent: str = "attacker",
-    opponent: Policy | None = None,
-    autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-    max_episode_steps: int | None = None,
-    backend: str = "numpy",
-    device: Any = None,
-    **kwargs: Any,
-) -> SequentialGameVectorEnv:
-    """The native vector env of the sensor game's ``action="sequential"`` (``make_vec``'s).
-
-    :func:`fdia_env.vector.env.make_vector`, the table's ``vector_entry_point``, hands the
-    format here (this module registers it in :data:`fdia_env.vector.env.FORMAT_VECTOR_ENVS`).
-
-    Raises:
-        ValueError: For another module, a render mode, or a bad option of the env.
-    """
-    if module != MODULE:
-        raise ValueError(f"module must be {MODULE!r} for this native vector env, got {module!r}")
-    from fdia_env.backend import get_backend
-
-    get_backend(backend, device)  # an unknown backend or a missing GPU fails first
-    if kwargs.get("render_mode") is not None:
-        raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
-    kwargs.pop("render_mode", None)
-    import importlib
-
-    parallel = importlib.import_module(module).parallel_env(**kwargs)
-    return SequentialGameVectorEnv(
-        parallel,
-        num_envs,
-        agent=agent,
-        opponent=opponent,
-        autoreset_mode=autoreset_mode,
-        max_episode_steps=max_episode_steps,
-        backend=backend,
-        device=device,
-    )
-
-
-vector_env.FORMAT_VECTOR_ENVS[(MODULE, "sequential")] = make_vector
+# fdia_env.vector.env.make_vector (make_vec's entry point) builds the class for the format
+vector_env.FORMAT_VECTOR_ENVS[(MODULE, "sequential")] = SequentialGameVectorEnv

@@ -1,6 +1,7 @@
 """Power-grid DC dynamic state estimation (docs/math.md §7); needs the ``[grid]`` extra."""
 
 from fdia_env.systems.grid.cases import GRID_CASES, GridCase, GridPreset
+from fdia_env.systems.grid.dc14 import dc_grid14
 from fdia_env.systems.grid.measurements import (
     DEFAULT_Q,
     DEFAULT_SIGMA_FLOW,
@@ -23,6 +24,7 @@ __all__ = [
     "GridModel",
     "GridPreset",
     "Meter",
+    "dc_grid14",
     "dc_network",
     "grid_model",
     "grid_system",

@@ -8,7 +8,7 @@ One :class:`GridCase` per pandapower case the suite knows. Derived from it:
   :class:`GridPreset`);
 - the cases of :class:`fdia_env.envs.grid_family.GridFamily` (``family=True``) and their meter
   counts, known without building the case (pandapower is slow to import);
-- :func:`baselines.sparse.testbeds.dc_grid14`, the IEEE 14-bus DC model built without
+- :func:`fdia_env.systems.grid.dc14.dc_grid14`, the IEEE 14-bus DC model built without
   pandapower from :data:`IEEE14_BRANCHES`.
 
 Adding a grid case is one :class:`GridCase` in :data:`GRID_CASES` (its counts are checked
