@@ -195,6 +195,14 @@ def _as_reference(reference: Reference | float | None, env: gym.Env) -> Referenc
     return entry.reference_of(env) if entry is not None else None
 
 
+def _masks_fn(env: gym.Env) -> Any:
+    """``env``'s ``action_masks`` method, the outermost wrapper's that has one (None: none)."""
+    try:
+        return env.get_wrapper_attr("action_masks")
+    except AttributeError:
+        return None
+
+
 def play(
     policy: Policy | RandomPolicy,
     env: gym.Env,
@@ -210,7 +218,7 @@ def play(
     ``types``, when given, receives each episode's attacker type where the learning player's
     reset info reports one (the typed sensor game's attacker).
     """
-    masks_fn = getattr(env.unwrapped, "action_masks", None)
+    masks_fn = _masks_fn(env)
     pass_masks = masks_fn is not None and _accepts_masks(policy)
     returns, first_actions = np.zeros(n_episodes), []
     for i in range(n_episodes):

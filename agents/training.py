@@ -70,6 +70,7 @@ from agents.config import (
     with_defaults,
 )
 from agents.evaluate import Evaluation, evaluate
+from agents.increasing_picks import IncreasingPicks
 from agents.interrupt import StopTrainingCallback
 from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
@@ -103,11 +104,13 @@ def env_thunk(
     opponent: Callable[[], Any] | None = None,
     monitor: bool = False,
     reward: tuple[float, float] | None = None,
+    increasing_picks: bool = False,
 ) -> Callable[[], gym.Env]:
     """A zero-argument factory of the env (a fresh ``opponent()`` each call, if given).
 
     ``reward``: ``(shift, scale)`` of :class:`NormalizedReward` for training (the monitor,
-    outside it, logs the raw returns).
+    outside it, logs the raw returns). ``increasing_picks``: the plan-first picks in increasing
+    order (:class:`agents.increasing_picks.IncreasingPicks`).
     """
 
     def thunk() -> gym.Env:
@@ -115,6 +118,8 @@ def env_thunk(
         if opponent is not None:
             kwargs["opponent"] = opponent()
         env = gym.make(gym_id, **kwargs)
+        if increasing_picks:
+            env = IncreasingPicks(env)
         if monitor:
             env = Monitor(env)
         return env if reward is None else NormalizedReward(env, *reward)
@@ -457,6 +462,8 @@ class RunSetup:
         hp: ``--`` hyperparameters with the scenario table's filled in where unset.
         normalize_reward: Whether the training env's rewards are rescaled
             (:func:`reward_normalization`).
+        increasing_picks: Whether the stable-baselines3 learners pick a plan's pairs in
+            increasing order (:class:`agents.increasing_picks.IncreasingPicks`).
     """
 
     entry: Trainable
@@ -464,6 +471,7 @@ class RunSetup:
     env_kwargs: dict[str, Any]
     hp: Hyperparameters
     normalize_reward: bool
+    increasing_picks: bool = False
 
 
 def run_setup(
@@ -474,6 +482,7 @@ def run_setup(
     algo: str | None,
     hp: Hyperparameters,
     normalize_reward: bool | None = None,
+    increasing_picks: bool | None = None,
 ) -> RunSetup:
     """Resolve a command's options against the registry and :data:`SCENARIO_DEFAULTS`.
 
@@ -488,14 +497,18 @@ def run_setup(
     else:
         name = entry.algorithm(algo if algo is not None else defaults.algo)
     normalize = defaults.normalize_reward if normalize_reward is None else normalize_reward
-    return RunSetup(entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize)
+    increasing = defaults.increasing_picks if increasing_picks is None else increasing_picks
+    return RunSetup(
+        entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize, increasing
+    )
 
 
 def setup_of(cfg: TrainConfig) -> RunSetup:
     """:func:`run_setup` of the attacker or defender command."""
     return run_setup(
-        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward
-    )
+        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward,
+        cfg.increasing_picks,
+    )  # fmt: skip
 
 
 def train_prefix(cfg: TrainConfig) -> str:
@@ -598,7 +611,11 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
-        eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent), entry.gym_id)
+        increasing = setup.increasing_picks
+        eval_env = make_env(
+            env_thunk(entry.gym_id, env_kwargs, opponent, increasing_picks=increasing),
+            entry.gym_id,
+        )
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
         run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say)
@@ -613,7 +630,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
         )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         vec_env = DummyVecEnv(
-            [env_thunk(entry.gym_id, env_kwargs, opponent, monitor=True, reward=normalization)]
+            [env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization, increasing)]
         )
         stack.callback(vec_env.close)
         if checkpoint is not None:
@@ -641,6 +658,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
                 "reward_normalization": None
                 if normalization is None
                 else {"shift": normalization[0], "scale": normalization[1]},
+                "increasing_picks": increasing,
                 "reference": reference_record(reference),
             },
         )
