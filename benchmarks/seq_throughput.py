@@ -10,11 +10,12 @@ Every setting trains a fresh MaskablePPO with ``train.py``'s hyperparameters for
 attacker on the grid presets (read from :mod:`agents.config`: rollout 512, minibatch 128, 10
 epochs, ...), one torch thread, for the same number of decisions, in two ways:
 
-- ``1 env``: one Gymnasium env in a ``DummyVecEnv``, as ``train.py`` trains (it adds a reward
-  rescaling wrapper, not timed here);
+- ``1 env``: one Gymnasium env in a ``DummyVecEnv``, as ``train.py`` trains: the plan-first
+  order in ``train.py``'s wrapper that keeps a plan's picks in increasing order, where
+  ``train.py`` uses it (its reward rescaling wrapper is not timed here);
 - ``8 envs``: the native vector env of each format (``gymnasium.make_vec(...,
   vectorization_mode="vector_entry_point")`` through :mod:`fdia_env.vector.sb3`), 8 members of
-  64 steps each per rollout (the same 512 decisions per update).
+  64 steps each per rollout (the same 512 decisions per update), without ``train.py``'s wrappers.
 
 A last row of the ``1 env`` way, ``zero-cost env``, trains on an env with the spaces of
 ``grid-ieee14 sequential (plan)`` that does no work (a constant observation, every action legal,
@@ -80,13 +81,20 @@ class ZeroCostEnv(gym.Env):
         return self._mask.copy()
 
 
-def train_settings() -> dict[str, Any]:
-    """MaskablePPO's options as ``train.py attacker --scenario grid-ieee14`` resolves them."""
-    from agents.config import Hyperparameters, algo_kwargs
+def train_setup() -> Any:
+    """``train.py attacker --scenario grid-ieee14 --algo MaskablePPO``'s resolved run setup."""
+    from agents.config import Hyperparameters
     from agents.training import run_setup
 
     hp = Hyperparameters()
-    setup = run_setup("sparse_attack_v2", "attacker", "grid-ieee14", {}, "MaskablePPO", hp)
+    return run_setup("sparse_attack_v2", "attacker", "grid-ieee14", {}, "MaskablePPO", hp)
+
+
+def train_settings() -> dict[str, Any]:
+    """MaskablePPO's options as ``train.py attacker --scenario grid-ieee14`` resolves them."""
+    from agents.config import algo_kwargs
+
+    setup = train_setup()
     return algo_kwargs(setup.algo, setup.hp)
 
 
@@ -127,6 +135,10 @@ def make_model(kwargs: dict[str, Any], way: str, settings: dict[str, Any], seed:
         env: Any = ZeroCostEnv(real, int(kwargs["budget"]) + 1)
     elif way == WAYS[0]:
         env = gym.make(GYM_ID, **kwargs)
+        if kwargs.get("order") == "plan" and train_setup().increasing_picks:
+            from agents.increasing_picks import IncreasingPicks
+
+            env = IncreasingPicks(env)  # as train.py wraps the plan-first order
     else:
         from fdia_env.vector.sb3 import make_sb3_vec_env
 
