@@ -199,11 +199,6 @@ def main(argv: Sequence[str] | None = None) -> object:
             f"--num-envs applies to --algo torch-ppo only (got --algo {cfg.algo or 'default'}; "
             "the stable-baselines3 and RLlib runs choose their own envs)"
         )
-    if isinstance(cfg, TrainConfig) and cfg.increasing_picks and (torch_ppo or rllib):
-        raise ValueError(
-            "--increasing-picks applies to the stable-baselines3 learners only (torch-ppo and "
-            "RLlib train on the env's own mask)"
-        )
     if torch_ppo:
         from agents.torch_ppo_train import train_torch_ppo_run
 

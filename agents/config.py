@@ -333,9 +333,7 @@ class ScenarioDefaults:
             rewards.
         when: The defaults apply only when the run's env options include these (e.g. the
             sequential action format; with ``--env-kwargs action '"multibinary"'`` the
-            algorithm's own defaults are used).
-        increasing_picks: Train and score the stable-baselines3 learners with the plan-first
-            picks in increasing order (:class:`agents.increasing_picks.IncreasingPicks`).
+            algorithm's own defaults are used); a tuple value allows any of its values.
     """
 
     env_kwargs: dict[str, Any] = field(default_factory=dict)
@@ -343,23 +341,24 @@ class ScenarioDefaults:
     hyperparameters: dict[str, Any] = field(default_factory=dict)
     normalize_reward: bool = False
     when: dict[str, Any] = field(default_factory=dict)
-    increasing_picks: bool = False
 
 
 # The grid presets' sparse attack is built one pair per decision (the sequential format in its
 # plan-first order: at most c picks of Discrete(N·M + 1), then stop), with the action mask for
-# MaskablePPO; the time-major order (the env's default) does not learn there (docs/guide/
-# sparse.md, decision order). The algorithm's own defaults, rewards normalised, the picks of a
-# plan in increasing order (one sequence of picks per plan: agents/increasing_picks.py).
+# MaskablePPO; the time-major order does not learn there (docs/guide/sparse.md, decision
+# order). The algorithm's own defaults, rewards normalised, and the env's order="increasing":
+# a plan's pairs picked in increasing order, one sequence of picks per plan, so the entropy
+# bonus explores other plans (``--env-kwargs order '"plan"'`` allows every order of the picks,
+# with the same defaults otherwise).
 _SEQUENTIAL = {"action": "sequential"}
 _PLAN_FIRST = {"action": "sequential", "order": "plan"}
+_INCREASING = {"action": "sequential", "order": "increasing"}
 _GRID_SPARSE = ScenarioDefaults(
-    env_kwargs=_PLAN_FIRST,
+    env_kwargs=_INCREASING,
     algo="MaskablePPO",
     hyperparameters={"norm_obs": False},  # torch-ppo only (docs/guide/sparse.md)
     normalize_reward=True,
-    when=_PLAN_FIRST,
-    increasing_picks=True,
+    when={"action": "sequential", "order": ("increasing", "plan")},
 )
 _GRID_GAME = ScenarioDefaults(
     env_kwargs=_SEQUENTIAL,
@@ -406,7 +405,9 @@ def scenario_defaults(env: str, scenario: str, env_kwargs: dict[str, Any]) -> Sc
     leave the table's conditions (``when``), e.g. another action format.
     """
     found = SCENARIO_DEFAULTS.get((env, scenario))
-    if found is None or any(env_kwargs.get(k) != v for k, v in found.when.items()):
+    if found is None or not all(
+        env_kwargs.get(k) in (v if isinstance(v, tuple) else (v,)) for k, v in found.when.items()
+    ):
         return ScenarioDefaults()
     return found
 
@@ -558,11 +559,6 @@ class TrainConfig:
     normalize_reward: bool | None = None
     """Train on rewards rescaled so that doing nothing is 0 and the reference 1 (evaluation
     stays on the raw rewards). Default: the scenario's (on for the grid presets)."""
-    increasing_picks: bool | None = None
-    """stable-baselines3 learners in the sparse attack's plan-first order: pick a plan's pairs
-    in increasing order, in training and when scoring (one sequence of picks per plan, so the
-    entropy bonus explores other plans; agents.increasing_picks). Default: the scenario's (on
-    for the grid presets)."""
     run: tyro.conf.OmitArgPrefixes[RunSettings] = field(default_factory=RunSettings)
     """Run folder, seeding and output."""
     hp: tyro.conf.OmitArgPrefixes[Hyperparameters] = field(default_factory=Hyperparameters)
@@ -574,10 +570,6 @@ class TrainConfig:
         check_choice("agent", self.agent, ("attacker", "defender"))
         check_choice("opponent", self.opponent, ("uniform", "equilibrium"))
         check_env_kwargs_format(self.env_kwargs)
-        if self.increasing_picks is not None and not isinstance(self.increasing_picks, bool):
-            raise TypeError(
-                f"{flag('increasing_picks')} must be true or false, got {self.increasing_picks!r}"
-            )
         if self.num_envs is not None:
             check_number(
                 "num_envs", self.num_envs, int, lambda v: 1 <= v <= MAX_NUM_ENVS,

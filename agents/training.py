@@ -70,7 +70,6 @@ from agents.config import (
     with_defaults,
 )
 from agents.evaluate import Evaluation, evaluate
-from agents.increasing_picks import IncreasingPicks
 from agents.interrupt import StopTrainingCallback
 from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
@@ -104,13 +103,11 @@ def env_thunk(
     opponent: Callable[[], Any] | None = None,
     monitor: bool = False,
     reward: tuple[float, float] | None = None,
-    increasing_picks: bool = False,
 ) -> Callable[[], gym.Env]:
     """A zero-argument factory of the env (a fresh ``opponent()`` each call, if given).
 
     ``reward``: ``(shift, scale)`` of :class:`NormalizedReward` for training (the monitor,
-    outside it, logs the raw returns). ``increasing_picks``: the plan-first picks in increasing
-    order (:class:`agents.increasing_picks.IncreasingPicks`).
+    outside it, logs the raw returns).
     """
 
     def thunk() -> gym.Env:
@@ -118,8 +115,6 @@ def env_thunk(
         if opponent is not None:
             kwargs["opponent"] = opponent()
         env = gym.make(gym_id, **kwargs)
-        if increasing_picks:
-            env = IncreasingPicks(env)
         if monitor:
             env = Monitor(env)
         return env if reward is None else NormalizedReward(env, *reward)
@@ -462,8 +457,6 @@ class RunSetup:
         hp: ``--`` hyperparameters with the scenario table's filled in where unset.
         normalize_reward: Whether the training env's rewards are rescaled
             (:func:`reward_normalization`).
-        increasing_picks: Whether the stable-baselines3 learners pick a plan's pairs in
-            increasing order (:class:`agents.increasing_picks.IncreasingPicks`).
     """
 
     entry: Trainable
@@ -471,7 +464,6 @@ class RunSetup:
     env_kwargs: dict[str, Any]
     hp: Hyperparameters
     normalize_reward: bool
-    increasing_picks: bool = False
 
 
 def run_setup(
@@ -482,7 +474,6 @@ def run_setup(
     algo: str | None,
     hp: Hyperparameters,
     normalize_reward: bool | None = None,
-    increasing_picks: bool | None = None,
 ) -> RunSetup:
     """Resolve a command's options against the registry and :data:`SCENARIO_DEFAULTS`.
 
@@ -497,17 +488,13 @@ def run_setup(
     else:
         name = entry.algorithm(algo if algo is not None else defaults.algo)
     normalize = defaults.normalize_reward if normalize_reward is None else normalize_reward
-    increasing = defaults.increasing_picks if increasing_picks is None else increasing_picks
-    return RunSetup(
-        entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize, increasing
-    )
+    return RunSetup(entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize)
 
 
 def setup_of(cfg: TrainConfig) -> RunSetup:
     """:func:`run_setup` of the attacker or defender command."""
     return run_setup(
-        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward,
-        cfg.increasing_picks,
+        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward
     )  # fmt: skip
 
 
@@ -611,11 +598,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
-        increasing = setup.increasing_picks
-        eval_env = make_env(
-            env_thunk(entry.gym_id, env_kwargs, opponent, increasing_picks=increasing),
-            entry.gym_id,
-        )
+        eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent), entry.gym_id)
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
         run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say)
@@ -629,9 +612,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
             reward_normalization(entry, eval_env, reference) if setup.normalize_reward else None
         )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        vec_env = DummyVecEnv(
-            [env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization, increasing)]
-        )
+        vec_env = DummyVecEnv([env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization)])
         stack.callback(vec_env.close)
         if checkpoint is not None:
             model = load_checkpoint(
@@ -658,7 +639,6 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
                 "reward_normalization": None
                 if normalization is None
                 else {"shift": normalization[0], "scale": normalization[1]},
-                "increasing_picks": increasing,
                 "reference": reference_record(reference),
             },
         )

@@ -11,8 +11,8 @@ attacker on the grid presets (read from :mod:`agents.config`: rollout 512, minib
 epochs, ...), one torch thread, for the same number of decisions, in two ways:
 
 - ``1 env``: one Gymnasium env in a ``DummyVecEnv``, as ``train.py`` trains: the plan-first
-  order in ``train.py``'s wrapper that keeps a plan's picks in increasing order, where
-  ``train.py`` uses it (its reward rescaling wrapper is not timed here);
+  order as ``train.py`` picks it on the grid presets (``order="increasing"``: a plan's picks in
+  increasing order; its reward rescaling wrapper is not timed here);
 - ``8 envs``: the native vector env of each format (``gymnasium.make_vec(...,
   vectorization_mode="vector_entry_point")`` through :mod:`fdia_env.vector.sb3`), 8 members of
   64 steps each per rollout (the same 512 decisions per update), without ``train.py``'s wrappers.
@@ -134,11 +134,9 @@ def make_model(kwargs: dict[str, Any], way: str, settings: dict[str, Any], seed:
         real = gym.make(GYM_ID, **{k: v for k, v in kwargs.items() if k != "zero_cost"})
         env: Any = ZeroCostEnv(real, int(kwargs["budget"]) + 1)
     elif way == WAYS[0]:
+        if kwargs.get("order") == "plan":  # the plan-first order train.py picks (increasing)
+            kwargs = {**kwargs, "order": train_setup().env_kwargs["order"]}
         env = gym.make(GYM_ID, **kwargs)
-        if kwargs.get("order") == "plan" and train_setup().increasing_picks:
-            from agents.increasing_picks import IncreasingPicks
-
-            env = IncreasingPicks(env)  # as train.py wraps the plan-first order
     else:
         from fdia_env.vector.sb3 import make_sb3_vec_env
 

@@ -60,7 +60,7 @@ def test_results_train_maskable_ppo_with_train_py_grid_hyperparameters():
 
     setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
     assert setup.algo == "MaskablePPO" and setup.normalize_reward
-    assert setup.env_kwargs["order"] == "plan"
+    assert setup.env_kwargs["order"] == "increasing"
     ours = resolved_hyperparameters("MaskablePPO", sparse_grid.train_py_hyperparameters())
     assert ours == resolved_hyperparameters("MaskablePPO", setup.hp)
 

@@ -69,14 +69,14 @@ def test_bad_options_are_refused(argv, capsys):
 
 
 def test_each_way_trains_the_env_as_described():
-    from agents.increasing_picks import IncreasingPicks
     from fdia_env.vector.sb3 import SB3VecEnv
 
     settings = seq.train_settings()
     kwargs = dict(scenario="ch4-position", budget=2, horizon=3, action="sequential", order="plan")
     one = seq.make_model(kwargs, seq.WAYS[0], settings, seed=0)
     monitor = one.get_env().envs[0]  # SB3 wraps a gym env in a Monitor
-    assert isinstance(monitor.env, IncreasingPicks) == seq.train_setup().increasing_picks
+    order = monitor.unwrapped.parallel.order  # the plan-first order train.py picks
+    assert order == seq.train_setup().env_kwargs["order"] == "increasing"
     assert (one.n_envs, one.n_steps) == (1, settings["n_steps"])
     eight = seq.make_model(kwargs, seq.WAYS[1], settings, seed=0)
     assert isinstance(eight.get_env(), SB3VecEnv) and eight.n_envs == seq.VECTOR_ENVS

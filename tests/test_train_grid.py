@@ -23,7 +23,6 @@ from agents.config import (
     scenario_defaults,
     with_defaults,
 )
-from agents.increasing_picks import IncreasingPicks
 from agents.registry import get
 from agents.torch_ppo import TorchPPOConfig
 from agents.training import NormalizedReward, null_return, run_setup
@@ -127,11 +126,9 @@ def test_attacker_command_trains_on_grid_ieee14_with_the_table_defaults(tmp_path
     assert result.run_dir.name.startswith("sparse_attack_v2-MaskablePPO-s0-")
     config = json.loads((result.run_dir / "config.json").read_text())["resolved"]
     assert config["env_kwargs"]["action"] == "sequential"
-    assert config["env_kwargs"]["order"] == "plan"
+    assert config["env_kwargs"]["order"] == "increasing"  # a plan's pairs in increasing order
     assert config["hyperparameters"]["net_arch"] == [64, 64]
-    # the plan's pairs picked in increasing order, in training and when scored
-    assert config["increasing_picks"] is True
-    assert isinstance(result.model.get_env().envs[0].env.env, IncreasingPicks)
+    assert result.model.get_env().envs[0].unwrapped.parallel.increasing  # the env's own order
     norm = config["reward_normalization"]
     best = exhaustive("grid-ieee14", budget=2, horizon=1).value
     assert norm["shift"] + norm["scale"] == pytest.approx(best, rel=1e-12)
