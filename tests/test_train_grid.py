@@ -42,7 +42,9 @@ def run(tmp_path, *args):
 def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
     setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
     assert setup.algo == "MaskablePPO" and setup.normalize_reward
-    assert setup.env_kwargs == {"scenario": "grid-ieee14", "action": "sequential", "order": "plan"}
+    assert setup.env_kwargs == {
+        "scenario": "grid-ieee14", "action": "sequential", "order": "increasing"
+    }  # fmt: skip
     # torch-ppo's observation normalisation is off there; nothing else leaves the defaults
     assert SCENARIO_DEFAULTS["sparse_attack_v0", "grid-ieee14"].hyperparameters == {
         "norm_obs": False
