@@ -195,10 +195,15 @@ def main(argv: Sequence[str] | None = None) -> object:
         cfg = with_saved_options(cfg, argv)
         torch_ppo = isinstance(cfg, TrainConfig) and is_torch_ppo(cfg.algo)
     if isinstance(cfg, TrainConfig) and cfg.num_envs is not None and not torch_ppo:
-        raise ValueError(
-            f"--num-envs applies to --algo torch-ppo only (got --algo {cfg.algo or 'default'}; "
-            "the stable-baselines3 and RLlib runs choose their own envs)"
-        )
+        from agents.training import setup_of
+
+        algo = "RLlib" if rllib else setup_of(cfg).algo  # the scenario's default resolved
+        if algo != "MaskablePPO":
+            raise ValueError(
+                "--num-envs applies to --algo torch-ppo and MaskablePPO only (MaskablePPO: the "
+                f"env's native vector env of that many members), got {algo}; the other "
+                "stable-baselines3 algorithms train on one env and RLlib chooses its own envs"
+            )
     if torch_ppo:
         from agents.torch_ppo_train import train_torch_ppo_run
 

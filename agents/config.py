@@ -544,8 +544,10 @@ class TrainConfig:
     """PPO, MaskablePPO, A2C, DQN or SAC, where it fits the env (default: the env's first), or
     torch-ppo (every env: PPO with env, rollout buffer and policy on --device)."""
     num_envs: int | None = None
-    """torch-ppo: members of the torch vector env stepped at once on --device (default 4096);
-    the stable-baselines3 algorithms train on one env and reject it."""
+    """torch-ppo: members of the torch vector env stepped at once on --device (default 4096).
+    MaskablePPO: train on the env's native vector env of this many members (default: one env;
+    each rollout is num_envs x n_steps decisions). The other stable-baselines3 algorithms train
+    on one env and reject it."""
     total_timesteps: int = 100_000
     """Environment steps to train for, in total across resumes."""
     eval_freq: int = 10_000

@@ -41,7 +41,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper, VecMonitor
 
 from agents.algos import build_model
 from agents.checkpoint import (
@@ -528,6 +528,61 @@ class NormalizedReward(gym.Wrapper):
         return obs, scaled / self.scale, terminated, truncated, {**info, "raw_reward": reward}
 
 
+class NormalizedVecReward(VecEnvWrapper):
+    """:class:`NormalizedReward` for a stable-baselines3 ``VecEnv``.
+
+    Each member's rewards become ``(r − shift) / scale``, the shift paid once, at the step
+    that ends the member's episode.
+    """
+
+    def __init__(self, venv: VecEnv, shift: float, scale: float) -> None:
+        super().__init__(venv)
+        if not (math.isfinite(shift) and math.isfinite(scale) and scale > 0):
+            raise ValueError(
+                f"reward normalisation needs a finite shift and a scale > 0, got {shift}, {scale}"
+            )
+        self.shift, self.scale = float(shift), float(scale)
+
+    def reset(self) -> Any:
+        """Reset every member."""
+        return self.venv.reset()
+
+    def step_wait(self) -> Any:
+        """The members' step with the rescaled rewards."""
+        obs, reward, dones, infos = self.venv.step_wait()
+        scaled = (reward - self.shift * dones) / self.scale
+        return obs, scaled.astype(np.float32), dones, infos
+
+
+def native_vec_env(
+    gym_id: str,
+    env_kwargs: dict[str, Any],
+    num_envs: int,
+    reward: tuple[float, float] | None = None,
+    opponent: Callable[[], Any] | None = None,
+) -> VecEnv:
+    """The env's native vector env of ``num_envs`` members as a stable-baselines3 ``VecEnv``.
+
+    Monitored (the raw episode returns, as :func:`env_thunk`'s ``Monitor``), its rewards
+    rescaled by ``reward`` (``(shift, scale)``, as :class:`NormalizedReward`); a game view's
+    fixed other player is ``opponent()`` (None: the env's uniform mix).
+
+    Raises:
+        ValueError: Naming ``--num-envs`` where the env has no native vector env.
+    """
+    from fdia_env.vector.sb3 import make_sb3_vec_env
+
+    kwargs = dict(env_kwargs) if opponent is None else {**env_kwargs, "opponent": opponent()}
+    try:
+        venv: VecEnv = VecMonitor(make_sb3_vec_env(gym_id, num_envs, **kwargs))
+    except (TypeError, ValueError, gym.error.Error) as exc:
+        raise ValueError(
+            f"{flag('num_envs')} trains on the env's native vector env, which {gym_id} with "
+            f"these options does not have: {exc}"
+        ) from None
+    return venv if reward is None else NormalizedVecReward(venv, *reward)
+
+
 def null_return(entry: Trainable, env: gym.Env) -> float:
     """The return of doing nothing: the sparse attacker (any version) attacking no sensor (else 0).
 
@@ -612,7 +667,14 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
             reward_normalization(entry, eval_env, reference) if setup.normalize_reward else None
         )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        vec_env = DummyVecEnv([env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization)])
+        if cfg.num_envs is None:
+            vec_env: VecEnv = DummyVecEnv(
+                [env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization)]
+            )
+        else:
+            vec_env = native_vec_env(
+                entry.gym_id, env_kwargs, cfg.num_envs, normalization, opponent
+            )
         stack.callback(vec_env.close)
         if checkpoint is not None:
             model = load_checkpoint(

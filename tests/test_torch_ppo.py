@@ -368,7 +368,7 @@ def test_cli_rejects_options_torch_ppo_does_not_take(tmp_path, args, message):
 
 
 def test_cli_num_envs_only_with_torch_ppo(tmp_path):
-    with pytest.raises(ValueError, match="--num-envs applies to --algo torch-ppo only"):
+    with pytest.raises(ValueError, match="--num-envs applies to --algo torch-ppo and MaskablePPO"):
         train.main(["attacker", "--algo", "PPO", "--num-envs", "8"])
 
 

@@ -1,0 +1,100 @@
+"""``train.py --num-envs N`` with MaskablePPO: training on the env's native vector env."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py lives at the root
+
+import train
+from agents.training import NormalizedVecReward, native_vec_env
+from baselines.sparse import exhaustive
+from fdia_env.envs.sequential import PlanOrderPolicy
+from fdia_env.vector.sb3 import SB3VecEnv
+from fdia_env.vector.sequential import SequentialVectorEnv
+
+pytest.importorskip("pandapower")
+
+TINY = ["--no-progress-bar", "--final-eval-episodes", "2", "--eval-freq", "0"]
+TINY_PPO = ["--n-steps", "16", "--batch-size", "16", "--n-epochs", "1"]
+
+
+def test_maskable_ppo_trains_on_the_native_vector_env_of_num_envs_members(tmp_path):
+    result = train.main(
+        [
+            "attacker", "--scenario", "grid-ieee14", "--env-kwargs", "budget", "2", "horizon",
+            "1", "--num-envs", "4", "--total-timesteps", "128", *TINY, *TINY_PPO,
+            "--runs-root", str(tmp_path / "runs"),
+        ]
+    )  # fmt: skip
+    model = result.model
+    assert model.n_envs == 4 and model.num_timesteps == 128  # 2 rollouts of 4 x 16 decisions
+    venv = model.get_env()
+    assert isinstance(venv, NormalizedVecReward)  # rewards rescaled as with one env
+    native = venv.venv.venv  # inside the VecMonitor
+    assert isinstance(native, SB3VecEnv) and isinstance(native.venv, SequentialVectorEnv)
+    assert native.venv.increasing and native.venv.num_envs == 4  # the presets' order
+    config = json.loads((result.run_dir / "config.json").read_text())
+    assert config["resolved"]["algo"] == "MaskablePPO"
+    assert config["config"]["num_envs"] == 4
+    rows = result.evaluations
+    assert rows["EXS"].score == pytest.approx(1.0, rel=1e-12)
+    assert 0.0 <= rows["learned (MaskablePPO)"].score <= 1.0 + 1e-12
+
+
+def test_the_vector_rewards_map_nothing_to_0_and_the_optimum_to_1():
+    kwargs = {"scenario": "ch4-position", "budget": 2, "horizon": 3, "action": "sequential"}
+    best = exhaustive("ch4-position", budget=2, horizon=3)
+    nothing = -34.5  # any shift and scale: the map is checked against the raw returns
+    venv = native_vec_env(
+        "fdia_env/SparseAttack-v2", {**kwargs, "order": "increasing"}, 3, (nothing, 2.0)
+    )
+    raw = native_vec_env("fdia_env/SparseAttack-v2", {**kwargs, "order": "increasing"}, 3)
+    policy = PlanOrderPolicy.from_result(best)
+    for env in (venv, raw):
+        env.seed(0)
+    obs = venv.reset()
+    raw.reset()
+    totals, totals_raw = np.zeros(3), np.zeros(3)
+    done = np.zeros(3, dtype=bool)
+    while not done.all():
+        actions = np.where([0, 1, 1], policy.predict(obs)[0], 0)  # member 0 attacks nothing
+        obs, r, d, _ = venv.step(actions)
+        _, r_raw, _, _ = raw.step(actions)
+        totals += np.where(done, 0.0, r)
+        totals_raw += np.where(done, 0.0, r_raw)
+        done |= d
+    np.testing.assert_allclose(totals, (totals_raw - nothing) / 2.0, rtol=1e-5)
+    assert totals_raw[1] == pytest.approx(best.value, rel=1e-5)  # float32 rewards of SB3
+    with pytest.raises(ValueError, match="scale > 0"):
+        NormalizedVecReward(raw, 0.0, 0.0)
+
+
+def test_num_envs_names_what_it_applies_to(tmp_path):
+    runs = ["--runs-root", str(tmp_path / "runs")]
+    with pytest.raises(ValueError, match="--num-envs applies to --algo torch-ppo and MaskablePPO"):
+        train.main(
+            ["attacker", "--scenario", "grid-ieee14", "--algo", "PPO", "--num-envs", "4", *runs]
+        )
+    with pytest.raises(ValueError, match=r"num_envs \(--num-envs\) trains on the env's native"):
+        native_vec_env("fdia_env/StealthDefender-v0", {}, 2)  # one without a native vector env
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_game_view_trains_against_its_fixed_opponent_on_the_native_vector_env(tmp_path):
+    from fdia_env.vector.sequential_game import SequentialGameVectorEnv
+
+    result = train.main(
+        [
+            "attacker", "--env", "sensor_game_v0", "--scenario", "grid-ieee14", "--opponent",
+            "equilibrium", "--num-envs", "2", "--total-timesteps", "32", *TINY, *TINY_PPO,
+            "--runs-root", str(tmp_path / "runs"),
+        ]
+    )  # fmt: skip
+    native = result.model.get_env().venv.venv
+    assert isinstance(native, SB3VecEnv) and isinstance(native.venv, SequentialGameVectorEnv)
+    probs = native.venv.opponent.probs  # the LP equilibrium's mix, not the uniform one
+    assert probs.shape == (596,) and probs.max() > 10 / 596
