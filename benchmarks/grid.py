@@ -1,6 +1,7 @@
 """Speed of the power-grid presets against ch4-position, measured in the same run.
 
-Run: ``python benchmarks/grid.py [--quick] [--max-batch B] [--presets P ...] [--vector-only]``.
+Run: ``python benchmarks/grid.py [--quick] [--max-batch B] [--presets P ...] [--vector-only]
+[--clock cpu]``.
 For ch4-position (the reference) and each grid preset (``grid-ieee14/30/57/118``, needs the
 ``[grid]`` extra) it prints:
 
@@ -17,7 +18,13 @@ as stable-baselines3's PPO consumes, so the env does not limit single-env traini
 ≥ 10× SyncVectorEnv at B = 1024 on grid-ieee14 (the gain that makes the batched engine worth
 using) and ≥ 1× on grid-ieee118 (where the per-member n×n algebra dominates, batching must at
 least not lose). The machine line comes first; figures on a
-shared machine are noisy (the bursts alternate so that drift hits every env alike).
+shared machine are noisy (the bursts alternate so that drift hits every env alike; ``--clock cpu``
+times this process's CPU time, steadier under load than wall time, the default).
+
+Two versions in one sitting: the script puts its own checkout after ``PYTHONPATH`` on the path,
+so ``PYTHONPATH=<other checkout> python benchmarks/grid.py --presets grid-ieee118 --max-batch 256
+--vector-only --clock cpu`` measures that checkout's package (docs/benchmarks.md's grid-ieee118
+per member-step against the code of the time the target was set was measured so, alternating).
 """
 
 from __future__ import annotations
@@ -34,10 +41,10 @@ import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.append(str(Path(__file__).resolve().parent.parent))  # after PYTHONPATH (see above)
 from _timing import rate
 
-import fdia_env  # noqa: F401
+import fdia_env
 from baselines.game import solve_double_oracle
 from baselines.sparse import dp, sbs, sfs, sfs_ss
 from fdia_env import scenarios
@@ -45,6 +52,7 @@ from fdia_env import scenarios
 ENV_ID = "fdia_env/SparseAttack-v0"
 PRESETS = ("ch4-position", "grid-ieee14", "grid-ieee30", "grid-ieee57", "grid-ieee118")
 BATCHES = (64, 256, 1024, 4096)
+CLOCK = time.perf_counter  # --clock cpu: time.process_time (this process's CPU time)
 SYNC_BATCHES = (64, 1024)
 
 
@@ -73,12 +81,12 @@ def single_rate(name: str, steps: int) -> float:
 
 
 def _burst(venv, acts, seconds: float) -> float:
-    steps, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
+    steps, t0 = 0, CLOCK()
+    while CLOCK() - t0 < seconds:
         for a in acts:
             venv.step(a)
         steps += len(acts)
-    return steps * venv.num_envs / (time.perf_counter() - t0)
+    return steps * venv.num_envs / (CLOCK() - t0)
 
 
 def vector_rates(name: str, batches, rounds: int, seconds: float) -> dict[str, float]:
@@ -141,12 +149,16 @@ def main() -> None:
     p.add_argument(
         "--vector-only", action="store_true", help="the native vector env only (with its Sync)"
     )
+    p.add_argument("--clock", choices=("wall", "cpu"), default="wall", help="what is timed")
     args = p.parse_args()
+    global CLOCK
+    CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"python {platform.python_version()}, numpy {np.__version__}, "
         f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']} "
-        "(shared machine: figures are noisy)"
+        f"(shared machine: figures are noisy); clock: {args.clock}; "
+        f"fdia_env from {Path(fdia_env.__file__).parent.parent}"
     )
     rounds, seconds = (3, 0.3) if args.quick else (5, 0.5)
     # the slow configurations (a step of seconds) run 3 rounds of one step each

@@ -10,11 +10,17 @@ Every setting trains a fresh MaskablePPO with ``train.py``'s hyperparameters for
 attacker on the grid presets (read from :mod:`agents.config`: rollout 512, minibatch 128, 10
 epochs, ...), one torch thread, for the same number of decisions, in two ways:
 
-- ``1 env``: one Gymnasium env in a ``DummyVecEnv``, as ``train.py`` trains (it adds a reward
-  rescaling wrapper, not timed here);
+- ``1 env``: one Gymnasium env in a ``DummyVecEnv``, as ``train.py`` trains: the plan-first
+  order in ``train.py``'s wrapper that keeps a plan's picks in increasing order, where
+  ``train.py`` uses it (its reward rescaling wrapper is not timed here);
 - ``8 envs``: the native vector env of each format (``gymnasium.make_vec(...,
   vectorization_mode="vector_entry_point")`` through :mod:`fdia_env.vector.sb3`), 8 members of
-  64 steps each per rollout (the same 512 decisions per update).
+  64 steps each per rollout (the same 512 decisions per update), without ``train.py``'s wrappers.
+
+A last row of the ``1 env`` way, ``zero-cost env``, trains on an env with the spaces of
+``grid-ieee14 sequential (plan)`` that does no work (a constant observation, every action legal,
+episodes of c + 1 decisions): its rate is MaskablePPO's own cost per decision, so its ratio is the
+most any env in that format could reach this way.
 
 The settings take turns within each repeat so a change of load hits them alike. Rates are env
 decisions per CPU second of this process (wall-clock rates printed too); each ratio is against
@@ -44,15 +50,51 @@ GYM_ID = "fdia_env/SparseAttack-v2"
 VECTOR_ENVS = 8
 BASELINE = "ieee14-rtu bitmask"
 WAYS = ("1 env", f"{VECTOR_ENVS} envs")
+BOUND = "zero-cost env"
+
+
+class ZeroCostEnv(gym.Env):
+    """The spaces of ``env``, no work: a constant observation, every action legal.
+
+    An episode takes ``length`` decisions (the plan's c picks and its stop).
+    """
+
+    def __init__(self, env: gym.Env, length: int) -> None:
+        self.observation_space, self.action_space = env.observation_space, env.action_space
+        self._obs = np.zeros(self.observation_space.shape, np.float32)
+        self._mask = np.ones(int(self.action_space.n), dtype=bool)
+        self._length, self._t = length, 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple:
+        """Start an episode."""
+        super().reset(seed=seed)
+        self._t = 0
+        return self._obs.copy(), {}
+
+    def step(self, action: Any) -> tuple:
+        """One decision: reward 0, the episode ends after ``length``."""
+        self._t += 1
+        return self._obs.copy(), 0.0, self._t >= self._length, False, {}
+
+    def action_masks(self) -> np.ndarray:
+        """Every action legal."""
+        return self._mask.copy()
+
+
+def train_setup() -> Any:
+    """``train.py attacker --scenario grid-ieee14 --algo MaskablePPO``'s resolved run setup."""
+    from agents.config import Hyperparameters
+    from agents.training import run_setup
+
+    hp = Hyperparameters()
+    return run_setup("sparse_attack_v2", "attacker", "grid-ieee14", {}, "MaskablePPO", hp)
 
 
 def train_settings() -> dict[str, Any]:
     """MaskablePPO's options as ``train.py attacker --scenario grid-ieee14`` resolves them."""
-    from agents.config import Hyperparameters, algo_kwargs
-    from agents.training import run_setup
+    from agents.config import algo_kwargs
 
-    hp = Hyperparameters()
-    setup = run_setup("sparse_attack_v2", "attacker", "grid-ieee14", {}, "MaskablePPO", hp)
+    setup = train_setup()
     return algo_kwargs(setup.algo, setup.hp)
 
 
@@ -76,6 +118,10 @@ def formats() -> dict[str, dict[str, Any]]:
         "grid-ieee14 sequential (plan)": {
             "scenario": "grid-ieee14", "action": "sequential", "order": "plan", **base
         },
+        BOUND: {
+            "scenario": "grid-ieee14", "action": "sequential", "order": "plan", "zero_cost": True,
+            **base,
+        },
     }  # fmt: skip
 
 
@@ -84,8 +130,15 @@ def make_model(kwargs: dict[str, Any], way: str, settings: dict[str, Any], seed:
     from agents.algos import build_model
 
     settings = dict(settings)
-    if way == WAYS[0]:
-        env: Any = gym.make(GYM_ID, **kwargs)
+    if kwargs.get("zero_cost"):
+        real = gym.make(GYM_ID, **{k: v for k, v in kwargs.items() if k != "zero_cost"})
+        env: Any = ZeroCostEnv(real, int(kwargs["budget"]) + 1)
+    elif way == WAYS[0]:
+        env = gym.make(GYM_ID, **kwargs)
+        if kwargs.get("order") == "plan" and train_setup().increasing_picks:
+            from agents.increasing_picks import IncreasingPicks
+
+            env = IncreasingPicks(env)  # as train.py wraps the plan-first order
     else:
         from fdia_env.vector.sb3 import make_sb3_vec_env
 
@@ -113,7 +166,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--steps must be >= {settings['n_steps']} and --repeats >= 1")
     torch.set_num_threads(1)
     envs = formats()
-    timed = [(name, way) for way in WAYS for name in envs if way == WAYS[0] or "(time)" not in name]
+    timed = [
+        (name, way)
+        for way in WAYS
+        for name in envs
+        if way == WAYS[0] or not ("(time)" in name or name == BOUND)
+    ]
     for name, way in timed:  # warm-up: imports, the grid build, first allocations
         learn_rate(make_model(envs[name], way, settings, seed=0), settings["n_steps"])
     rates: dict[tuple[str, str], list[tuple[float, float]]] = {key: [] for key in timed}
@@ -127,7 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"MaskablePPO with train.py's grid settings {shown}, {args.steps} decisions x "
         f"{args.repeats} repeats, one torch thread; {platform.processor() or platform.machine()}, "
-        f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}"
+        f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}, "
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}"
     )
     print(
         f"{'setting':32s} {'way':>7s} {'decisions/s (CPU)':>18s} {'(wall)':>10s} "

@@ -41,6 +41,8 @@ vectorization_mode="vector_entry_point", action="sequential")``, numpy or torch)
 the whole horizon are picked first (``Discrete(N·M + 1)``, action ``1 + k·M + j - 1`` = sensor
 j at window step k + 1, the ``(N·M + 1,)`` mask forbidding a pair in the plan and every pair
 once the plan uses the budget), then stop plays the plan out; same rewards and reachable sets.
+``order="increasing"`` is ``"plan"`` with the picks in increasing order (the mask also forbids
+every pair at or below the last pick), so each plan has one sequence of picks.
 
 ## Observation Space
 
@@ -137,7 +139,8 @@ def parallel_env(
 
     ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSetEnv``
     over the ``"multibinary"`` env (see the module docstring's Action Space), its decisions in
-    ``order`` (``"time"``, or ``"plan"``: the pairs of the whole horizon first). The episode
+    ``order`` (``"time"``; ``"plan"``: the pairs of the whole horizon first; ``"increasing"``:
+    as ``"plan"``, the pairs picked in increasing order). The episode
     parameters (``horizon``, ``objective``, ...) are those of
     :data:`fdia_env.envs.factory.EPISODE_PARAMETERS`.
 

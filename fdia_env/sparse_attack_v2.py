@@ -23,8 +23,9 @@ Gymnasium id ``fdia_env/SparseAttack-v2`` (with its native vector env:
 
 ``action="auto"`` (default): ``Discrete(N·M + 1)`` in the sequential format's plan-first order
 above 16 sensors (an episode takes at most c + 1 decisions); ``Discrete(2**M)``, the bitmask,
-up to 16. ``action="sequential"`` takes ``order="plan"`` (default) or ``order="time"``
-(``Discrete(M + 1)``, v1's default). The other formats by name, as in ``sparse_attack_v0``.
+up to 16. ``action="sequential"`` takes ``order="plan"`` (default), ``order="increasing"``
+(the plan's pairs picked in increasing order) or ``order="time"`` (``Discrete(M + 1)``, v1's
+default). The other formats by name, as in ``sparse_attack_v0``.
 
 ## Observation Space
 

@@ -74,6 +74,10 @@ def test_train_py_takes_the_preset_with_its_table_defaults():
             if name in ("norm_obs",):  # torch-ppo only
                 continue
             assert getattr(setup.hp, name) == value
+    assert defaults.hyperparameters["ent_coef"] == 0.05  # the grid presets' 0.01 otherwise
+    torch = run_setup("sparse_attack_v2", "attacker", "dc-ieee14-50", {}, "torch-ppo",
+                      Hyperparameters())  # fmt: skip
+    assert (torch.hp.ent_coef, torch.hp.norm_obs) == (0.05, False)
     # the command line wins over the table
     given = run_setup(
         "sparse_attack_v2", "attacker", "dc-ieee14-50", {}, "PPO", Hyperparameters(ent_coef=0.0)
@@ -95,6 +99,7 @@ def test_attacker_command_trains_on_the_preset(tmp_path, capsys):
     config = json.loads((result.run_dir / "config.json").read_text())["resolved"]
     assert config["env_kwargs"]["scenario"] == "dc-ieee14-50"
     assert (config["env_kwargs"]["action"], config["env_kwargs"]["order"]) == ("sequential", "plan")
+    assert config["hyperparameters"]["ent_coef"] == 0.05  # the table's, not MaskablePPO's 0.01
     best = exhaustive(testbeds.dc_grid14(50), budget=2, horizon=1).value
     norm = config["reward_normalization"]
     assert norm["shift"] + norm["scale"] == pytest.approx(best, rel=1e-12)

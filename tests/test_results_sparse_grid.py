@@ -174,3 +174,30 @@ def test_plot_curves_writes_the_learning_curve_figure(tmp_path):
     path = sparse_grid.plot_curves(row, tmp_path / "curve.png")
     assert path == tmp_path / "curve.png"
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("objective", ["trace", "logdet"])
+def test_last_step_values_equal_the_problem_evaluation_of_every_set(objective):
+    from baselines.sparse import make_problem
+    from baselines.sparse.testbeds import dc_grid14
+
+    system = dc_grid14(14)
+    sets, values = sparse_grid.last_step_values(system, 3, 2, objective)
+    assert sets.shape == (math.comb(14, 3), 3)
+    problem = make_problem(system, 3, 2, objective)
+    expected = [problem.evaluate([(1, int(i)) for i in s]) for s in sets]
+    np.testing.assert_allclose(values, expected, rtol=1e-10)
+    with pytest.raises(ValueError, match="budget"):
+        sparse_grid.last_step_values(system, 0, 2)
+    with pytest.raises(ValueError, match="objective"):
+        sparse_grid.last_step_values(system, 2, 2, "max")
+
+
+def test_landscape_of_dc_ieee14_50_has_one_set_at_99_percent():
+    text = sparse_grid.landscape("dc-ieee14-50")
+    # the best last-step set is branch and bound's proved optimum (tests/test_bnb.py)
+    assert "best 0.000176854543 (sensors [6, 7, 13, 27, 47], 0-based), SFS 98.51%" in text
+    assert "4 sets beat SFS, 1 reach 99 %" in text
+    # 3 of the 4 meters that see bus 8 are worth at most 59.85 %, all 4 at least 96.32 %
+    assert "| 3 | 4,140 | 59.85% | 43.73% |" in text
+    assert "| 4 | 46 | 100.00% | 96.32% |" in text

@@ -843,7 +843,7 @@ def test_plan_order_mask_observation_and_illegal_actions():
         sparse_attack_v0.parallel_env(action="sequential", order="random")
     with pytest.raises(ValueError, match="order='plan' applies to action='sequential' only"):
         sparse_attack_v0.parallel_env(action="bitmask", order="plan")
-    with pytest.raises(ValueError, match="must be in order='plan'"):
+    with pytest.raises(ValueError, match=r"must be in a plan-first order \['plan', 'increasing'\]"):
         plan_actions(sparse_attack_v0.parallel_env(action="sequential"), [[1]])
 
 
@@ -943,3 +943,144 @@ def test_plan_playout_reads_the_wrapped_observation_once_and_hands_out_copies(mo
     for key, value in out[4]["attacker"].items():
         np.testing.assert_array_equal(infos["attacker"][key], value)
     assert obs["attacker"]["action_mask"].tolist() == [1] + [0] * (N * M)
+
+
+# --- order="increasing": the plan-first picks in increasing order ----------------------------
+
+
+def make_increasing(rule: str = "error", skip_forced: bool = True, **kwargs) -> SequentialSetEnv:
+    kwargs = {"scenario": "ch4-position", "budget": 3, "horizon": 3, **kwargs}
+    parallel = sparse_attack_v0.parallel_env(action="multibinary", **kwargs)
+    return SequentialSetEnv(
+        parallel, illegal_action=rule, skip_forced=skip_forced, order="increasing"
+    )
+
+
+def test_increasing_order_mask_after_picks_and_refused_picks():
+    env = make_increasing()  # M = 3, N = 3: pairs 1..9, step-major
+    assert env.plan_first and env.increasing and env.action_space("attacker").n == 10
+    obs, _ = env.reset(seed=0)
+    assert obs["attacker"]["action_mask"].tolist() == [1] * 10
+    obs = env.step({"attacker": 5})[0]["attacker"]  # sensor 2 at window step 2
+    assert obs["action_mask"].tolist() == [1, 0, 0, 0, 0, 0, 1, 1, 1, 1]
+    assert obs["observation"][-10:].tolist() == [0, 0, 0, 0, 1, 0, 0, 0, 0, pytest.approx(2 / 3)]
+    obs = env.step({"attacker": 7})[0]["attacker"]
+    assert obs["action_mask"].tolist() == [1, 0, 0, 0, 0, 0, 0, 0, 1, 1]
+    assert env.inner.sim.k == 0  # nothing played while planning
+    with pytest.raises(
+        ValueError,
+        match=r"action 6 \(sensor 3 at window step 2\) is illegal: order='increasing' picks "
+        r"the pairs in increasing order and the last pick is action 7; legal actions are those "
+        r"with action_mask\[a\] = 1: \[0, 8, 9\]",
+    ):
+        env.step({"attacker": 6})
+    with pytest.raises(ValueError, match="this pair is already in the plan"):
+        env.step({"attacker": 7})
+    assert env.action_mask().tolist() == [1, 0, 0, 0, 0, 0, 0, 0, 1, 1]  # refused: no change
+    for rule in ("trim", "noop"):  # a pick below the last one stops: the plan {5, 7} plays out
+        env = make_increasing(rule)
+        env.reset(seed=0)
+        env.step({"attacker": 5})
+        env.step({"attacker": 7})
+        _, _, term, _, info = env.step({"attacker": 2})
+        assert term["attacker"] and info["attacker"]["budget_left"] == 1
+        assert env.inner.sim.k == 3
+    # the last pair leaves no pair above it: stop is forced (played by the env with skip_forced)
+    env = make_increasing()
+    env.reset(seed=0)
+    env.step({"attacker": 2})
+    _, _, term, _, info = env.step({"attacker": 9})
+    assert term["attacker"] and info["attacker"]["budget_left"] == 1
+    slow = make_increasing(skip_forced=False)
+    slow.reset(seed=0)
+    assert slow.step({"attacker": 9})[0]["attacker"]["action_mask"].tolist() == [1] + [0] * 9
+    with pytest.raises(ValueError, match=r"order must be one of \['time', 'plan', 'increasing'\]"):
+        sparse_attack_v0.parallel_env(action="sequential", order="increasng")
+    with pytest.raises(ValueError, match="order='increasing' applies to action='sequential'"):
+        sparse_attack_v0.parallel_env(action="multibinary", order="increasing")
+
+
+def test_increasing_order_every_attack_set_reachable_with_the_plan_orders_value():
+    """M = 3, N = 2, c = 2: each of the 22 sets plays as in "plan" and the bitmask, exactly."""
+    kwargs = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
+    inc = sparse_attack_v0.parallel_env(
+        action="sequential", order="increasing", illegal_action="error", **kwargs
+    )
+    plan_env = sparse_attack_v0.parallel_env(
+        action="sequential", order="plan", illegal_action="error", **kwargs
+    )
+    pairs = list(itertools.product(range(2), range(1, 4)))
+    played = 0
+    for size in range(3):
+        for chosen in itertools.combinations(pairs, size):
+            plan: list[list[int]] = [[], []]
+            for k, j in chosen:
+                plan[k].append(j)
+            value = play_plan(inc, plan, seed=0)
+            assert value == play_plan(plan_env, plan, seed=0)
+            assert value == pytest.approx(sum(bitmask_rewards(plan, **kwargs)), rel=1e-12, abs=0)
+            played += 1
+    assert played == 22
+
+
+@pytest.mark.parametrize("dynamics", ["expected", "sampled"])
+def test_increasing_order_solver_sets_replayed_return_their_value(dynamics):
+    system = mixed_tracking(6)
+    bnb = branch_and_bound(system, 4, 5)
+    assert bnb.proved_optimal
+    for result in (bnb, sfs(system, 4, 5)):
+        plan: list[list[int]] = [[] for _ in range(5)]
+        for k, i in result.attacks:
+            plan[k].append(i + 1)
+        kwargs = dict(scenario=system, budget=4, horizon=5, action="sequential", dynamics=dynamics)
+        inc = sparse_attack_v0.parallel_env(order="increasing", **kwargs)
+        value = play_plan(inc, plan, seed=3)
+        assert value == play_plan(sparse_attack_v0.parallel_env(order="plan", **kwargs), plan, 3)
+        if dynamics == "expected":
+            assert value == pytest.approx(result.value, rel=1e-12)
+
+
+def test_increasing_order_masked_random_play_never_errors_on_grid_preset():
+    env = sparse_attack_v0.parallel_env(
+        scenario="grid-ieee14", objective="logdet", action="sequential", order="increasing",
+        illegal_action="error",
+    )  # fmt: skip
+    N, M, c = 6, 34, 6
+    rng = np.random.default_rng(5)
+    for episode in range(4):
+        obs, _ = env.reset(seed=episode)
+        picks = []
+        while env.agents:
+            mask = obs["attacker"]["action_mask"]
+            assert mask.shape == (N * M + 1,) and mask[STOP] == 1
+            if picks:  # only the pairs above the last pick are open
+                assert not mask[1 : picks[-1] + 1].any()
+            legal = np.flatnonzero(mask)
+            a = int(rng.choice(legal[1:])) if len(legal) > 1 and rng.random() < 0.9 else STOP
+            obs, *_ = env.step({"attacker": a})
+            picks += [a] if a != STOP else []
+        assert picks == sorted(set(picks)) and len(picks) <= c
+
+
+def test_increasing_order_reference_policy_and_gymnasium_view():
+    from gymnasium.utils.env_checker import check_env
+
+    from agents.registry import sparse_reference
+    from fdia_env.envs.sequential import PlanOrderPolicy
+
+    kwargs = dict(scenario="ch4-position", budget=2, horizon=3, action="sequential")
+    ref = sparse_reference(sparse_attack_v0.parallel_env(order="increasing", **kwargs))
+    best = exhaustive("ch4-position", budget=2, horizon=3)
+    assert isinstance(ref.policy, PlanOrderPolicy)
+    view = gym.make(
+        "fdia_env/SparseAttack-v2", order="increasing", illegal_action="error", **kwargs
+    )
+    check_env(view.unwrapped, skip_render_check=True)
+    obs, _ = view.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        obs, r, term, trunc, _ = view.step(int(ref.policy.predict(obs)[0]))
+        total, done = total + r, term or trunc
+    assert total == pytest.approx(best.value, rel=1e-12)
+    parallel_api_test(sparse_attack_v0.parallel_env(order="increasing", **kwargs), num_cycles=30)
+    api_test(sparse_attack_v0.env(order="increasing", **kwargs), num_cycles=30)

@@ -97,6 +97,15 @@ def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, 
             "order": "plan",
         },
         {"scenario": "ch4-position", "budget": 4, "reward_mode": "per_step", "order": "plan"},
+        {"scenario": "ch4-position", "budget": 3, "horizon": 5, "order": "increasing"},
+        {
+            "scenario": "ch4-position",
+            "budget": 2,
+            "horizon": 4,
+            "dynamics": "sampled",
+            "order": "increasing",
+        },
+        {"scenario": "grid-ieee14", "budget": 4, "horizon": 3, "order": "increasing"},
     ],
 )
 def test_native_vector_env_matches_sync_vector_env_of_single_views(kwargs):
@@ -112,6 +121,7 @@ def test_native_vector_env_matches_sync_vector_env_of_single_views(kwargs):
         {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_episode_steps": 4},
         {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_cycles": 3},
         {"scenario": "ch4-position", "budget": 3, "horizon": 6, "max_cycles": 3, "order": "plan"},
+        {"scenario": "ch4-position", "budget": 3, "horizon": 6, "order": "increasing"},
     ],
 )
 def test_truncation_and_autoreset_match_sync(kwargs, autoreset):
@@ -198,7 +208,7 @@ def test_illegal_actions_and_bad_input():
         ).step(np.array([0, 0]))
 
 
-@pytest.mark.parametrize("order", ["time", "plan"])
+@pytest.mark.parametrize("order", ["time", "plan", "increasing"])
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
 def test_torch_backend_matches_numpy(dynamics, order):
     torch = pytest.importorskip("torch")
@@ -274,16 +284,17 @@ def test_torchrl_face_serves_the_sequential_format_with_its_action_mask(backend)
     assert bool(mask.gather(-1, action.unsqueeze(-1)).all())  # "error": none was illegal
     assert int(rollout["next", "done"].sum()) >= 3  # every member ended at least once
     assert bool(torch.isfinite(rollout["next", "reward"]).all())
-    plan = FdiaTorchRLEnv(
-        ID, num_envs=2, backend=backend, action="sequential", order="plan",
-        scenario="ch4-position", budget=2, horizon=4, illegal_action="error",
-    )  # fmt: skip
-    assert plan.observation_spec["action_mask"].shape == (2, 4 * 3 + 1)
-    masked = TransformedEnv(plan, ActionMask())
-    masked.set_seed(0)
-    rollout = masked.rollout(8, break_when_any_done=False)
-    assert bool(rollout["action_mask"].gather(-1, rollout["action"].unsqueeze(-1)).all())
-    assert int(rollout["next", "done"].sum()) >= 2  # a plan ends within c + 1 decisions
+    for order in ("plan", "increasing"):
+        plan = FdiaTorchRLEnv(
+            ID, num_envs=2, backend=backend, action="sequential", order=order,
+            scenario="ch4-position", budget=2, horizon=4, illegal_action="error",
+        )  # fmt: skip
+        assert plan.observation_spec["action_mask"].shape == (2, 4 * 3 + 1)
+        masked = TransformedEnv(plan, ActionMask())
+        masked.set_seed(0)
+        rollout = masked.rollout(8, break_when_any_done=False)
+        assert bool(rollout["action_mask"].gather(-1, rollout["action"].unsqueeze(-1)).all())
+        assert int(rollout["next", "done"].sum()) >= 2  # a plan ends within c + 1 decisions
 
 
 @pytest.mark.parametrize("action", ["sequential", "multibinary"])
@@ -464,3 +475,34 @@ def test_plan_order_playing_out_is_one_window_step_per_stop_without_skip_forced(
     vec.step(np.array([0, 0]))
     with pytest.raises(ValueError, match=r"member 0 is illegal: the plan is committed and plays"):
         vec.step(np.array([1, 0]))
+
+
+def test_increasing_order_masks_and_refused_picks_member_by_member():
+    """Each member's mask closes the pairs up to its own last pick; a pick below it is refused."""
+
+    def make(rule):
+        env = gym.make_vec(
+            ID, num_envs=3, vectorization_mode="vector_entry_point", action="sequential",
+            scenario="ch4-position", budget=3, horizon=3, order="increasing", illegal_action=rule,
+        )  # fmt: skip
+        env.reset(seed=0)
+        env.step(np.array([5, 2, 9]))  # member 2 picks the last pair: its plan plays out
+        return env
+
+    env = make("error")
+    masks = env.action_masks()
+    assert masks[0].tolist() == [True] + [False] * 5 + [True] * 4
+    assert masks[1].tolist() == [True, False, False] + [True] * 7
+    assert masks[2].tolist() == [True] + [False] * 9  # its plan played out (restarts next)
+    with pytest.raises(
+        ValueError,
+        match=r"action 4 \(sensor 1 at window step 2\) of member 0 is illegal: order='increasing' "
+        r"picks the pairs in increasing order and the last pick is action 5",
+    ):
+        env.step(np.array([4, 3, 0]))
+    env = make("trim")  # the refused pick stops: member 0's plan {5} plays out, member 1 goes on
+    _, _, term, _, info = env.step(np.array([4, 3, 0]))
+    assert term.tolist() == [True, False, False] and info["budget_left"][0] == 2
+    masks = env.action_masks()
+    assert masks[1].tolist() == [True, False, False, False] + [True] * 6
+    assert masks[2].tolist() == [True] * 10  # restarted (NEXT_STEP): a fresh plan

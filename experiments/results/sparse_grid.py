@@ -606,3 +606,106 @@ def run(quick: bool = False, seed: int = 0, out: Path | None = None) -> str:
         f"{len(seeds)} seed(s) per learner, MaskablePPO {budget.maskable_steps} steps, "
         f"torch PPO {budget.torch_steps} steps (B = {budget.torch_envs})."
     )
+
+
+def last_step_values(
+    system: LinearSystem, budget: int, horizon: int, objective: str = "trace"
+) -> tuple[np.ndarray, np.ndarray]:
+    """Φ of every attack set of exactly ``budget`` sensors, all at the window's last step.
+
+    The filter runs ``horizon − 1`` steps with every sensor from the steady state (as the sparse
+    env and ``baselines.sparse`` start), then the last step without the set's sensors. With
+    scalar sensors, dropping a set S from the full information ``A`` at the last step is a rank
+    ``|S|`` downdate (Woodbury): with ``u_i = H_i' R_i^{-1/2}``, ``K = U' A⁻¹ U`` and
+    ``L = U' A⁻² U``, ``tr (A − U_S U_S')⁻¹ = tr A⁻¹ + tr((I − K_SS)⁻¹ L_SS)`` and
+    ``log det (A − U_S U_S')⁻¹ = −log det A − log det(I − K_SS)``. Batched over all
+    ``C(M, budget)`` sets (2,118,760 for dc-ieee14-50, a few seconds).
+
+    Returns:
+        ``(sets, values)``: (C(M, budget), budget) sensor indices in ``itertools.combinations``
+        order and their Φ.
+
+    Raises:
+        ValueError: For a sensor with more than one measurement row, a budget outside 1..M, a
+            horizon < 1 or an unknown objective.
+    """
+    import itertools
+
+    from baselines.sparse import make_problem
+    from fdia_env.kalman.filter import information_update, predict_cov
+
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+    if any(s.H.shape[0] != 1 for s in system.sensors):
+        raise ValueError("system must have scalar sensors (one measurement row each)")
+    M = system.M
+    if isinstance(budget, bool) or not isinstance(budget, int) or not 1 <= budget <= M:
+        raise ValueError(f"budget must be an integer in 1..{M}, got {budget!r}")
+    if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+        raise ValueError(f"horizon must be an integer >= 1, got {horizon!r}")
+    P = make_problem(system, budget, horizon).P_start
+    for _ in range(horizon - 1):
+        P = information_update(predict_cov(P, system.F, system.Q), system.J)
+    A = np.linalg.inv(predict_cov(P, system.F, system.Q)) + system.J.sum(axis=0)
+    A_inv = np.linalg.inv(A)
+    U = np.stack([s.H[0] / np.sqrt(s.R[0, 0]) for s in system.sensors], axis=1)  # (n, M)
+    K, L = U.T @ A_inv @ U, U.T @ A_inv @ A_inv @ U
+    sets = np.array(list(itertools.combinations(range(M), budget)), dtype=np.intp)
+    values = np.empty(len(sets))
+    eye = np.eye(budget)
+    for lo in range(0, len(sets), 250_000):  # chunks: (chunk, c, c) blocks
+        s = sets[lo : lo + 250_000]
+        rows, cols = s[:, :, None], s[:, None, :]
+        D = eye - K[rows, cols]
+        if objective == "trace":
+            values[lo : lo + len(s)] = np.trace(A_inv) + np.einsum(
+                "bii->b", np.linalg.solve(D, L[rows, cols])
+            )
+        else:
+            values[lo : lo + len(s)] = -np.linalg.slogdet(A)[1] - np.linalg.slogdet(D)[1]
+    return sets, values
+
+
+def landscape(name: str = "dc-ieee14-50", budget: int = 5, horizon: int = 6) -> str:
+    """Why the learners stop at SFS's set on a preset: its last-step attack sets, counted.
+
+    Every set of ``budget`` sensors at the last step (:func:`last_step_values`, trace), scored
+    against the best of them (Φ / Φ*), grouped by how many of the best set's own sensors (those
+    not in SFS's set) it holds, and by how many of SFS's own: the best score in each group is
+    the path a learner that builds a set one sensor at a time can climb.
+
+    Returns:
+        Markdown lines.
+    """
+    from baselines.sparse import sfs
+    from fdia_env import scenarios
+
+    system = scenarios.get(name).system
+    sets, values = last_step_values(system, budget, horizon)
+    best = values.max()
+    score = values / best
+    top = sets[values.argmax()]
+    greedy = sfs(system, budget, horizon)
+    if any(k != horizon - 1 for k, _ in greedy.attacks):
+        raise ValueError("SFS's set attacks before the last step: the table does not apply")
+    sfs_set = np.array(sorted(i for _, i in greedy.attacks))
+    sfs_score = greedy.value / best
+    own_top, own_sfs = np.setdiff1d(top, sfs_set), np.setdiff1d(sfs_set, top)
+    lines = [
+        f"{name}, c = {budget}, N = {horizon}, trace: {len(sets):,} sets of the last step; best "
+        f"{best:.9g} (sensors {top.tolist()}, 0-based), SFS {sfs_score:.2%} "
+        f"(sensors {sfs_set.tolist()}); {int((score > sfs_score + 1e-12).sum())} sets beat "
+        f"SFS, {int((score >= 0.99).sum())} reach 99 %",
+        "",
+        f"| k | sets with k of {own_top.tolist()} (the best set's own) | best score | worst "
+        f"| sets with k of {own_sfs.tolist()} (SFS's own) | best score |",
+        "|---|---|---|---|---|---|",
+    ]
+    in_top, in_sfs = np.isin(sets, own_top).sum(1), np.isin(sets, own_sfs).sum(1)
+    for k in range(max(len(own_top), len(own_sfs)) + 1):
+        a, b = in_top == k, in_sfs == k
+        cells = [f"{int(a.sum()):,}", f"{score[a].max():.2%}", f"{score[a].min():.2%}"]
+        cells = cells if a.any() else ["0", "-", "-"]
+        other = [f"{int(b.sum()):,}", f"{score[b].max():.2%}"] if b.any() else ["0", "-"]
+        lines.append(f"| {k} | " + " | ".join(cells + other) + " |")
+    return "\n".join(lines)

@@ -19,7 +19,12 @@ window step K+1, stop, then K+2, ...), so a decision sees the covariance it acts
 horizon, action ``1 + k·M + (j - 1)`` = sensor j at window step K+1+k (``Discrete(N·M + 1)``),
 then stops; the filter then plays the plan one window step per decision (stop is the only legal
 action there), each paying that step's reward. The mask of ``"plan"`` allows a pair while it is
-not in the plan and the plan is smaller than the budget. A decision whose only legal action is stop
+not in the plan and the plan is smaller than the budget. ``"increasing"`` is ``"plan"`` with the
+picks in increasing order: the same actions, observation and rewards, and the mask also forbids
+every pair at or below the last pick (stop as in ``"plan"``). A plan of c pairs can be picked in
+c! orders in ``"plan"`` and in one order here, so a policy's randomness (an entropy bonus) goes
+into trying other plans rather than into reordering one; every plan stays reachable (by its
+pairs in increasing order) and returns the same value. A decision whose only legal action is stop
 (the budget is spent, or every sensor is in the set) is played by the env itself
 (``skip_forced=True``, default): an episode takes at most ``N + c`` decisions, and once the
 budget is spent it ends at once. Pass ``skip_forced=False`` to take every stop yourself.
@@ -30,14 +35,16 @@ it plays), so an episode's return equals the return of the same attack set playe
 ``"bitmask"`` or ``"multibinary"`` format, and every set of those formats is reachable.
 
 Illegal actions (``illegal_action``): an action outside the mask (a sensor already in the step's
-set, or any sensor once the set uses up the budget left) raises ``ValueError`` with
+set, or any sensor once the set uses up the budget left; ``"increasing"``: also a pair at or below
+the last pick) raises ``ValueError`` with
 ``"error"``, and acts as stop with ``"trim"`` (default) and ``"noop"``, so that every decision
 either grows the set or advances the filter. An action outside ``Discrete(M + 1)`` is always a
 ``ValueError``.
 
 Observation: ``{"observation": Box, "action_mask": Box(0, 1, (A,), int8)}`` (A = M + 1, or
-N·M + 1 with ``"plan"``); the ``Box`` is the wrapped env's features (see ``sparse_attack_v0``)
-followed by M entries (1 = sensor in the set being built; ``"plan"``: N·M entries, the plan,
+N·M + 1 with ``"plan"`` or ``"increasing"``); the ``Box`` is the wrapped env's features (see
+``sparse_attack_v0``) followed by M entries (1 = sensor in the set being built; plan-first
+orders: N·M entries, the plan,
 step-major) and the budget that would be left after the set (the plan's steps not yet played),
 as a fraction of ``budget``.
 Infos are the wrapped env's (of its last window step; at a pick, unchanged).
@@ -66,8 +73,11 @@ from fdia_env.systems import LinearSystem
 STOP = 0
 """The stop action: commit the set built so far and take the window step."""
 
-ORDERS = ("time", "plan")
+ORDERS = ("time", "plan", "increasing")
 """Decision orders of the sparse attacker's sequential format (see the module docstring)."""
+
+PLAN_FIRST_ORDERS = ("plan", "increasing")
+"""The orders that pick the whole horizon's (sensor, window step) pairs first."""
 
 
 class SequentialBase(ParallelEnv):
@@ -165,8 +175,8 @@ class SequentialBase(ParallelEnv):
     def action_space(self, agent: str) -> spaces.Space:
         """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call).
 
-        The sparse attacker's ``order="plan"``: ``Discrete(N·M + 1)``, 0 = stop, 1 + k·M + j - 1
-        = sensor j at window step k + 1.
+        The sparse attacker's ``order="plan"`` (and ``"increasing"``): ``Discrete(N·M + 1)``,
+        0 = stop, 1 + k·M + j - 1 = sensor j at window step k + 1.
         """
         self._check_agent(agent)
         return self._action_space
@@ -241,7 +251,8 @@ class SequentialSetEnv(SequentialBase):
             ``"error"`` (it raises ``ValueError``).
         skip_forced: Play the decisions whose only legal action is stop (default True).
         order: ``"time"`` (default: each window step's set, in the filter's order) or
-            ``"plan"`` (the (sensor, window step) pairs of the whole horizon first).
+            ``"plan"`` (the (sensor, window step) pairs of the whole horizon first) or
+            ``"increasing"`` (as ``"plan"``, the pairs picked in increasing order).
 
     Raises:
         TypeError: If ``inner`` is not such an env.
@@ -274,7 +285,8 @@ class SequentialSetEnv(SequentialBase):
         self.order = check_choice("order", order, ORDERS)
         super().__init__(inner, illegal_action, skip_forced)
         self.horizon = N = int(inner.spec.horizon)
-        self.plan_first = order == "plan"
+        self.plan_first = order in PLAN_FIRST_ORDERS
+        self.increasing = order == "increasing"
         slots = N * self.M if self.plan_first else self.M
         self._action_space = spaces.Discrete(slots + 1)
         self._obs_spaces = {
@@ -284,6 +296,7 @@ class SequentialSetEnv(SequentialBase):
         self._chosen = np.zeros((N, self.M) if self.plan_first else self.M, dtype=np.int8)
         self._flat = self._chosen.reshape(-1)  # a view: slot j - 1 of action j
         self._played = 0  # window steps played ("plan": > 0 once the plan is committed)
+        self._last = STOP  # "increasing": the last pick (the pairs up to it are closed)
         self._box: np.ndarray | None = None
         self._info: dict[str, Any] = {}
         # the decision's state, kept up to date by _refresh (each decision reads it several
@@ -298,6 +311,7 @@ class SequentialSetEnv(SequentialBase):
         """The first decision is the first pick of window step K+1 (``"plan"``: of the plan)."""
         self._chosen[:] = 0
         self._played = 0
+        self._last = STOP
         self._pending = 0
         self._box = obs["attacker"]
         self._info = infos["attacker"]
@@ -324,6 +338,8 @@ class SequentialSetEnv(SequentialBase):
         reward, term, trunc = 0.0, False, False
         if j != STOP:
             self._flat[j - 1] = 1
+            if self.increasing:
+                self._last = j
             self._obs[self._n_box + j - 1] = 1.0
             self._pending += 1
             self._refresh()
@@ -356,6 +372,11 @@ class SequentialSetEnv(SequentialBase):
             why = "the plan is committed and plays out: stop (0) is the only legal action"
         elif self._flat[j - 1]:
             why = "this pair is already in the plan"
+        elif self.increasing and j <= self._last:
+            why = (
+                f"order='increasing' picks the pairs in increasing order and the last pick is "
+                f"action {self._last}"
+            )
         else:
             why = f"the plan already uses the budget ({self.attack.budget})"
         return (
@@ -406,6 +427,8 @@ class SequentialSetEnv(SequentialBase):
         mask = self._mask
         if left > 0 and not (self.plan_first and self._played):
             np.equal(self._flat, 0, out=mask[1:])
+            if self._last:  # "increasing": the pairs up to the last pick are closed
+                mask[1 : self._last + 1] = 0
         else:
             mask[1:] = 0
         mask[STOP] = 1
@@ -417,6 +440,8 @@ class SequentialSetEnv(SequentialBase):
     def _forced(self) -> bool:
         """True when stop is the only legal action."""
         if self.plan_first and self._played:
+            return True
+        if self.increasing and self._last == self._flat.size:  # no pair above the last pick
             return True
         return self._left() <= 0 or bool(self._chosen.all())
 
@@ -434,14 +459,16 @@ class SequentialSetEnv(SequentialBase):
 
 
 def plan_actions(env: SequentialSetEnv, plan: list[list[int]]) -> list[int]:
-    """``"plan"`` order: the actions (pairs in increasing order, then stop) that play ``plan``.
+    """Plan-first orders: the actions (pairs in increasing order, then stop) that play ``plan``.
 
     Raises:
-        ValueError: If ``env`` is not in the ``"plan"`` order, or ``plan`` names a window step
-            beyond the horizon or a sensor outside 1..M.
+        ValueError: If ``env`` is not in a plan-first order (``"plan"``, ``"increasing"``), or
+            ``plan`` names a window step beyond the horizon or a sensor outside 1..M.
     """
     if not env.plan_first:
-        raise ValueError(f"env must be in order='plan', got order={env.order!r}")
+        raise ValueError(
+            f"env must be in a plan-first order {list(PLAN_FIRST_ORDERS)}, got order={env.order!r}"
+        )
     if len(plan) > env.horizon:
         raise ValueError(f"plan has {len(plan)} window steps; the horizon is {env.horizon}")
     actions = []
@@ -456,7 +483,7 @@ def plan_actions(env: SequentialSetEnv, plan: list[list[int]]) -> list[int]:
 
 
 class PlanOrderPolicy(PolicyBase):
-    """Plays a fixed attack set in the ``order="plan"`` format (stable-baselines3 signature).
+    """Plays a fixed attack set in a plan-first order (stable-baselines3 signature).
 
     At each decision: the lowest-numbered pair of the set not yet in the plan (read from the
     observation's N·M plan entries, before its last entry), else stop (0), which plays the plan
@@ -507,7 +534,7 @@ def play_plan(env: SequentialSetEnv, plan: list[list[int]], seed: int | None = N
     """Play ``plan`` (per window step, the 1-based sensors) in ``env``; return the return.
 
     ``"time"`` order: each step's sensors are picked in increasing order, then stop, skipping
-    what the env plays itself. ``"plan"`` order: the pairs of :func:`plan_actions`, then stop
+    what the env plays itself. Plan-first orders: the pairs of :func:`plan_actions`, then stop
     until the episode ends. The episode's rewards are summed.
 
     Raises:

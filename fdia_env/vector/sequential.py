@@ -24,7 +24,9 @@ built, the budget left after it as a fraction of ``budget``); the (B, M + 1) mas
 ``infos["action_mask"]`` and :meth:`SequentialVectorEnv.action_masks` (1 = legal: stop always,
 sensor j while it is not in the set and the set is smaller than the budget left). The single
 env's ``order="plan"`` is served too: (B, N·M + 1) masks over the (sensor, window step) pairs,
-and each member plays its plan out once it stops (see :mod:`fdia_env.envs.sequential`). Autoreset
+and each member plays its plan out once it stops (see :mod:`fdia_env.envs.sequential`), and its
+``order="increasing"`` (``"plan"`` with each member's picks in increasing order: its mask also
+closes the pairs at or below its last pick). Autoreset
 and ``max_episode_steps`` (counted in decisions, as Gymnasium's ``TimeLimit`` over the view)
 follow :mod:`fdia_env.vector.env`.
 """
@@ -247,12 +249,14 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         xp, B, M = self.xp, self.num_envs, self.M
         self.budget = int(self.attack.budget)
         self.order, self.plan_first = parallel.order, parallel.plan_first
+        self.increasing = parallel.increasing
         self.horizon = N = parallel.horizon
         self._slots = S = N * M if self.plan_first else M  # the pick actions 1..S
         self._arange = xp.asarray(np.arange(1, S + 1, dtype=np.int64))
         self._steps = xp.asarray(np.arange(N, dtype=np.int64))
         self._chosen = xp.zeros((B, S), dtype=xp.bool)  # "plan": (B, N·M), step-major
         self._playing = xp.zeros(B, dtype=xp.bool)  # "plan": the plan is committed
+        self._last = xp.zeros(B, dtype=xp.int64)  # "increasing": each member's last pick
 
     # --- reset ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
@@ -263,6 +267,7 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         xp, B = self.xp, self.num_envs
         self._chosen = xp.zeros((B, self._slots), dtype=xp.bool)
         self._playing = xp.zeros(B, dtype=xp.bool)
+        self._last = xp.zeros(B, dtype=xp.int64)
         self._decisions = xp.zeros(B, dtype=xp.int64)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._started = True
@@ -272,6 +277,7 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self.inner._reset_members(where)
         self._chosen = self._chosen & ~where[:, None]
         self._playing = self._playing & ~where
+        self._last = self.xp.where(where, 0, self._last)
         self._decisions = self.xp.where(where, 0, self._decisions)
 
     # --- masks ---------------------------------------------------------------------------------
@@ -294,11 +300,16 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         mask[:, STOP] = True
         open_ = (self._left() > 0) & ~self._playing
         mask[:, 1:] = ~self._chosen & open_[:, None]
+        if self.increasing:  # the pairs at or below each member's last pick are closed
+            mask[:, 1:] = mask[:, 1:] & (self._arange[None, :] > self._last[:, None])
         return mask
 
     def _forced(self) -> Any:
         """(B,) members whose only legal action is stop."""
-        return self._playing | (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
+        forced = self._playing | (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
+        if self.increasing:  # no pair above the last pick
+            forced = forced | (self._last >= self._slots)
+        return forced
 
     def _current_sets(self) -> Any:
         """(B, M) bool: each member's set of its next window step."""
@@ -322,13 +333,18 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         xp, B = self.xp, self.num_envs
         onehot = (actions[:, None] == self._arange) & live[:, None]  # (B, M): the picks
         closed = (self._left() <= 0) | self._playing
-        legal = ~_any1(xp, onehot & (self._chosen | closed[:, None]))
+        taken = self._chosen | closed[:, None]
+        if self.increasing:  # and the pairs at or below the last pick
+            taken = taken | (self._arange[None, :] <= self._last[:, None])
+        legal = ~_any1(xp, onehot & taken)
         if not xp.all(legal):
             if self.illegal_action == "error":
                 self._raise_illegal(actions, legal)
             onehot = onehot & legal[:, None]  # "trim" / "noop": an illegal pick stops
         pick = _any1(xp, onehot)
         self._chosen = self._chosen | onehot
+        if self.increasing:
+            self._last = xp.where(pick, actions, self._last)
         commit = live & ~pick
         if self.skip_forced:
             commit = commit | (pick & self._forced())
@@ -364,6 +380,11 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
                 why = "the plan is committed and plays out: stop (0) is the only legal action"
             elif bool(self._chosen[i, j - 1]):
                 why = "this pair is already in the plan"
+            elif self.increasing and j <= int(self._last[i]):
+                why = (
+                    "order='increasing' picks the pairs in increasing order and the last pick "
+                    f"is action {int(self._last[i])}"
+                )
             else:
                 why = f"the plan already uses the budget ({self.budget})"
         else:

@@ -64,8 +64,8 @@ def _sparse(draw, window):
 
 
 def _sequential(draw, window):
-    # the sparse attacker's sequential, masked format (its own native vector env), in both
-    # orders, on v1 and v2 (v2: the same env with order="plan" by default)
+    # the sparse attacker's sequential, masked format (its own native vector env), in each of
+    # its orders, on v1 and v2 (v2: the same env with order="plan" by default)
     scenario = draw(st.sampled_from([*SMALL, GRID]))
     return (
         draw(st.sampled_from(["fdia_env.sparse_attack_v1", "fdia_env.sparse_attack_v2"])),
@@ -73,7 +73,7 @@ def _sequential(draw, window):
         {
             "scenario": scenario,
             "action": "sequential",
-            "order": draw(st.sampled_from(["time", "plan"])),
+            "order": draw(st.sampled_from(["time", "plan", "increasing"])),
             "budget": draw(st.integers(1, window)),
             "objective": draw(st.sampled_from(["trace", "logdet"])),
             "horizon": window,
