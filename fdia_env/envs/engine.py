@@ -52,6 +52,7 @@ from fdia_env.kalman import (
     predict_cov,
     psd_sqrt,
     small,
+    spd_inv,
     steady_state,
     sym,
 )
@@ -631,11 +632,21 @@ class BatchedSimulation:
         # P[k|k−1] = F P F' + Q; a random walk (F = I, the grid presets) skips the products
         P_new = self._low_rank_step(mask) if self._lr_on else None
         P_pred = None  # read by the full update and the sampled step's NIS only
-        if (P_new is None and not self.fast) or self.sampled:
+        if P_new is None or self.sampled:
             P_pred = P_prev + self._Q if self._F_identity else predict_cov(P_prev, self._F, self._Q)
-        if P_new is None and self.fast:  # 2 states: the single env's kernel, on components
-            self._comp = self._update2(self._comp, self._used_components(used))
-            P_new = self.P
+        if P_new is None and self.fast:
+            # 2 states, each member as its single env: the float kernel on components while no
+            # bias has reached its filter nor reaches it now, else (P[k|k−1]⁻¹ + Σ J_i)⁻¹ by
+            # two closed-form inverses (as the single env's engine step)
+            kernel = self.consistent if present is None else self.consistent & ~present
+            if (self._clean and present is None) or xp.all(kernel):
+                self._comp = self._update2(self._comp, self._used_components(used))
+                P_new = self.P
+            else:
+                P_new = spd_inv(spd_inv(P_pred) + self._used_information(used))
+                if xp.any(kernel):
+                    self._comp = self._update2(self._comp, self._used_components(used))
+                    P_new = xp.where(kernel[:, None, None], self.P, P_new)
         elif P_new is None:
             # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹ computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]:
             # one LU solve instead of two inverses (I + P J is invertible: its eigenvalues are
@@ -718,14 +729,21 @@ class BatchedSimulation:
                 return self.value_override
             e = self.x - self.x_hat
             return xp.einsum("bi,bi->b", e, e)
-        if self.fast:  # small.trace2 / small.logdet2 of M's components (the single env's)
-            a, b, d = self._components_of_M()
-            if self.spec.objective == "trace":
-                return a + d
+        if self._c is None:
+            return objective(self.M, self.spec.objective)
+        # 2 states: small.trace2 / small.logdet2 of P's components where M is P (the single
+        # env's float kernel), the generic objective of M where a bias reached the filter (the
+        # single env's engine step): each member by its own state, as its single env
+        a, b, d = self._c
+        if self.spec.objective == "trace":
+            phi = a + d
+        else:
             det = a * d - b * b
             with np.errstate(divide="ignore", invalid="ignore"):
-                return xp.where(det > 0, xp.log(det), -np.inf)
-        return objective(self.M, self.spec.objective)
+                phi = xp.where(det > 0, xp.log(det), -np.inf)
+        if self._clean or self.all_consistent():
+            return phi
+        return xp.where(self.consistent, phi, objective(self.M, self.spec.objective))
 
     def _components_of_M(self) -> tuple[Any, Any, Any]:
         """(a, b, d) of each member's M, (B,) each (2-state models)."""

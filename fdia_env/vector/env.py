@@ -6,9 +6,10 @@ the single env exactly: reset with ``seed`` gives member ``i`` the seed ``seed +
 ``SyncVectorEnv`` does), expected dynamics are deterministic, and sampled dynamics draw each
 member's noise from its own generator in the single env's order. For the 2-state models in
 expected dynamics (numpy, and torch on the CPU) the members are nodes of a table of the attack
-histories reached (:mod:`fdia_env.envs.history`), computed by the single env's own kernel:
-observations, rewards and Φ then equal the single env's bit for bit (until a bias reaches a
-filter; after that, and for the other models, to round-off).
+histories reached (:mod:`fdia_env.envs.history`), computed by the single env's own kernel. On
+numpy every member's observations, rewards, Φ and infos equal its single env's bit for bit, in
+or out of that table, in both dynamics (see :mod:`fdia_env.envs.engine` for the two grid-scale
+cases that match to round-off).
 
 Autoreset follows Gymnasium's rules: ``autoreset_mode=AutoresetMode.NEXT_STEP`` (default, as
 ``SyncVectorEnv``) resets a finished member on the next ``step`` (its action is ignored, reward 0,
