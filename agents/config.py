@@ -391,6 +391,7 @@ _DC_SPARSE = ScenarioDefaults(
 SCENARIO_DEFAULTS: dict[tuple[str, str], ScenarioDefaults] = {
     **{(env, name): _GRID_SPARSE for env in SPARSE_ENVS for name in GRID_PRESETS},
     **{(env, "dc-ieee14-50"): _DC_SPARSE for env in SPARSE_ENVS},
+    **{(env, "grid-ieee14-rtu"): _GRID_SPARSE for env in SPARSE_ENVS},
     ("sensor_game_v0", "grid-ieee14"): _GRID_GAME,
 }
 """Per (env, scenario preset): ``train.py``'s defaults there (docs/guide/training.md lists them).

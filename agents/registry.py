@@ -496,6 +496,7 @@ _SPARSE_SCENARIOS = {
     "ch4-random": {"budget": 10, "horizon": 6},
     **{name: {} for name in GRID_PRESETS},
     "dc-ieee14-50": {},  # c = 5, N = 6 of the preset; the trace (the env's default objective)
+    "grid-ieee14-rtu": {"objective": "logdet"},  # c = 6, N = 6 of the preset
 }
 _COVARIANCE_SCENARIOS = {
     "ch2-position": {"power": 3000.0},

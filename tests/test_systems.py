@@ -154,6 +154,7 @@ def test_scenario_names_cover_the_literature_table():
         "grid-ieee57",
         "grid-ieee118",
         "dc-ieee14-50",
+        "grid-ieee14-rtu",
     ]
     assert literature == [
         "ch2-position",

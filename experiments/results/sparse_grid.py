@@ -9,9 +9,11 @@ project's SB3 model, :func:`agents.algos.build_model` with the defaults of
 :data:`agents.config.ALGO_DEFAULTS`, its rewards rescaled as ``train.py`` rescales them on the
 grid presets: attacking nothing 0, the optimum 1) and the torch PPO
 (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's defaults; it scales its own
-rewards). Both play the env's own sequential format in the plan-first order
-(``gymnasium.make("fdia_env/SparseAttack-v2", action="sequential", order="plan")``: masked picks
-of sensor-time pairs, then stop, then the plan plays out; torch PPO on its native vector env),
+rewards). Both play the env's own sequential format in the order ``train.py`` trains the grid
+presets in, plan-first with the picks in increasing order
+(``gymnasium.make("fdia_env/SparseAttack-v2", action="sequential", order="increasing")``:
+masked picks of sensor-time pairs, each above the last, then stop, then the plan plays out;
+torch PPO on its native vector env),
 since the bitmask ``Discrete(2**M)`` is too large for these learners at M = 14 and, above 16
 sensors, the ``MultiBinary(M)`` action has no mask.
 
@@ -38,7 +40,7 @@ from experiments.results.common import mean_ci95, write_rows
 from fdia_env.systems import LinearSystem
 
 GYM_ID = "fdia_env/SparseAttack-v2"
-ORDER = "plan"
+ORDER = "increasing"
 """The sequential format's decision order the learners train in (docs/guide/sparse.md: why)."""
 
 OBJECTIVES = ("trace", "logdet")
