@@ -71,6 +71,14 @@ class PartialStep:
     num_envs: int
     attack: Any
     defense: Any
+    inner: Any
+
+    def _infos(self) -> dict[str, Any]:
+        """The engine's infos with the members' action masks (``action_mask``, int8)."""
+        infos = self.inner._infos()
+        infos["action_mask"] = self.xp.astype(self.action_masks(), self.xp.int8)
+        infos["_action_mask"] = self.inner._all
+        return infos
 
     def _save(self, sim: Any) -> dict[str, Any]:
         """Copies of the engine's and the models' per-member state (before a partial step)."""
@@ -449,12 +457,6 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         out[:, d:-1] = xp.astype(self._chosen, xp.float32)
         out[:, -1] = xp.astype(xp.maximum(self._left(), 0), xp.float64) / self.budget
         return out
-
-    def _infos(self) -> dict[str, Any]:
-        infos = self.inner._infos()
-        infos["action_mask"] = self.xp.astype(self.action_masks(), self.xp.int8)
-        infos["_action_mask"] = self.inner._all
-        return infos
 
 
 def _any1(xp: Any, x: Any) -> Any:

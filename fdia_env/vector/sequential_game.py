@@ -296,12 +296,6 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         out[:, d:] = xp.astype(self._chosen, xp.float32)
         return out
 
-    def _infos(self) -> dict[str, Any]:
-        infos = self.inner._infos()
-        infos["action_mask"] = self.xp.astype(self.action_masks(), self.xp.int8)
-        infos["_action_mask"] = self.inner._all
-        return infos
-
 
 # fdia_env.vector.env.make_vector (make_vec's entry point) builds the class for the format
 vector_env.FORMAT_VECTOR_ENVS[(MODULE, "sequential")] = SequentialGameVectorEnv
