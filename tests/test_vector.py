@@ -642,3 +642,26 @@ def test_every_torch_id_builds_resets_and_steps_on_torch():
         out = env.step(torch.as_tensor(action))
         assert torch.isfinite(out[1]).all(), env_id
         env.close()
+
+
+def test_make_vector_forwards_the_vector_options_of_the_class_and_the_rest_to_the_env():
+    # make_vector takes every option as a keyword (as Gymnasium's entry points): the vector
+    # env's options are FdiaVectorEnv's keyword parameters, the rest the env's own
+    import inspect
+
+    from fdia_env.vector.env import FdiaVectorEnv, make_vector, split_vector_options
+
+    params = list(inspect.signature(FdiaVectorEnv.__init__).parameters)[3:]
+    options, rest = split_vector_options({"max_episode_steps": 3, "scenario": "ch4-position"})
+    assert list(options) == params
+    assert options["max_episode_steps"] == 3 and options["backend"] == "numpy"
+    assert rest == {"scenario": "ch4-position"}
+    env = make_vector(
+        "fdia_env.fdia_v0", 2, max_episode_steps=3, autoreset_mode="SameStep", max_cycles=7
+    )
+    assert env.max_episode_steps == 3 and env.autoreset_mode.name == "SAME_STEP"
+    assert env.parallel.max_cycles == 7
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        make_vector("fdia_env.fdia_v0", 2, autoreset_mode="later")
+    with pytest.raises(TypeError, match="positional"):
+        make_vector("fdia_env.fdia_v0", 2, "defender")

@@ -41,6 +41,7 @@ game's exact expected errors are integrated on the host (see :mod:`fdia_env.dete
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable
 from typing import Any
 
@@ -454,38 +455,58 @@ def _check_torch_support(parallel: FdiaParallelEnv) -> None:
         )
 
 
+_VECTOR_DEFAULTS = {
+    name: param.default
+    for name, param in inspect.signature(FdiaVectorEnv.__init__).parameters.items()
+    if param.default is not inspect.Parameter.empty
+}
+
+
 def _box(space: spaces.Space) -> spaces.Box:
     return space["observation"] if isinstance(space, spaces.Dict) else space
 
 
-def make_vector(
-    module: str,
-    num_envs: int,
-    agent: str = "attacker",
-    opponent: Policy | None = None,
-    autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-    max_episode_steps: int | None = None,
-    backend: str = "numpy",
-    device: Any = None,
-    **kwargs: Any,
-) -> FdiaVectorEnv:
+def split_vector_options(kwargs: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Split :func:`make_vector`'s keywords into the vector env's options and the env's.
+
+    The vector env's options are the keyword parameters of ``FdiaVectorEnv.__init__``
+    (``agent``, ``opponent``, ``autoreset_mode``, ``max_episode_steps``, ``backend``,
+    ``device``), with its defaults for those not given, so the class's signature is their one
+    definition.
+
+    Returns:
+        The vector env's options (all of them) and the other keywords (the env's own).
+    """
+    options = {name: kwargs.get(name, default) for name, default in _VECTOR_DEFAULTS.items()}
+    return options, {k: v for k, v in kwargs.items() if k not in _VECTOR_DEFAULTS}
+
+
+def make_vector(module: str, num_envs: int, **kwargs: Any) -> gym.vector.VectorEnv:
     """Gymnasium ``vector_entry_point``: ``fdia_env.<module>.parallel_env(**kwargs)`` × B.
 
-    ``backend`` and ``device`` choose numpy (default) or torch on a device (see
-    :class:`FdiaVectorEnv`); they are checked before the env is built. The sparse attacker's
-    ``action="sequential"`` gets :class:`fdia_env.vector.sequential.SequentialVectorEnv`, the
-    sensor game's :class:`fdia_env.vector.sequential_game.SequentialGameVectorEnv` (through
+    As Gymnasium's entry points, it takes every option as a keyword: the vector env's
+    (``agent``, ``opponent``, ``autoreset_mode``, ``max_episode_steps``, ``backend``,
+    ``device``; see :class:`FdiaVectorEnv` for their meaning, defaults and errors) and the
+    env's own (the rest, passed to ``parallel_env``). ``backend`` and ``device`` choose numpy
+    (default) or torch on a device; they are checked before the env is built. The sparse
+    attacker's ``action="sequential"`` gets
+    :class:`fdia_env.vector.sequential.SequentialVectorEnv`, the sensor game's
+    :class:`fdia_env.vector.sequential_game.SequentialGameVectorEnv` (through
     :data:`FORMAT_VECTOR_ENVS`).
+
+    Raises:
+        ValueError: For a bad vector option (as :class:`FdiaVectorEnv`), a render mode, a
+            backend the env's entry in :data:`fdia_env.registration.ENVS` does not list, or an
+            action format the native vector env does not run.
     """
     action = kwargs.get("action")
     # only a format name can select a native vector env of its own (anything else, e.g. an
     # array, goes on to the env, whose own check names the parameter)
     fmt = FORMAT_VECTOR_ENVS.get((module, action)) if isinstance(action, str | None) else None
     if fmt is not None and not isinstance(fmt, type):  # a format's maker of its own
-        return fmt(
-            module, num_envs, agent, opponent, autoreset_mode, max_episode_steps, backend, device,
-            **kwargs
-        )  # fmt: skip
+        return fmt(module, num_envs, **kwargs)
+    options, kwargs = split_vector_options(kwargs)
+    backend, device = options["backend"], options["device"]
     xp = get_backend(backend, device)  # an unknown backend or a missing GPU fails first
     if kwargs.get("render_mode") is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
@@ -506,21 +527,13 @@ def make_vector(
                 f"wraps the env as a {type(parallel).__name__}); use gymnasium.make_vec(..., "
                 "vectorization_mode='sync') or another action format"
             )
+        agent = options["agent"]
         check_agent(agent, parallel.possible_agents)
         if (
-            opponent is None
+            options["opponent"] is None
             and hasattr(mod, "default_opponent")
             and len(parallel.possible_agents) > 1
         ):
-            opponent = mod.default_opponent(parallel, agent)
+            options["opponent"] = mod.default_opponent(parallel, agent)
     # a format's own vector env class checks the env and its options itself
-    return (FdiaVectorEnv if fmt is None else fmt)(
-        parallel,
-        num_envs,
-        agent=agent,
-        opponent=opponent,
-        autoreset_mode=autoreset_mode,
-        max_episode_steps=max_episode_steps,
-        backend=backend,
-        device=device,
-    )
+    return (FdiaVectorEnv if fmt is None else fmt)(parallel, num_envs, **options)

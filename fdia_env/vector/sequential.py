@@ -472,22 +472,14 @@ def _expand(where: Any, ndim: int) -> Any:
     return where.reshape(-1, *[1] * (ndim - 1))
 
 
-def make_vector(
-    module: str,
-    num_envs: int,
-    agent: str = "attacker",
-    opponent: Any = None,
-    autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-    max_episode_steps: int | None = None,
-    backend: str = "numpy",
-    device: Any = None,
-    **kwargs: Any,
-) -> gym.vector.VectorEnv:
+def make_vector(module: str, num_envs: int, **kwargs: Any) -> gym.vector.VectorEnv:
     """The native vector env of ``action="sequential"`` (what ``make_vec`` gives for it).
 
     :func:`fdia_env.vector.env.make_vector`, the table's ``vector_entry_point``, hands the
     sequential format of a module of :data:`SEQUENTIAL_MODULES` here (this module registers it
-    in :data:`fdia_env.vector.env.FORMAT_VECTOR_ENVS`).
+    in :data:`fdia_env.vector.env.FORMAT_VECTOR_ENVS`), with the same keywords: the vector
+    env's options (those of :class:`SequentialVectorEnv`, plus ``agent`` and ``opponent``,
+    which must be ``"attacker"`` and None) and the env's own.
 
     Raises:
         ValueError: For a module without the format's native vector env, a render mode, an
@@ -500,31 +492,23 @@ def make_vector(
         )
     from fdia_env.backend import get_backend
 
-    get_backend(backend, device)  # an unknown backend or a missing GPU fails first
-    if kwargs.get("render_mode") is not None:
+    options, env_kwargs = vector_env.split_vector_options(kwargs)
+    agent, opponent = options.pop("agent"), options.pop("opponent")
+    # an unknown backend or a missing GPU fails first
+    get_backend(options["backend"], options["device"])
+    if env_kwargs.pop("render_mode", None) is not None:
         raise ValueError("render_mode is not supported by the native vector env; use SyncVectorEnv")
-    kwargs.pop("render_mode", None)
     if not isinstance(agent, str) or agent != "attacker":
         raise ValueError(f"agent must be 'attacker' for {module}, got {agent!r}")
     if opponent is not None:
         raise ValueError(f"opponent must be None: {module} has a single player")
     import importlib
 
-    parallel = importlib.import_module(module).parallel_env(**kwargs)
+    parallel = importlib.import_module(module).parallel_env(**env_kwargs)
     if not isinstance(parallel, SequentialSetEnv):  # v1's "auto" up to 16 sensors: the bitmask
-        kwargs = {**kwargs, "scenario": parallel.scenario, "action": parallel.attack.format}
-        return vector_env.make_vector(
-            module, num_envs, agent=agent, opponent=opponent, autoreset_mode=autoreset_mode,
-            max_episode_steps=max_episode_steps, backend=backend, device=device, **kwargs
-        )  # fmt: skip
-    return SequentialVectorEnv(
-        parallel,
-        num_envs,
-        autoreset_mode=autoreset_mode,
-        max_episode_steps=max_episode_steps,
-        backend=backend,
-        device=device,
-    )
+        fixed = {"scenario": parallel.scenario, "action": parallel.attack.format}
+        return vector_env.make_vector(module, num_envs, **{**kwargs, **fixed})
+    return SequentialVectorEnv(parallel, num_envs, **options)
 
 
 for _module in SEQUENTIAL_MODULES:
