@@ -13,12 +13,12 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import gymnasium as gym
 import numpy as np
 import torch
+from _timing import burst
 
 import fdia_env  # noqa: F401
 
@@ -28,16 +28,6 @@ CASES = [
     ("ch4-position, sampled", {"dynamics": "sampled"}, 65536, 8),
     ("grid-ieee14, expected", {"scenario": "grid-ieee14", "action": "single"}, 1024, 35),
 ]
-
-
-def _burst(env: gym.vector.VectorEnv, actions: list, seconds: float, sync) -> float:
-    steps, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        for a in actions:
-            env.step(a)
-        steps += len(actions)
-    sync()
-    return steps * env.num_envs / (time.perf_counter() - t0)
 
 
 def main() -> None:
@@ -69,11 +59,11 @@ def main() -> None:
         actions = {"numpy": raw, "torch": [torch.as_tensor(a, device=args.device) for a in raw]}
         for key, env in envs.items():  # warm-up
             env.reset(seed=0)
-            _burst(env, actions[key][:2], 0.0, sync)
+            burst(env, actions[key][:2], 0.0, sync=sync)
         rates: dict[str, list[float]] = {key: [] for key in envs}
         for _ in range(rounds):
             for key, env in envs.items():
-                rates[key].append(_burst(env, actions[key], seconds, sync))
+                rates[key].append(burst(env, actions[key], seconds, sync=sync))
         med = {key: float(np.median(r)) for key, r in rates.items()}
         ratio = float(np.median(np.array(rates["torch"]) / np.array(rates["numpy"])))
         print(f"{name:26s} {B:6d} {med['numpy']:12,.0f} {med['torch']:12,.0f} {ratio:11.2f}x")

@@ -42,7 +42,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.append(str(Path(__file__).resolve().parent.parent))  # after PYTHONPATH (see above)
-from _timing import rate
+from _timing import burst, rate
 
 import fdia_env
 from baselines.game import solve_double_oracle
@@ -80,15 +80,6 @@ def single_rate(name: str, steps: int) -> float:
     return rate(run, steps, repeats=3)
 
 
-def _burst(venv, acts, seconds: float) -> float:
-    steps, t0 = 0, CLOCK()
-    while CLOCK() - t0 < seconds:
-        for a in acts:
-            venv.step(a)
-        steps += len(acts)
-    return steps * venv.num_envs / (CLOCK() - t0)
-
-
 def vector_rates(name: str, batches, rounds: int, seconds: float) -> dict[str, float]:
     """Median env-steps/s per (kind, B), native and sync bursts alternating."""
     venvs = {}
@@ -113,7 +104,7 @@ def vector_rates(name: str, batches, rounds: int, seconds: float) -> dict[str, f
     rates: dict[str, list[float]] = {k: [] for k in venvs}
     for _ in range(rounds):
         for k, v in venvs.items():
-            rates[k].append(_burst(v, acts[k], seconds))
+            rates[k].append(burst(v, acts[k], seconds, CLOCK))
     for v in venvs.values():
         v.close()
     return {k: float(np.median(r)) for k, r in rates.items()}

@@ -24,20 +24,11 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import gymnasium as gym
 import numpy as np
+from _timing import burst
 
 import fdia_env
 
 CLOCK = time.perf_counter  # --clock cpu: time.process_time (this process's CPU time)
-
-
-def _burst(venv: gym.vector.VectorEnv, actions: list[np.ndarray], seconds: float) -> float:
-    """Env-steps/s of stepping ``venv`` with ``actions`` for about ``seconds``."""
-    steps, t0 = 0, CLOCK()
-    while CLOCK() - t0 < seconds:
-        for a in actions:
-            venv.step(a)
-        steps += len(actions)
-    return steps * venv.num_envs / (CLOCK() - t0)
 
 
 def interleaved(
@@ -55,11 +46,11 @@ def interleaved(
     }
     for k, v in venvs.items():  # warm-up
         v.reset(seed=0)
-        _burst(v, actions[k][:7], 0.0)
+        burst(v, actions[k][:7], 0.0, CLOCK)
     rates: dict[str, list[float]] = {k: [] for k in venvs}
     for _ in range(rounds):
         for k, v in venvs.items():
-            rates[k].append(_burst(v, actions[k], seconds))
+            rates[k].append(burst(v, actions[k], seconds, CLOCK))
     return rates
 
 
