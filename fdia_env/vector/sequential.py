@@ -64,7 +64,9 @@ class PartialStep:
     For a native vector env whose members take their window steps at different decisions (the
     engine and the models step the whole batch). :meth:`_adopt` sets what such an env takes
     from its engine (``self.inner``) and single env, :meth:`_begin` opens its step (the checked
-    actions, the next-step autoreset) and :meth:`_finish` ends it (the same-step autoreset).
+    actions, the next-step autoreset) and :meth:`_finish` ends it (the same-step autoreset);
+    :meth:`reset` resets the engine and the seeding, then the format's own decision state
+    (:meth:`_reset_decisions`).
     """
 
     xp: Any
@@ -72,6 +74,19 @@ class PartialStep:
     attack: Any
     defense: Any
     inner: Any
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        """Reset every member (an int ``seed`` seeds member i with ``seed + i``, as the engine)."""
+        self.inner.reset(seed=seed, options=options)
+        if seed is not None and not isinstance(seed, list | tuple):
+            super().reset(seed=int(seed))  # the next class in the env's MRO: VectorEnv
+        self._reset_decisions()
+        self._started = True
+        return self._observe(), self._infos()
+
+    def _reset_decisions(self) -> None:
+        """Every member's decision state at a reset (each format's own)."""
+        raise NotImplementedError
 
     def _infos(self) -> dict[str, Any]:
         """The engine's infos with the members' action masks (``action_mask``, int8)."""
@@ -267,19 +282,14 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._last = xp.zeros(B, dtype=xp.int64)  # "increasing": each member's last pick
 
     # --- reset ---------------------------------------------------------------------------------
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        """Reset every member (an int ``seed`` seeds member i with ``seed + i``, as the engine)."""
-        self.inner.reset(seed=seed, options=options)
-        if seed is not None and not isinstance(seed, list | tuple):
-            super().reset(seed=int(seed))
+    def _reset_decisions(self) -> None:
+        """Every member's decision state at a reset: nothing chosen, nothing playing."""
         xp, B = self.xp, self.num_envs
         self._chosen = xp.zeros((B, self._slots), dtype=xp.bool)
         self._playing = xp.zeros(B, dtype=xp.bool)
         self._last = xp.zeros(B, dtype=xp.int64)
         self._decisions = xp.zeros(B, dtype=xp.int64)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
-        self._started = True
-        return self._observe(), self._infos()
 
     def _reset_members(self, where: Any) -> None:
         self.inner._reset_members(where)

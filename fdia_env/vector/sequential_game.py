@@ -134,15 +134,10 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._prev_done = xp.zeros(B, dtype=xp.bool)
 
     # --- reset ---------------------------------------------------------------------------------
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        """Reset every member (an int ``seed`` seeds member i with ``seed + i``, as the engine)."""
-        self.inner.reset(seed=seed, options=options)
-        if seed is not None and not isinstance(seed, list | tuple):
-            super().reset(seed=int(seed))
+    def _reset_decisions(self) -> None:
+        """Every member's decision state at a reset and the opponent's subsets of its round."""
         self._reset_state()
         self._new_rounds(self.inner._all)
-        self._started = True
-        return self._observe(), self._infos()
 
     def _reset_members(self, where: Any) -> None:
         self.inner._reset_members(where)
