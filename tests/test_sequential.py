@@ -734,23 +734,33 @@ def test_plan_order_same_rewards_as_bitmask_on_random_plans(reward_mode, objecti
         assert play_plan(env, plan, seed=0) == pytest.approx(sum(expected), rel=1e-12, abs=0)
 
 
-def test_plan_order_every_attack_set_reachable_and_only_those():
-    """M = 3, N = 2, c = 2: each of the 22 sets of <= 2 pairs, and no larger set, is played."""
-    kwargs = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
-    env = sparse_attack_v0.parallel_env(
-        action="sequential", order="plan", illegal_action="error", **kwargs
-    )
+SMALL = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
+
+
+def _every_small_plan() -> list[list[list[int]]]:
+    """The 22 plans of at most 2 pairs of :data:`SMALL` (M = 3, N = 2), sensors 1-based."""
     pairs = list(itertools.product(range(2), range(1, 4)))
-    played = 0
+    plans = []
     for size in range(3):
         for chosen in itertools.combinations(pairs, size):
             plan: list[list[int]] = [[], []]
             for k, j in chosen:
                 plan[k].append(j)
-            expected = sum(bitmask_rewards(plan, **kwargs))
-            assert play_plan(env, plan, seed=0) == pytest.approx(expected, rel=1e-12, abs=0)
-            played += 1
-    assert played == 22
+            plans.append(plan)
+    return plans
+
+
+def test_plan_order_every_attack_set_reachable_and_only_those():
+    """M = 3, N = 2, c = 2: each of the 22 sets of <= 2 pairs, and no larger set, is played."""
+    kwargs = SMALL
+    env = sparse_attack_v0.parallel_env(
+        action="sequential", order="plan", illegal_action="error", **kwargs
+    )
+    plans = _every_small_plan()
+    for plan in plans:
+        expected = sum(bitmask_rewards(plan, **kwargs))
+        assert play_plan(env, plan, seed=0) == pytest.approx(expected, rel=1e-12, abs=0)
+    assert len(plans) == 22
     env.reset(seed=0)
     env.step({"attacker": 1})
     assert env.action_mask().tolist() == [1, 0, 1, 1, 1, 1, 1]
@@ -1002,25 +1012,19 @@ def test_increasing_order_mask_after_picks_and_refused_picks():
 
 def test_increasing_order_every_attack_set_reachable_with_the_plan_orders_value():
     """M = 3, N = 2, c = 2: each of the 22 sets plays as in "plan" and the bitmask, exactly."""
-    kwargs = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
+    kwargs = SMALL
     inc = sparse_attack_v0.parallel_env(
         action="sequential", order="increasing", illegal_action="error", **kwargs
     )
     plan_env = sparse_attack_v0.parallel_env(
         action="sequential", order="plan", illegal_action="error", **kwargs
     )
-    pairs = list(itertools.product(range(2), range(1, 4)))
-    played = 0
-    for size in range(3):
-        for chosen in itertools.combinations(pairs, size):
-            plan: list[list[int]] = [[], []]
-            for k, j in chosen:
-                plan[k].append(j)
-            value = play_plan(inc, plan, seed=0)
-            assert value == play_plan(plan_env, plan, seed=0)
-            assert value == pytest.approx(sum(bitmask_rewards(plan, **kwargs)), rel=1e-12, abs=0)
-            played += 1
-    assert played == 22
+    plans = _every_small_plan()
+    for plan in plans:
+        value = play_plan(inc, plan, seed=0)
+        assert value == play_plan(plan_env, plan, seed=0)
+        assert value == pytest.approx(sum(bitmask_rewards(plan, **kwargs)), rel=1e-12, abs=0)
+    assert len(plans) == 22
 
 
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
