@@ -737,6 +737,16 @@ def test_plan_order_same_rewards_as_bitmask_on_random_plans(reward_mode, objecti
 SMALL = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
 
 
+def _view_return(view: gym.Env, policy) -> float:
+    """The return of one episode of ``policy`` (deterministic ``predict``) in a Gymnasium view."""
+    obs, _ = view.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        obs, r, term, trunc, _ = view.step(int(policy.predict(obs)[0]))
+        total, done = total + r, term or trunc
+    return total
+
+
 def _every_small_plan() -> list[list[list[int]]]:
     """The 22 plans of at most 2 pairs of :data:`SMALL` (M = 3, N = 2), sensors 1-based."""
     pairs = list(itertools.product(range(2), range(1, 4)))
@@ -909,12 +919,7 @@ def test_plan_order_reference_policy_plays_the_solver_set_in_the_env_format():
         order="plan",
         illegal_action="error",
     )
-    obs, _ = view.reset(seed=0)
-    total, done = 0.0, False
-    while not done:
-        obs, r, term, trunc, _ = view.step(int(ref.policy.predict(obs)[0]))
-        total, done = total + r, term or trunc
-    assert total == pytest.approx(best.value, rel=1e-12)
+    assert _view_return(view, ref.policy) == pytest.approx(best.value, rel=1e-12)
     with pytest.raises(ValueError, match=r"attacks must be \(step, sensor\) pairs"):
         PlanOrderPolicy([(3, 0)], num_sensors=3, horizon=3)
 
@@ -1080,11 +1085,6 @@ def test_increasing_order_reference_policy_and_gymnasium_view():
         "fdia_env/SparseAttack-v2", order="increasing", illegal_action="error", **kwargs
     )
     check_env(view.unwrapped, skip_render_check=True)
-    obs, _ = view.reset(seed=0)
-    total, done = 0.0, False
-    while not done:
-        obs, r, term, trunc, _ = view.step(int(ref.policy.predict(obs)[0]))
-        total, done = total + r, term or trunc
-    assert total == pytest.approx(best.value, rel=1e-12)
+    assert _view_return(view, ref.policy) == pytest.approx(best.value, rel=1e-12)
     parallel_api_test(sparse_attack_v0.parallel_env(order="increasing", **kwargs), num_cycles=30)
     api_test(sparse_attack_v0.env(order="increasing", **kwargs), num_cycles=30)
