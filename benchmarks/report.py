@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -44,30 +45,50 @@ def _find(pattern: str, text: str) -> re.Match | None:
     return re.search(pattern, text, re.MULTILINE)
 
 
-def _row(
-    out: str, what: str, pattern: str, figure: str, ref_pattern: str = "", reference: str = ""
-) -> Row:
-    """A README row read from a script's output (a pattern that does not match: empty cell).
+class Read(NamedTuple):
+    r"""A figure read from a script's output.
 
-    ``figure`` and ``reference`` are formats of the match ``m`` of ``pattern`` and
-    ``ref_pattern`` (none: the same match), e.g. ``"{m[1]}×"``.
+    ``text`` formatted with the first match ``m`` of ``pattern`` (a multiline regex), e.g.
+    ``Read(r"ratio: ([\d.]+)x", "{m[1]}×")``; an output without a match gives an empty cell.
     """
-    m = _find(pattern, out)
-    r = _find(ref_pattern, out) if ref_pattern else m
-    return (what, figure.format(m=m) if m else "", reference.format(m=r) if r else "")
+
+    pattern: str
+    text: str
+
+    def __call__(self, out: str) -> str:
+        """The figure in ``out`` (empty: not there)."""
+        m = _find(self.pattern, out)
+        return self.text.format(m=m) if m else ""
 
 
-def _single_view(out: str) -> list[Row]:
-    return [
-        _row(
-            out,
-            "Gymnasium single view vs `CartPole-v1` (`single_view.py --clock cpu`; target ≥ 0.3×)",
-            r"view / CartPole-v1: ([\d.]+)x",
-            "{m[1]}×",
-            r"gymnasium\.make CartPole-v1\s+([\d,]+) steps/s",
-            "`CartPole-v1` {m[1]} steps/s",
-        )
-    ]
+class Figure(NamedTuple):
+    """One README row: what it measures, its figure, the reference's rate in the same run.
+
+    The reference is a :class:`Read` of the output or a fixed text.
+    """
+
+    what: str
+    figure: Read
+    reference: Read | str = ""
+
+    def row(self, out: str) -> Row:
+        """The row of this figure in a script's output ``out``."""
+        ref = self.reference if isinstance(self.reference, str) else self.reference(out)
+        return (self.what, self.figure(out), ref)
+
+
+def _figures(*figures: Figure) -> Callable[[str], list[Row]]:
+    """A :attr:`Bench.summary` whose rows are read from the output by patterns."""
+    return lambda out: [f.row(out) for f in figures]
+
+
+_single_view = _figures(
+    Figure(
+        "Gymnasium single view vs `CartPole-v1` (`single_view.py --clock cpu`; target ≥ 0.3×)",
+        Read(r"view / CartPole-v1: ([\d.]+)x", "{m[1]}×"),
+        Read(r"gymnasium\.make CartPole-v1\s+([\d,]+) steps/s", "`CartPole-v1` {m[1]} steps/s"),
+    )
+)
 
 
 def _vector(out: str) -> list[Row]:
@@ -101,88 +122,76 @@ def _vector(out: str) -> list[Row]:
     return rows
 
 
-def _train_fps(out: str) -> list[Row]:
-    return [
-        _row(
-            out,
-            "SB3 PPO's steps/s on the single view vs on `CartPole-v1` (`train_fps.py`, CPU time; "
-            "target ≥ 90 %)",
-            r"SparseAttack-v0 / CartPole-v1: ([\d.]+)% of CPU-time rate",
-            "{m[1]} %",
+_train_fps = _figures(
+    Figure(
+        "SB3 PPO's steps/s on the single view vs on `CartPole-v1` (`train_fps.py`, CPU time; "
+        "target ≥ 90 %)",
+        Read(r"SparseAttack-v0 / CartPole-v1: ([\d.]+)% of CPU-time rate", "{m[1]} %"),
+        Read(
             r"^PPO on CartPole-v1\s+([\d,]+)\s+([\d,]+)",
             "PPO on `CartPole-v1` {m[2]} steps/s (CPU)",
-        )
-    ]
-
-
-def _env_step(out: str) -> list[Row]:
-    return [
-        _row(
-            out,
-            "`gymnasium.make` view, expected dynamics (`env_step.py`; target 50,000 steps/s)",
-            r"^gymnasium\.make view \(expected\)\s+([\d,]+) steps/s",
-            "{m[1]} steps/s",
-            r"^gymnasium\.make CartPole-v1\s+([\d,]+) steps/s",
-            "`CartPole-v1` {m[1]} steps/s",
         ),
-        _row(
-            out,
-            "parallel env vs PettingZoo's `rps_v2` (same script; target ≥ 3×)",
-            r"^parallel env / rps_v2:\s+([\d.]+)x",
-            "{m[1]}×",
-            r"^pettingzoo rps_v2 parallel\s+([\d,]+) steps/s",
-            "`rps_v2` {m[1]} steps/s",
+    )
+)
+
+_env_step = _figures(
+    Figure(
+        "`gymnasium.make` view, expected dynamics (`env_step.py`; target 50,000 steps/s)",
+        Read(r"^gymnasium\.make view \(expected\)\s+([\d,]+) steps/s", "{m[1]} steps/s"),
+        Read(r"^gymnasium\.make CartPole-v1\s+([\d,]+) steps/s", "`CartPole-v1` {m[1]} steps/s"),
+    ),
+    Figure(
+        "parallel env vs PettingZoo's `rps_v2` (same script; target ≥ 3×)",
+        Read(r"^parallel env / rps_v2:\s+([\d.]+)x", "{m[1]}×"),
+        Read(r"^pettingzoo rps_v2 parallel\s+([\d,]+) steps/s", "`rps_v2` {m[1]} steps/s"),
+    ),
+)
+
+
+def _backend(case: str) -> Figure:
+    line = rf"^{case}\s+65536\s+([\d,]+)\s+([\d,]+)\s+([\d.]+)x"
+    return Figure(
+        f"native vector env, torch (CPU) vs numpy, {case}, B = 65,536 (`backends.py`)",
+        Read(line, "{m[3]}×"),
+        Read(line, "numpy {m[1]} env-steps/s"),
+    )
+
+
+_backends = _figures(_backend("ch4-position, expected"), _backend("ch4-position, sampled"))
+
+_grid = _figures(
+    Figure(
+        "native vector env on grid-ieee118, B = 256 (`grid.py --vector-only`)",
+        Read(
+            r"^grid-ieee118 native B=256: ([\d,]+) µs per member-step", "{m[1]} µs per member-step"
         ),
-    ]
-
-
-def _backends(out: str) -> list[Row]:
-    return [
-        _row(
-            out,
-            f"native vector env, torch (CPU) vs numpy, {case}, B = 65,536 (`backends.py`)",
-            rf"^{case}\s+65536\s+([\d,]+)\s+([\d,]+)\s+([\d.]+)x",
-            "{m[3]}×",
-            reference="numpy {m[1]} env-steps/s",
-        )
-        for case in ("ch4-position, expected", "ch4-position, sampled")
-    ]
-
-
-def _grid(out: str) -> list[Row]:
-    return [
-        _row(
-            out,
-            "native vector env on grid-ieee118, B = 256 (`grid.py --vector-only`)",
-            r"^grid-ieee118 native B=256: ([\d,]+) µs per member-step",
-            "{m[1]} µs per member-step",
+        Read(
             r"^grid-ieee118\s+([\d,]+)\s+([\d,]+)\s+([\d,]+)",
             "`SyncVectorEnv` B = 64 {m[2]} env-steps/s",
-        )
-    ]
-
-
-def _sparse(out: str) -> list[Row]:
-    return [
-        _row(
-            out,
-            "EXS, ch4-position at size 18 (`sparse.py`)",
-            r"^EXS\s+18\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)×",
-            "{m[1]} s, {m[3]}× faster than the literature",
-            reference="the literature's Matlab: {m[2]} s",
-        )
-    ]
-
-
-def _bnb(out: str) -> list[Row]:
-    what, figure, _ = _row(
-        out,
-        "branch and bound, 300-pair meter-level DC IEEE 14, c = 5 (`bnb.py`)",
-        r"dc-ieee14-50 \(50 meters, N = 6\) (\w+): .*?(proved optimal|gap [\d.]+ %), "
-        r"(\d+) nodes, ([\d.]+) s",
-        "{m[2]} in {m[4]} s ({m[1]})",
+        ),
     )
-    return [(what, figure, "C(300, 5) ≈ 2·10¹⁰ sets")]
+)
+
+EXS_18 = r"^EXS\s+18\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)×"
+_sparse = _figures(
+    Figure(
+        "EXS, ch4-position at size 18 (`sparse.py`)",
+        Read(EXS_18, "{m[1]} s, {m[3]}× faster than the literature"),
+        Read(EXS_18, "the literature's Matlab: {m[2]} s"),
+    )
+)
+
+_bnb = _figures(
+    Figure(
+        "branch and bound, 300-pair meter-level DC IEEE 14, c = 5 (`bnb.py`)",
+        Read(
+            r"dc-ieee14-50 \(50 meters, N = 6\) (\w+): .*?(proved optimal|gap [\d.]+ %), "
+            r"(\d+) nodes, ([\d.]+) s",
+            "{m[2]} in {m[4]} s ({m[1]})",
+        ),
+        "C(300, 5) ≈ 2·10¹⁰ sets",
+    )
+)
 
 
 def _seq(out: str) -> list[Row]:
@@ -222,23 +231,18 @@ def _game(out: str) -> list[Row]:
     ]
 
 
-def _stealth(out: str) -> list[Row]:
-    vector = r"B = 4,096, expected: ([\d,]+) env-steps/s .*?SyncVectorEnv B = 64: ([\d,]+)"
-    return [
-        _row(
-            out,
-            "security indices of every IEEE 118 state by minimum cut (`stealth.py`; target ≤ 60 s)",
-            r"min cut, all (\d+) states: ([\d.]+) s",
-            "{m[2]} s for {m[1]} states",
-        ),
-        _row(
-            out,
-            "static stealth env's native vector env on grid-ieee118, B = 4,096, expected",
-            vector,
-            "{m[1]} env-steps/s",
-            reference="`SyncVectorEnv` B = 64 {m[2]} env-steps/s",
-        ),
-    ]
+STEALTH_VECTOR = r"B = 4,096, expected: ([\d,]+) env-steps/s .*?SyncVectorEnv B = 64: ([\d,]+)"
+_stealth = _figures(
+    Figure(
+        "security indices of every IEEE 118 state by minimum cut (`stealth.py`; target ≤ 60 s)",
+        Read(r"min cut, all (\d+) states: ([\d.]+) s", "{m[2]} s for {m[1]} states"),
+    ),
+    Figure(
+        "static stealth env's native vector env on grid-ieee118, B = 4,096, expected",
+        Read(STEALTH_VECTOR, "{m[1]} env-steps/s"),
+        Read(STEALTH_VECTOR, "`SyncVectorEnv` B = 64 {m[2]} env-steps/s"),
+    ),
+)
 
 
 @dataclass(frozen=True)

@@ -126,3 +126,20 @@ def test_no_figure_outside_the_generated_sections():
     outside += before + after.split(report.README_END)[1]
     assert FIGURE.findall(outside) == []
     assert FIGURE.findall("took 1.5× and 12 s, 30 %, 165 µs") == ["1.5×", "12 s", "30 %", "165 µs"]
+
+
+def test_the_readme_rows_are_read_again_from_the_pages_outputs():
+    # the README's figures are the ones its rows' patterns read from the outputs the page holds
+    # (both are written by the same run): every row, its figure and its reference, to the letter
+    page = (ROOT / "docs" / "benchmarks.md").read_text()
+    blocks = re.findall(
+        r"^`python benchmarks/(\S+)[^`]*`:.*?\n\n```\n(.*?)\n```", page, re.S | re.M
+    )
+    outputs = dict(blocks)  # a run of some benchmarks (--only) writes both with those only
+    results = [(b, "cmd", outputs[b.script]) for b in report.BENCHES if b.script in outputs]
+    assert results
+    rows = [r for r in report.readme_table(results, False).splitlines() if r.startswith("| ")]
+    readme = (ROOT / "README.md").read_text()
+    table = readme.split(report.README_BEGIN)[1].split(report.README_END)[0]
+    assert rows == [r for r in table.splitlines() if r.startswith("| ")]
+    assert len(rows) == 1 + sum(len(b.summary("")) for b, *_ in results)  # the header, each row
