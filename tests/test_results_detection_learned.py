@@ -22,6 +22,7 @@ from baselines.detection.response import (
 )
 from experiments import results
 from experiments.results import detection_learned as dl
+from experiments.results.detection_learned_report import format_tables
 from fdia_env import detection_game_v0
 
 CSD_TAU = 5.991464547107979  # χ²₂ at 95 %
@@ -144,6 +145,41 @@ def test_quick_table_learned_policies_beat_random_and_respect_the_references(cap
         if r["round"] > 0:
             assert r["payoff"] <= r["best_response"] + 1e-6 * abs(r["best_response"])
     assert (tmp_path / "results_detection_learned_attacker.png").stat().st_size > 10_000
+
+
+def test_each_tables_cells_stand_under_their_headers():
+    setting = {"scenario": "ch3-static", "power": 1000.0}
+    res = {
+        "defender_refs": [
+            {**setting, "criterion": "mse", "best_threshold": 8.0912, "best_value": -14.77081,
+             "env_value": -14.77081, "obdd_threshold": float("inf"), "obdd_value": -16.2,
+             "obdd_score": 0.844, "random_score": 0.374}
+        ],
+        "attacker_refs": [
+            {**setting, "criterion": "mse", "detector": "OBDD", "constant": True,
+             "threshold": 3.80912, "preset_value": 150.0, "br_value": 200.0, "env_value": 200.0,
+             "br_probability": 1.0, "br_sigma": [[1.04, 0.0], [0.0, 2.26]], "br_gain": 1.3333}
+        ],
+        "learned_attackers": [
+            {**setting, "detector": "CSD", "steps": 800, "learned": (150.2, 3.1),
+             "learned_p": (0.91234, float("nan")), "br_value": 200.0,
+             "learned_score": (0.741, 0.02), "random_score": 0.311, "preset_value": 150.0}
+        ],
+        "learned_defenders": [
+            {**setting, "steps": 800, "learned": (-210.5, float("nan")), "best_value": -200.0,
+             "learned_score": (0.933, 0.011), "obdd_score": 0.844, "random_score": 0.794}
+        ],
+        "rounds": [],
+    }  # fmt: skip
+    rows = [line for line in format_tables(res).splitlines() if line.startswith("| ch3")]
+    assert rows == [
+        "| ch3-static a²=1000 | mse | 8.091 | -14.7708 | -14.7708 | inf | -16.2 | 84.4% | 37.4% |",
+        "| ch3-static a²=1000 | mse | OBDD (always discards: constant) | 3.809 | 150 | 200 | 200 "
+        "| 1 | [[1.0, 0.0], [0.0, 2.3]] | ×1.333 |",
+        "| ch3-static a²=1000 | CSD | 800 | 150.2 ± 3.1 | 0.912 | 200 | 74.1% ± 2.0% | 31.1% "
+        "| 75.0% |",
+        "| ch3-static a²=1000 | 800 | -210.5 | -200 | 93.30% ± 1.1% | 84.40% | 79.4% |",
+    ]
 
 
 @pytest.mark.parametrize(

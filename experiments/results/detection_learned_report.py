@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,87 +26,93 @@ def _setting(row: dict[str, Any]) -> str:
     return f"{row['scenario']} a²={row['power']:g}"
 
 
+Column = tuple[str, str | Callable[[dict[str, Any]], Any]]
+"""A table column: its header and its cell, a format of the record's fields or a function of it."""
+
+
+def _columns_table(records: list[dict[str, Any]], columns: Sequence[Column]) -> str:
+    """``records`` as a Markdown table with ``columns``, one row each."""
+    rows = [[c.format(**r) if isinstance(c, str) else c(r) for _, c in columns] for r in records]
+    return table([header for header, _ in columns], rows)
+
+
+def _detector(row: dict[str, Any]) -> str:
+    """The fixed detector, noted where its best response is constant."""
+    return row["detector"] + (" (always discards: constant)" if row["constant"] else "")
+
+
+def _mean_pm(key: str, fmt: str = ".4g") -> Callable[[dict[str, Any]], str]:
+    """The cell of a (mean, 95 % half-width) field: ``mean ± half`` (:func:`_pm`)."""
+    return lambda r: _pm(r[key], fmt)
+
+
+DEFENDER_REFS: tuple[Column, ...] = (
+    ("setting", _setting),
+    ("criterion", "{criterion}"),
+    ("τ*", "{best_threshold:.4g}"),
+    ("τ*'s reward", "{best_value:.6g}"),
+    ("env's reward at τ*", "{env_value:.6g}"),
+    ("OBDD α", "{obdd_threshold:.4g}"),
+    ("OBDD's reward", "{obdd_value:.6g}"),
+    ("OBDD's score", "{obdd_score:.1%}"),
+    ("random thresholds' score", "{random_score:.1%}"),
+)
+"""Table 1a: the defender's best threshold against the preset attack."""
+
+ATTACKER_REFS: tuple[Column, ...] = (
+    ("setting", _setting),
+    ("criterion", "{criterion}"),
+    ("detector", _detector),
+    ("τ", "{threshold:.4g}"),
+    ("preset attack", "{preset_value:.6g}"),
+    ("best response", "{br_value:.6g}"),
+    ("env's reward", "{env_value:.6g}"),
+    ("p*", "{br_probability:g}"),
+    ("Σ*", lambda r: np.round(np.asarray(r["br_sigma"]), 1).tolist()),
+    ("gain", "×{br_gain:.3f}"),
+)
+"""Table 1b: the attacker's best response to each fixed detector."""
+
+LEARNED_ATTACKERS: tuple[Column, ...] = (
+    ("setting", _setting),
+    ("detector", "{detector}"),
+    ("steps", "{steps}"),
+    ("learned reward", _mean_pm("learned")),
+    ("learned p", _mean_pm("learned_p", ".3f")),
+    ("best response", "{br_value:.5g}"),
+    ("learned's score", _mean_pm("learned_score", ".1%")),
+    ("random attacks' score", "{random_score:.1%}"),
+    ("preset's score", lambda r: f"{r['preset_value'] / r['br_value']:.1%}"),
+)
+"""Table 2: the learned attacker against each fixed detector."""
+
+LEARNED_DEFENDERS: tuple[Column, ...] = (
+    ("setting", _setting),
+    ("steps", "{steps}"),
+    ("learned reward", _mean_pm("learned")),
+    ("τ*'s reward", "{best_value:.6g}"),
+    ("learned's score", _mean_pm("learned_score", ".2%")),
+    ("OBDD α's score", "{obdd_score:.2%}"),
+    ("random thresholds' score", "{random_score:.1%}"),
+)
+"""Table 3: the learned defender against the preset attack."""
+
+
 def format_tables(res: dict[str, Any]) -> str:
     """The four tables as Markdown."""
     out = ["**1a. Defender's best threshold against the preset attack** (exact, 1-D search)", ""]
-    header = ["setting", "criterion", "τ*", "τ*'s reward", "env's reward at τ*", "OBDD α"]
-    header += ["OBDD's reward", "OBDD's score", "random thresholds' score"]
-    rows = [
-        [
-            _setting(r),
-            r["criterion"],
-            f"{r['best_threshold']:.4g}",
-            f"{r['best_value']:.6g}",
-            f"{r['env_value']:.6g}",
-            f"{r['obdd_threshold']:.4g}",
-            f"{r['obdd_value']:.6g}",
-            f"{r['obdd_score']:.1%}",
-            f"{r['random_score']:.1%}",
-        ]
-        for r in res["defender_refs"]
-    ]
-    out.append(table(header, rows))
+    out.append(_columns_table(res["defender_refs"], DEFENDER_REFS))
     out += [
         "",
         "**1b. Attacker's best response (p, Σ) to each fixed detector** "
         "(exact, multi-start search; preset: p1 = 0.85, c2-maximising Σ)",
         "",
     ]
-    header = ["setting", "criterion", "detector", "τ", "preset attack", "best response"]
-    header += ["env's reward", "p*", "Σ*", "gain"]
-    rows = []
-    for r in res["attacker_refs"]:
-        sigma = np.round(np.asarray(r["br_sigma"]), 1).tolist()
-        note = " (always discards: constant)" if r["constant"] else ""
-        rows.append(
-            [
-                _setting(r),
-                r["criterion"],
-                f"{r['detector']}{note}",
-                f"{r['threshold']:.4g}",
-                f"{r['preset_value']:.6g}",
-                f"{r['br_value']:.6g}",
-                f"{r['env_value']:.6g}",
-                f"{r['br_probability']:g}",
-                sigma,
-                f"×{r['br_gain']:.3f}",
-            ]
-        )
-    out.append(table(header, rows))
+    out.append(_columns_table(res["attacker_refs"], ATTACKER_REFS))
     out += ["", "**2. Learned attacker (SAC, MSE criterion) against each fixed detector**", ""]
-    header = ["setting", "detector", "steps", "learned reward", "learned p", "best response"]
-    header += ["learned's score", "random attacks' score", "preset's score"]
-    rows = [
-        [
-            _setting(r),
-            r["detector"],
-            r["steps"],
-            _pm(r["learned"]),
-            _pm(r["learned_p"], ".3f"),
-            f"{r['br_value']:.5g}",
-            _pm(r["learned_score"], ".1%"),
-            f"{r['random_score']:.1%}",
-            f"{r['preset_value'] / r['br_value']:.1%}",
-        ]
-        for r in res["learned_attackers"]
-    ]
-    out.append(table(header, rows))
+    out.append(_columns_table(res["learned_attackers"], LEARNED_ATTACKERS))
     out += ["", "**3. Learned defender (SAC, MSE criterion) against the preset attack**", ""]
-    header = ["setting", "steps", "learned reward", "τ*'s reward", "learned's score"]
-    header += ["OBDD α's score", "random thresholds' score"]
-    rows = [
-        [
-            _setting(r),
-            r["steps"],
-            _pm(r["learned"]),
-            f"{r['best_value']:.6g}",
-            _pm(r["learned_score"], ".2%"),
-            f"{r['obdd_score']:.2%}",
-            f"{r['random_score']:.1%}",
-        ]
-        for r in res["learned_defenders"]
-    ]
-    out.append(table(header, rows))
+    out.append(_columns_table(res["learned_defenders"], LEARNED_DEFENDERS))
     if res["rounds"]:
         out += [
             "",
