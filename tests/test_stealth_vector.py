@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from fdia_env.stealth import GYM_ID, static_estimation, stealth_attack_v0
+from fdia_env.stealth import GYM_ID, static_estimation, stealth_attack_v0, stealth_dynamic_v0
 
 
 @pytest.fixture(scope="module")
@@ -190,6 +190,30 @@ def _stacked(final, ended):
     """The ended members' rows of ``final_obs`` (numpy: an object array; torch: a tensor)."""
     rows = np.flatnonzero(_np(ended))
     return np.stack(list(final[rows])) if isinstance(final, np.ndarray) else _np(final)[rows]
+
+
+@pytest.mark.parametrize(
+    ("gym_id", "module"),
+    [(GYM_ID, stealth_attack_v0), ("fdia_env/StealthDynamic-v0", stealth_dynamic_v0)],
+)
+def test_max_cycles_truncates_as_the_single_env_then_the_member_resets(est, gym_id, module):
+    kwargs = {"horizon": 5, "max_cycles": 2, "dynamics": "expected"}
+    kwargs |= {"scenario": est} if gym_id == GYM_ID else {}
+    vec = gym.make_vec(gym_id, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
+    single = module.parallel_env(**kwargs)
+    vec.reset(seed=0)
+    single.reset(seed=0)
+    zero = np.zeros((3, *vec.unwrapped.single_action_space.shape), dtype=np.float32)
+    flags = []
+    for _ in range(3):  # two steps, then the next-step reset
+        _, _, term, trunc, _ = vec.step(zero)
+        flags.append((term.tolist(), trunc.tolist()))
+    _, _, sterm, strunc, _ = single.step({"attacker": zero[0]})
+    assert (sterm["attacker"], strunc["attacker"]) == (False, False)
+    _, _, sterm, strunc, _ = single.step({"attacker": zero[0]})
+    assert (sterm["attacker"], strunc["attacker"]) == (False, True)
+    none, every = [False] * 3, [True] * 3
+    assert flags == [(none, none), (none, every), (none, none)]  # the third: the reset step
 
 
 @pytest.mark.parametrize("backend", ["numpy", "torch"])
