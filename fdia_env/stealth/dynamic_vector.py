@@ -51,14 +51,6 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         self._tau = xp.asarray(tau)
         self._state = self.model.new_state(self.num_envs, xp)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
-        """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        xp, B = self.xp, self.num_envs
-        self._seed(seed)
-        self._state = self.model.new_state(B, xp)
-        self._needs_reset[:] = False
-        return self._restart(xp.ones(B, dtype=np.bool_))
-
     def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
         """Start ``members`` afresh; the reset observation and info (rows of ``members``)."""
         xp, B = self.xp, self.num_envs

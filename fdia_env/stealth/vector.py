@@ -85,12 +85,6 @@ class StealthVectorEnv(StealthVectorBase):
                 a.scatter_(1, order[:, env.budget :], 0.0)
         return a
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
-        """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        self._seed(seed)
-        self._needs_reset[:] = False
-        return self._restart(self.xp.ones(self.num_envs, dtype=np.bool_))
-
     def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
         """Start ``members`` afresh; the reset observation and info (rows of ``members``)."""
         xp = self.xp

@@ -29,9 +29,9 @@ from fdia_env.backend import NUMPY, Backend, get_backend
 class StealthVectorBase(VectorEnv):
     """B copies of a stealth env's attacker view, stepped as one batch.
 
-    A subclass names its single env (``env_cls``) and largest batch (``max_num_envs``), and
-    builds its batch state in :meth:`_init_state`, called once the single env and the batched
-    spaces are there.
+    A subclass names its single env (``env_cls``) and largest batch (``max_num_envs``), builds
+    its batch state in :meth:`_init_state`, called once the single env and the batched spaces
+    are there, and starts members afresh in :meth:`_restart` (every member at :meth:`reset`).
 
     Args:
         num_envs: B, 1..``max_num_envs``.
@@ -78,6 +78,12 @@ class StealthVectorBase(VectorEnv):
     def _generator(self, seed: int | None) -> Any:
         """The batch's generator: numpy's, or a ``torch.Generator`` of the device."""
         return np.random.default_rng(seed) if self.xp is NUMPY else self.xp.generator(seed)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
+        """Reset every member; ``seed`` seeds the noise of the whole batch."""
+        self._seed(seed)
+        self._needs_reset[:] = False
+        return self._restart(self.xp.ones(self.num_envs, dtype=np.bool_))
 
     def _seed(self, seed: Any) -> None:
         """Reseed the batch's noise when ``seed`` is given (a non-negative int: one generator).
