@@ -506,3 +506,51 @@ def test_increasing_order_masks_and_refused_picks_member_by_member():
     masks = env.action_masks()
     assert masks[1].tolist() == [True, False, False, False] + [True] * 6
     assert masks[2].tolist() == [True] * 10  # restarted (NEXT_STEP): a fresh plan
+
+
+def test_held_members_keep_their_exact_state_while_another_member_plays_its_plan():
+    """The engine steps every member; the held ones are put back bit for bit after the run."""
+    env = gym.make_vec(
+        "fdia_env/SparseAttack-v2", num_envs=3, vectorization_mode="vector_entry_point",
+        action="sequential", scenario="grid-ieee14", budget=3, horizon=3, order="increasing",
+    )  # fmt: skip
+    env.reset(seed=0)
+    env.step(np.array([1, 40, 70]))  # every member picks a pair; nobody plays
+    sim, attack = env.inner.sim, env.attack
+
+    def state():
+        return [xp.copy() for xp in (sim.P, sim.M, sim.k, sim.phi, attack.b_remaining)]
+
+    before = state()
+    masks_before = env.action_masks()
+    obs, reward, term, _, info = env.step(np.array([0, 41, 75]))  # member 0 plays {1} out
+    after = state()
+    assert term.tolist() == [True, False, False] and info["step"].tolist() == [3, 0, 0]
+    assert reward[0] != 0.0 and reward[1:].tolist() == [0.0, 0.0]
+    assert info["budget_left"].tolist() == [2, 3, 3]  # member 0 spent one pair, once
+    for old, new in zip(before, after, strict=True):  # members 1 and 2: not a bit moved
+        np.testing.assert_array_equal(new[1:], old[1:])
+    assert not np.array_equal(after[0][0], before[0][0])  # member 0's covariance did move
+    np.testing.assert_array_equal(obs[1:, :14], env.inner._observe("attacker")[1:, :14])
+    # the masks follow the new picks of members 1 and 2 (what was computed before is forgotten)
+    masks = env.action_masks()
+    assert masks_before[1, 41] and not masks[1, 41] and masks[1, 42]  # action j: column j
+    assert masks_before[2, 74] and not masks[2, 74] and not masks[2, 75] and masks[2, 76]
+    np.testing.assert_array_equal(masks, info["action_mask"].astype(bool))
+
+
+def test_action_masks_are_the_callers_own_array():
+    env = gym.make_vec(
+        ID, num_envs=2, vectorization_mode="vector_entry_point", action="sequential",
+        scenario="ch4-position", budget=2, horizon=3, order="increasing",
+    )  # fmt: skip
+    _, info = env.reset(seed=0)
+    masks = env.action_masks()
+    assert masks.all()
+    masks[:] = False  # the caller's array: the env's masks do not change with it
+    assert env.action_masks().all() and info["action_mask"].all()
+    _, _, _, _, info = env.step(np.array([2, 0]))
+    np.testing.assert_array_equal(env.action_masks(), info["action_mask"].astype(bool))
+    masks = env.action_masks()
+    assert masks[0].tolist() == [True, False, False] + [True] * 7  # pairs above action 2
+    assert masks[1].tolist() == [True] + [False] * 9  # its empty plan played out
