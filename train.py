@@ -264,7 +264,8 @@ def main(argv: Sequence[str] | None = None) -> object:
     return _summary(
         result,
         f"\n{learned.policy} {cfg.agent} on {learned.env_id}, {result.model.num_timesteps} "
-        f"steps in {result.train_seconds:.0f} s (seed {cfg.run.seed})",
+        f"steps in {result.train_seconds:.0f} s (seed {cfg.run.seed}"
+        + (f", {result.model.n_envs} envs)" if result.model.n_envs > 1 else ")"),
     )
 
 

@@ -58,7 +58,10 @@ def test_results_train_maskable_ppo_with_train_py_grid_hyperparameters():
     from agents.config import Hyperparameters, resolved_hyperparameters
     from agents.training import run_setup
 
-    setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
+    # the results train one env: train.py's settings with --num-envs 1
+    setup = run_setup(
+        "sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters(), num_envs=1
+    )
     assert setup.algo == "MaskablePPO" and setup.normalize_reward
     assert setup.env_kwargs["order"] == "increasing"
     ours = resolved_hyperparameters("MaskablePPO", sparse_grid.train_py_hyperparameters())

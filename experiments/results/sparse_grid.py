@@ -299,10 +299,12 @@ def training_env(
 
 
 def train_py_hyperparameters() -> Any:
-    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets' sparse attack.
+    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets for one env.
 
     The algorithm's defaults (:data:`agents.config.ALGO_DEFAULTS`) with the grid presets' own
-    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py`` does.
+    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py
+    --num-envs 1`` does (its default there trains 8 native members, with 128 decisions each per
+    rollout and minibatches of 256).
     """
     from agents.config import SCENARIO_DEFAULTS, Hyperparameters, with_defaults
 
