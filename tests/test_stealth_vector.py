@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from fdia_env.stealth import GYM_ID, static_estimation, stealth_attack_v0
+from fdia_env.stealth import GYM_ID, static_estimation, stealth_attack_v0, stealth_dynamic_v0
 
 
 @pytest.fixture(scope="module")
@@ -190,6 +190,60 @@ def _stacked(final, ended):
     """The ended members' rows of ``final_obs`` (numpy: an object array; torch: a tensor)."""
     rows = np.flatnonzero(_np(ended))
     return np.stack(list(final[rows])) if isinstance(final, np.ndarray) else _np(final)[rows]
+
+
+@pytest.mark.parametrize(
+    ("gym_id", "kwargs"),
+    [
+        (GYM_ID, {"budget": 3, "action": "free", "a_max": 0.05, "horizon": 4}),
+        ("fdia_env/StealthDynamic-v0", {"action": "linear", "horizon": 4}),
+    ],
+)
+def test_a_reset_mid_episode_equals_a_fresh_env(est, gym_id, kwargs):
+    kwargs = kwargs | ({"scenario": est} if gym_id == GYM_ID else {})
+    make = {"num_envs": 2, "vectorization_mode": "vector_entry_point", **kwargs}
+    used, fresh = gym.make_vec(gym_id, **make), gym.make_vec(gym_id, **make)
+    space = used.unwrapped.single_action_space
+    acts = np.random.default_rng(5).uniform(-0.5, 0.5, (4, 2, *space.shape)).astype(np.float32)
+    used.reset(seed=1)
+    for a in acts[:2]:
+        used.step(a)
+    _assert_same_outputs(used.reset(seed=7), fresh.reset(seed=7))
+    for a in acts[2:]:
+        _assert_same_outputs(used.step(a), fresh.step(a))
+
+
+def _assert_same_outputs(got, want):
+    """Two envs' ``reset`` or ``step`` outputs are equal, the infos key by key."""
+    for g, w in zip(got[:-1], want[:-1], strict=True):
+        np.testing.assert_array_equal(g, w)
+    assert set(got[-1]) == set(want[-1])
+    for key, value in want[-1].items():
+        np.testing.assert_array_equal(got[-1][key], value, err_msg=key)
+
+
+@pytest.mark.parametrize(
+    ("gym_id", "module"),
+    [(GYM_ID, stealth_attack_v0), ("fdia_env/StealthDynamic-v0", stealth_dynamic_v0)],
+)
+def test_max_cycles_truncates_as_the_single_env_then_the_member_resets(est, gym_id, module):
+    kwargs = {"horizon": 5, "max_cycles": 2, "dynamics": "expected"}
+    kwargs |= {"scenario": est} if gym_id == GYM_ID else {}
+    vec = gym.make_vec(gym_id, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
+    single = module.parallel_env(**kwargs)
+    vec.reset(seed=0)
+    single.reset(seed=0)
+    zero = np.zeros((3, *vec.unwrapped.single_action_space.shape), dtype=np.float32)
+    flags = []
+    for _ in range(3):  # two steps, then the next-step reset
+        _, _, term, trunc, _ = vec.step(zero)
+        flags.append((term.tolist(), trunc.tolist()))
+    _, _, sterm, strunc, _ = single.step({"attacker": zero[0]})
+    assert (sterm["attacker"], strunc["attacker"]) == (False, False)
+    _, _, sterm, strunc, _ = single.step({"attacker": zero[0]})
+    assert (sterm["attacker"], strunc["attacker"]) == (False, True)
+    none, every = [False] * 3, [True] * 3
+    assert flags == [(none, none), (none, every), (none, none)]  # the third: the reset step
 
 
 @pytest.mark.parametrize("backend", ["numpy", "torch"])

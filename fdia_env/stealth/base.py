@@ -71,9 +71,19 @@ class StealthParallelEnv(ParallelEnv):
     horizon: int
     max_cycles: int | None
     on_detect: str
+    penalty: float
     false_alarm_cost: float
     render_mode: str | None
     _k: int
+
+    @property
+    def detected_reward(self) -> float:
+        """The attacker's reward in a step where it is detected: ``-penalty`` or 0.
+
+        ``-penalty`` with ``on_detect="penalty"``, else 0 (``"zero"``, and ``"end"``, which also
+        ends the episode).
+        """
+        return -self.penalty if self.on_detect == "penalty" else 0.0
 
     def _init_players(
         self,

@@ -159,7 +159,7 @@ class StealthDynamicEnv(StealthParallelEnv):
             free,
         )
         o = {key: value[0] for key, value in out.items()}
-        caught = -self.penalty if self.on_detect == "penalty" else 0.0
+        caught = self.detected_reward
         detected = bool(o["detected"])
         p = float(o["p"])
         if self.dynamics == "sampled":

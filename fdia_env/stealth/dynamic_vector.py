@@ -24,7 +24,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
@@ -51,15 +50,6 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         tau = np.repeat(self.env._tau[[self.env._default_rate()]], self.num_envs, axis=0)
         self._tau = xp.asarray(tau)
         self._state = self.model.new_state(self.num_envs, xp)
-        self._needs_reset = xp.zeros(self.num_envs, dtype=np.bool_)
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
-        """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        xp, B = self.xp, self.num_envs
-        self._seed(seed)
-        self._state = self.model.new_state(B, xp)
-        self._needs_reset[:] = False
-        return self._restart(xp.ones(B, dtype=np.bool_))
 
     def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
         """Start ``members`` afresh; the reset observation and info (rows of ``members``)."""
@@ -84,7 +74,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         out = self.model.step(
             self._state, acts, self._alpha, self._tau, sampled, self._rng, None, xp
         )
-        caught = -env.penalty if env.on_detect == "penalty" else 0.0
+        caught = env.detected_reward
         if sampled:
             reward = xp.where(out["detected"], caught, out["error"])
         else:
@@ -94,14 +84,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         k = self._state["k"]
         live = ~resetting
         detected = out["detected"] & live
-        ends = k >= env.horizon
-        if env.on_detect == "end":
-            ends = ends | detected
-        terminated = live & ends
-        if env.max_cycles is None:
-            truncated = xp.zeros(B, dtype=np.bool_)
-        else:
-            truncated = live & ~terminated & (k >= env.max_cycles)
+        terminated, truncated = self._episode_ends(k, live, detected)
         reward = xp.where(live, reward, 0.0)
         phi = xp.where(live, out["phi"], self.model.clean)
         ratio = xp.where(live, out["statistic"] / out["threshold"], 0.0)
@@ -110,8 +93,6 @@ class StealthDynamicVectorEnv(StealthVectorBase):
         obs[:, 1] = xp.astype(detected, np.float32)
         obs[:, 2] = xp.minimum(ratio, MAX_RATIO)
         obs[:, 3] = xp.minimum(xp.log(xp.maximum(phi / self.model.clean, 1.0)), MAX_LOG_ERROR)
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._needs_reset = terminated | truncated
         infos = self._infos(
             phi,
             xp.where(live, out["error"], self.model.clean),

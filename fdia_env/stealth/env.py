@@ -170,12 +170,11 @@ class StealthAttackEnv(StealthParallelEnv):
             z = e + a  # the residual does not depend on the true state
             detected = bool(est.alarm(z, self.test))
             statistic = float(est.statistic(z))
-            reward = (-self.penalty if self.on_detect == "penalty" else 0.0) if detected else damage
+            reward = self.detected_reward if detected else damage
         else:
             detected = False
             statistic = float(est.noncentrality(a) + est.dof)  # E[J] under the injection
-            caught = -self.penalty if self.on_detect == "penalty" else 0.0
-            reward = (1.0 - p) * damage + p * caught
+            reward = (1.0 - p) * damage + p * self.detected_reward
         self._k += 1
         self._last_a = a
         self._last = {

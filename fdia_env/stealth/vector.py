@@ -21,7 +21,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
@@ -59,7 +58,6 @@ class StealthVectorEnv(StealthVectorBase):
             self._lnr_scale = xp.asarray(est._lnr_scale)
             self._critical = xp.asarray(est.critical)
         self._k = xp.zeros(self.num_envs, dtype=np.int64)
-        self._needs_reset = xp.zeros(self.num_envs, dtype=np.bool_)
 
     def injections(self, actions: Any) -> Any:
         """(B, m) injections of (B, d) actions: as the single env's ``injection``, batched."""
@@ -87,12 +85,6 @@ class StealthVectorEnv(StealthVectorBase):
                 a.scatter_(1, order[:, env.budget :], 0.0)
         return a
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
-        """Reset every member; ``seed`` seeds the noise of the whole batch."""
-        self._seed(seed)
-        self._needs_reset[:] = False
-        return self._restart(self.xp.ones(self.num_envs, dtype=np.bool_))
-
     def _restart(self, members: Any) -> tuple[Any, dict[str, Any]]:
         """Start ``members`` afresh; the reset observation and info (rows of ``members``)."""
         xp = self.xp
@@ -118,7 +110,7 @@ class StealthVectorEnv(StealthVectorBase):
         a = self.injections(actions)
         damage = self._max_abs(a @ self._KT)
         p = self._detection_probability(a) if env.test == "chi2" else xp.zeros(B)
-        caught = -env.penalty if env.on_detect == "penalty" else 0.0
+        caught = env.detected_reward
         if env.dynamics == "sampled":
             e = self.noise()
             z = (e * self._diag_L if self._diag_L is not None else e @ self._LT) + a
@@ -132,15 +124,7 @@ class StealthVectorEnv(StealthVectorBase):
         resetting = xp.copy(self._needs_reset)
         live = ~resetting
         self._k = xp.where(resetting, 0, self._k + 1)
-        ends = self._k >= env.horizon
-        if env.on_detect == "end":
-            ends = ends | detected
-        terminated = live & ends
-        truncated = live & ~terminated
-        if env.max_cycles is None:
-            truncated = xp.zeros(B, dtype=np.bool_)
-        else:
-            truncated = truncated & (self._k >= env.max_cycles)
+        terminated, truncated = self._episode_ends(self._k, live, detected)
         reward = xp.where(resetting, 0.0, reward)
         detected = detected & live
         obs = xp.empty((B, 3), dtype=np.float32)
@@ -155,8 +139,6 @@ class StealthVectorEnv(StealthVectorBase):
             xp.where(live, statistic, 0.0),
             xp.where(live, used, 0),
         )
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._needs_reset = terminated | truncated
         obs, infos = self._autoreset(obs, infos, terminated | truncated)
         return obs, reward, terminated, truncated, infos
 

@@ -1,4 +1,4 @@
-"""What the two stealth native vector envs share: the constructor, seeding, autoreset, options.
+"""What the two stealth native vector envs share: constructor, seeding, episode end, autoreset.
 
 :class:`StealthVectorBase` is the base of :class:`~fdia_env.stealth.vector.StealthVectorEnv`
 and :class:`~fdia_env.stealth.dynamic_vector.StealthDynamicVectorEnv`; :func:`vector_options`
@@ -29,9 +29,9 @@ from fdia_env.backend import NUMPY, Backend, get_backend
 class StealthVectorBase(VectorEnv):
     """B copies of a stealth env's attacker view, stepped as one batch.
 
-    A subclass names its single env (``env_cls``) and largest batch (``max_num_envs``), and
-    builds its batch state in :meth:`_init_state`, called once the single env and the batched
-    spaces are there.
+    A subclass names its single env (``env_cls``) and largest batch (``max_num_envs``), builds
+    its batch state in :meth:`_init_state`, called once the single env and the batched spaces
+    are there, and starts members afresh in :meth:`_restart` (every member at :meth:`reset`).
 
     Args:
         num_envs: B, 1..``max_num_envs``.
@@ -68,6 +68,7 @@ class StealthVectorBase(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._rng = self._generator(None)
+        self._needs_reset = self.xp.zeros(self.num_envs, dtype=np.bool_)  # NEXT_STEP's
         self._init_state()
 
     def _init_state(self) -> None:
@@ -77,6 +78,12 @@ class StealthVectorBase(VectorEnv):
     def _generator(self, seed: int | None) -> Any:
         """The batch's generator: numpy's, or a ``torch.Generator`` of the device."""
         return np.random.default_rng(seed) if self.xp is NUMPY else self.xp.generator(seed)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
+        """Reset every member; ``seed`` seeds the noise of the whole batch."""
+        self._seed(seed)
+        self._needs_reset[:] = False
+        return self._restart(self.xp.ones(self.num_envs, dtype=np.bool_))
 
     def _seed(self, seed: Any) -> None:
         """Reseed the batch's noise when ``seed`` is given (a non-negative int: one generator).
@@ -111,15 +118,36 @@ class StealthVectorBase(VectorEnv):
         """
         raise NotImplementedError
 
+    def _episode_ends(self, k: Any, live: Any, detected: Any) -> tuple[Any, Any]:
+        """(B,) terminated and truncated after a step, as the single env's ``_finish_step``.
+
+        A ``live`` member (not resetting in this step) terminates at ``k >= horizon`` or, with
+        ``on_detect="end"``, when ``detected``; one that did not is truncated at ``max_cycles``.
+        """
+        env = self.env
+        ends = k >= env.horizon
+        if env.on_detect == "end":
+            ends = ends | detected
+        terminated = live & ends
+        if env.max_cycles is None:
+            truncated = self.xp.zeros(self.num_envs, dtype=np.bool_)
+        else:
+            truncated = live & ~terminated & (k >= env.max_cycles)
+        return terminated, truncated
+
     def _autoreset(self, obs: Any, infos: dict[str, Any], ended: Any) -> tuple[Any, dict]:
         """The step's ``(obs, infos)`` after the finishing of ``ended`` members.
 
-        ``NEXT_STEP``: unchanged (they reset on the next step). ``SAME_STEP``: the ``ended``
-        members restart now; their rows of ``obs`` and of each info become the reset ones, and
-        the step's go in ``final_obs`` / ``final_info`` (see the module docstring).
+        ``NEXT_STEP``: unchanged; the ``ended`` members reset on the next step. ``SAME_STEP``:
+        the ``ended`` members restart now; their rows of ``obs`` and of each info become the
+        reset ones, and the step's go in ``final_obs`` / ``final_info`` (see the module
+        docstring).
         """
         xp = self.xp
-        if self.autoreset_mode != AutoresetMode.SAME_STEP or not xp.any(ended):
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._needs_reset = ended
+            return obs, infos
+        if not xp.any(ended):
             return obs, infos
         if xp is NUMPY:
             final: Any = np.full(self.num_envs, None, dtype=object)

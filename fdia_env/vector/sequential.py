@@ -33,6 +33,8 @@ follow :mod:`fdia_env.vector.env`.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import gymnasium as gym
@@ -62,11 +64,12 @@ class PartialStep:
     """Hold some members of a batch through an engine step: save their state, put it back.
 
     For a native vector env whose members take their window steps at different decisions (the
-    engine and the models step the whole batch). :meth:`_adopt` sets what such an env takes
-    from its engine (``self.inner``) and single env, :meth:`_begin` opens its step (the checked
-    actions, the next-step autoreset) and :meth:`_finish` ends it (the same-step autoreset);
-    :meth:`reset` resets the engine and the seeding, then the format's own decision state
-    (:meth:`_reset_decisions`).
+    engine and the models step the whole batch): an engine step in a ``with`` :meth:`_holding`
+    block leaves the members it does not step as they were. :meth:`_adopt` sets what such an
+    env takes from its engine (``self.inner``) and single env, :meth:`_begin` opens its step
+    (the checked actions, the next-step autoreset) and :meth:`_finish` ends it (the same-step
+    autoreset); :meth:`reset` resets the engine and the seeding, then the format's own decision
+    state (:meth:`_reset_decisions`).
     """
 
     xp: Any
@@ -110,6 +113,25 @@ class PartialStep:
                 if name.startswith("b_") and _batched(value, self.num_envs):
                     saved[f"{who}.{name}"] = xp.copy(value)
         return saved
+
+    @contextmanager
+    def _holding(self, stepping: Any) -> Iterator[Any]:
+        """Step the batch inside the block; the members not ``stepping`` keep their state.
+
+        Yields the engine. On leaving, the held members get back what they had on entering:
+        the engine's and the models' state (:meth:`_save`, :meth:`_restore`) and the engine's
+        detection info.
+        """
+        xp, inner = self.xp, self.inner
+        sim = inner.sim
+        held = ~stepping
+        saved = self._save(sim) if bool(xp.any(held)) else None
+        yield sim
+        if inner._det_defaults:
+            for key, values in sim.detection_info.items():
+                inner._det_info[key] = xp.where(held, inner._det_info[key], values)
+        if saved is not None:
+            self._restore(sim, saved, held)
 
     def _restore(self, sim: Any, saved: dict[str, Any], held: Any) -> None:
         """Put the held members' state back (the stepping members keep the new one)."""
@@ -423,37 +445,28 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         Returns:
             (B,) rewards, terminations and truncations (zero / False for the held members).
         """
-        xp, inner = self.xp, self.inner
-        sim = inner.sim
-        held = ~stepping
-        hold = bool(xp.any(held))
-        if hold:
-            saved = self._save(sim)
-        sets = xp.astype(self._current_sets() & stepping[:, None], xp.int8)
-        attacked, sigma = self.attack.batch_apply(sets)
-        used, leak, present, steady = self.defense.batch_apply(None, attacked, sigma)
-        phi_prev = sim.phi
-        sim.step(
-            used,
-            leak,
-            present,
-            steady,
-            active=stepping,
-            detection=self.defense.batch_detection(),
-            probability=getattr(self.attack, "b_probability", None),
-        )
-        if inner._det_defaults:
-            for key, values in sim.detection_info.items():
-                inner._det_info[key] = xp.where(held, inner._det_info[key], values)
-        if hold:
-            self._restore(sim, saved, held)
+        xp = self.xp
+        with self._holding(stepping) as sim:
+            sets = xp.astype(self._current_sets() & stepping[:, None], xp.int8)
+            attacked, sigma = self.attack.batch_apply(sets)
+            used, leak, present, steady = self.defense.batch_apply(None, attacked, sigma)
+            phi_prev = sim.phi
+            sim.step(
+                used,
+                leak,
+                present,
+                steady,
+                active=stepping,
+                detection=self.defense.batch_detection(),
+                probability=getattr(self.attack, "b_probability", None),
+            )
         k = sim.k
         done = stepping & (k >= self.spec_episode.horizon)
         truncated = xp.zeros(self.num_envs, dtype=xp.bool)
         reward = attacker_reward(self.spec_episode.reward_mode, sim.phi, phi_prev, done, xp)
         reward = xp.where(stepping, reward, 0.0)
         if not self.plan_first:  # "time": the next step's set starts empty
-            self._chosen = self._chosen & held[:, None]
+            self._chosen = self._chosen & ~stepping[:, None]
         return reward, done, truncated
 
     # --- observations --------------------------------------------------------------------------

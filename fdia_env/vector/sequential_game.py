@@ -244,36 +244,29 @@ class SequentialGameVectorEnv(PartialStep, gym.vector.VectorEnv):
         Returns:
             (B,) the learner's rewards and the terminations (zero / False for the held members).
         """
-        xp, inner = self.xp, self.inner
-        sim = inner.sim
-        held = ~commit
-        hold = bool(xp.any(held))
-        if hold:
-            saved = self._save(sim)
-        played = self._chosen if not self.drops else ~self._chosen
-        code = xp.sum(xp.astype(played, xp.int64) * self._bits[None, :], 1)
-        own = self._code_index[xp.searchsorted(self._codes, code) - 1]
-        own = xp.where(commit, own, 0)
-        subsets = {self.agent: own, self.other: xp.where(commit, self._opp, 0)}
-        attacked, sigma = self.attack.batch_apply(subsets["attacker"])
-        used, leak, present, steady = self.defense.batch_apply(subsets["defender"], attacked, sigma)
-        self.attack.batch_observe_opponent(self.defense)
-        self.defense.batch_observe_opponent(self.attack)
-        phi_prev = sim.phi
-        phi = sim.step(
-            used,
-            leak,
-            present,
-            steady,
-            active=commit,
-            detection=self.defense.batch_detection(),
-            probability=self.attack.batch_probability(),
-        )
-        if inner._det_defaults:
-            for key, values in sim.detection_info.items():
-                inner._det_info[key] = xp.where(held, inner._det_info[key], values)
-        if hold:
-            self._restore(sim, saved, held)
+        xp = self.xp
+        with self._holding(commit) as sim:
+            played = self._chosen if not self.drops else ~self._chosen
+            code = xp.sum(xp.astype(played, xp.int64) * self._bits[None, :], 1)
+            own = self._code_index[xp.searchsorted(self._codes, code) - 1]
+            own = xp.where(commit, own, 0)
+            subsets = {self.agent: own, self.other: xp.where(commit, self._opp, 0)}
+            attacked, sigma = self.attack.batch_apply(subsets["attacker"])
+            used, leak, present, steady = self.defense.batch_apply(
+                subsets["defender"], attacked, sigma
+            )
+            self.attack.batch_observe_opponent(self.defense)
+            self.defense.batch_observe_opponent(self.attack)
+            phi_prev = sim.phi
+            phi = sim.step(
+                used,
+                leak,
+                present,
+                steady,
+                active=commit,
+                detection=self.defense.batch_detection(),
+                probability=self.attack.batch_probability(),
+            )
         done = commit & (sim.k >= self.spec_episode.horizon)
         reward = attacker_reward(self.spec_episode.reward_mode, phi, phi_prev, done, xp)
         if self.agent == "defender":
