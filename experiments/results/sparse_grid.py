@@ -238,18 +238,16 @@ def _play(policy: Any, env: Any, episodes: int = 1, seed: int = 0) -> float:
 
 
 def replay_native(result: Any, system: LinearSystem, inst: Instance) -> float:
-    """The return of ``result.policy()`` in ``sparse_attack_v0`` itself (its own action format)."""
-    import gymnasium as gym
+    """The return of ``result.policy()`` in ``sparse_attack_v0`` itself (its own action format).
 
+    Built with :func:`fdia_env.tasks.task.make_pinned`: v0 on purpose, so Gymnasium's
+    out-of-date notice for it is not printed.
+    """
     from agents.evaluate import evaluate
+    from fdia_env.tasks.task import make_pinned
 
-    env = gym.make(
-        "fdia_env/SparseAttack-v0",
-        scenario=system,
-        budget=inst.budget,
-        horizon=inst.horizon,
-        objective=inst.objective,
-    )
+    kwargs = {"budget": inst.budget, "horizon": inst.horizon, "objective": inst.objective}
+    env = make_pinned("fdia_env/SparseAttack-v0", None, {"scenario": system, **kwargs})
     try:
         return evaluate(result.policy(), env, 1, 0, reference=1.0).mean
     finally:
