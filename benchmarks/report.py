@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+sys.path.append(str(ROOT))  # after PYTHONPATH, as the scripts it runs
 from experiments.reproduce import machine  # noqa: E402
 
 PAGE = ROOT / "docs" / "benchmarks.md"
