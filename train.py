@@ -261,10 +261,11 @@ def main(argv: Sequence[str] | None = None) -> object:
 
     result = train(cfg)
     learned = next(iter(result.evaluations.values()))
+    envs = f", {result.model.n_envs} envs" if result.model.n_envs > 1 else ""
+    line = f"{result.model.num_timesteps} steps in {result.train_seconds:.0f} s"
     return _summary(
         result,
-        f"\n{learned.policy} {cfg.agent} on {learned.env_id}, {result.model.num_timesteps} "
-        f"steps in {result.train_seconds:.0f} s (seed {cfg.run.seed})",
+        f"\n{learned.policy} {cfg.agent} on {learned.env_id}, {line} (seed {cfg.run.seed}{envs})",
     )
 
 

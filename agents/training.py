@@ -31,7 +31,7 @@ import math
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -457,6 +457,8 @@ class RunSetup:
         hp: ``--`` hyperparameters with the scenario table's filled in where unset.
         normalize_reward: Whether the training env's rewards are rescaled
             (:func:`reward_normalization`).
+        num_envs: MaskablePPO's members of the native vector env (``--num-envs``, else the
+            scenario table's ``num_envs``); None: one env.
     """
 
     entry: Trainable
@@ -464,6 +466,7 @@ class RunSetup:
     env_kwargs: dict[str, Any]
     hp: Hyperparameters
     normalize_reward: bool
+    num_envs: int | None = None
 
 
 def run_setup(
@@ -474,8 +477,12 @@ def run_setup(
     algo: str | None,
     hp: Hyperparameters,
     normalize_reward: bool | None = None,
+    num_envs: int | None = None,
 ) -> RunSetup:
     """Resolve a command's options against the registry and :data:`SCENARIO_DEFAULTS`.
+
+    ``num_envs`` is ``--num-envs``; where it and ``--n-steps`` are both unset, MaskablePPO takes
+    the scenario's ``num_envs`` and ``vector_hyperparameters``.
 
     Raises:
         ValueError: For an unknown env, scenario or algorithm (listing the valid names).
@@ -488,13 +495,18 @@ def run_setup(
     else:
         name = entry.algorithm(algo if algo is not None else defaults.algo)
     normalize = defaults.normalize_reward if normalize_reward is None else normalize_reward
-    return RunSetup(entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize)
+    if name == "MaskablePPO" and num_envs is None and hp.n_steps is None and defaults.num_envs:
+        num_envs = defaults.num_envs
+        vector = {**defaults.hyperparameters, **defaults.vector_hyperparameters}
+        defaults = replace(defaults, hyperparameters=vector)
+    return RunSetup(entry, name, env_kwargs, with_defaults(name, hp, defaults), normalize, num_envs)
 
 
 def setup_of(cfg: TrainConfig) -> RunSetup:
     """:func:`run_setup` of the attacker or defender command."""
     return run_setup(
-        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward
+        cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward,
+        cfg.num_envs,
     )  # fmt: skip
 
 
@@ -667,13 +679,13 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
             reward_normalization(entry, eval_env, reference) if setup.normalize_reward else None
         )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
-        if cfg.num_envs is None:
+        if setup.num_envs is None:
             vec_env: VecEnv = DummyVecEnv(
                 [env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization)]
             )
         else:
             vec_env = native_vec_env(
-                entry.gym_id, env_kwargs, cfg.num_envs, normalization, opponent
+                entry.gym_id, env_kwargs, setup.num_envs, normalization, opponent
             )
         stack.callback(vec_env.close)
         if checkpoint is not None:
@@ -698,6 +710,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
                 "algo": algo,
                 "env_kwargs": env_kwargs,
                 "hyperparameters": hyperparameters,
+                "num_envs": setup.num_envs,
                 "reward_normalization": None
                 if normalization is None
                 else {"shift": normalization[0], "scale": normalization[1]},

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.append(str(Path(__file__).resolve().parent.parent))  # after PYTHONPATH: it wins
 from baselines.sparse import branch_and_bound, exhaustive
 from baselines.sparse.testbeds import dc_grid14, mixed_tracking
 from experiments.reproduce import machine

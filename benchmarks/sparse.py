@@ -21,7 +21,7 @@ from pathlib import Path
 # Single-threaded BLAS for tiny LAPACK calls (see experiments/reproduce/__init__.py); set before
 # numpy loads.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.append(str(Path(__file__).resolve().parent.parent))  # after PYTHONPATH: it wins
 from baselines.sparse import SOLVERS, exhaustive
 from experiments.reproduce import machine
 from experiments.reproduce.ch4 import literature_columns, solver_label

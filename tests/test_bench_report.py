@@ -143,3 +143,12 @@ def test_the_readme_rows_are_read_again_from_the_pages_outputs():
     table = readme.split(report.README_BEGIN)[1].split(report.README_END)[0]
     assert rows == [r for r in table.splitlines() if r.startswith("| ")]
     assert len(rows) == 1 + sum(len(b.summary("")) for b, *_ in results)  # the header, each row
+
+
+def test_no_benchmark_puts_its_checkout_before_pythonpath():
+    # a run with PYTHONPATH=<other checkout> must measure that checkout (docs/benchmarks.md)
+    scripts = sorted((ROOT / "benchmarks").glob("*.py"))
+    for root in ("Path(__file__).resolve().parent.parent", "ROOT"):
+        assert not [s.name for s in scripts if f"sys.path.insert(0, str({root}))" in s.read_text()]
+    appended = [s.name for s in scripts if "sys.path.append(str(" in s.read_text()]
+    assert len(appended) == 9 and "grid.py" in appended and "report.py" in appended

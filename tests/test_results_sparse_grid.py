@@ -58,7 +58,10 @@ def test_results_train_maskable_ppo_with_train_py_grid_hyperparameters():
     from agents.config import Hyperparameters, resolved_hyperparameters
     from agents.training import run_setup
 
-    setup = run_setup("sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters())
+    # the results train one env: train.py's settings with --num-envs 1
+    setup = run_setup(
+        "sparse_attack_v0", "attacker", "grid-ieee14", {}, None, Hyperparameters(), num_envs=1
+    )
     assert setup.algo == "MaskablePPO" and setup.normalize_reward
     assert setup.env_kwargs["order"] == "increasing"
     ours = resolved_hyperparameters("MaskablePPO", sparse_grid.train_py_hyperparameters())
@@ -201,3 +204,15 @@ def test_landscape_of_dc_ieee14_50_has_one_set_at_99_percent():
     # 3 of the 4 meters that see bus 8 are worth at most 59.85 %, all 4 at least 96.32 %
     assert "| 3 | 4,140 | 59.85% | 43.73% |" in text
     assert "| 4 | 46 | 100.00% | 96.32% |" in text
+
+
+def test_the_replay_in_v0_returns_sfs_value_without_an_out_of_date_notice():
+    import warnings
+
+    inst = sparse_grid.QUICK_INSTANCE
+    system = sparse_grid.SYSTEMS[inst.system][2]()
+    result = sfs(system, inst.budget, inst.horizon, inst.objective)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)  # v0 is built on purpose
+        value = sparse_grid.replay_native(result, system, inst)
+    assert value == pytest.approx(result.value, rel=1e-12)

@@ -64,20 +64,31 @@ def test_the_zero_cost_env_has_the_real_envs_spaces_and_does_nothing():
 def test_bad_options_are_refused(argv, capsys):
     with pytest.raises(SystemExit):
         seq.main(argv)
-    n_steps = seq.train_settings()["n_steps"]  # train.py's rollout on the grid presets
-    assert f"--steps must be >= {n_steps}" in capsys.readouterr().err
+    settings = seq.train_settings()[seq.WAYS[1]]  # train.py's default on the grid presets
+    rollout = settings["n_steps"] * seq.VECTOR_ENVS  # one rollout of its 8 members
+    assert f"--steps must be >= {rollout} (one rollout)" in capsys.readouterr().err
 
 
 def test_each_way_trains_the_env_as_described():
     from fdia_env.vector.sb3 import SB3VecEnv
 
     settings = seq.train_settings()
-    kwargs = dict(scenario="ch4-position", budget=2, horizon=3, action="sequential", order="plan")
-    one = seq.make_model(kwargs, seq.WAYS[0], settings, seed=0)
+    assert seq.train_setup().num_envs == seq.VECTOR_ENVS  # train.py's default
+    assert (settings["8 envs"]["n_steps"], settings["8 envs"]["batch_size"]) == (128, 256)
+    assert (settings["1 env"]["n_steps"], settings["1 env"]["batch_size"]) == (512, 128)
+    order = seq.train_setup().env_kwargs["order"]  # the plan-first order train.py picks
+    assert order == "increasing"
+    assert {k: v.get("order") for k, v in seq.formats().items() if "(time)" not in k} == {
+        seq.BASELINE: None,
+        "ieee14-rtu sequential (increasing)": order,
+        "grid-ieee14 sequential (increasing)": order,
+        seq.BOUND: order,
+    }
+    kwargs = dict(scenario="ch4-position", budget=2, horizon=3, action="sequential", order=order)
+    one = seq.make_model(kwargs, seq.WAYS[0], settings[seq.WAYS[0]], seed=0)
     monitor = one.get_env().envs[0]  # SB3 wraps a gym env in a Monitor
-    order = monitor.unwrapped.parallel.order  # the plan-first order train.py picks
-    assert order == seq.train_setup().env_kwargs["order"] == "increasing"
-    assert (one.n_envs, one.n_steps) == (1, settings["n_steps"])
-    eight = seq.make_model(kwargs, seq.WAYS[1], settings, seed=0)
+    assert monitor.unwrapped.parallel.order == order
+    assert (one.n_envs, one.n_steps) == (1, 512)
+    eight = seq.make_model(kwargs, seq.WAYS[1], settings[seq.WAYS[1]], seed=0)
     assert isinstance(eight.get_env(), SB3VecEnv) and eight.n_envs == seq.VECTOR_ENVS
-    assert eight.n_steps * seq.VECTOR_ENVS == settings["n_steps"]  # the same rollout
+    assert (eight.n_steps, eight.batch_size) == (128, 256)  # per member, as train.py

@@ -49,7 +49,9 @@ def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
     assert SCENARIO_DEFAULTS["sparse_attack_v0", "grid-ieee14"].hyperparameters == {
         "norm_obs": False
     }
-    assert setup.hp == Hyperparameters()  # MaskablePPO's own defaults (norm_obs not its own)
+    # MaskablePPO's own defaults (norm_obs is not its own) but for its vector setting: 8 native
+    # members of 128 decisions per rollout, minibatches of 256
+    assert setup.hp == Hyperparameters(n_steps=128, batch_size=256) and setup.num_envs == 8
     # the time-major order (the env's default) leaves the table
     timed = run_setup(
         "sparse_attack_v0", "attacker", "grid-ieee14", {"order": '"time"'}, None,
@@ -68,6 +70,7 @@ def test_the_table_picks_the_sequential_format_and_masked_ppo_on_grid_presets():
         Hyperparameters(),
     )  # fmt: skip
     assert other.algo == "MaskablePPO" and other.hp == Hyperparameters()
+    assert other.num_envs is None  # one env
     assert "order" not in other.env_kwargs  # the table's options go with its format
     assert not other.normalize_reward
     # a hyperparameter the algorithm does not take is not filled in

@@ -10,7 +10,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py lives at the root
 
 import train
-from agents.training import NormalizedVecReward, native_vec_env
+from agents.config import Hyperparameters
+from agents.training import NormalizedVecReward, native_vec_env, run_setup
 from baselines.sparse import exhaustive
 from fdia_env.envs.sequential import PlanOrderPolicy
 from fdia_env.vector.sb3 import SB3VecEnv
@@ -98,3 +99,50 @@ def test_a_game_view_trains_against_its_fixed_opponent_on_the_native_vector_env(
     assert isinstance(native, SB3VecEnv) and isinstance(native.venv, SequentialGameVectorEnv)
     probs = native.venv.opponent.probs  # the LP equilibrium's mix, not the uniform one
     assert probs.shape == (596,) and probs.max() > 10 / 596
+
+
+def test_grid_presets_train_on_8_native_members_unless_num_envs_or_n_steps_is_given():
+    hp = Hyperparameters()
+    grid = ("sparse_attack_v2", "attacker", "grid-ieee14", {})
+    table = run_setup(*grid, None, hp)
+    assert (table.algo, table.num_envs) == ("MaskablePPO", 8)
+    assert (table.hp.n_steps, table.hp.batch_size) == (128, 256)  # 1,024 decisions per update
+    for env in ("sparse_attack_v0", "sparse_attack_v1"):  # every version, every grid preset
+        for scenario in ("grid-ieee14-rtu", "grid-ieee118"):
+            assert run_setup(env, "attacker", scenario, {}, None, hp).num_envs == 8
+    # --num-envs or --n-steps replaces the vector setting: the algorithm's defaults otherwise
+    given = run_setup(*grid, None, hp, num_envs=4)
+    assert (given.num_envs, given.hp.n_steps, given.hp.batch_size) == (4, None, None)
+    one = run_setup(*grid, None, Hyperparameters(n_steps=256))
+    assert (one.num_envs, one.hp.n_steps, one.hp.batch_size) == (None, 256, None)
+    batch = run_setup(*grid, None, Hyperparameters(batch_size=64))  # the command line wins
+    assert (batch.num_envs, batch.hp.n_steps, batch.hp.batch_size) == (8, 128, 64)
+    # only MaskablePPO, only the table's format, only the grid presets
+    assert run_setup(*grid, "PPO", hp).num_envs is None
+    torch = run_setup(*grid, "torch-ppo", hp)
+    assert torch.num_envs is None and torch.hp.n_steps is None  # torch-ppo's own members
+    multibinary = run_setup(*grid[:3], {"action": '"multibinary"'}, None, hp)
+    assert multibinary.num_envs is None and multibinary.hp == hp
+    for env, scenario in (("sparse_attack_v2", "dc-ieee14-50"), ("sensor_game_v0", "grid-ieee14")):
+        assert run_setup(env, "attacker", scenario, {}, None, hp).num_envs is None
+    assert run_setup("sparse_attack_v2", "attacker", None, {}, None, hp).num_envs is None
+
+
+def test_train_py_trains_a_grid_preset_on_8_native_members_by_default(tmp_path, capsys):
+    result = train.main(
+        [
+            "attacker", "--scenario", "grid-ieee14", "--env-kwargs", "budget", "2", "horizon",
+            "1", "--total-timesteps", "1024", "--n-epochs", "1", *TINY,
+            "--runs-root", str(tmp_path / "runs"),
+        ]
+    )  # fmt: skip
+    model = result.model
+    assert (model.n_envs, model.n_steps, model.batch_size) == (8, 128, 256)
+    assert model.num_timesteps == 1024  # one rollout of 8 x 128 decisions
+    native = model.get_env().venv.venv
+    assert isinstance(native, SB3VecEnv) and native.venv.increasing
+    config = json.loads((result.run_dir / "config.json").read_text())
+    assert config["config"]["num_envs"] is None  # not given: the scenario's
+    assert config["resolved"]["num_envs"] == 8
+    assert config["resolved"]["hyperparameters"]["n_steps"] == 128
+    assert "(seed 0, 8 envs)" in capsys.readouterr().out

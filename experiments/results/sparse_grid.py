@@ -238,18 +238,16 @@ def _play(policy: Any, env: Any, episodes: int = 1, seed: int = 0) -> float:
 
 
 def replay_native(result: Any, system: LinearSystem, inst: Instance) -> float:
-    """The return of ``result.policy()`` in ``sparse_attack_v0`` itself (its own action format)."""
-    import gymnasium as gym
+    """The return of ``result.policy()`` in ``sparse_attack_v0`` itself (its own action format).
 
+    Built with :func:`fdia_env.tasks.task.make_pinned`: v0 on purpose, so Gymnasium's
+    out-of-date notice for it is not printed.
+    """
     from agents.evaluate import evaluate
+    from fdia_env.tasks.task import make_pinned
 
-    env = gym.make(
-        "fdia_env/SparseAttack-v0",
-        scenario=system,
-        budget=inst.budget,
-        horizon=inst.horizon,
-        objective=inst.objective,
-    )
+    kwargs = {"budget": inst.budget, "horizon": inst.horizon, "objective": inst.objective}
+    env = make_pinned("fdia_env/SparseAttack-v0", None, {"scenario": system, **kwargs})
     try:
         return evaluate(result.policy(), env, 1, 0, reference=1.0).mean
     finally:
@@ -299,10 +297,12 @@ def training_env(
 
 
 def train_py_hyperparameters() -> Any:
-    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets' sparse attack.
+    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets for one env.
 
     The algorithm's defaults (:data:`agents.config.ALGO_DEFAULTS`) with the grid presets' own
-    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py`` does.
+    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py
+    --num-envs 1`` does (its default there trains 8 native members, with 128 decisions each per
+    rollout and minibatches of 256).
     """
     from agents.config import SCENARIO_DEFAULTS, Hyperparameters, with_defaults
 
