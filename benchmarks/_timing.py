@@ -43,3 +43,14 @@ def burst(
     if sync is not None:
         sync()
     return steps * venv.num_envs / (clock() - t0)
+
+
+def warm_up(venv: Any, actions: Sequence[Any], sync: Callable[[], None] | None = None) -> None:
+    """Step ``venv`` once with each of ``actions`` (imports, caches, first allocations), untimed.
+
+    (:func:`burst` with ``seconds=0`` takes no step, so it cannot warm up.)
+    """
+    for a in actions:
+        venv.step(a)
+    if sync is not None:
+        sync()

@@ -18,7 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import gymnasium as gym
 import numpy as np
 import torch
-from _timing import burst
+from _timing import burst, warm_up
 
 import fdia_env  # noqa: F401
 
@@ -59,7 +59,7 @@ def main() -> None:
         actions = {"numpy": raw, "torch": [torch.as_tensor(a, device=args.device) for a in raw]}
         for key, env in envs.items():  # warm-up
             env.reset(seed=0)
-            burst(env, actions[key][:2], 0.0, sync=sync)
+            warm_up(env, actions[key][:2], sync=sync)
         rates: dict[str, list[float]] = {key: [] for key in envs}
         for _ in range(rounds):
             for key, env in envs.items():

@@ -24,7 +24,7 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import gymnasium as gym
 import numpy as np
-from _timing import burst
+from _timing import burst, warm_up
 
 import fdia_env
 
@@ -46,7 +46,7 @@ def interleaved(
     }
     for k, v in venvs.items():  # warm-up
         v.reset(seed=0)
-        burst(v, actions[k][:7], 0.0, CLOCK)
+        warm_up(v, actions[k][:7])
     rates: dict[str, list[float]] = {k: [] for k in venvs}
     for _ in range(rounds):
         for k, v in venvs.items():

@@ -152,3 +152,24 @@ def test_no_benchmark_puts_its_checkout_before_pythonpath():
         assert not [s.name for s in scripts if f"sys.path.insert(0, str({root}))" in s.read_text()]
     appended = [s.name for s in scripts if "sys.path.append(str(" in s.read_text()]
     assert len(appended) == 9 and "grid.py" in appended and "report.py" in appended
+
+
+def test_the_warm_up_steps_once_with_each_action_and_a_zero_burst_takes_none():
+    path = ROOT / "benchmarks" / "_timing.py"
+    spec = importlib.util.spec_from_file_location("bench_timing", path)
+    timing = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(timing)
+
+    class Counting:
+        num_envs = 4
+
+        def __init__(self):
+            self.actions = []
+
+        def step(self, action):
+            self.actions.append(action)
+
+    env, synced = Counting(), []
+    timing.warm_up(env, [1, 2, 3], sync=lambda: synced.append(True))
+    assert env.actions == [1, 2, 3] and synced == [True]
+    assert timing.burst(env, [4], 0.0) == 0.0 and env.actions == [1, 2, 3]  # no step
