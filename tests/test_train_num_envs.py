@@ -123,8 +123,9 @@ def test_grid_presets_train_on_8_native_members_unless_num_envs_or_n_steps_is_gi
     assert torch.num_envs is None and torch.hp.n_steps is None  # torch-ppo's own members
     multibinary = run_setup(*grid[:3], {"action": '"multibinary"'}, None, hp)
     assert multibinary.num_envs is None and multibinary.hp == hp
-    for env, scenario in (("sparse_attack_v2", "dc-ieee14-50"), ("sensor_game_v0", "grid-ieee14")):
-        assert run_setup(env, "attacker", scenario, {}, None, hp).num_envs is None
+    dc = run_setup("sparse_attack_v2", "attacker", "dc-ieee14-50", {}, None, hp)
+    assert (dc.num_envs, dc.hp.n_steps, dc.hp.ent_coef) == (8, 128, 0.05)  # its own entropy
+    assert run_setup("sensor_game_v0", "attacker", "grid-ieee14", {}, None, hp).num_envs is None
     assert run_setup("sparse_attack_v2", "attacker", None, {}, None, hp).num_envs is None
 
 
