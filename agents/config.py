@@ -560,9 +560,9 @@ class TrainConfig:
     torch-ppo (every env: PPO with env, rollout buffer and policy on --device)."""
     num_envs: int | None = None
     """torch-ppo: members of the torch vector env stepped at once on --device (default 4096).
-    MaskablePPO: train on the env's native vector env of this many members (default: one env;
-    each rollout is num_envs x n_steps decisions). The other stable-baselines3 algorithms train
-    on one env and reject it."""
+    MaskablePPO: train on the env's native vector env of this many members (default: one env,
+    8 on the grid presets' sparse attack unless --n-steps is given; each rollout is num_envs x
+    n_steps decisions). The other stable-baselines3 algorithms train on one env and reject it."""
     total_timesteps: int = 100_000
     """Environment steps to train for, in total across resumes."""
     eval_freq: int = 10_000
