@@ -43,6 +43,12 @@ j at window step k + 1, the ``(N·M + 1,)`` mask forbidding a pair in the plan a
 once the plan uses the budget), then stop plays the plan out; same rewards and reachable sets.
 ``order="increasing"`` is ``"plan"`` with the picks in increasing order (the mask also forbids
 every pair at or below the last pick), so each plan has one sequence of picks.
+``groups="state"`` (plan-first orders only; default None) adds N·n group actions after the
+pairs' (``Discrete(N·M + 1 + N·n)``): action ``N·M + 1 + k·n + j`` adds every pair of window
+step K+1+k whose sensor sees state j, the smallest set that biases that state alone (legal in
+increasing order of the groups, when it adds 1 to the budget left new pairs). Same observation,
+rewards and reachable sets; ``train.py`` trains the ``dc-ieee14-50`` preset with it, whose
+optimum needs all four meters of one bus at once (see ``fdia_env.envs.sequential``).
 
 ## Observation Space
 
@@ -118,14 +124,16 @@ from fdia_env.envs.factory import (
     with_episode_parameters,
 )
 from fdia_env.envs.parallel import FdiaParallelEnv
-from fdia_env.envs.sequential import ORDERS, SequentialSetEnv
+from fdia_env.envs.sequential import ORDERS, SequentialSetEnv, check_groups
 from fdia_env.scenarios import Scenario
 from fdia_env.systems import LinearSystem
 
 NAME = "sparse_attack_v0"
 
 
-@with_episode_parameters("scenario", "budget", *EPISODE_ORDER, "illegal_action", "action", "order")
+@with_episode_parameters(
+    "scenario", "budget", *EPISODE_ORDER, "illegal_action", "action", "order", "groups"
+)
 def parallel_env(
     scenario: str | Scenario | LinearSystem = "ch4-position",
     budget: int | None = None,
@@ -133,6 +141,7 @@ def parallel_env(
     illegal_action: str = "trim",
     action: str = "auto",
     order: str = "time",
+    groups: str | None = None,
     **episode: Any,
 ) -> FdiaParallelEnv | SequentialSetEnv:
     """The PettingZoo ``ParallelEnv`` (see the module docstring).
@@ -140,13 +149,15 @@ def parallel_env(
     ``action="sequential"`` returns a ``fdia_env.envs.sequential.SequentialSetEnv``
     over the ``"multibinary"`` env (see the module docstring's Action Space), its decisions in
     ``order`` (``"time"``; ``"plan"``: the pairs of the whole horizon first; ``"increasing"``:
-    as ``"plan"``, the pairs picked in increasing order). The episode
+    as ``"plan"``, the pairs picked in increasing order), with group actions when ``groups`` is
+    ``"state"`` (plan-first orders only: each adds the pairs of one window step whose sensors see
+    one state; see the module docstring). The episode
     parameters (``horizon``, ``objective``, ...) are those of
     :data:`fdia_env.envs.factory.EPISODE_PARAMETERS`.
 
     Raises:
-        ValueError: For ``order="plan"`` with another format than ``"sequential"`` (and for any
-            other bad option, naming it).
+        ValueError: For ``order="plan"`` with another format than ``"sequential"``, ``groups``
+            with another order than a plan-first one (and for any other bad option, naming it).
     """
     check_choice("action", action, (*ACTION_FORMATS, "sequential"))  # every format in the error
     check_choice("order", order, ORDERS)
@@ -154,6 +165,7 @@ def parallel_env(
         raise ValueError(
             f"order={order!r} applies to action='sequential' only, got action={action!r}"
         )
+    check_groups(groups, order)
     if action == "sequential":
         inner = parallel_env(
             scenario,
@@ -163,7 +175,7 @@ def parallel_env(
             action="multibinary",
             **episode,
         )
-        return SequentialSetEnv(inner, illegal_action=illegal_action, order=order)
+        return SequentialSetEnv(inner, illegal_action=illegal_action, order=order, groups=groups)
     sc, spec = episode_spec(scenario, **episode)
     attack = SparseAttack(
         scenario_default(sc, "budget", budget), action=action, illegal_action=illegal_action

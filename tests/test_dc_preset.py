@@ -67,7 +67,7 @@ def test_train_py_takes_the_preset_with_its_table_defaults():
     for env in SPARSE_ENVS:  # every version trains the preset in the same format
         setup = run_setup(env, "attacker", "dc-ieee14-50", {}, None, Hyperparameters())
         assert setup.env_kwargs == {
-            "scenario": "dc-ieee14-50", "action": "sequential", "order": "plan",
+            "scenario": "dc-ieee14-50", "action": "sequential", "order": "plan", "groups": "state",
         }  # fmt: skip
         assert setup.algo == defaults.algo and setup.normalize_reward
         for name, value in defaults.hyperparameters.items():
@@ -78,6 +78,10 @@ def test_train_py_takes_the_preset_with_its_table_defaults():
     torch = run_setup("sparse_attack_v2", "attacker", "dc-ieee14-50", {}, "torch-ppo",
                       Hyperparameters())  # fmt: skip
     assert (torch.hp.ent_coef, torch.hp.norm_obs) == (0.05, False)
+    # without the groups (the plan-first order pair by pair) the rest of the table still applies
+    pairs = run_setup("sparse_attack_v2", "attacker", "dc-ieee14-50", {"groups": None}, None,
+                      Hyperparameters())  # fmt: skip
+    assert pairs.env_kwargs["groups"] is None and pairs.hp.ent_coef == 0.05
     # the command line wins over the table
     given = run_setup(
         "sparse_attack_v2", "attacker", "dc-ieee14-50", {}, "PPO", Hyperparameters(ent_coef=0.0)
@@ -99,6 +103,7 @@ def test_attacker_command_trains_on_the_preset(tmp_path, capsys):
     config = json.loads((result.run_dir / "config.json").read_text())["resolved"]
     assert config["env_kwargs"]["scenario"] == "dc-ieee14-50"
     assert (config["env_kwargs"]["action"], config["env_kwargs"]["order"]) == ("sequential", "plan")
+    assert config["env_kwargs"]["groups"] == "state"  # the state groups of the table
     assert config["hyperparameters"]["ent_coef"] == 0.05  # the table's, not MaskablePPO's 0.01
     best = exhaustive(testbeds.dc_grid14(50), budget=2, horizon=1).value
     norm = config["reward_normalization"]

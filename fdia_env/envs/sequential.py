@@ -29,6 +29,22 @@ pairs in increasing order) and returns the same value. A decision whose only leg
 (``skip_forced=True``, default): an episode takes at most ``N + c`` decisions, and once the
 budget is spent it ends at once. Pass ``skip_forced=False`` to take every stop yourself.
 
+State groups (``groups="state"``, plan-first orders only): the action space gains N·n group
+actions after the pairs' (``Discrete(N·M + 1 + N·n)``); action ``N·M + 1 + k·n + j`` adds, in
+one decision, every pair of window step K+1+k whose sensor sees state j (a nonzero of the
+sensor's rows of ``H`` in column j: :func:`state_groups`). These are the smallest sets that bias
+one state without touching any other measurement (the stealthy attack ``a = H c`` with ``c``
+nonzero at one state), and an objective can pay for such a set only once all of it is attacked:
+on the ``dc-ieee14-50`` preset the proved optimum holds the four meters that see bus 8's angle,
+which are worth at most 69 % of it one to three at a time, so a learner that builds its plan pair
+by pair stops at SFS's set (98.5 %), and reaches the optimum with the groups. A group is legal
+while the plan is not committed, above the last group picked (groups go in increasing order;
+pairs and groups may alternate) and when it adds between 1 and the budget left new pairs (pairs
+already in the plan count once). The observation is unchanged (the plan's N·M entries show what
+a group added); the mask has ``N·M + 1 + N·n`` entries. Every plan of the pair actions stays
+reachable by them alone and returns the same value; a plan built with groups returns what the
+same pairs return picked one by one.
+
 Dynamics and rewards are those of the wrapped env: a pick pays 0, and a stop pays the wrapped
 env's reward of the window step it commits (with ``skip_forced``, the sum over the window steps
 it plays), so an episode's return equals the return of the same attack set played in the
@@ -36,7 +52,7 @@ it plays), so an episode's return equals the return of the same attack set playe
 
 Illegal actions (``illegal_action``): an action outside the mask (a sensor already in the step's
 set, or any sensor once the set uses up the budget left; ``"increasing"``: also a pair at or below
-the last pick) raises ``ValueError`` with
+the last pick; a group that is closed) raises ``ValueError`` with
 ``"error"``, and acts as stop with ``"trim"`` (default) and ``"noop"``, so that every decision
 either grows the set or advances the filter. An action outside ``Discrete(M + 1)`` is always a
 ``ValueError``.
@@ -78,6 +94,71 @@ ORDERS = ("time", "plan", "increasing")
 
 PLAN_FIRST_ORDERS = ("plan", "increasing")
 """The orders that pick the whole horizon's (sensor, window step) pairs first."""
+
+GROUPINGS = ("state",)
+"""Group actions of the plan-first orders (``groups``; see the module docstring)."""
+
+
+def check_groups(groups: Any, order: str) -> str | None:
+    """``groups`` if it is None or one of :data:`GROUPINGS` with a plan-first ``order``.
+
+    Raises:
+        ValueError: For another value, or a grouping with the ``"time"`` order.
+    """
+    if groups is None:
+        return None
+    check_choice("groups", groups, GROUPINGS)
+    if order not in PLAN_FIRST_ORDERS:
+        raise ValueError(
+            f"groups={groups!r} applies to the plan-first orders {list(PLAN_FIRST_ORDERS)} "
+            f"only, got order={order!r}"
+        )
+    return groups
+
+
+def group_illegal(
+    j: int, slots: int, n: int, playing: bool, last_group: int, new: int, left: int
+) -> tuple[str, str]:
+    """What group action ``j`` is and why it is illegal (the single and vector envs' errors).
+
+    Args:
+        j: The action (``slots + 1 + k·n + state``).
+        slots: The pair actions' count (N·M).
+        n: The state size.
+        playing: The plan is committed.
+        last_group: The last group picked (0: none).
+        new: The group's pairs not in the plan.
+        left: The budget left.
+    """
+    k, state = divmod(j - slots - 1, n)
+    what = f"the sensors that see state {state + 1} at window step {k + 1}"
+    if playing:
+        why = "the plan is committed and plays out: stop (0) is the only legal action"
+    elif j <= last_group:
+        why = f"groups are picked in increasing order and the last group is {last_group}"
+    elif new == 0:
+        why = "every pair of the group is already in the plan"
+    else:
+        why = f"its {new} new pairs exceed the budget left ({left})"
+    return what, why
+
+
+def state_groups(system: LinearSystem, horizon: int) -> np.ndarray:
+    """(N·n, N·M) bool: group ``k·n + j``, the pairs of window step k whose sensor sees state j.
+
+    A sensor sees state j where its rows of ``H`` are nonzero in column j.
+
+    Every sensor that sees a state has to be attacked for a bias of that state alone to leave
+    every other measurement untouched (the stealthy attack ``a = H c`` of a DC grid with ``c``
+    nonzero at one state), so these are the smallest sets that move one state unseen.
+    """
+    sees = np.zeros((system.M, system.n), dtype=bool)
+    np.logical_or.at(sees, system.row_sensor, system.H != 0)
+    M, n = system.M, system.n
+    groups = np.zeros((horizon, n, horizon, M), dtype=bool)
+    for k in range(horizon):
+        groups[k, :, k, :] = sees.T
+    return groups.reshape(horizon * n, horizon * M)
 
 
 class SequentialBase(ParallelEnv):
@@ -253,11 +334,14 @@ class SequentialSetEnv(SequentialBase):
         order: ``"time"`` (default: each window step's set, in the filter's order) or
             ``"plan"`` (the (sensor, window step) pairs of the whole horizon first) or
             ``"increasing"`` (as ``"plan"``, the pairs picked in increasing order).
+        groups: None (default) or ``"state"`` (plan-first orders only): also offer group
+            actions, each adding every pair of one window step whose sensor sees one state
+            (see the module docstring).
 
     Raises:
         TypeError: If ``inner`` is not such an env.
         ValueError: For a budget of 0 (there would be no decision to make), a bad
-            ``illegal_action`` or ``order``.
+            ``illegal_action``, ``order`` or ``groups``.
     """
 
     def __init__(
@@ -266,6 +350,7 @@ class SequentialSetEnv(SequentialBase):
         illegal_action: str = "trim",
         skip_forced: bool = True,
         order: str = "time",
+        groups: str | None = None,
     ) -> None:
         if not isinstance(inner, FdiaParallelEnv) or not isinstance(inner.attack, SparseAttack):
             raise TypeError(
@@ -283,12 +368,18 @@ class SequentialSetEnv(SequentialBase):
                 "decision to make; use another format), got 0"
             )
         self.order = check_choice("order", order, ORDERS)
+        self.groups = check_groups(groups, order)
         super().__init__(inner, illegal_action, skip_forced)
         self.horizon = N = int(inner.spec.horizon)
         self.plan_first = order in PLAN_FIRST_ORDERS
         self.increasing = order == "increasing"
         slots = N * self.M if self.plan_first else self.M
-        self._action_space = spaces.Discrete(slots + 1)
+        # group actions slots + 1 .. slots + G: (G, slots) 0/1, the pairs each one adds
+        grouped = state_groups(inner.system, N) if groups else np.zeros((0, slots), bool)
+        self._groups = grouped.astype(np.int64)
+        self._group_sizes = self._groups.sum(1)
+        self._slots = slots
+        self._action_space = spaces.Discrete(slots + 1 + len(grouped))
         self._obs_spaces = {
             "attacker": self._masked_space(inner.observation_space("attacker"), slots + 1)
         }
@@ -297,13 +388,14 @@ class SequentialSetEnv(SequentialBase):
         self._flat = self._chosen.reshape(-1)  # a view: slot j - 1 of action j
         self._played = 0  # window steps played ("plan": > 0 once the plan is committed)
         self._last = STOP  # "increasing": the last pick (the pairs up to it are closed)
+        self._last_group = STOP  # groups: the last group picked (the groups up to it are closed)
         self._box: np.ndarray | None = None
         self._info: dict[str, Any] = {}
         # the decision's state, kept up to date by _refresh (each decision reads it several
         # times: the step's check, the observation, MaskablePPO's action_masks)
         self._pending = 0  # pairs in the set being built ("plan": in the steps not yet played)
         self._remaining = 0  # the wrapped env's budget left
-        self._mask = np.zeros(slots + 1, dtype=np.int8)
+        self._mask = np.zeros(int(self._action_space.n), dtype=np.int8)
         self._obs = np.zeros(self._obs_spaces["attacker"]["observation"].shape, np.float32)
         self._n_box = int(inner.observation_space("attacker").shape[0])
 
@@ -312,6 +404,7 @@ class SequentialSetEnv(SequentialBase):
         self._chosen[:] = 0
         self._played = 0
         self._last = STOP
+        self._last_group = STOP
         self._pending = 0
         self._box = obs["attacker"]
         self._info = infos["attacker"]
@@ -336,7 +429,14 @@ class SequentialSetEnv(SequentialBase):
                 raise ValueError(self._illegal_message(j, self.action_mask()))
             j = STOP
         reward, term, trunc = 0.0, False, False
-        if j != STOP:
+        if j > self._slots:  # a group: its pairs not yet in the plan
+            new = np.flatnonzero(self._groups[j - self._slots - 1] > self._flat)
+            self._flat[new] = 1
+            self._last_group = j
+            self._obs[self._n_box + new] = 1.0
+            self._pending += new.size
+            self._refresh()
+        elif j != STOP:
             self._flat[j - 1] = 1
             if self.increasing:
                 self._last = j
@@ -367,6 +467,8 @@ class SequentialSetEnv(SequentialBase):
                 else f"the step's set already uses the budget left ({self._left()})"
             )
             return f"attacker action {j} (add sensor {j}) is illegal: {why}" + legal
+        if j > self._slots:
+            return self._illegal_group(j) + legal
         k, i = divmod(j - 1, self.M)
         if self._played:
             why = "the plan is committed and plays out: stop (0) is the only legal action"
@@ -382,6 +484,13 @@ class SequentialSetEnv(SequentialBase):
         return (
             f"attacker action {j} (sensor {i + 1} at window step {k + 1}) is illegal: {why}" + legal
         )
+
+    def _illegal_group(self, j: int) -> str:
+        g = j - self._slots - 1
+        new = int(self._group_sizes[g] - self._groups[g] @ self._flat)
+        state = (bool(self._played), self._last_group, new, self._left())
+        what, why = group_illegal(j, self._slots, self.system.n, *state)
+        return f"attacker action {j} ({what}) is illegal: {why}"
 
     def _current(self) -> np.ndarray:
         """The set of the window step to play: (M,) int8."""
@@ -425,10 +534,15 @@ class SequentialSetEnv(SequentialBase):
         left = self._left()
         self._obs[-1] = max(left, 0) / self.attack.budget
         mask = self._mask
+        S = self._slots
         if left > 0 and not (self.plan_first and self._played):
-            np.equal(self._flat, 0, out=mask[1:])
+            np.equal(self._flat, 0, out=mask[1 : S + 1])
             if self._last:  # "increasing": the pairs up to the last pick are closed
                 mask[1 : self._last + 1] = 0
+            if len(self._groups):  # groups: above the last group, adding 1..left new pairs
+                new = self._group_sizes - self._groups @ self._flat
+                mask[S + 1 :] = (new > 0) & (new <= left)
+                mask[S + 1 : self._last_group + 1] = 0
         else:
             mask[1:] = 0
         mask[STOP] = 1
@@ -441,6 +555,8 @@ class SequentialSetEnv(SequentialBase):
         """True when stop is the only legal action."""
         if self.plan_first and self._played:
             return True
+        if len(self._groups):  # (plan-first: a pick's _refresh has the mask up to date)
+            return not self._mask[1:].any()
         if self.increasing and self._last == self._flat.size:  # no pair above the last pick
             return True
         return self._left() <= 0 or bool(self._chosen.all())

@@ -26,7 +26,8 @@ sensor j while it is not in the set and the set is smaller than the budget left)
 env's ``order="plan"`` is served too: (B, N·M + 1) masks over the (sensor, window step) pairs,
 and each member plays its plan out once it stops (see :mod:`fdia_env.envs.sequential`), and its
 ``order="increasing"`` (``"plan"`` with each member's picks in increasing order: its mask also
-closes the pairs at or below its last pick). Autoreset
+closes the pairs at or below its last pick), each with the state groups (``groups="state"``:
+(B, N·M + 1 + N·n) masks, a group adds its pairs not yet in the member's plan). Autoreset
 and ``max_episode_steps`` (counted in decisions, as Gymnasium's ``TimeLimit`` over the view)
 follow :mod:`fdia_env.vector.env`.
 
@@ -55,7 +56,7 @@ from gymnasium.vector.utils import batch_space
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
 from fdia_env.envs.parallel import attacker_reward
-from fdia_env.envs.sequential import STOP, SequentialSetEnv
+from fdia_env.envs.sequential import STOP, SequentialSetEnv, group_illegal
 from fdia_env.vector import env as vector_env
 
 SEQUENTIAL_MODULES = (
@@ -321,6 +322,14 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._chosen = xp.zeros((B, S), dtype=xp.bool)  # "plan": (B, N·M), step-major
         self._playing = xp.zeros(B, dtype=xp.bool)  # "plan": the plan is committed
         self._last = xp.zeros(B, dtype=xp.int64)  # "increasing": each member's last pick
+        # groups: (G, S) the pairs of each group action S + 1 + g; each member's last group
+        # picked (0: none)
+        self._groups = xp.asarray(parallel._groups.astype(bool))
+        self._n_groups = G = int(parallel._groups.shape[0])
+        self._group_sizes = xp.asarray(parallel._group_sizes.astype(np.float64))
+        self._groups_f = xp.asarray(parallel._groups.T.astype(np.float64))  # (S, G)
+        self._group_ids = xp.asarray(np.arange(S + 1, S + 1 + G, dtype=np.int64))
+        self._last_group = xp.zeros(B, dtype=xp.int64)
         # what the decision state gives (budget left, forced stops, masks), computed once per
         # change of it (see _changed)
         self._cache: dict[str, Any] = {}
@@ -332,6 +341,7 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._chosen = xp.zeros((B, self._slots), dtype=xp.bool)
         self._playing = xp.zeros(B, dtype=xp.bool)
         self._last = xp.zeros(B, dtype=xp.int64)
+        self._last_group = xp.zeros(B, dtype=xp.int64)
         self._decisions = xp.zeros(B, dtype=xp.int64)
         self._prev_done = xp.zeros(B, dtype=xp.bool)
         self._changed()
@@ -341,6 +351,8 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._chosen = self._chosen & ~where[:, None]
         self._playing = self._playing & ~where
         self._last = self.xp.where(where, 0, self._last)
+        if self._n_groups:
+            self._last_group = self.xp.where(where, 0, self._last_group)
         self._decisions = self.xp.where(where, 0, self._decisions)
         self._changed()
 
@@ -377,21 +389,36 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
 
     def _compute_masks(self) -> Any:
         xp = self.xp
-        mask = xp.empty((self.num_envs, self._slots + 1), dtype=xp.bool)
+        S = self._slots
+        mask = xp.empty((self.num_envs, S + 1 + self._n_groups), dtype=xp.bool)
         mask[:, STOP] = True
         open_ = (self._left() > 0) & ~self._playing
-        mask[:, 1:] = ~self._chosen & open_[:, None]
+        mask[:, 1 : S + 1] = ~self._chosen & open_[:, None]
         if self.increasing:  # the pairs at or below each member's last pick are closed
-            mask[:, 1:] = mask[:, 1:] & (self._arange[None, :] > self._last[:, None])
+            mask[:, 1 : S + 1] = mask[:, 1 : S + 1] & (self._arange[None, :] > self._last[:, None])
+        if self._n_groups:
+            mask[:, S + 1 :] = self._group_masks(open_)
         return mask
+
+    def _group_masks(self, open_: Any) -> Any:
+        """(B, G) groups legal now: above the member's last group, adding 1..left new pairs."""
+        xp = self.xp
+        new = self._group_sizes[None, :] - xp.astype(self._chosen, xp.float64) @ self._groups_f
+        left = xp.astype(self._left(), xp.float64)[:, None]
+        fits = (new > 0) & (new <= left)
+        above = self._group_ids[None, :] > self._last_group[:, None]
+        return fits & above & open_[:, None]
 
     def _forced(self) -> Any:
         """(B,) members whose only legal action is stop."""
         forced = self._cache.get("forced")
         if forced is None:
-            forced = self._playing | (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
-            if self.increasing:  # no pair above the last pick
-                forced = forced | (self._last >= self._slots)
+            if self._n_groups:  # every action but stop is closed
+                forced = self._playing | ~_any1(self.xp, self.action_masks()[:, 1:])
+            else:
+                forced = self._playing | (self._left() <= 0) | ~_any1(self.xp, ~self._chosen)
+                if self.increasing:  # no pair above the last pick
+                    forced = forced | (self._last >= self._slots)
             self._cache["forced"] = forced
         return forced
 
@@ -415,6 +442,19 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         """
         actions, live = self._begin(actions, "attacker")
         xp = self.xp
+        grouped = None
+        if self._n_groups:  # the group actions, checked against the mask
+            grouped = live & (actions > self._slots)
+            if xp.any(grouped):
+                legal = self.action_masks()[self._rows, actions] | ~grouped
+                if not xp.all(legal):
+                    if self.illegal_action == "error":
+                        self._raise_illegal(actions, legal)
+                    grouped = grouped & legal  # "trim" / "noop": an illegal group stops
+                index = xp.where(grouped, actions - self._slots - 1, 0)
+                added = self._groups[index] & grouped[:, None]
+            else:
+                grouped = None
         onehot = (actions[:, None] == self._arange) & live[:, None]  # (B, M): the picks
         closed = (self._left() <= 0) | self._playing
         taken = self._chosen | closed[:, None]
@@ -429,6 +469,10 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         self._chosen = self._chosen | onehot
         if self.increasing:
             self._last = xp.where(pick, actions, self._last)
+        if grouped is not None:
+            self._chosen = self._chosen | added
+            self._last_group = xp.where(grouped, actions, self._last_group)
+            pick = pick | grouped
         self._changed()
         commit = live & ~pick
         if self.skip_forced:
@@ -448,7 +492,13 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
         i = int(self.xp.to_numpy(self.xp.flatnonzero(~legal))[0])
         j = int(actions[i])
         allowed = np.flatnonzero(self.xp.to_numpy(self.action_masks()[i])).tolist()
-        if self.plan_first:
+        if j > self._slots:
+            g = j - self._slots - 1
+            new = int(self._group_sizes[g]) - int(self.xp.sum(self._groups[g] & self._chosen[i], 0))
+            state = (bool(self._playing[i]), int(self._last_group[i]))
+            n = self.parallel.system.n
+            what, why = group_illegal(j, self._slots, n, *state, new, int(self._left()[i]))
+        elif self.plan_first:
             k, s = divmod(j - 1, self.M)
             what = f"sensor {s + 1} at window step {k + 1}"
             if bool(self._playing[i]):
