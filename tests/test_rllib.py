@@ -632,14 +632,17 @@ def test_resume_with_other_options_lists_each_difference(one_iteration_run, tmp_
 # RLlib's masked PPO module on the sequential action format: one small PPO iteration of the
 # sensor game's two masked players, and of the sparse attacker in the plan-first order
 # (sparse_attack_v2's default: Discrete(N·M + 1) pairs, then the plan plays out) and in its
-# order="increasing" (the picks in increasing order: the mask closes the pairs below), with
-# illegal_action="error", so a single action outside a mask would stop the test
+# order="increasing" (the picks in increasing order: the mask closes the pairs below) and with
+# its state groups, with illegal_action="error", so a single action outside a mask would stop
+# the test
 @pytest.mark.parametrize(
     ("name", "env_config", "policies", "mask_size"),
     [
         ("sensor_game_v0", {"rounds": 2}, {"attacker", "defender"}, 4),  # M + 1, M = 3
         ("sparse_attack_v2", {"budget": 2, "horizon": 2}, {"attacker"}, 7),  # N·M + 1 = 2·3 + 1
         ("sparse_attack_v2", {"budget": 2, "horizon": 2, "order": "increasing"}, {"attacker"}, 7),
+        # the state groups: N·n = 2·2 more actions
+        ("sparse_attack_v2", {"budget": 2, "horizon": 2, "groups": "state"}, {"attacker"}, 11),
     ],
 )
 def test_plain_ppo_config_trains_on_the_sequential_format_within_the_mask(
