@@ -120,8 +120,14 @@ def train_torch_ppo_run(
         final_evaluations,
         history_record,
         reference_record,
+        saved_env_kwargs,
+        saved_resolution,
         train_prefix,
         write_scores,
+    )
+
+    env_kwargs = saved_env_kwargs(
+        env_kwargs, saved_resolution(cfg, CHECKPOINT), report or (lambda line: None)
     )
 
     check_env_kwargs(entry.gym_id, env_kwargs)

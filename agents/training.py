@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import json
 import math
 import time
 from collections.abc import Callable
@@ -74,7 +75,7 @@ from agents.interrupt import StopTrainingCallback
 from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
-from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
+from agents.runs import read_jsonl, resume_dir, run_prefix, write_json, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 
 __all__ = [
@@ -510,6 +511,78 @@ def setup_of(cfg: TrainConfig) -> RunSetup:
     )  # fmt: skip
 
 
+def saved_resolution(cfg: TrainConfig, marker: str) -> dict[str, Any]:
+    """The ``resolved`` entry of the run folder ``--resume`` continues ({} for a new run).
+
+    Raises:
+        ValueError: Nothing to resume, or a corrupt config.json (as :func:`open_run`).
+    """
+    if not cfg.run.resume:
+        return {}
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg), marker)
+    resolved = read_json(run_dir / "config.json", "run config").get("resolved")
+    return resolved if isinstance(resolved, dict) else {}
+
+
+def saved_env_kwargs(
+    env_kwargs: dict[str, Any], resolved: dict[str, Any], say: Callable[[str], None]
+) -> dict[str, Any]:
+    """A resumed run's env options (its ``resolved`` entry's), reported where they differ."""
+    saved = resolved.get("env_kwargs", env_kwargs)
+    if saved != env_kwargs:
+        say(f"resuming with the run's own env options {saved} (train.py's defaults are now "
+            f"{env_kwargs})")  # fmt: skip
+    return saved
+
+
+def as_saved(
+    setup: RunSetup,
+    resolved: dict[str, Any],
+    num_envs: int | None,
+    say: Callable[[str], None],
+) -> RunSetup:
+    """``setup`` with the env options, members and hyperparameters a resumed run was saved with.
+
+    ``train.py``'s per-scenario defaults change between versions (dc-ieee14-50 gained the
+    state groups, the grid presets 8 members of the native vector env), while the options given
+    on the command line must be the run's own (:func:`agents.runs.check_resumable`): a resume
+    continues the run with what its config.json's ``resolved`` entry says it was trained with,
+    and ``say`` gets one line per option where that differs from today's defaults.
+
+    Args:
+        setup: Today's resolution of the command (:func:`setup_of`).
+        resolved: The run's saved ``resolved`` entry ({}: a new run, ``setup`` unchanged).
+        num_envs: ``--num-envs`` (the members of a run saved before ``resolved`` named them).
+        say: Reports the options kept.
+    """
+    if not resolved:
+        return setup
+    kept = {}
+    env_kwargs = saved_env_kwargs(setup.env_kwargs, resolved, say)
+    members = setup.num_envs
+    hp = setup.hp
+    if setup.algo != TORCH_PPO:  # torch-ppo's members and hyperparameters are its own
+        members = resolved.get("num_envs", num_envs)
+        if members != setup.num_envs:
+            kept["native vector env members"] = (members, setup.num_envs)
+        saved_hp = resolved.get("hyperparameters")
+        today = json.loads(json.dumps(resolved_hyperparameters(setup.algo, setup.hp)))
+        if isinstance(saved_hp, dict) and saved_hp != today:
+            hp = Hyperparameters(
+                **{k: tuple(v) if isinstance(v, list) else v for k, v in saved_hp.items()}
+            )
+            changed = sorted(
+                k for k in saved_hp.keys() | today.keys() if saved_hp.get(k) != today.get(k)
+            )
+            kept["hyperparameters"] = (
+                {k: saved_hp.get(k) for k in changed},
+                {k: today.get(k) for k in changed},
+            )
+    for what, (old, new) in kept.items():
+        say(f"resuming with the run's own {what} {old} (train.py's defaults are now {new})")
+    return replace(setup, env_kwargs=env_kwargs, num_envs=members, hp=hp)
+
+
 def train_prefix(cfg: TrainConfig) -> str:
     """Run folder name without its time: ``<env>[-defender]-<algo>-s<seed>`` (also torch-ppo's)."""
     setup = setup_of(cfg)
@@ -656,7 +729,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     """
     say = report or (lambda line: None)
     check_device_available(cfg.run.device)
-    setup = setup_of(cfg)
+    setup = as_saved(setup_of(cfg), saved_resolution(cfg, CHECKPOINT_STATE), cfg.num_envs, say)
     entry, algo, env_kwargs = setup.entry, setup.algo, setup.env_kwargs
     kwargs = algo_kwargs(algo, setup.hp)
     hyperparameters = resolved_hyperparameters(algo, setup.hp)

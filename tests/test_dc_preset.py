@@ -112,3 +112,38 @@ def test_attacker_command_trains_on_the_preset(tmp_path, capsys):
     assert rows["EXS"].score == pytest.approx(1.0, rel=1e-12)
     assert 0.3 < rows[f"learned ({config['algo']})"].score <= 1.0 + 1e-12
     assert "reference (EXS)" in capsys.readouterr().out
+
+
+def test_a_run_made_before_the_groups_resumes_with_its_own_options(tmp_path, capsys, monkeypatch):
+    """train.py's defaults for the preset changed (the state groups, 8 native members); a run
+    saved under the former ones resumes with what it was trained with, and says so."""
+    from dataclasses import replace
+
+    key = ("sparse_attack_v2", "dc-ieee14-50")
+    today = SCENARIO_DEFAULTS[key]
+    former = replace(today, env_kwargs={"action": "sequential", "order": "plan"}, num_envs=None)
+    args = [
+        "attacker", "--scenario", "dc-ieee14-50", "--env-kwargs", "budget", "2", "horizon", "1",
+        "--total-timesteps", "64", "--n-epochs", "1", "--no-progress-bar",
+        "--final-eval-episodes", "2", "--eval-freq", "0", "--run-dir", str(tmp_path / "run"),
+    ]  # fmt: skip
+    with monkeypatch.context() as patch:
+        patch.setitem(SCENARIO_DEFAULTS, key, former)
+        first = train.main(args)
+    saved = json.loads((first.run_dir / "config.json").read_text())["resolved"]
+    assert "groups" not in saved["env_kwargs"] and saved["num_envs"] is None
+    assert saved["hyperparameters"]["n_steps"] == 512  # one env's rollout
+    capsys.readouterr()
+    again = train.main(["attacker", "--run-dir", str(first.run_dir), "--resume"])
+    out = capsys.readouterr().out
+    assert again.resumed and again.run_dir == first.run_dir
+    assert "resuming with the run's own env options" in out and "'groups': 'state'" in out
+    assert "resuming with the run's own native vector env members None" in out
+    assert "'n_steps': 512" in out and "'n_steps': 128" in out  # saved, and today's default
+    resumed = json.loads((again.run_dir / "config.json").read_text())["resolved"]
+    for name in ("env_kwargs", "num_envs", "hyperparameters"):
+        assert resumed[name] == saved[name]
+    # a new run takes today's defaults
+    fresh = train.main([*args[:-2], "--run-dir", str(tmp_path / "new")])
+    config = json.loads((fresh.run_dir / "config.json").read_text())["resolved"]
+    assert config["env_kwargs"]["groups"] == "state" and config["num_envs"] == 8
