@@ -135,6 +135,8 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
         raise ValueError(f"run config {config_path} is corrupt: {exc}") from None
     default.run.run_dir = Path(run_dir)
     argv = list(argv)
+    if "--env-kwargs" in argv:  # given again: parsed as given (tyro reads a non-empty dict
+        default.env_kwargs = {}  # default as --env-kwargs.NAME options), checked by the trainer
     command = next(a for a in argv if a in COMMANDS)
     return tyro.cli(type(cfg), args=argv[argv.index(command) + 1 :], default=default)
 

@@ -143,6 +143,10 @@ def test_a_run_made_before_the_groups_resumes_with_its_own_options(tmp_path, cap
     resumed = json.loads((again.run_dir / "config.json").read_text())["resolved"]
     for name in ("env_kwargs", "num_envs", "hyperparameters"):
         assert resumed[name] == saved[name]
+    # the run's own options given again, --env-kwargs included, resume it as well
+    assert train.main([*args, "--resume"]).run_dir == first.run_dir
+    with pytest.raises(ValueError, match=r"options differ from its config\.json"):
+        train.main([*args[:5], "3", *args[6:], "--resume"])  # budget 3: not the run's
     # a new run takes today's defaults
     fresh = train.main([*args[:-2], "--run-dir", str(tmp_path / "new")])
     config = json.loads((fresh.run_dir / "config.json").read_text())["resolved"]
