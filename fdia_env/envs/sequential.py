@@ -257,7 +257,9 @@ class SequentialBase(ParallelEnv):
         """``Discrete(M + 1)``: 0 = stop, j = pick sensor j (the same object on every call).
 
         The sparse attacker's ``order="plan"`` (and ``"increasing"``): ``Discrete(N·M + 1)``,
-        0 = stop, 1 + k·M + j - 1 = sensor j at window step k + 1.
+        0 = stop, 1 + k·M + j - 1 = sensor j at window step k + 1; with ``groups="state"``
+        ``Discrete(N·M + 1 + N·n)``, N·M + 1 + k·n + j = the sensors that see state j + 1 at
+        window step k + 1.
         """
         self._check_agent(agent)
         return self._action_space
