@@ -2,18 +2,18 @@
 
 Random configurations of every Kalman-filter env (every scenario family incl. a grid preset, both
 dynamics, every action format incl. the sparse attacker's sequential, masked format of
-``sparse_attack_v1``/``v2`` in both orders, the typed (incomplete-information) sensor game, the
-sensor game's sequential, masked format (both players, ``max_subset_size``, a subset-format
-opponent asked once per round), every attack × defense pair of ``fdia_v0``, random (masked)
-actions, batch sizes and seeds): the single env (through Gymnasium's ``SyncVectorEnv``), the
-native vector env on numpy and on torch (CPU) give the same observations, rewards, terminations,
-truncations and infos. numpy equals the single env bit for bit in every case: the single env is
-the engine's batch of one, the 2-state kernels (the single env's floats, the history table, the
-closed form on component arrays) are one sequence of IEEE operations with numpy's logarithm, and
-every product a member goes through is computed member by member (a (B, w) @ (w, n) BLAS product
-rounds a row differently at B = 1, a three-operand einsum too). torch equals numpy to 1e-10 in
-expected dynamics and in distribution in sampled dynamics (its own device generator; the typed
-sensor game's types too, so member by member only under a degenerate prior).
+``sparse_attack_v1``/``v2`` in each order (the plan-first ones with and without the state groups),
+the typed (incomplete-information) sensor game, the sensor game's sequential, masked format (both
+players, ``max_subset_size``, a subset-format opponent asked once per round), every attack × defense
+pair of ``fdia_v0``, random (masked) actions, batch sizes and seeds): the single env (through
+Gymnasium's ``SyncVectorEnv``), the native vector env on numpy and on torch (CPU) give the same
+observations, rewards, terminations, truncations and infos. numpy equals the single env bit for bit
+in every case: the single env is the engine's batch of one, the 2-state kernels (the single env's
+floats, the history table, the closed form on component arrays) are one sequence of IEEE operations
+with numpy's logarithm, and every product a member goes through is computed member by member (a (B,
+w) @ (w, n) BLAS product rounds a row differently at B = 1, a three-operand einsum too). torch
+equals numpy to 1e-10 in expected dynamics and in distribution in sampled dynamics (its own device
+generator; the typed sensor game's types too, so member by member only under a degenerate prior).
 
 Not covered here, and to round-off only (docs/benchmarks.md says why): systems of n >= 40 states
 from the steady state on numpy (their low-rank form pads each member to the batch's widest rank
@@ -65,15 +65,19 @@ def _sparse(draw, window):
 
 def _sequential(draw, window):
     # the sparse attacker's sequential, masked format (its own native vector env), in each of
-    # its orders, on v1 and v2 (v2: the same env with order="plan" by default)
+    # its orders, on v1 and v2 (v2: the same env with order="plan" by default); the plan-first
+    # orders with or without the state groups
     scenario = draw(st.sampled_from([*SMALL, GRID]))
+    order = draw(st.sampled_from(["time", "plan", "increasing"]))
+    groups = None if order == "time" else draw(st.sampled_from([None, "state"]))
     return (
         draw(st.sampled_from(["fdia_env.sparse_attack_v1", "fdia_env.sparse_attack_v2"])),
         "attacker",
         {
             "scenario": scenario,
             "action": "sequential",
-            "order": draw(st.sampled_from(["time", "plan", "increasing"])),
+            "order": order,
+            "groups": groups,
             "budget": draw(st.integers(1, window)),
             "objective": draw(st.sampled_from(["trace", "logdet"])),
             "horizon": window,
