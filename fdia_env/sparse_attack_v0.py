@@ -46,7 +46,7 @@ every pair at or below the last pick), so each plan has one sequence of picks.
 ``groups="state"`` (plan-first orders only; default None) adds N·n group actions after the
 pairs' (``Discrete(N·M + 1 + N·n)``): action ``N·M + 1 + k·n + j`` adds every pair of window
 step K+1+k whose sensor sees state j, the smallest set that biases that state alone (legal in
-increasing order of the groups, when it adds 1 to the budget left new pairs). Same observation,
+increasing order of the groups, when it adds 1 to budget-left new pairs). Same observation,
 rewards and reachable sets; ``train.py`` trains the ``dc-ieee14-50`` preset with it, whose
 optimum needs all four meters of one bus at once (see ``fdia_env.envs.sequential``).
 
