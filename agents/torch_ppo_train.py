@@ -121,17 +121,15 @@ def train_torch_ppo_run(
         history_record,
         reference_record,
         saved_env_kwargs,
-        saved_resolution,
         train_prefix,
         write_scores,
     )
 
-    env_kwargs = saved_env_kwargs(
-        env_kwargs, saved_resolution(cfg, CHECKPOINT), report or (lambda line: None)
-    )
-
-    check_env_kwargs(entry.gym_id, env_kwargs)
     with ExitStack() as stack:
+        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report)
+        # a resume continues with the env options its run was resolved with
+        env_kwargs = saved_env_kwargs(env_kwargs, run.saved_resolved, report or (lambda _: None))
+        check_env_kwargs(entry.gym_id, env_kwargs)
         try:
             eval_env = gym.make(entry.gym_id, **env_kwargs)
             venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
@@ -142,7 +140,6 @@ def train_torch_ppo_run(
         stack.callback(eval_env.close)
         stack.callback(venv.close)
         reference = entry.reference_of(eval_env)
-        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report)
         resume: TrainingState | None = None
         if run.resumed:
             resume = load_training_state(run.path / CHECKPOINT, run.path)

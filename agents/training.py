@@ -75,7 +75,7 @@ from agents.interrupt import StopTrainingCallback
 from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
-from agents.runs import read_jsonl, resume_dir, run_prefix, write_json, write_jsonl
+from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 
 __all__ = [
@@ -511,19 +511,6 @@ def setup_of(cfg: TrainConfig) -> RunSetup:
     )  # fmt: skip
 
 
-def saved_resolution(cfg: TrainConfig, marker: str) -> dict[str, Any]:
-    """The ``resolved`` entry of the run folder ``--resume`` continues ({} for a new run).
-
-    Raises:
-        ValueError: Nothing to resume, or a corrupt config.json (as :func:`open_run`).
-    """
-    if not cfg.run.resume:
-        return {}
-    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, train_prefix(cfg), marker)
-    resolved = read_json(run_dir / "config.json", "run config").get("resolved")
-    return resolved if isinstance(resolved, dict) else {}
-
-
 def saved_env_kwargs(
     env_kwargs: dict[str, Any], resolved: dict[str, Any], say: Callable[[str], None]
 ) -> dict[str, Any]:
@@ -729,19 +716,20 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     """
     say = report or (lambda line: None)
     check_device_available(cfg.run.device)
-    setup = as_saved(setup_of(cfg), saved_resolution(cfg, CHECKPOINT_STATE), cfg.num_envs, say)
-    entry, algo, env_kwargs = setup.entry, setup.algo, setup.env_kwargs
-    kwargs = algo_kwargs(algo, setup.hp)
-    hyperparameters = resolved_hyperparameters(algo, setup.hp)
-    check_env_kwargs(entry.gym_id, env_kwargs)
-    opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
+        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say)
+        # a resume continues with the options its run was resolved with ({} for a new run)
+        setup = as_saved(setup_of(cfg), run.saved_resolved, cfg.num_envs, say)
+        entry, algo, env_kwargs = setup.entry, setup.algo, setup.env_kwargs
+        kwargs = algo_kwargs(algo, setup.hp)
+        hyperparameters = resolved_hyperparameters(algo, setup.hp)
+        check_env_kwargs(entry.gym_id, env_kwargs)
+        opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
         eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent), entry.gym_id)
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
-        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say)
         checkpoint: CheckpointState | None = None
         if run.resumed:
             checkpoint = read_checkpoint_state(run.path / "checkpoints", run.path, trusted)
