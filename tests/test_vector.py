@@ -6,7 +6,7 @@ import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
-from stable_baselines3.common.vec_env import VecCheckNan
+from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan
 
 from fdia_env import LinearSystem, Sensor
 from fdia_env.envs.opponents import FixedMix
@@ -224,6 +224,40 @@ def test_sb3_adapter_passes_checks_and_trains():
     MaskablePPO("MlpPolicy", venv, n_steps=32, batch_size=64, seed=0).learn(256)
     box = make_sb3_vec_env("fdia_env/CovarianceAttack-v0", num_envs=4)
     PPO("MlpPolicy", box, n_steps=32, batch_size=64, seed=0).learn(128)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"dynamics": "expected"},
+        {"dynamics": "sampled", "max_episode_steps": 4},  # TimeLimit.truncated set
+        {"action": "sequential", "order": "plan"},
+    ],
+)
+def test_sb3_adapter_infos_are_dummy_vec_envs_of_single_envs(kwargs):
+    """Each env's info (the step's, the final step's at an end) and reset_infos as DummyVecEnv."""
+    native = make_sb3_vec_env("fdia_env/SparseAttack-v0", num_envs=4, **kwargs)
+    dummy = DummyVecEnv([lambda: gym.make("fdia_env/SparseAttack-v0", **kwargs) for _ in range(4)])
+    for venv in (native, dummy):
+        venv.seed(3)
+    np.testing.assert_array_equal(native.reset(), dummy.reset())
+    rng = np.random.default_rng(1)
+    ended, cut = 0, False
+    for _ in range(20):
+        masks = np.stack(native.env_method("action_masks"))
+        actions = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+        got, want = native.step(actions), dummy.step(actions)
+        for a, b in zip(got[:3], want[:3], strict=True):
+            np.testing.assert_array_equal(a, b)
+        for mine, theirs in ((got[3], want[3]), (native.reset_infos, dummy.reset_infos)):
+            for i, j in zip(mine, theirs, strict=True):
+                assert i.keys() == j.keys()
+                for key in i:
+                    np.testing.assert_array_equal(i[key], j[key], err_msg=key)
+        ended += int(got[2].sum())
+        cut = cut or any(i["TimeLimit.truncated"] for i in got[3])
+    assert ended >= 8  # two episodes each: the final step's info and the reset's were compared
+    assert cut == ("max_episode_steps" in kwargs)
 
 
 def test_sb3_seeds_reproduce_sampled_rollouts():
