@@ -102,6 +102,38 @@ def test_the_readme_table_is_rebuilt_from_the_run(tmp_path):
     assert "2.00× (50,000,000 env-steps/s) (`vector.py` failed with exit status 1)" in missed
 
 
+def test_only_reruns_its_benchmarks_and_keeps_the_others_with_their_dates(tmp_path, monkeypatch):
+    # --only replaces its blocks and keeps the page's others (a full run replaces all), each
+    # kept block and the README's header naming the run it came from
+    page, readme = tmp_path / "benchmarks.md", tmp_path / "README.md"
+    page.write_text("# Performance\n\nProse.\n")
+    readme.write_text(f"# x\n\n{report.README_BEGIN}\n{report.README_END}\n")
+    rates = {"vector": VECTOR_OUTPUT, "single_view": "view / CartPole-v1: 0.31x"}
+    monkeypatch.setattr(
+        report, "run", lambda b, q, t: (f"python benchmarks/{b.script}", rates[b.name])
+    )
+    now = ["2026-01-01 00:00 UTC"]
+    monkeypatch.setattr(report, "_now", lambda: now[0])
+    args = ["--page", str(page), "--readme", str(readme), "--only"]
+    assert report.main([*args, "single_view", "vector"]) == 0
+    rates["single_view"], now[0] = "view / CartPole-v1: 0.42x", "2026-02-02 00:00 UTC"
+    assert report.main([*args, "single_view"]) == 0
+    text = page.read_text()
+    assert "0.42x" in text and "0.31x" not in text and "2.00x" in text and "Prose." in text
+    blocks = report.read_blocks(text)
+    assert [(k.bench.name, k.when) for k in blocks] == [
+        ("single_view", "2026-02-02 00:00 UTC"),
+        ("vector", "2026-01-01 00:00 UTC"),
+    ]
+    assert "Kept from the run of 2026-01-01 00:00 UTC." in text
+    assert "reran single_view; the other blocks are kept" in text
+    table = readme.read_text()
+    assert "0.42×" in table and "2.00× (50,000,000 env-steps/s)" in table
+    assert "reran the others), the run of 2026-01-01 00:00 UTC: `vector.py`." in table
+    # a run of every benchmark keeps nothing
+    assert report.section([(blocks[0].bench, "c", "o")], False, kept=None).count("block:") == 1
+
+
 def test_every_benchmark_of_the_run_names_its_readme_figures():
     # each benchmark contributes rows; an output without its figures says so, never blank
     for bench in report.BENCHES:
