@@ -68,6 +68,30 @@ def test_results_train_maskable_ppo_with_train_py_grid_hyperparameters():
     assert ours == resolved_hyperparameters("MaskablePPO", setup.hp)
 
 
+@pytest.mark.parametrize("inst", sparse_grid.FULL_INSTANCES, ids=lambda i: i.system)
+@pytest.mark.parametrize("algo", ["MaskablePPO", "torch-ppo"])
+def test_each_rows_learners_take_train_pys_options_and_hyperparameters_there(inst, algo):
+    """The env options (dc-ieee14-50: plan order, state groups) and hyperparameters of train.py."""
+    from agents.config import Hyperparameters, resolved_hyperparameters
+    from agents.training import run_setup
+
+    preset = "grid-ieee14-rtu" if inst.system == "ieee14-rtu" else inst.system
+    setup = run_setup(
+        "sparse_attack_v0", "attacker", preset, {}, algo, Hyperparameters(), num_envs=1
+    )
+    system = sparse_grid.SYSTEMS[inst.system][2]() if inst.system == "ieee14-rtu" else None
+    ours = sparse_grid.env_kwargs(system, inst)
+    for key in ("action", "order", "groups"):
+        assert ours.get(key) == setup.env_kwargs.get(key), key
+    assert ours.get("groups") == ("state" if inst.system == "dc-ieee14-50" else None)
+    hp = sparse_grid.train_py_hyperparameters(inst, setup.algo)
+    assert resolved_hyperparameters(setup.algo, hp) == resolved_hyperparameters(
+        setup.algo, setup.hp
+    )
+    # an explicit order (the decision-order study) leaves the preset's other options out
+    assert "groups" not in sparse_grid.env_kwargs(system, inst, "time")
+
+
 def test_plan_policy_picks_the_lowest_pair_not_yet_planned_batched():
     best = exhaustive("ch4-position", budget=2, horizon=3)
     policy = sparse_grid.plan_policy(best)

@@ -9,11 +9,13 @@ project's SB3 model, :func:`agents.algos.build_model` with the defaults of
 :data:`agents.config.ALGO_DEFAULTS`, its rewards rescaled as ``train.py`` rescales them on the
 grid presets: attacking nothing 0, the optimum 1) and the torch PPO
 (:func:`agents.torch_ppo.train_torch_ppo` with torch-ppo's defaults; it scales its own
-rewards). Both play the env's own sequential format in the order ``train.py`` trains the grid
-presets in, plan-first with the picks in increasing order
+rewards). Both play the env's own sequential format with the options ``train.py`` trains each
+preset with (:data:`agents.config.SCENARIO_DEFAULTS`, :func:`train_py_defaults`): on the grid
+presets plan-first with the picks in increasing order
 (``gymnasium.make("fdia_env/SparseAttack-v2", action="sequential", order="increasing")``:
-masked picks of sensor-time pairs, each above the last, then stop, then the plan plays out;
-torch PPO on its native vector env),
+masked picks of sensor-time pairs, each above the last, then stop, then the plan plays out), on
+dc-ieee14-50 in the plan order with the state groups (``order="plan", groups="state"``, and
+``ent_coef`` 0.05); torch PPO on its native vector env,
 since the bitmask ``Discrete(2**M)`` is too large for these learners at M = 14 and, above 16
 sensors, the ``MultiBinary(M)`` action has no mask.
 
@@ -40,8 +42,8 @@ from experiments.results.common import mean_ci95, write_rows
 from fdia_env.systems import LinearSystem
 
 GYM_ID = "fdia_env/SparseAttack-v2"
-ORDER = "increasing"
-"""The sequential format's decision order the learners train in (docs/guide/sparse.md: why)."""
+ENV = "sparse_attack_v0"
+"""The env family's key in :data:`agents.config.SCENARIO_DEFAULTS`."""
 
 OBJECTIVES = ("trace", "logdet")
 EXS_MAX_SETS = 200_000  # below this many attack sets EXS also runs (a check of B&B)
@@ -205,19 +207,42 @@ def solve(inst: Instance, system: LinearSystem) -> dict[str, Any]:
     }
 
 
-def env_kwargs(system: LinearSystem, inst: Instance, order: str = ORDER) -> dict[str, Any]:
-    """The options of the learners' env: ``inst`` in the sequential format, in ``order``."""
+def train_py_defaults(inst: Instance) -> Any:
+    """``train.py``'s defaults on ``inst``'s preset (:class:`agents.config.ScenarioDefaults`).
+
+    Those of ``inst.system`` where :data:`agents.config.SCENARIO_DEFAULTS` has them
+    (dc-ieee14-50: the plan order with the state groups), else the grid presets' (the bus-level
+    ieee14-rtu trains as ``grid-ieee14-rtu`` does).
+    """
+    from agents.config import SCENARIO_DEFAULTS
+
+    found = SCENARIO_DEFAULTS.get((ENV, inst.system))
+    return found if found is not None else SCENARIO_DEFAULTS[(ENV, "grid-ieee14")]
+
+
+def env_kwargs(system: LinearSystem, inst: Instance, order: str | None = None) -> dict[str, Any]:
+    """The options of the learners' env: ``inst`` in the sequential format.
+
+    Args:
+        system: ``inst``'s system.
+        inst: The instance.
+        order: The decision order (its other options left at the env's defaults), or None for
+            ``train.py``'s options on the preset (:func:`train_py_defaults`).
+    """
+    if order is None:
+        options = dict(train_py_defaults(inst).env_kwargs)
+    else:
+        options = {"action": "sequential", "order": order}
     return {
         "scenario": system,
         "budget": inst.budget,
         "horizon": inst.horizon,
         "objective": inst.objective,
-        "action": "sequential",
-        "order": order,
+        **options,
     }
 
 
-def make_env(system: LinearSystem, inst: Instance, order: str = ORDER) -> Any:
+def make_env(system: LinearSystem, inst: Instance, order: str | None = None) -> Any:
     """The learners' Gymnasium env of ``inst`` (see :func:`env_kwargs`)."""
     import gymnasium as gym
 
@@ -266,7 +291,10 @@ def _nothing_return(env: Any) -> float:
 
 
 def training_env(
-    system: LinearSystem, inst: Instance, order: str = ORDER, reference: float | None = None
+    system: LinearSystem,
+    inst: Instance,
+    order: str | None = None,
+    reference: float | None = None,
 ) -> Any:
     """MaskablePPO's training env of ``inst``: one member, its rewards rescaled.
 
@@ -296,18 +324,18 @@ def training_env(
     )
 
 
-def train_py_hyperparameters() -> Any:
-    """MaskablePPO's hyperparameters as ``train.py`` sets them on the grid presets for one env.
+def train_py_hyperparameters(inst: Instance | None = None, algo: str = "MaskablePPO") -> Any:
+    """``algo``'s hyperparameters as ``train.py`` sets them on ``inst``'s preset for one env.
 
-    The algorithm's defaults (:data:`agents.config.ALGO_DEFAULTS`) with the grid presets' own
-    (:data:`agents.config.SCENARIO_DEFAULTS`), so that the results train as ``train.py
-    --num-envs 1`` does (its default there trains 8 native members, with 128 decisions each per
-    rollout and minibatches of 256).
+    The algorithm's defaults (:data:`agents.config.ALGO_DEFAULTS`) with the preset's own
+    (:func:`train_py_defaults`; without ``inst`` the grid presets'), so that the results train
+    as ``train.py --num-envs 1`` does (its default there trains 8 native members, with 128
+    decisions each per rollout and minibatches of 256).
     """
     from agents.config import SCENARIO_DEFAULTS, Hyperparameters, with_defaults
 
-    grid = SCENARIO_DEFAULTS[("sparse_attack_v0", "grid-ieee14")]
-    return with_defaults("MaskablePPO", Hyperparameters(), grid)
+    defaults = SCENARIO_DEFAULTS[(ENV, "grid-ieee14")] if inst is None else train_py_defaults(inst)
+    return with_defaults(algo, Hyperparameters(), defaults)
 
 
 def train_maskable(
@@ -315,14 +343,14 @@ def train_maskable(
     inst: Instance,
     budget: Budget,
     seed: int,
-    order: str = ORDER,
+    order: str | None = None,
     reference: float | None = None,
 ) -> tuple[Any, list[tuple[int, float]], float]:
     """MaskablePPO in ``order``: ``(model, curve [(steps, return)], train seconds)``.
 
-    Trained as ``train.py`` trains on the grid presets: its hyperparameters there
-    (:func:`train_py_hyperparameters`) and the rewards rescaled so that attacking nothing
-    returns 0 and ``reference`` 1 (:func:`training_env`).
+    Trained as ``train.py`` trains on the preset: its options and hyperparameters there
+    (``order`` None; :func:`env_kwargs`, :func:`train_py_hyperparameters`) and the rewards
+    rescaled so that attacking nothing returns 0 and ``reference`` 1 (:func:`training_env`).
     """
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
@@ -334,7 +362,7 @@ def train_maskable(
     eval_env = make_env(system, inst, order)
     venv = training_env(system, inst, order, reference)
     model = build_model(
-        "MaskablePPO", venv, algo_kwargs("MaskablePPO", train_py_hyperparameters()), seed
+        "MaskablePPO", venv, algo_kwargs("MaskablePPO", train_py_hyperparameters(inst)), seed
     )
     every = max(1, budget.maskable_steps // budget.evals)
     curve: list[tuple[int, float]] = []
@@ -360,19 +388,20 @@ def train_torch(
 ) -> tuple[Any, list[tuple[int, float]], float]:
     """torch-ppo on the native vector env: ``(policy, curve [(steps, return)], seconds)``.
 
-    torch-ppo's defaults, except that observations are not normalised (``norm_obs``): with
-    its running normalisation torch-ppo reached 46.4 % of the optimum on ieee14-rtu in the
+    torch-ppo's defaults with the preset's as ``train.py`` sets them
+    (:func:`train_py_hyperparameters`), observations not normalised (``norm_obs``): with its
+    running normalisation torch-ppo reached 46.4 % of the optimum on ieee14-rtu in the
     plan-first order (seed 0, 200,000 steps), without it 100 % (docs/guide/sparse.md).
     """
     import dataclasses
 
     import torch
 
-    from agents.config import ALGO_DEFAULTS, TORCH_PPO
+    from agents.config import TORCH_PPO, resolved_hyperparameters
     from agents.torch_ppo import TorchPPOConfig, make_torch_env, train_torch_ppo
 
     torch.set_num_threads(1)
-    hp = ALGO_DEFAULTS[TORCH_PPO]
+    hp = resolved_hyperparameters(TORCH_PPO, train_py_hyperparameters(inst, TORCH_PPO))
     config = TorchPPOConfig.from_hyperparameters(hp, budget.torch_steps, budget.torch_envs)
     config = dataclasses.replace(config, norm_obs=norm_obs)
     eval_env = make_env(system, inst)
