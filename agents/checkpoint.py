@@ -271,7 +271,7 @@ def load_model(
     """
     path = inside(Path(path).parent, Path(path).name, root, "model file")
     if path.suffix == ".zip":
-        return _load_sb3_zip(path, env, device, algo, trusted)
+        return load_sb3_zip(path, algo, trusted, env, device)
     if path.suffix != ".json":
         raise ValueError(
             f"model file {path}: expected a .json checkpoint description (with its .pt tensors) "
@@ -361,13 +361,33 @@ def require_trusted(path: Path, trusted: bool, what: str = "a stable-baselines3 
         )
 
 
-def _load_sb3_zip(
-    path: Path, env: Any, device: str, algo: str | None, trusted: bool
+def load_sb3_zip(
+    path: Path, algo: str | None, trusted: bool, env: Any = None, device: str = "cpu"
 ) -> BaseAlgorithm:
+    """A stable-baselines3 ``.zip``: SB3's own ``load``, which unpickles, so only when trusted.
+
+    The project's one path to an SB3 ``.zip`` (training's resume and the scorer's agents).
+
+    Args:
+        path: The ``.zip``.
+        algo: Its algorithm, a key of :data:`agents.algos.ALGO_CLASSES`.
+        trusted: The user marked it as trusted (``--trust-checkpoint``).
+        env: The env the model is built on (SB3 checks its spaces), or None.
+        device: torch device.
+
+    Raises:
+        UntrustedCheckpointError: Without ``trusted``, before anything is read.
+        ValueError: For a missing ``algo`` or one that is not known, or a missing file.
+    """
     require_trusted(path, trusted)
     if algo is None:
-        raise ValueError(f"loading the stable-baselines3 .zip {path} needs its algorithm")
-    if not path.is_file():
+        raise ValueError(
+            f"algo is needed to load the stable-baselines3 .zip {path}: one of "
+            f"{', '.join(ALGO_CLASSES)} (--algo)"
+        )
+    if algo not in ALGO_CLASSES:
+        raise ValueError(f"algo must be one of {', '.join(ALGO_CLASSES)}, got {algo!r}")
+    if not Path(path).is_file():
         raise ValueError(f"model file {path} does not exist")
     return ALGO_CLASSES[algo].load(path, env=env, device=device)
 

@@ -247,23 +247,16 @@ def _sb3(path: Path, root: Path, env: gym.Env, source: str, algo: str | None) ->
 
 
 def _sb3_zip(path: Path, env: gym.Env, source: str, algo: str | None, trusted: bool) -> LoadedAgent:
-    from agents.algos import ALGO_CLASSES
-    from agents.checkpoint import UntrustedCheckpointError, require_trusted
+    from agents.checkpoint import UntrustedCheckpointError, load_sb3_zip
 
     try:
-        require_trusted(path, trusted)
+        model = load_sb3_zip(path, algo, trusted)
     except UntrustedCheckpointError as exc:
         raise UntrustedCheckpointError(
             f"agent {source}: {exc} (trust_checkpoint=True, --trust-checkpoint)"
         ) from None
-    if algo is None:
-        raise ValueError(
-            f"algo is needed to load the stable-baselines3 .zip {source}: one of "
-            f"{', '.join(ALGO_CLASSES)} (--algo)"
-        )
-    if algo not in ALGO_CLASSES:
-        raise ValueError(f"algo must be one of {', '.join(ALGO_CLASSES)}, got {algo!r}")
-    model = ALGO_CLASSES[algo].load(path, device="cpu")
+    except ValueError as exc:
+        raise ValueError(f"agent {source}: {exc}") from None
     check_spaces(source, model.observation_space, model.action_space, env)
     return LoadedAgent(
         model, "sb3-zip", source, f"stable-baselines3 {algo} (.zip), {model.num_timesteps:,} steps"
