@@ -460,12 +460,27 @@ def read_blocks(text: str) -> list[Kept]:
 
 def _merged(
     results: list[tuple[Bench, str, str]], kept: list[Kept] | None
-) -> list[tuple[Bench, str, str, Kept | None]]:
-    """This run's blocks and the kept ones (those this run did not redo), in :data:`ORDER`."""
+) -> tuple[list[tuple[Bench, str, str, Kept | None]], list[Kept]]:
+    """This run's blocks and the kept ones (those this run did not redo), in :data:`ORDER`.
+
+    Returns:
+        ``(blocks, old)``: every block as ``(bench, command, output, kept or None)``, and the
+        kept ones.
+    """
     done = {b.name for b, *_ in results}
+    old = [k for k in kept or [] if k.bench.name not in done]
     rows = [(b, cmd, out, None) for b, cmd, out in results]
-    rows += [(k.bench, k.cmd, k.out, k) for k in kept or [] if k.bench.name not in done]
-    return sorted(rows, key=lambda r: ORDER.index(r[0].name) if r[0].name in ORDER else -1)
+    rows += [(k.bench, k.cmd, k.out, k) for k in old]
+    rows.sort(key=lambda r: ORDER.index(r[0].name) if r[0].name in ORDER else -1)
+    return rows, [k for *_, k in rows if k is not None]
+
+
+def _written(quick: bool, when: str, where: str) -> str:
+    """The sentence naming the command, the date and the machine of a run."""
+    return (
+        f"Written by `python benchmarks/report.py{' --quick' if quick else ''}` (`make bench`) on "
+        f"{when}; machine: {where}."
+    )
 
 
 def section(
@@ -485,17 +500,15 @@ def section(
     """
     where = machine(threads="1")  # each benchmark runs with OPENBLAS_NUM_THREADS=1
     when = _now()
-    merged = _merged(results, kept)
+    merged, old = _merged(results, kept)
     lines = [
         BEGIN,
         "## Latest run of every benchmark",
         "",
-        f"Written by `python benchmarks/report.py{' --quick' if quick else ''}` (`make bench`) on "
-        f"{when}; machine: {where}. Each block is the script's own output, reference rates "
+        f"{_written(quick, when, where)} Each block is the script's own output, reference rates "
         "measured in the same run.",
         "",
     ]
-    old = [k for *_, k in merged if k is not None]
     if old:
         lines += [
             f"This run reran {', '.join(b.name for b, *_ in results) or 'nothing'}; the other "
@@ -534,16 +547,13 @@ def readme_table(
     runs (see :func:`section`), named with their dates in the header.
     """
     when = when or _now()
-    merged = _merged(results, kept)
+    merged, old = _merged(results, kept)
     lines = [
         README_BEGIN,
-        f"Written by `python benchmarks/report.py{' --quick' if quick else ''}` (`make bench`) on "
-        f"{when}; machine: "
-        f"{machine(threads='1')}. The full outputs are in "
+        f"{_written(quick, when, machine(threads='1'))} The full outputs are in "
         "[docs/benchmarks.md](docs/benchmarks.md).",
         "",
     ]
-    old = [k for *_, k in merged if k is not None]
     if old:
         dates = dict.fromkeys(k.when for k in old)
         runs = "; ".join(
