@@ -26,16 +26,15 @@ import gymnasium as gym
 from agents.config import (
     TORCH_PPO,
     TORCH_PPO_NUM_ENVS,
+    Hyperparameters,
     TrainConfig,
     check_device_available,
     flag,
-    parse_env_kwargs,
     resolve_device,
     resolved_hyperparameters,
 )
 from agents.evaluate import evaluate
 from agents.lifecycle import RunResult, open_run
-from agents.registry import get
 from agents.runs import read_jsonl, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 from agents.torch_ppo import (
@@ -71,14 +70,21 @@ class TorchPPORun(RunResult):
     num_envs: int = field(default=TORCH_PPO_NUM_ENVS, kw_only=True)
 
 
-def torch_ppo_config(cfg: TrainConfig) -> tuple[TorchPPOConfig, dict[str, Any]]:
+def torch_ppo_config(
+    cfg: TrainConfig, hp: Hyperparameters | None = None
+) -> tuple[TorchPPOConfig, dict[str, Any]]:
     """The :class:`TorchPPOConfig` of a train command, and its resolved hyperparameters.
+
+    Args:
+        cfg: The command.
+        hp: Its hyperparameters with the scenario's defaults (:func:`agents.training.setup_of`,
+            e.g. no observation normalisation on the grid presets); None: ``cfg.hp`` alone.
 
     Raises:
         ValueError: For a hyperparameter that does not apply to torch-ppo (naming where it
             does), or ``--n-epochs``/``--n-steps`` values torch-ppo rejects.
     """
-    hp = resolved_hyperparameters(TORCH_PPO, cfg.hp)
+    hp = resolved_hyperparameters(TORCH_PPO, cfg.hp if hp is None else hp)
     num_envs = TORCH_PPO_NUM_ENVS if cfg.num_envs is None else cfg.num_envs
     try:
         config = TorchPPOConfig.from_hyperparameters(hp, cfg.total_timesteps, num_envs)
@@ -112,23 +118,28 @@ def train_torch_ppo_run(
         )
     check_device_available(cfg.run.device)
     device = resolve_device(cfg.run.device)
-    entry = get(cfg.env, cfg.agent)
-    config, hyperparameters = torch_ppo_config(cfg)
-    env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     from agents.training import (
+        as_saved,
         check_env_kwargs,
         final_evaluations,
         history_record,
         reference_record,
-        saved_env_kwargs,
+        setup_of,
         train_prefix,
         write_scores,
     )
 
+    # the scenario's env options and hyperparameters (train.py's table), as the SB3 learners'
+    setup = setup_of(cfg)
+    entry = setup.entry
+    torch_ppo_config(cfg, setup.hp)  # checked before the run folder exists
+
     with ExitStack() as stack:
         run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report)
-        # a resume continues with the env options its run was resolved with
-        env_kwargs = saved_env_kwargs(env_kwargs, run.saved_resolved, report or (lambda _: None))
+        # a resume continues with the env options and hyperparameters its run was resolved with
+        setup = as_saved(setup, run.saved_resolved, cfg.num_envs, report or (lambda _: None))
+        env_kwargs = setup.env_kwargs
+        config, hyperparameters = torch_ppo_config(cfg, setup.hp)
         check_env_kwargs(entry.gym_id, env_kwargs)
         try:
             eval_env = gym.make(entry.gym_id, **env_kwargs)

@@ -548,23 +548,23 @@ def as_saved(
     env_kwargs = saved_env_kwargs(setup.env_kwargs, resolved, say)
     members = setup.num_envs
     hp = setup.hp
-    if setup.algo != TORCH_PPO:  # torch-ppo's members and hyperparameters are its own
+    if setup.algo != TORCH_PPO:  # torch-ppo's members are its own (--num-envs, checked)
         members = resolved.get("num_envs", num_envs)
         if members != setup.num_envs:
             kept["native vector env members"] = (members, setup.num_envs)
-        saved_hp = resolved.get("hyperparameters")
-        today = json.loads(json.dumps(resolved_hyperparameters(setup.algo, setup.hp)))
-        if isinstance(saved_hp, dict) and saved_hp != today:
-            hp = Hyperparameters(
-                **{k: tuple(v) if isinstance(v, list) else v for k, v in saved_hp.items()}
-            )
-            changed = sorted(
-                k for k in saved_hp.keys() | today.keys() if saved_hp.get(k) != today.get(k)
-            )
-            kept["hyperparameters"] = (
-                {k: saved_hp.get(k) for k in changed},
-                {k: today.get(k) for k in changed},
-            )
+    saved_hp = resolved.get("hyperparameters")
+    today = json.loads(json.dumps(resolved_hyperparameters(setup.algo, setup.hp)))
+    if isinstance(saved_hp, dict) and saved_hp != today:
+        hp = Hyperparameters(
+            **{k: tuple(v) if isinstance(v, list) else v for k, v in saved_hp.items()}
+        )
+        changed = sorted(
+            k for k in saved_hp.keys() | today.keys() if saved_hp.get(k) != today.get(k)
+        )
+        kept["hyperparameters"] = (
+            {k: saved_hp.get(k) for k in changed},
+            {k: today.get(k) for k in changed},
+        )
     for what, (old, new) in kept.items():
         say(f"resuming with the run's own {what} {old} (train.py's defaults are now {new})")
     return replace(setup, env_kwargs=env_kwargs, num_envs=members, hp=hp)

@@ -151,3 +151,46 @@ def test_a_run_made_before_the_groups_resumes_with_its_own_options(tmp_path, cap
     fresh = train.main([*args[:-2], "--run-dir", str(tmp_path / "new")])
     config = json.loads((fresh.run_dir / "config.json").read_text())["resolved"]
     assert config["env_kwargs"]["groups"] == "state" and config["num_envs"] == 8
+
+
+def test_torch_ppo_command_takes_the_table_and_a_resume_keeps_the_runs_own(
+    tmp_path, capsys, monkeypatch
+):
+    """--algo torch-ppo trains with the preset's hyperparameters (ent_coef 0.05, no observation
+    normalisation) and env options; a run saved under other defaults resumes with its own."""
+    from dataclasses import replace
+
+    import agents.torch_ppo_train as runner
+
+    key = ("sparse_attack_v2", "dc-ieee14-50")
+    today = SCENARIO_DEFAULTS[key]
+    former = replace(today, hyperparameters={"ent_coef": 0.02, "norm_obs": True})
+    args = [
+        "attacker", "--scenario", "dc-ieee14-50", "--algo", "torch-ppo", "--device", "cpu",
+        "--num-envs", "8", "--env-kwargs", "budget", "2", "horizon", "1",
+        "--total-timesteps", "192", "--final-eval-episodes", "2", "--eval-freq", "0",
+    ]  # fmt: skip
+    fresh = train.main([*args, "--run-dir", str(tmp_path / "new")])
+    config = json.loads((fresh.run_dir / "config.json").read_text())["resolved"]
+    assert (config["hyperparameters"]["ent_coef"], config["hyperparameters"]["norm_obs"]) == (
+        0.05,
+        False,
+    )
+    assert config["env_kwargs"]["groups"] == "state"
+    # a run stopped under former defaults resumes with its own hyperparameters, and says so
+    real = runner.train_torch_ppo
+    stopped = lambda *a, **k: real(*a, **{**k, "stop": lambda: True})  # noqa: E731
+    with monkeypatch.context() as patch:
+        patch.setitem(SCENARIO_DEFAULTS, key, former)
+        patch.setattr(runner, "train_torch_ppo", stopped)
+        first = train.main([*args, "--run-dir", str(tmp_path / "run")])
+    saved = json.loads((first.run_dir / "config.json").read_text())["resolved"]
+    assert saved["hyperparameters"]["ent_coef"] == 0.02 and saved["hyperparameters"]["norm_obs"]
+    assert first.timesteps < 192
+    capsys.readouterr()
+    again = train.main(["attacker", "--run-dir", str(first.run_dir), "--resume"])
+    out = capsys.readouterr().out
+    assert again.resumed and again.timesteps == 192
+    assert "resuming with the run's own hyperparameters" in out and "'ent_coef': 0.02" in out
+    resumed = json.loads((again.run_dir / "config.json").read_text())["resolved"]
+    assert resumed["hyperparameters"] == saved["hyperparameters"]
