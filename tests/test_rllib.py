@@ -629,6 +629,37 @@ def test_resume_with_other_options_lists_each_difference(one_iteration_run, tmp_
     assert not (run_dir / "progress.jsonl").read_text().count("\n") > 1  # nothing trained
 
 
+def test_resume_keeps_the_runs_own_env_options_when_the_defaults_changed(
+    one_iteration_run, tmp_path, capsys, monkeypatch
+):
+    # train.py's per-scenario defaults change between versions; a resume trains on the env
+    # options the run was resolved with (as the SB3 and torch-ppo drivers do), and says so
+    import json
+
+    import train
+    from agents.config import SCENARIO_DEFAULTS, ScenarioDefaults
+    from agents.registry import get
+
+    run_dir = _copy_run(one_iteration_run, tmp_path)
+    saved = json.loads((run_dir / "config.json").read_text())["resolved"]
+    assert saved["env"] == get("sparse_attack_v2", "attacker").gym_id  # the run's env
+    key = ("sparse_attack_v2", saved["env_kwargs"]["scenario"])
+    assert key not in SCENARIO_DEFAULTS and "reward_mode" not in saved["env_kwargs"]
+    monkeypatch.setitem(
+        SCENARIO_DEFAULTS, key, ScenarioDefaults(env_kwargs={"reward_mode": "shaped"})
+    )
+    steps = one_iteration_run.timesteps
+    more = train.main(
+        ["attacker", "--backend", "rllib", "--resume", "--run-dir", str(run_dir),
+         "--total-timesteps", str(steps + 1), "--no-progress-bar"]
+    )  # fmt: skip
+    assert more.resumed
+    out = capsys.readouterr().out
+    assert "resuming with the run's own env options" in out and "'reward_mode': 'shaped'" in out
+    resumed = json.loads((run_dir / "config.json").read_text())["resolved"]
+    assert resumed["env_kwargs"] == saved["env_kwargs"]
+
+
 # RLlib's masked PPO module on the sequential action format: one small PPO iteration of the
 # sensor game's two masked players, and of the sparse attacker in the plan-first order
 # (sparse_attack_v2's default: Discrete(N·M + 1) pairs, then the plan plays out) and in its

@@ -316,7 +316,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
     from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.envs import is_masked
     from agents.rllib.policy import policy_of
-    from agents.training import check_env_kwargs, final_evaluations
+    from agents.training import check_env_kwargs, final_evaluations, saved_env_kwargs
 
     check_algo(cfg.algo)
     entry = get(cfg.env, cfg.agent)
@@ -327,6 +327,14 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
     with ExitStack() as stack:
         stack.callback(eval_env.close)
         run = open_run(cfg, stack, report)
+        # a resume continues with the env options its run was resolved with (train.py's
+        # per-scenario defaults change between versions), as the SB3 and torch-ppo drivers do
+        saved = saved_env_kwargs(env_kwargs, run.folder.saved_resolved, report or (lambda _: None))
+        if saved != env_kwargs:
+            env_kwargs = saved
+            check_env_kwargs(entry.gym_id, env_kwargs)
+            env_config, eval_env = env_config_of(entry, env_kwargs, cfg.opponent)
+            stack.callback(eval_env.close)
         run_dir = run.run_dir
         reference = entry.reference_of(eval_env)
         algo, stop = _start(
