@@ -177,7 +177,7 @@ def initial_action(policy: Any, entry: Any, env_kwargs: dict[str, Any]) -> int:
     In the sequential format (a subset built one sensor per decision) it is the index of the
     subset the policy builds in the first round, played deterministically from ``reset(seed=0)``.
     """
-    with entry.make(**env_kwargs) as env:
+    with entry.make_resolved(env_kwargs) as env:
         view = env.unwrapped
         if hasattr(view, "subset_strategy"):
             return int(np.argmax(view.subset_strategy(policy, seed=0, deterministic=True)))

@@ -404,6 +404,15 @@ class Trainable:
         """``gymnasium.make`` the view with :meth:`env_kwargs`."""
         return gym.make(self.gym_id, **self.env_kwargs(scenario, **overrides))
 
+    def make_resolved(self, env_kwargs: dict[str, Any], **extra: Any) -> gym.Env:
+        """``gymnasium.make`` the view with exactly ``env_kwargs`` (and ``extra``, an opponent).
+
+        For options already resolved (:meth:`env_kwargs`'s, or a resumed run's saved ones):
+        the scenario's defaults are not applied again, so a run saved under former defaults
+        gets its own env, not today's.
+        """
+        return gym.make(self.gym_id, **env_kwargs, **extra)
+
     def view(self, opponent: Any = None, **env_kwargs: Any) -> gym.Env:
         """The view built directly, without ``gymnasium.make``.
 

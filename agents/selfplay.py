@@ -82,6 +82,7 @@ from agents.training import (
     env_thunk,
     make_env,
     run_setup,
+    saved_env_kwargs,
 )
 from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
@@ -404,7 +405,7 @@ def load_policies(
             require_trusted(path, trusted)
     models: dict[str, list[BaseAlgorithm]] = {}
     for side in SIDES:
-        with entries[side].make(**env_kwargs) as env:
+        with entries[side].make_resolved(env_kwargs) as env:
             models[side] = [
                 load_model(path, env, run_dir, device, kwargs, algo, trusted)
                 for path in paths[side]
@@ -458,19 +459,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
     setup = game_setup(cfg)
     kwargs, hyperparameters, torch_config = _learner_options(cfg, algo, setup.hp)
     env_kwargs = setup.env_kwargs
-    check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
-    env = make_env(lambda: entries["attacker"].make(**env_kwargs), entries["attacker"].gym_id)
-    with env:
-        reference = entries["attacker"].reference_of(env)
-        if algo not in (EXACT, TORCH_PPO):  # SB3 checks the options when it builds a model
-            build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)
-    if reference is None or not reference.is_game:
-        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
-    L, value = reference.matrix_game(), reference.value  # the uninformed Bayesian game: L̄
-    # each side's pure strategies: the subsets (also in the sequential format, whose actions
-    # are single sensors)
-    n = {"defender": int(L.shape[0]), "attacker": int(L.shape[1])}
-    scale = abs(value) if setup.normalize_reward and algo not in (EXACT, TORCH_PPO) else None
+    reference = _game_reference(cfg, entries, algo, kwargs, env_kwargs)
     expected = expected_rewards(cfg, algo)
     trusted = cfg.run.trust_checkpoint
 
@@ -478,6 +467,17 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         state: dict[str, Any] = {"populations": {"attacker": [], "defender": []}, "history": []}
         run = open_run(cfg, stack, game_prefix(cfg), STATE, report)
         run_dir = run.path
+        # a resume plays the game its run was resolved with (train.py's per-scenario defaults
+        # change between versions), as the attacker and defender drivers do
+        saved = saved_env_kwargs(env_kwargs, run.saved_resolved, say)
+        if saved != env_kwargs:
+            env_kwargs = saved
+            reference = _game_reference(cfg, entries, algo, kwargs, env_kwargs)
+        L, value = reference.matrix_game(), reference.value  # the uninformed Bayesian game: L̄
+        # each side's pure strategies: the subsets (also in the sequential format, whose
+        # actions are single sensors)
+        n = {"defender": int(L.shape[0]), "attacker": int(L.shape[1])}
+        scale = abs(value) if setup.normalize_reward and algo not in (EXACT, TORCH_PPO) else None
         if run.resumed:
             state = _read_state(run_dir / STATE)
             run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")
@@ -553,6 +553,28 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             train_seconds,
             interrupted=stop.signum,
         )
+
+
+def _game_reference(
+    cfg: GameConfig, entries: dict[str, Any], algo: str, kwargs: Any, env_kwargs: dict[str, Any]
+) -> Any:
+    """The game's reference (its payoff matrix), its options checked, as the driver starts.
+
+    Raises:
+        ValueError: For env options the env rejects, learner options SB3 rejects, or a game
+            that is not a one-shot matrix game.
+    """
+    attacker = entries["attacker"]
+    check_env_kwargs(attacker.gym_id, env_kwargs)
+    env = make_env(lambda: attacker.make_resolved(env_kwargs), attacker.gym_id)
+    with env:
+        reference = attacker.reference_of(env)
+        if algo not in (EXACT, TORCH_PPO):  # SB3 checks the options when it builds a model
+            build_model(algo, env, kwargs, cfg.run.seed, cfg.run.device)
+    if reference is None or not reference.is_game:
+        raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
+    reference.matrix_game()  # raises for the informed-attacker Bayesian game
+    return reference
 
 
 def _learner_options(

@@ -133,7 +133,7 @@ def opponent_factory(entry: Trainable, kind: str, env_kwargs: dict[str, Any]) ->
     if kind != "equilibrium":
         raise ValueError(f"opponent must be 'uniform' or 'equilibrium', got {kind!r}")
     other = get(entry.env, "defender" if entry.agent == "attacker" else "attacker")
-    with other.make(**env_kwargs) as env:
+    with other.make_resolved(env_kwargs) as env:
         probs = other.reference_of(env).policy.probs
 
     def make() -> Any:

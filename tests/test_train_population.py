@@ -150,6 +150,30 @@ def test_the_game_command_runs_the_exact_oracle_and_resumes_it(tmp_path):
         run_game(tmp_path, "--algo", "exact", "--learning-rate", "0.1", "--run-dir", "x")
 
 
+def test_a_game_resume_plays_the_runs_own_game_when_the_defaults_changed(
+    tmp_path, monkeypatch, capsys
+):
+    # train.py's per-scenario defaults change between versions; a resumed game keeps the env
+    # options (and so the payoff matrix) its run was resolved with, and says so
+    from agents.config import SCENARIO_DEFAULTS, ScenarioDefaults
+
+    first = run_game(tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "2")
+    saved = json.loads((first.run_dir / "config.json").read_text())["resolved"]
+    key = ("sensor_game_v0", saved["env_kwargs"]["scenario"])
+    assert key not in SCENARIO_DEFAULTS and "allocation" not in saved["env_kwargs"]
+    today = ScenarioDefaults(env_kwargs={"allocation": "dependent"})
+    monkeypatch.setitem(SCENARIO_DEFAULTS, key, today)
+    capsys.readouterr()
+    more = run_game(
+        tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "3", "--resume"
+    )
+    out = capsys.readouterr().out
+    assert "resuming with the run's own env options" in out and "'dependent'" in out
+    assert more.history[:2] == first.history and more.value == pytest.approx(first.value)
+    resumed = json.loads((more.run_dir / "config.json").read_text())["resolved"]
+    assert resumed["env_kwargs"] == saved["env_kwargs"]
+
+
 def test_the_game_command_runs_torch_ppo_best_responses_and_resumes_them(tmp_path):
     args = ["--method", "psro", "--algo", "torch-ppo", "--device", "cpu",
             "--steps-per-iteration", "768"]  # fmt: skip

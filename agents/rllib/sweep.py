@@ -84,7 +84,7 @@ def trial(config: dict[str, Any]) -> dict[str, Any]:
         }
         seed = derived_seed(config["seed"], 10_000)
         if both:
-            reference = entry.reference_of(entry.make(**env_kwargs))
+            reference = entry.reference_of(entry.make_resolved(env_kwargs))
             half = len(mixes["attacker"]) // 2
             x = np.mean(mixes["defender"][half:], axis=0)
             y = np.mean(mixes["attacker"][half:], axis=0)
@@ -103,7 +103,7 @@ def trial(config: dict[str, Any]) -> dict[str, Any]:
             opponent = {} if probs is None else {"opponent": FixedMix(probs)}
             with make_view(entry.gym_id, env_config) as view:
                 masked = is_masked(view.observation_space)
-            with entry.make(**opponent, **env_kwargs) as env:
+            with entry.make_resolved(env_kwargs, **opponent) as env:
                 policy = policy_of(algo, None, env.action_space, masked)
                 ev = evaluate(policy, env, config["final_eval_episodes"], seed)
             final.update(

@@ -95,8 +95,8 @@ def env_config_of(
     if make is not None:
         mix = make()
         config["opponent"] = [float(p) for p in mix.probs]
-        return config, entry.make(opponent=mix, **env_kwargs)
-    return config, entry.make(**env_kwargs)
+        return config, entry.make_resolved(env_kwargs, opponent=mix)
+    return config, entry.make_resolved(env_kwargs)
 
 
 @dataclass
@@ -548,7 +548,7 @@ def _matrix_game(
     entries = {side: get(cfg.env, side) for side in SIDES}
     env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
-    with entries["attacker"].make(**env_kwargs) as env:
+    with entries["attacker"].make_resolved(env_kwargs) as env:
         reference = entries["attacker"].reference_of(env)
         n = {side: int(env.unwrapped.parallel.action_space(side).n) for side in SIDES}
     if reference is None or not reference.is_game:
@@ -716,7 +716,7 @@ def learn_best_response_rllib(
             result = algo.train()
             steps += steps_sampled(result)
             returns = agent_returns(result)
-        with entry.make(**env_kwargs) as env:
+        with entry.make_resolved(env_kwargs) as env:
             policy = policy_of(algo, None, env.action_space, False)
         return policy, initial_action(policy, entry, env_kwargs), returns
     finally:
@@ -906,7 +906,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
         evaluations = {}
         seed = derived_seed(cfg.run.seed, 20_000)
         for side, entry in entries.items():
-            with entry.make(**env_kwargs) as env:
+            with entry.make_resolved(env_kwargs) as env:
                 policy = policy_of(algo, side, env.action_space, False)
                 reference = entry.reference_of(env)
                 evaluations[f"{side} (learned, vs the view's opponent)"] = evaluate(
