@@ -578,10 +578,13 @@ def test_sigint_stops_after_the_iteration_and_leaves_a_resumable_state(local_ray
     )
 
 
-def test_psro_resume_rebuilds_earlier_policies_from_weights_only_files(local_ray, tmp_path):
+def test_psro_resume_rebuilds_earlier_policies_from_weights_only_files(
+    local_ray, tmp_path, monkeypatch, capsys
+):
     import torch
 
     import train
+    from agents.config import SCENARIO_DEFAULTS, ScenarioDefaults
     from baselines.game import exploitability, payoff_matrix
     from fdia_env import sensor_game_v0
 
@@ -591,7 +594,15 @@ def test_psro_resume_rebuilds_earlier_policies_from_weights_only_files(local_ray
             "--final-eval-episodes", "2"]  # fmt: skip
     first = train.main([*args, *tiny, "--iterations", "1"])
     meta1 = json.loads((first.run_dir / "scores.json").read_text())["meta_payoff"]
+    # train.py's defaults for the game changed since the run was saved: the resume plays the
+    # run's own game (the independent allocation the payoffs below are checked against)
+    key = ("sensor_game_v0", "ch5-game")
+    assert key not in SCENARIO_DEFAULTS
+    today = ScenarioDefaults(env_kwargs={"allocation": "dependent"})
+    monkeypatch.setitem(SCENARIO_DEFAULTS, key, today)
+    capsys.readouterr()
     more = train.main([*args, "--resume", "--iterations", "2"])
+    assert "resuming with the run's own env options" in capsys.readouterr().out
     assert more.run_dir == first.run_dir
     assert [h["iteration"] for h in more.history] == [1, 2]
     assert [h["timesteps"] for h in more.history] == [400, 800]

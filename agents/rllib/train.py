@@ -423,23 +423,22 @@ def _start(
 def _start_selfplay(
     cfg: GameConfig,
     stack: ExitStack,
-    report: Callable[[str], None] | None,
+    run: Session,
     env_kwargs: dict[str, Any],
     hyperparameters: dict[str, Any],
     reference: Any,
-) -> tuple[Session, int, Any, Any]:
-    """The self-play drivers' start: :func:`open_run`, one iteration's length, :func:`_start`.
+) -> tuple[int, Any, Any]:
+    """The self-play drivers' start in ``run``: one iteration's length, then :func:`_start`.
 
     Returns:
-        The session, the env steps of one iteration, the algorithm and the stop request.
+        The env steps of one iteration, the algorithm and the stop request.
     """
-    run = open_run(cfg, stack, report)
     per_iteration = _per_iteration(cfg, run, hyperparameters)
     algo, stop = _start(
         run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game", env_kwargs,
         hyperparameters, reference,
     )  # fmt: skip
-    return run, per_iteration, algo, stop
+    return per_iteration, algo, stop
 
 
 def _iterate_selfplay(
@@ -539,7 +538,6 @@ def _matrix_game(
     """
     from agents.population import SIDES
     from agents.rllib.config import rllib_hyperparameters
-    from agents.training import check_env_kwargs
 
     if cfg.env not in game_names():
         valid = [*game_names(), *CONTINUOUS_GAMES]
@@ -547,6 +545,17 @@ def _matrix_game(
     check_algo(cfg.algo)
     entries = {side: get(cfg.env, side) for side in SIDES}
     env_kwargs = entries["attacker"].env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
+    reference, n = _matrix_reference(cfg, entries, env_kwargs)
+    return entries, env_kwargs, reference, n, rllib_hyperparameters(cfg.hp)
+
+
+def _matrix_reference(
+    cfg: GameConfig, entries: dict[str, Any], env_kwargs: dict[str, Any]
+) -> tuple[Any, dict[str, int]]:
+    """The exact game of ``env_kwargs`` (checked) and each side's number of actions."""
+    from agents.population import SIDES
+    from agents.training import check_env_kwargs
+
     check_env_kwargs(entries["attacker"].gym_id, env_kwargs)
     with entries["attacker"].make_resolved(env_kwargs) as env:
         reference = entries["attacker"].reference_of(env)
@@ -554,7 +563,28 @@ def _matrix_game(
     if reference is None or not reference.is_game:
         raise ValueError(f"{cfg.env} with {env_kwargs} is not a one-shot matrix game")
     reference.matrix_game()  # raises for the informed-attacker Bayesian game
-    return entries, env_kwargs, reference, n, rllib_hyperparameters(cfg.hp)
+    return reference, n
+
+
+def _resumed_game(
+    cfg: GameConfig,
+    run: Session,
+    entries: dict[str, Any],
+    env_kwargs: dict[str, Any],
+    reference: Any,
+    n: dict[str, int],
+    say: Callable[[str], None],
+) -> tuple[dict[str, Any], Any, dict[str, int]]:
+    """A resumed run's own game: its saved env options, exact game and sizes.
+
+    Those given where they are the run's (a new run, or defaults unchanged since it was saved).
+    """
+    from agents.training import saved_env_kwargs
+
+    saved = saved_env_kwargs(env_kwargs, run.folder.saved_resolved, say)
+    if saved == env_kwargs:
+        return env_kwargs, reference, n
+    return saved, *_matrix_reference(cfg, entries, saved)
 
 
 def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) -> Any:
@@ -588,11 +618,13 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
     entries, env_kwargs, reference, n, hyperparameters = _matrix_game(cfg)
-    L, value = reference.payoff, reference.value
-    parallel = make_multi_agent(cfg.env, env_kwargs).parallel
     with ExitStack() as stack:
-        run, per_iteration, algo, stop = _start_selfplay(
-            cfg, stack, report, env_kwargs, hyperparameters, reference
+        run = open_run(cfg, stack, report)
+        env_kwargs, reference, n = _resumed_game(cfg, run, entries, env_kwargs, reference, n, say)
+        L, value = reference.payoff, reference.value
+        parallel = make_multi_agent(cfg.env, env_kwargs).parallel
+        per_iteration, algo, stop = _start_selfplay(
+            cfg, stack, run, env_kwargs, hyperparameters, reference
         )
         run_dir = run.run_dir
         policies = {
@@ -770,9 +802,10 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
         return _selfplay_continuous(cfg, report)
     say = report or (lambda line: None)
     entries, env_kwargs, reference, n, hyperparameters = _matrix_game(cfg)
-    L, value = reference.payoff, reference.value
     with ExitStack() as stack:
         run = open_run(cfg, stack, report, with_algorithm=False)
+        env_kwargs, reference, n = _resumed_game(cfg, run, entries, env_kwargs, reference, n, say)
+        L, value = reference.payoff, reference.value
         run_dir = run.run_dir
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         loop = _psro_loop_state(cfg, run, entries, env_kwargs, n)
@@ -880,7 +913,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     from agents.rllib.config import rllib_hyperparameters
     from agents.rllib.policy import policy_of
     from agents.selfplay import SelfPlayResult
-    from agents.training import check_env_kwargs
+    from agents.training import check_env_kwargs, saved_env_kwargs
 
     check_algo(cfg.algo)
     say = report or (lambda line: None)
@@ -890,8 +923,13 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
     env_kwargs = first.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(first.gym_id, env_kwargs)
     with ExitStack() as stack:
-        run, per_iteration, algo, stop = _start_selfplay(
-            cfg, stack, report, env_kwargs, hyperparameters, None
+        run = open_run(cfg, stack, report)
+        saved = saved_env_kwargs(env_kwargs, run.folder.saved_resolved, say)
+        if saved != env_kwargs:  # a resume plays the game its run was resolved with
+            env_kwargs = saved
+            check_env_kwargs(first.gym_id, env_kwargs)
+        per_iteration, algo, stop = _start_selfplay(
+            cfg, stack, run, env_kwargs, hyperparameters, None
         )
         run_dir = run.run_dir
 
