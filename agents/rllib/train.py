@@ -421,9 +421,9 @@ def _start(
 
 
 def _start_selfplay(
+    run: Session,
     cfg: GameConfig,
     stack: ExitStack,
-    run: Session,
     env_kwargs: dict[str, Any],
     hyperparameters: dict[str, Any],
     reference: Any,
@@ -624,7 +624,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         L, value = reference.payoff, reference.value
         parallel = make_multi_agent(cfg.env, env_kwargs).parallel
         per_iteration, algo, stop = _start_selfplay(
-            cfg, stack, run, env_kwargs, hyperparameters, reference
+            run, cfg, stack, env_kwargs, hyperparameters, reference
         )
         run_dir = run.run_dir
         policies = {
@@ -929,7 +929,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
             env_kwargs = saved
             check_env_kwargs(first.gym_id, env_kwargs)
         per_iteration, algo, stop = _start_selfplay(
-            cfg, stack, run, env_kwargs, hyperparameters, None
+            run, cfg, stack, env_kwargs, hyperparameters, None
         )
         run_dir = run.run_dir
 
