@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from fdia_env.envs.actions import check_batch_actions
+from fdia_env.backend import get_backend
+from fdia_env.envs.actions import check_batch_actions, check_vector_actions
 
 
 def _venv(env_id: str, B: int, **kwargs) -> gym.vector.VectorEnv:
@@ -83,6 +84,24 @@ def test_check_batch_actions_returns_the_checked_int64_batch():
         check_batch_actions(spaces.Discrete(5, start=2), np.array([1, 2]), 2, "defender")
     box = np.zeros((2, 3), dtype=np.float32)
     assert check_batch_actions(spaces.Box(-1, 1, (3,)), box, 2, "attacker") is box
+
+
+def test_check_vector_actions_checks_on_the_envs_backend():
+    space = spaces.Discrete(5)
+    out = check_vector_actions(
+        space, np.array([4, 0], dtype=np.uint8), 2, "attacker", get_backend()
+    )
+    assert out.dtype == np.int64 and out.tolist() == [4, 0]  # numpy: the checked array
+    with pytest.raises(ValueError, match=r"attacker actions must be integers in \[0, 5\)"):
+        check_vector_actions(space, np.array([5, 0]), 2, "attacker", get_backend())
+    torch = pytest.importorskip("torch")
+    xp = get_backend("torch", "cpu")
+    t = torch.tensor([1, 3])
+    assert check_vector_actions(space, t, 2, "defender", xp) is t  # torch: the tensor as given
+    with pytest.raises(TypeError, match=r"defender actions must be a torch\.Tensor"):
+        check_vector_actions(space, np.array([1, 3]), 2, "defender", xp)
+    with pytest.raises(ValueError, match="defender actions must lie in Discrete"):
+        check_vector_actions(space, torch.tensor([1, 7]), 2, "defender", xp)
 
 
 @pytest.mark.parametrize(

@@ -290,3 +290,33 @@ def check_batch_tensor_actions(
                 f"{who} actions must lie in [{space.low.min():g}, {space.high.max():g}] "
                 f"(the action space {space})"
             )
+
+
+def check_vector_actions(
+    space: spaces.Space, actions: Any, batch: int, who: str, backend: Any
+) -> Any:
+    """A native vector env's check of one step's actions, on the env's backend.
+
+    Every native vector env checks its actions here and nowhere else.
+
+    Args:
+        space: The single env's action space.
+        actions: (B, *space.shape) actions: an array on the numpy backend
+            (:func:`check_batch_actions`), a tensor of the env's device on the torch one
+            (:func:`check_batch_tensor_actions`).
+        batch: B, the number of members.
+        who: ``"attacker"`` or ``"defender"``, for the message.
+        backend: The env's backend (:mod:`fdia_env.backend`).
+
+    Returns:
+        The checked actions: :func:`check_batch_actions`'s array on numpy, the tensor as given
+        on torch.
+
+    Raises:
+        TypeError: On torch, for anything but a tensor of an allowed dtype.
+        ValueError: For actions that are not one element of ``space`` per member.
+    """
+    if backend.name == "numpy":
+        return check_batch_actions(space, actions, batch, who)
+    check_batch_tensor_actions(space, actions, batch, who, backend)
+    return actions

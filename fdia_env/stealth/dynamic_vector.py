@@ -25,8 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.backend import NUMPY
-from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
+from fdia_env.envs.actions import check_vector_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
 from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
@@ -64,11 +63,7 @@ class StealthDynamicVectorEnv(StealthVectorBase):
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
         """One filter step for every member (NEXT_STEP: those that ended last step reset)."""
         env, B, xp = self.env, self.num_envs, self.xp
-        if xp is NUMPY:
-            acts = check_batch_actions(self.single_action_space, actions, B, "attacker")
-        else:
-            check_batch_tensor_actions(self.single_action_space, actions, B, "attacker", xp)
-            acts = actions
+        acts = check_vector_actions(self.single_action_space, actions, B, "attacker", xp)
         resetting = xp.copy(self._needs_reset)
         sampled = env.dynamics == "sampled"
         out = self.model.step(

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from fdia_env.backend import NUMPY
-from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
+from fdia_env.envs.actions import check_vector_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
 from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
@@ -103,10 +103,7 @@ class StealthVectorEnv(StealthVectorBase):
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
         """One snapshot for every member (NEXT_STEP: members that ended last step reset instead)."""
         env, est, xp, B = self.env, self.env.estimation, self.xp, self.num_envs
-        if xp is NUMPY:
-            check_batch_actions(self.single_action_space, actions, B, "attacker")
-        else:
-            check_batch_tensor_actions(self.single_action_space, actions, B, "attacker", xp)
+        check_vector_actions(self.single_action_space, actions, B, "attacker", xp)
         a = self.injections(actions)
         damage = self._max_abs(a @ self._KT)
         p = self._detection_probability(a) if env.test == "chi2" else xp.zeros(B)

@@ -54,7 +54,7 @@ from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_agent, check_int
 from fdia_env.backend import NUMPY, get_backend
-from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
+from fdia_env.envs.actions import check_vector_actions
 from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, attacker_reward, check_reset_args
@@ -265,18 +265,16 @@ class FdiaVectorEnv(gym.vector.VectorEnv):
             raise RuntimeError("step() called before reset(): call reset() first")
         B, xp = self.num_envs, self.xp
         resetting = self._prev_done
-        if xp is NUMPY:  # the only check: the models take the checked array as valid
-            actions = check_batch_actions(self.single_action_space, actions, B, self.agent)
-        else:
-            check_batch_tensor_actions(self.single_action_space, actions, B, self.agent, xp)
-        actions = {self.agent: actions}
+        # the only check: the models take the checked actions as valid
+        actions = {
+            self.agent: check_vector_actions(self.single_action_space, actions, B, self.agent, xp)
+        }
         if self.other is not None:
             actions[self.other] = self._opponent_actions(~resetting)
             space = self.parallel.action_space(self.other)
-            if xp is NUMPY:
-                actions[self.other] = check_batch_actions(space, actions[self.other], B, self.other)
-            else:
-                check_batch_tensor_actions(space, actions[self.other], B, self.other, xp)
+            actions[self.other] = check_vector_actions(
+                space, actions[self.other], B, self.other, xp
+            )
         attacked, sigma = self.attack.batch_apply(actions["attacker"])
         used, leak, present, steady = self.defense.batch_apply(
             actions.get("defender"), attacked, sigma

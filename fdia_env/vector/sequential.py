@@ -54,7 +54,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from fdia_env.backend import NUMPY
-from fdia_env.envs.actions import check_batch_actions, check_batch_tensor_actions
+from fdia_env.envs.actions import check_vector_actions
 from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSetEnv, group_illegal
 from fdia_env.vector import env as vector_env
@@ -229,10 +229,7 @@ class PartialStep:
         if not self._started:
             raise RuntimeError("step() called before reset(): call reset() first")
         xp, B = self.xp, self.num_envs
-        if xp is NUMPY:
-            actions = check_batch_actions(self.single_action_space, actions, B, agent)
-        else:
-            check_batch_tensor_actions(self.single_action_space, actions, B, agent, xp)
+        actions = check_vector_actions(self.single_action_space, actions, B, agent, xp)
         actions = xp.astype(actions, xp.int64)
         resetting = self._prev_done
         if xp.any(resetting):  # NEXT_STEP: their action is ignored; they start a new episode
