@@ -338,7 +338,7 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         run_dir = run.run_dir
         reference = entry.reference_of(eval_env)
         algo, stop = _start(
-            run, cfg, stack, entry.gym_id, env_config, cfg.total_timesteps, cfg.agent, env_kwargs,
+            run, cfg, entry.gym_id, env_config, cfg.total_timesteps, cfg.agent, env_kwargs,
             hyperparameters, reference,
         )  # fmt: skip
         history, steps, seconds = _iterate(
@@ -393,7 +393,6 @@ def _ppo(
 def _start(
     run: Session,
     cfg: TrainConfig | GameConfig,
-    stack: ExitStack,
     env: str,
     env_config: dict[str, Any],
     total: int,
@@ -408,13 +407,13 @@ def _start(
     config.json and watch SIGINT/SIGTERM.
 
     Returns:
-        The algorithm (stopped when ``stack`` closes) and the stop request.
+        The algorithm (stopped when the run's exit stack closes) and the stop request.
     """
     seed = run.seed(cfg.run.seed)
     seed_everything(seed, cfg.run.torch_threads)
     init_ray(cfg.run)
     algo = _ppo(cfg, env, env_config, seed, total).build_algo()
-    stack.callback(algo.stop)
+    run.folder.stack.callback(algo.stop)
     begin(run, algo)
     _write_config(run, command, cfg, env, env_kwargs, hyperparameters, reference)
     return algo, run.folder.watch_signals()
@@ -423,7 +422,6 @@ def _start(
 def _start_selfplay(
     run: Session,
     cfg: GameConfig,
-    stack: ExitStack,
     env_kwargs: dict[str, Any],
     hyperparameters: dict[str, Any],
     reference: Any,
@@ -435,7 +433,7 @@ def _start_selfplay(
     """
     per_iteration = _per_iteration(cfg, run, hyperparameters)
     algo, stop = _start(
-        run, cfg, stack, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game", env_kwargs,
+        run, cfg, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game", env_kwargs,
         hyperparameters, reference,
     )  # fmt: skip
     return per_iteration, algo, stop
@@ -624,7 +622,7 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
         L, value = reference.payoff, reference.value
         parallel = make_multi_agent(cfg.env, env_kwargs).parallel
         per_iteration, algo, stop = _start_selfplay(
-            run, cfg, stack, env_kwargs, hyperparameters, reference
+            run, cfg, env_kwargs, hyperparameters, reference
         )
         run_dir = run.run_dir
         policies = {
@@ -928,9 +926,7 @@ def _selfplay_continuous(cfg: GameConfig, report: Callable[[str], None] | None =
         if saved != env_kwargs:  # a resume plays the game its run was resolved with
             env_kwargs = saved
             check_env_kwargs(first.gym_id, env_kwargs)
-        per_iteration, algo, stop = _start_selfplay(
-            run, cfg, stack, env_kwargs, hyperparameters, None
-        )
+        per_iteration, algo, stop = _start_selfplay(run, cfg, env_kwargs, hyperparameters, None)
         run_dir = run.run_dir
 
         def on_iteration(rec: dict[str, Any]) -> None:
