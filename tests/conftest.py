@@ -1,4 +1,4 @@
-"""Small shared helpers for the Kalman-core tests.
+"""Small shared helpers of the tests (the Kalman core's, and the vector envs' comparisons).
 
 Imported by the test modules as ``from conftest import ...`` (pytest puts ``tests/`` on the path).
 """
@@ -97,3 +97,28 @@ def stable_systems(draw, max_n: int = 4, max_sensors: int = 4) -> LinearSystem:
     q_rank = draw(st.integers(0, n))
     radius = draw(st.floats(0.2, 1.19))
     return random_system(draw(st.integers(0, 2**32 - 1)), n, dims, q_rank, radius)
+
+
+def assert_infos_equal(native, sync, where="", atol=1e-9, obs_atol=1e-6):
+    """Gymnasium vector infos equal key by key: keys, dtypes, shapes and ``_key`` masks.
+
+    Floats to ``rtol=1e-9`` and ``atol``, integers and bools exactly; the per-member
+    ``final_obs`` (None or an observation, float32) to 1e-6 relative and ``obs_atol``.
+    """
+    assert sorted(native) == sorted(sync), f"{where}: keys {sorted(native)} != {sorted(sync)}"
+    for key in sync:
+        n, s = native[key], sync[key]
+        if isinstance(s, dict):
+            assert_infos_equal(n, s, f"{where}/{key}", atol, obs_atol)
+        elif s.dtype == object:  # final_obs: None or the member's observation
+            for a, b in zip(n, s, strict=True):
+                assert (a is None) == (b is None), f"{where}/{key}"
+                if b is not None:
+                    np.testing.assert_allclose(a, b, rtol=1e-6, atol=obs_atol, err_msg=where)
+        else:
+            assert n.dtype == s.dtype, f"{where}/{key}: dtype {n.dtype} != {s.dtype}"
+            assert n.shape == s.shape, f"{where}/{key}: shape {n.shape} != {s.shape}"
+            if np.issubdtype(s.dtype, np.floating):
+                np.testing.assert_allclose(n, s, rtol=1e-9, atol=atol, err_msg=f"{where}/{key}")
+            else:
+                np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")

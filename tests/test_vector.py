@@ -3,6 +3,7 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_infos_equal
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from sb3_contrib import MaskablePPO
 from stable_baselines3 import PPO
@@ -73,27 +74,6 @@ def random_actions(space, rng, mask=None):
             return rng.integers(0, space.n, size=len(mask) if mask is not None else None)
         return np.array([rng.choice(np.flatnonzero(m)) for m in mask])
     return rng.uniform(-1, 1, size=space.shape).astype(np.float32)
-
-
-def assert_infos_equal(native, sync, where=""):
-    """Gymnasium vector infos identical key by key (values, dtypes, `_key` masks)."""
-    assert sorted(native) == sorted(sync), f"{where}: keys {sorted(native)} != {sorted(sync)}"
-    for key in sync:
-        n, s = native[key], sync[key]
-        if isinstance(s, dict):
-            assert_infos_equal(n, s, f"{where}/{key}")
-        elif s.dtype == object:  # final_obs: None or the member's observation
-            for a, b in zip(n, s, strict=True):
-                assert (a is None) == (b is None), f"{where}/{key}"
-                if b is not None:
-                    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
-        else:
-            assert n.dtype == s.dtype, f"{where}/{key}: dtype {n.dtype} != {s.dtype}"
-            assert n.shape == s.shape, f"{where}/{key}: shape {n.shape} != {s.shape}"
-            if np.issubdtype(s.dtype, np.floating):
-                np.testing.assert_allclose(n, s, rtol=1e-9, atol=1e-9, err_msg=f"{where}/{key}")
-            else:
-                np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
 
 
 def compare_with_sync(
