@@ -25,24 +25,12 @@ from baselines.game import (
     to_nashpy,
     to_openspiel_matrix,
 )
+from experiments.reproduce.ch5 import CH5_CORRECTED_L, CH5_ERRATA
 from fdia_env import scenarios
 from fdia_env.attacks.subsets import subsets
 from fdia_env.kalman import steady_state
 from fdia_env.systems import pv_sensor, tracking_system
 
-# docs/references.md §5: the literature's independent payoff (1-decimal print, with the 3.748
-# erratum: row z1z3, columns z2 and z2z3 print as 3.8 in the source).
-LITERATURE_L = np.array(
-    [
-        [25.4, 4.7, 4.7, 25.4, 25.4, 4.7, 25.4],
-        [7.2, 23.5, 7.2, 7.2, 7.2, 23.5, 7.2],
-        [10.0, 10.0, 23.6, 10.0, 10.0, 10.0, 10.0],
-        [13.5, 6.6, 3.4, 13.5, 13.5, 6.6, 13.5],
-        [16.4, 3.7, 5.4, 16.4, 16.4, 3.7, 16.4],
-        [5.0, 12.4, 8.0, 5.0, 5.0, 12.4, 5.0],
-        [10.2, 5.2, 3.9, 10.2, 10.2, 5.2, 10.2],
-    ]
-)
 # Full precision, pinned after this implementation and an independent scipy DARE computation
 # (test_ch5_payoff_agrees_with_an_independent_dare_computation) agreed to 2e-14.
 PINNED_ROWS = {  # distinct columns z1, z2, z3 of each row
@@ -69,8 +57,9 @@ def spread_system(M: int):
 
 def test_ch5_payoff_matches_literature_print_and_pinned_values():
     L = payoff_matrix("ch5-game")
-    np.testing.assert_array_equal(np.round(L, 1), LITERATURE_L)
-    assert L[4, 1] == pytest.approx(3.748, abs=5e-4)  # the erratum: printed 3.8
+    np.testing.assert_array_equal(np.round(L, 1), CH5_CORRECTED_L)
+    for (row, col), value in CH5_ERRATA.items():  # printed 3.8
+        assert L[row, col] == pytest.approx(value, abs=5e-4)
     for row, values in PINNED_ROWS.items():
         np.testing.assert_allclose(L[row, :3], values, rtol=1e-11)
     # columns z1, z1z2, z1z3, z1z2z3 all put the power on z1; z2 and z2z3 on z2

@@ -4,22 +4,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from experiments.reproduce.ch5 import CH5_CORRECTED_L, CH5_ERRATA
 from fdia_env import scenarios, sensor_game_v0
 from fdia_env.attacks.subset import allocation_covariance
 from fdia_env.attacks.subsets import subset_name, subsets
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.kalman import steady_state
-
-# docs/references.md §5: rows = defender subset, columns = attacked subset (1 decimal)
-CH5_INDEPENDENT = np.array([
-    [25.4, 4.7, 4.7, 25.4, 25.4, 4.7, 25.4],
-    [7.2, 23.5, 7.2, 7.2, 7.2, 23.5, 7.2],
-    [10.0, 10.0, 23.6, 10.0, 10.0, 10.0, 10.0],
-    [13.5, 6.6, 3.4, 13.5, 13.5, 6.6, 13.5],
-    [16.4, 3.7, 5.4, 16.4, 16.4, 3.7, 16.4],
-    [5.0, 12.4, 8.0, 5.0, 5.0, 12.4, 5.0],
-    [10.2, 5.2, 3.9, 10.2, 10.2, 5.2, 10.2],
-])  # fmt: skip
 
 
 def env_payoffs(allocation):
@@ -51,8 +41,9 @@ def direct_payoffs(system, power, allocation):
 
 def test_env_payoffs_reproduce_the_literature_matrix():
     L = env_payoffs("independent")
-    np.testing.assert_array_equal(np.round(L, 1), CH5_INDEPENDENT)
-    assert L[4, 1] == pytest.approx(3.748, abs=5e-4)  # the literature misprints it as 3.8
+    np.testing.assert_array_equal(np.round(L, 1), CH5_CORRECTED_L)
+    for (row, col), value in CH5_ERRATA.items():  # the literature misprints them as 3.8
+        assert L[row, col] == pytest.approx(value, abs=5e-4)
 
 
 @pytest.mark.parametrize("allocation", ["independent", "dependent"])
@@ -89,7 +80,7 @@ def test_repeated_rounds_show_each_player_the_others_last_subset():
     assert obs["attacker"][-3:].tolist() == [0, 1, 1]
     assert obs["defender"][-3:].tolist() == [1, 1, 0]
     assert not terms["attacker"]
-    assert rewards["attacker"] == pytest.approx(CH5_INDEPENDENT[5, 3], abs=0.05)
+    assert rewards["attacker"] == pytest.approx(CH5_CORRECTED_L[5, 3], abs=0.05)
     env.step({"attacker": 0, "defender": 0})
     *_, terms, _, _ = env.step({"attacker": 0, "defender": 0})
     assert terms["attacker"]

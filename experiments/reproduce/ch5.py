@@ -36,6 +36,15 @@ CH5_LITERATURE_L = np.array(
         [10.2, 5.2, 3.9, 10.2, 10.2, 5.2, 10.2],
     ]
 )
+CH5_ERRATA = {(4, 1): 3.748, (4, 5): 3.748}
+"""The print's misprints: ``(row, column)`` of :data:`CH5_LITERATURE_L` → the value of the
+literature's own model (docs/references.md §5, erratum)."""
+CH5_CORRECTED_L = CH5_LITERATURE_L.copy()
+for (_row, _col), _value in CH5_ERRATA.items():
+    CH5_CORRECTED_L[_row, _col] = round(_value, 1)
+CH5_CORRECTED_L.setflags(write=False)
+"""The literature's table with :data:`CH5_ERRATA` applied, at its one decimal (what the
+payoff reproduces exactly after rounding)."""
 CH5_LITERATURE_DEFENDER = (0.0, 0.0, 0.0, 0.0, 0.0, 0.40, 0.60)
 CH5_LITERATURE_VALUE = 8.106
 CH5_PRIORS = (0.5, 0.5)  # incomplete-information example: independent / dependent attacker
