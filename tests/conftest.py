@@ -122,3 +122,15 @@ def assert_infos_equal(native, sync, where="", atol=1e-9, obs_atol=1e-6):
                 np.testing.assert_allclose(n, s, rtol=1e-9, atol=atol, err_msg=f"{where}/{key}")
             else:
                 np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
+
+
+def attacker_return(env, policy, seed: int = 0) -> float:
+    """Return of one episode of ``policy`` (SB3's ``predict``, deterministic) as the attacker
+    of a parallel env without a defender, from ``reset(seed=seed)``."""
+    obs, _ = env.reset(seed=seed)
+    total = 0.0
+    while env.agents:
+        action, _ = policy.predict(obs["attacker"], deterministic=True)
+        obs, rewards, *_ = env.step({"attacker": action})
+        total += rewards["attacker"]
+    return total

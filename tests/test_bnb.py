@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import attacker_return
 
 from baselines.sparse import bnb as bnb_module
 from baselines.sparse import (
@@ -70,13 +71,7 @@ def play(result, scenario, budget, horizon, objective) -> float:
         objective=objective,
         reward_mode="terminal",
     )
-    obs, _ = env.reset(seed=0)
-    policy, total = result.policy(), 0.0
-    while env.agents:
-        action, _ = policy.predict(obs["attacker"])
-        obs, rewards, _, _, _ = env.step({"attacker": action})
-        total += rewards["attacker"]
-    return total
+    return attacker_return(env, result.policy())
 
 
 # --- equal to EXS -------------------------------------------------------------------------

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.optimize
-from conftest import random_pd
+from conftest import attacker_return, random_pd
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -455,14 +455,7 @@ def test_equivalent_sensor_uses_the_identical_h_rule_for_ch2_position():
 def play_parallel(policy_of, **env_kwargs) -> float:
     """Episode return of ``policy_of(env)`` in the parallel env."""
     env = covariance_attack_v0.parallel_env(**env_kwargs)
-    policy = policy_of(env)
-    obs, _ = env.reset(seed=0)
-    total = 0.0
-    while env.agents:
-        action, _ = policy.predict(obs["attacker"], deterministic=True)
-        obs, rewards, _, _, _ = env.step({"attacker": action})
-        total += rewards["attacker"]
-    return total
+    return attacker_return(env, policy_of(env))
 
 
 @pytest.mark.parametrize(

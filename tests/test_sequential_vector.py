@@ -5,6 +5,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_infos_equal
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from fdia_env.vector.sequential import SequentialVectorEnv
@@ -12,25 +13,13 @@ from fdia_env.vector.sequential import SequentialVectorEnv
 ID = "fdia_env/SparseAttack-v0"
 
 
-def assert_infos_equal(native, sync, where=""):
-    """Gymnasium vector infos equal key by key (dtypes, shapes, `_key` masks; floats to 1e-9)."""
-    assert sorted(native) == sorted(sync), f"{where}: keys {sorted(native)} != {sorted(sync)}"
-    for key in sync:
-        n, s = native[key], sync[key]
-        if isinstance(s, dict):
-            assert_infos_equal(n, s, f"{where}/{key}")
-        elif s.dtype == object:  # final_obs: None or the member's observation
-            for a, b in zip(n, s, strict=True):
-                assert (a is None) == (b is None), f"{where}/{key}"
-                if b is not None:
-                    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
-        else:
-            assert n.dtype == s.dtype, f"{where}/{key}: dtype {n.dtype} != {s.dtype}"
-            assert n.shape == s.shape, f"{where}/{key}: shape {n.shape} != {s.shape}"
-            if np.issubdtype(s.dtype, np.floating):
-                np.testing.assert_allclose(n, s, rtol=1e-9, atol=1e-15, err_msg=f"{where}/{key}")
-            else:
-                np.testing.assert_array_equal(n, s, err_msg=f"{where}/{key}")
+def make_native(num_envs, env_id=ID, **kwargs):
+    """The native vector env (vector_entry_point) of `env_id`, in the sequential format unless
+    `kwargs` names another action."""
+    kwargs.setdefault("action", "sequential")
+    return gym.make_vec(
+        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs
+    )
 
 
 def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, stop_p=0.3):
@@ -39,14 +28,7 @@ def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, 
     Returns the number of episodes that ended and of decisions at which members both committed
     a window step and held theirs (so the test sees members finishing sets at different times).
     """
-    native = gym.make_vec(
-        ID,
-        num_envs=B,
-        vectorization_mode="vector_entry_point",
-        autoreset_mode=autoreset,
-        action="sequential",
-        **kwargs,
-    )
+    native = make_native(B, autoreset_mode=autoreset, **kwargs)
     assert isinstance(native, SequentialVectorEnv) and native.autoreset_mode == autoreset
     sync = SyncVectorEnv(
         [lambda: gym.make(ID, action="sequential", **kwargs) for _ in range(B)],
@@ -57,7 +39,7 @@ def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, 
     obs_n, info_n = native.reset(seed=11)
     obs_s, info_s = sync.reset(seed=11)
     np.testing.assert_allclose(obs_n, obs_s, rtol=1e-6, atol=1e-6)
-    assert_infos_equal(info_n, info_s, "reset")
+    assert_infos_equal(info_n, info_s, "reset", atol=1e-15)
     rng = np.random.default_rng(0)
     ended = mixed = 0
     for t in range(steps):
@@ -73,7 +55,7 @@ def compare_with_sync(kwargs, B=4, steps=30, autoreset=AutoresetMode.NEXT_STEP, 
         np.testing.assert_allclose(r_n, r_s, rtol=1e-9, atol=1e-15, err_msg=f"step {t}")
         np.testing.assert_array_equal(te_n, te_s)
         np.testing.assert_array_equal(tr_n, tr_s)
-        assert_infos_equal(info_n, info_s, f"step {t}")
+        assert_infos_equal(info_n, info_s, f"step {t}", atol=1e-15)
         moved = info_s["step"] != k_before
         mixed += bool(moved.any() and not moved.all())
         ended += int((te_s | tr_s).sum())
@@ -130,16 +112,7 @@ def test_truncation_and_autoreset_match_sync(kwargs, autoreset):
 
 
 def test_skip_forced_and_members_finishing_at_different_decisions():
-    env = gym.make_vec(
-        ID,
-        num_envs=3,
-        vectorization_mode="vector_entry_point",
-        action="sequential",
-        scenario="ch4-position",
-        budget=2,
-        horizon=4,
-        illegal_action="error",
-    )
+    env = make_native(3, scenario="ch4-position", budget=2, horizon=4, illegal_action="error")
     obs, info = env.reset(seed=0)
     assert obs.shape == (3, 5 + 4) and info["action_mask"].tolist() == [[1, 1, 1, 1]] * 3
     # member 0 picks 2, member 1 stops (window step 1 with nothing), member 2 picks 1
@@ -167,16 +140,8 @@ def test_skip_forced_and_members_finishing_at_different_decisions():
 
 def test_illegal_actions_and_bad_input():
     def make(rule, **kwargs):
-        env = gym.make_vec(
-            ID,
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            action="sequential",
-            scenario="ch4-position",
-            budget=2,
-            horizon=3,
-            illegal_action=rule,
-            **kwargs,
+        env = make_native(
+            2, scenario="ch4-position", budget=2, horizon=3, illegal_action=rule, **kwargs
         )
         env.reset(seed=0)
         env.step(np.array([1, 2]))  # both pick a sensor: one pair of the budget left
@@ -193,37 +158,20 @@ def test_illegal_actions_and_bad_input():
     with pytest.raises(ValueError, match=r"integers in \[0, 4\); member 1 has 4"):
         env.step(np.array([0, 4]))
     with pytest.raises(ValueError, match="budget must be >= 1"):
-        gym.make_vec(
-            ID,
-            num_envs=2,
-            vectorization_mode="vector_entry_point",
-            action="sequential",
-            budget=0,
-        )
+        make_native(2, budget=0)
     with pytest.raises(ValueError, match="num_envs"):
-        gym.make_vec(ID, num_envs=0, vectorization_mode="vector_entry_point", action="sequential")
+        make_native(0)
     with pytest.raises(RuntimeError, match="before reset"):
-        gym.make_vec(
-            ID, num_envs=2, vectorization_mode="vector_entry_point", action="sequential"
-        ).step(np.array([0, 0]))
+        make_native(2).step(np.array([0, 0]))
 
 
 @pytest.mark.parametrize("order", ["time", "plan", "increasing"])
 @pytest.mark.parametrize("dynamics", ["expected", "sampled"])
 def test_torch_backend_matches_numpy(dynamics, order):
     torch = pytest.importorskip("torch")
-    kwargs = dict(
-        order=order,
-        num_envs=6,
-        vectorization_mode="vector_entry_point",
-        action="sequential",
-        scenario="ch4-position",
-        budget=3,
-        horizon=5,
-        dynamics=dynamics,
-    )
-    tv = gym.make_vec(ID, backend="torch", device="cpu", **kwargs)
-    nv = gym.make_vec(ID, **kwargs)
+    kwargs = dict(order=order, scenario="ch4-position", budget=3, horizon=5, dynamics=dynamics)
+    tv = make_native(6, backend="torch", device="cpu", **kwargs)
+    nv = make_native(6, **kwargs)
     obs_t, info_t = tv.reset(seed=1)
     obs_n, info_n = nv.reset(seed=1)
     rng = np.random.default_rng(2)
@@ -414,23 +362,12 @@ def test_v1_names_a_bad_budget_on_a_large_grid(budget):
 )
 def test_both_native_vector_envs_check_their_episode_options_alike(action, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        gym.make_vec(
-            "fdia_env/SparseAttack-v0", num_envs=2, vectorization_mode="vector_entry_point",
-            action=action, **kwargs,
-        )  # fmt: skip
+        make_native(2, "fdia_env/SparseAttack-v0", action=action, **kwargs)
 
 
 def test_plan_order_members_plan_then_play_out_their_plans():
-    env = gym.make_vec(
-        ID,
-        num_envs=3,
-        vectorization_mode="vector_entry_point",
-        action="sequential",
-        order="plan",
-        scenario="ch4-position",
-        budget=2,
-        horizon=3,
-        illegal_action="error",
+    env = make_native(
+        3, order="plan", scenario="ch4-position", budget=2, horizon=3, illegal_action="error"
     )
     obs, info = env.reset(seed=0)
     M = 3  # action 1 + k*M + (j - 1): sensor j at window step k + 1
@@ -481,10 +418,9 @@ def test_increasing_order_masks_and_refused_picks_member_by_member():
     """Each member's mask closes the pairs up to its own last pick; a pick below it is refused."""
 
     def make(rule):
-        env = gym.make_vec(
-            ID, num_envs=3, vectorization_mode="vector_entry_point", action="sequential",
-            scenario="ch4-position", budget=3, horizon=3, order="increasing", illegal_action=rule,
-        )  # fmt: skip
+        env = make_native(
+            3, scenario="ch4-position", budget=3, horizon=3, order="increasing", illegal_action=rule
+        )
         env.reset(seed=0)
         env.step(np.array([5, 2, 9]))  # member 2 picks the last pair: its plan plays out
         return env
@@ -510,10 +446,14 @@ def test_increasing_order_masks_and_refused_picks_member_by_member():
 
 def test_held_members_keep_their_exact_state_while_another_member_plays_its_plan():
     """The engine steps every member; the held ones are put back bit for bit after the run."""
-    env = gym.make_vec(
-        "fdia_env/SparseAttack-v2", num_envs=3, vectorization_mode="vector_entry_point",
-        action="sequential", scenario="grid-ieee14", budget=3, horizon=3, order="increasing",
-    )  # fmt: skip
+    env = make_native(
+        3,
+        "fdia_env/SparseAttack-v2",
+        scenario="grid-ieee14",
+        budget=3,
+        horizon=3,
+        order="increasing",
+    )
     env.reset(seed=0)
     env.step(np.array([1, 40, 70]))  # every member picks a pair; nobody plays
     sim, attack = env.inner.sim, env.attack
@@ -540,10 +480,7 @@ def test_held_members_keep_their_exact_state_while_another_member_plays_its_plan
 
 
 def test_action_masks_are_the_callers_own_array():
-    env = gym.make_vec(
-        ID, num_envs=2, vectorization_mode="vector_entry_point", action="sequential",
-        scenario="ch4-position", budget=2, horizon=3, order="increasing",
-    )  # fmt: skip
+    env = make_native(2, scenario="ch4-position", budget=2, horizon=3, order="increasing")
     _, info = env.reset(seed=0)
     masks = env.action_masks()
     assert masks.all()

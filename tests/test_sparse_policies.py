@@ -5,6 +5,7 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
+from conftest import attacker_return
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,14 +19,9 @@ RTOL = 1e-12
 
 def play_parallel(policy, **env_kwargs) -> float:
     """Episode return of ``policy`` in the parallel env (terminal reward = Φ(P[K+N|K+N]))."""
-    env = sparse_attack_v0.parallel_env(reward_mode="terminal", **env_kwargs)
-    obs, _ = env.reset(seed=0)
-    total = 0.0
-    while env.agents:
-        action, _ = policy.predict(obs["attacker"], deterministic=True)
-        obs, rewards, _, _, _ = env.step({"attacker": action})
-        total += rewards["attacker"]
-    return total
+    return attacker_return(
+        sparse_attack_v0.parallel_env(reward_mode="terminal", **env_kwargs), policy
+    )
 
 
 def play_gymnasium(policy, **env_kwargs) -> float:
