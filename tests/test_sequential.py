@@ -35,23 +35,67 @@ def bitmask_rewards(plan: list[list[int]], seed: int = 0, **kwargs) -> list[floa
     ]
 
 
-def sequential_rewards(plan: list[list[int]], seed: int = 0, **kwargs) -> list[float]:
-    """Per-window-step rewards of ``plan`` in the sequential format, every stop played."""
-    parallel = sparse_attack_v0.parallel_env(action="multibinary", illegal_action="error", **kwargs)
-    env = SequentialSetEnv(parallel, illegal_action="error", skip_forced=False)
-    env.reset(seed=seed)
-    out = []
+def multibinary_return(plan: list[list[int]], M: int, seed: int = 0, **kwargs) -> float:
+    """The return of ``plan`` played in the ``"multibinary"`` format (``M`` sensors)."""
+    multi = sparse_attack_v0.parallel_env(action="multibinary", illegal_action="error", **kwargs)
+    multi.reset(seed=seed)
+    total = 0.0
     for sensors in plan:
-        for j in sorted(sensors):
-            assert env.step({"attacker": j})[1]["attacker"] == 0.0  # picks pay nothing
-        out.append(env.step({"attacker": STOP})[1]["attacker"])
+        a = np.zeros(M, dtype=np.int8)
+        a[np.asarray(sensors, dtype=int) - 1] = 1
+        total += multi.step({"attacker": a})[1]["attacker"]
+    return total
+
+
+def solver_plan(result, horizon: int) -> list[list[int]]:
+    """The attack plan (1-based sensors per window step) of a solver result's ``attacks``."""
+    plan: list[list[int]] = [[] for _ in range(horizon)]
+    for k, i in result.attacks:
+        plan[k].append(i + 1)
+    return plan
+
+
+def _view_return(view: gym.Env, policy) -> float:
+    """The return of one episode of ``policy`` (deterministic ``predict``) in a Gymnasium view."""
+    obs, _ = view.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        obs, r, term, trunc, _ = view.step(int(policy.predict(obs)[0]))
+        total, done = total + r, term or trunc
+    return total
+
+
+def sequential_rewards(
+    plan: list[list[int]], seed: int = 0, order: str = "time", **kwargs
+) -> list[float]:
+    """Per-window-step rewards of ``plan`` in the sequential format's ``order``, every stop played.
+
+    ``"time"``: each window step's picks, then its stop; ``"plan"``: the plan's picks, then one
+    stop per window step as the plan plays out (stop the only legal action).
+    """
+    parallel = sparse_attack_v0.parallel_env(action="multibinary", illegal_action="error", **kwargs)
+    env = SequentialSetEnv(parallel, illegal_action="error", skip_forced=False, order=order)
+    env.reset(seed=seed)
+    if order == "time":
+        steps = [(sorted(sensors), STOP) for sensors in plan]
+    else:
+        *picks, stop = plan_actions(env, plan)
+        steps = [(picks, stop)] + [([], stop)] * (len(plan) - 1)
+    out = []
+    for picks, stop in steps:
+        for a in picks:
+            assert env.step({"attacker": a})[1]["attacker"] == 0.0  # picks pay nothing
+        out.append(env.step({"attacker": stop})[1]["attacker"])
+        if order != "time":  # the plan plays out: stop is the only legal action now
+            assert env.action_mask()[1:].sum() == 0
     assert env.agents == []
     return out
 
 
 @pytest.mark.parametrize("reward_mode", ["terminal", "shaped", "per_step"])
 @pytest.mark.parametrize("objective", ["trace", "logdet"])
-def test_same_rewards_as_bitmask_on_random_plans(reward_mode, objective):
+@pytest.mark.parametrize(("order", "rng_seed"), [("time", 1), ("plan", 2)], ids=["time", "plan"])
+def test_same_rewards_as_bitmask_on_random_plans(order, rng_seed, reward_mode, objective):
     kwargs = dict(
         scenario=mixed_tracking(5),
         budget=4,
@@ -59,12 +103,13 @@ def test_same_rewards_as_bitmask_on_random_plans(reward_mode, objective):
         reward_mode=reward_mode,
         objective=objective,
     )
-    rng = np.random.default_rng(1)
+    rng = np.random.default_rng(rng_seed)
     for _ in range(6):
         plan = random_plan(rng, 5, 5, 4)
         expected = bitmask_rewards(plan, **kwargs)
-        assert sequential_rewards(plan, **kwargs) == expected  # step by step, exactly
-        env = sparse_attack_v0.parallel_env(action="sequential", **kwargs)  # skip_forced
+        assert sequential_rewards(plan, order=order, **kwargs) == expected  # step by step, exactly
+        env = sparse_attack_v0.parallel_env(action="sequential", order=order, **kwargs)
+        # skip_forced: the env plays the forced stops itself
         assert play_plan(env, plan, seed=0) == pytest.approx(sum(expected), rel=1e-12, abs=0)
 
 
@@ -74,17 +119,16 @@ def test_sampled_dynamics_same_rewards_as_bitmask_for_the_same_seed():
     assert sequential_rewards(plan, seed=7, **kwargs) == bitmask_rewards(plan, seed=7, **kwargs)
 
 
-def test_solver_sets_replayed_return_their_value():
+@pytest.mark.parametrize("order", ["time", "plan"])
+def test_solver_sets_replayed_return_their_value(order):
     system = mixed_tracking(6)
-    for result in (branch_and_bound(system, 4, 5), sfs(system, 4, 5)):
-        plan: list[list[int]] = [[] for _ in range(5)]
-        for k, i in result.attacks:
-            plan[k].append(i + 1)
+    bnb = branch_and_bound(system, 4, 5)
+    for result in (bnb, sfs(system, 4, 5)):
         env = sparse_attack_v0.parallel_env(
-            scenario=system, budget=4, horizon=5, action="sequential"
+            scenario=system, budget=4, horizon=5, action="sequential", order=order
         )
-        assert play_plan(env, plan) == pytest.approx(result.value, rel=1e-12)
-    assert branch_and_bound(system, 4, 5).proved_optimal
+        assert play_plan(env, solver_plan(result, 5)) == pytest.approx(result.value, rel=1e-12)
+    assert bnb.proved_optimal
 
 
 def test_same_return_as_multibinary_on_grid_preset():
@@ -93,15 +137,7 @@ def test_same_return_as_multibinary_on_grid_preset():
     rng = np.random.default_rng(3)
     for _ in range(3):
         plan = random_plan(rng, M, N, c)
-        multi = sparse_attack_v0.parallel_env(
-            action="multibinary", illegal_action="error", **kwargs
-        )
-        multi.reset(seed=0)
-        total = 0.0
-        for sensors in plan:
-            a = np.zeros(M, dtype=np.int8)
-            a[np.asarray(sensors, dtype=int) - 1] = 1
-            total += multi.step({"attacker": a})[1]["attacker"]
+        total = multibinary_return(plan, M, **kwargs)
         env = sparse_attack_v0.parallel_env(action="sequential", **kwargs)
         assert play_plan(env, plan, seed=0) == pytest.approx(total, rel=1e-12, abs=0)
 
@@ -256,13 +292,7 @@ def test_solver_policy_in_sequential_format_returns_its_value():
             action="sequential",
             illegal_action="error",
         )
-        obs, _ = env.reset(seed=0)
-        total, done = 0.0, False
-        while not done:
-            action, _ = policy.predict(obs)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total, done = total + reward, terminated or truncated
-        assert total == pytest.approx(result.value, rel=1e-12)
+        assert _view_return(env, policy) == pytest.approx(result.value, rel=1e-12)
     batch = np.zeros((2, 9), dtype=np.float32)  # ch4-position: 5 features + 3 set + budget
     batch[:, 0] = 1.0  # step K+1 (6 steps left of 6)
     batch[1, 5] = 1.0  # member 1 already has sensor 1 in the set
@@ -272,7 +302,8 @@ def test_solver_policy_in_sequential_format_returns_its_value():
         SparsePolicy([1, 3], sequential=True)
 
 
-def test_train_py_attacker_on_the_sequential_format_scores_the_optimum(tmp_path, capsys):
+def train_sequential_scores(tmp_path, agent: str, algo: str, final_eval_episodes: int) -> dict:
+    """The final evaluations (scores.json) of a short train.py run in the sequential format."""
     import json
     import sys
     from pathlib import Path
@@ -282,13 +313,18 @@ def test_train_py_attacker_on_the_sequential_format_scores_the_optimum(tmp_path,
 
     result = train.main(
         [
-            "attacker", "--env-kwargs", "action", '"sequential"', "--algo", "MaskablePPO",
+            agent, "--env-kwargs", "action", '"sequential"', "--algo", algo,
             "--total-timesteps", "128", "--eval-freq", "0", "--checkpoint-freq", "128",
-            "--no-progress-bar", "--final-eval-episodes", "3", "--n-steps", "64",
-            "--batch-size", "32", "--n-epochs", "1", "--runs-root", str(tmp_path / "runs"),
+            "--no-progress-bar", "--final-eval-episodes", str(final_eval_episodes),
+            "--n-steps", "64", "--batch-size", "32", "--n-epochs", "1",
+            "--runs-root", str(tmp_path / "runs"),
         ]
     )  # fmt: skip
-    scores = json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
+    return json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
+
+
+def test_train_py_attacker_on_the_sequential_format_scores_the_optimum(tmp_path, capsys):
+    scores = train_sequential_scores(tmp_path, "attacker", "MaskablePPO", final_eval_episodes=3)
     assert scores["EXS"]["score"] == pytest.approx(1.0, rel=1e-12)  # its plan, one by one
     assert 0 < scores["learned (MaskablePPO)"]["score"] <= 1 + 1e-12
 
@@ -582,16 +618,9 @@ def test_covariance_game_page_sequential_snippet_prints_what_the_page_shows(caps
 def test_sensor_game_sequential_evaluation_plays_subset_mixes_and_scores_learned_policies(
     tmp_path,
 ):
-    import json
-    import sys
-    from pathlib import Path
-
     from agents.evaluate import evaluate
     from agents.registry import get
     from baselines.game import MixedStrategyPolicy
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py is at the root
-    import train
 
     entry = get("sensor_game_v0", "defender")
     old = gym.make("fdia_env/SensorGameDefender-v0")
@@ -604,15 +633,7 @@ def test_sensor_game_sequential_evaluation_plays_subset_mixes_and_scores_learned
     assert results[1].mean == pytest.approx(results[0].mean, rel=1e-12)  # the same rounds
     assert results[1].score == pytest.approx(0.0, abs=1e-9)  # the equilibrium: exploitability 0
     np.testing.assert_allclose(results[1].strategy, ref.policy.probs)
-    result = train.main(
-        [
-            "defender", "--env-kwargs", "action", '"sequential"', "--algo", "PPO",
-            "--total-timesteps", "128", "--eval-freq", "0", "--checkpoint-freq", "128",
-            "--no-progress-bar", "--final-eval-episodes", "4", "--n-steps", "64",
-            "--batch-size", "32", "--n-epochs", "1", "--runs-root", str(tmp_path / "runs"),
-        ]
-    )  # fmt: skip
-    scores = json.loads((result.run_dir / "scores.json").read_text())["evaluations"]
+    scores = train_sequential_scores(tmp_path, "defender", "PPO", final_eval_episodes=4)
     learned = scores["learned (PPO)"]
     assert sorted(learned["strategy"]) == [0.0] * 6 + [1.0]  # one subset: its pure strategy
     assert learned["score"] >= 0 and scores["game value (LP)"]["score"] < 1e-9
@@ -700,51 +721,7 @@ def test_pettingzoo_seed_max_cycles_and_render_tests_pass_in_the_sequential_form
 # --- order="plan": the (sensor, window step) pairs of the whole horizon first ------------------
 
 
-def plan_rewards(plan: list[list[int]], seed: int = 0, **kwargs) -> list[float]:
-    """Per-window-step rewards of ``plan`` in the plan-first order, every stop played."""
-    parallel = sparse_attack_v0.parallel_env(action="multibinary", illegal_action="error", **kwargs)
-    env = SequentialSetEnv(parallel, illegal_action="error", skip_forced=False, order="plan")
-    env.reset(seed=seed)
-    *picks, stop = plan_actions(env, plan)
-    for a in picks:
-        assert env.step({"attacker": a})[1]["attacker"] == 0.0  # picks pay nothing
-    out = []
-    while env.agents:  # the plan plays out: one window step per stop, each paying its reward
-        out.append(env.step({"attacker": stop})[1]["attacker"])
-        assert env.action_mask()[1:].sum() == 0  # stop is the only legal action now
-    return out
-
-
-@pytest.mark.parametrize("reward_mode", ["terminal", "shaped", "per_step"])
-@pytest.mark.parametrize("objective", ["trace", "logdet"])
-def test_plan_order_same_rewards_as_bitmask_on_random_plans(reward_mode, objective):
-    kwargs = dict(
-        scenario=mixed_tracking(5),
-        budget=4,
-        horizon=5,
-        reward_mode=reward_mode,
-        objective=objective,
-    )
-    rng = np.random.default_rng(2)
-    for _ in range(6):
-        plan = random_plan(rng, 5, 5, 4)
-        expected = bitmask_rewards(plan, **kwargs)
-        assert plan_rewards(plan, **kwargs) == expected  # step by step, exactly
-        env = sparse_attack_v0.parallel_env(action="sequential", order="plan", **kwargs)
-        assert play_plan(env, plan, seed=0) == pytest.approx(sum(expected), rel=1e-12, abs=0)
-
-
 SMALL = dict(scenario="ch4-position", budget=2, horizon=2, reward_mode="shaped")
-
-
-def _view_return(view: gym.Env, policy) -> float:
-    """The return of one episode of ``policy`` (deterministic ``predict``) in a Gymnasium view."""
-    obs, _ = view.reset(seed=0)
-    total, done = 0.0, False
-    while not done:
-        obs, r, term, trunc, _ = view.step(int(policy.predict(obs)[0]))
-        total, done = total + r, term or trunc
-    return total
 
 
 def _every_small_plan() -> list[list[list[int]]]:
@@ -778,20 +755,6 @@ def test_plan_order_every_attack_set_reachable_and_only_those():
     assert env.agents == []
 
 
-def test_plan_order_solver_sets_replayed_return_their_value():
-    system = mixed_tracking(6)
-    bnb = branch_and_bound(system, 4, 5)
-    for result in (bnb, sfs(system, 4, 5)):
-        plan: list[list[int]] = [[] for _ in range(5)]
-        for k, i in result.attacks:
-            plan[k].append(i + 1)
-        env = sparse_attack_v0.parallel_env(
-            scenario=system, budget=4, horizon=5, action="sequential", order="plan"
-        )
-        assert play_plan(env, plan) == pytest.approx(result.value, rel=1e-12)
-    assert bnb.proved_optimal
-
-
 def test_plan_order_same_return_as_multibinary_on_grid_preset_and_masked_random_play():
     kwargs = dict(scenario="grid-ieee14", objective="logdet")
     M, N, c = 34, 6, 6
@@ -802,15 +765,7 @@ def test_plan_order_same_return_as_multibinary_on_grid_preset_and_masked_random_
     assert env.action_space("attacker").n == N * M + 1
     for _ in range(2):
         plan = random_plan(rng, M, N, c)
-        multi = sparse_attack_v0.parallel_env(
-            action="multibinary", illegal_action="error", **kwargs
-        )
-        multi.reset(seed=0)
-        total = 0.0
-        for sensors in plan:
-            a = np.zeros(M, dtype=np.int8)
-            a[np.asarray(sensors, dtype=int) - 1] = 1
-            total += multi.step({"attacker": a})[1]["attacker"]
+        total = multibinary_return(plan, M, **kwargs)
         assert play_plan(env, plan, seed=0) == pytest.approx(total, rel=1e-12, abs=0)
     for episode in range(3):  # a masked random policy never meets the "error" rule
         obs, _ = env.reset(seed=episode)
@@ -1038,9 +993,7 @@ def test_increasing_order_solver_sets_replayed_return_their_value(dynamics):
     bnb = branch_and_bound(system, 4, 5)
     assert bnb.proved_optimal
     for result in (bnb, sfs(system, 4, 5)):
-        plan: list[list[int]] = [[] for _ in range(5)]
-        for k, i in result.attacks:
-            plan[k].append(i + 1)
+        plan = solver_plan(result, 5)
         kwargs = dict(scenario=system, budget=4, horizon=5, action="sequential", dynamics=dynamics)
         inc = sparse_attack_v0.parallel_env(order="increasing", **kwargs)
         value = play_plan(inc, plan, seed=3)
