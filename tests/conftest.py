@@ -5,6 +5,8 @@ Imported by the test modules as ``from conftest import ...`` (pytest puts ``test
 
 from __future__ import annotations
 
+import contextlib
+import io
 import itertools
 import os
 
@@ -134,3 +136,11 @@ def attacker_return(env, policy, seed: int = 0) -> float:
         obs, rewards, *_ = env.step({"attacker": action})
         total += rewards["attacker"]
     return total
+
+
+def printed_by(code: str, name: str) -> str:
+    """What a documented Python block prints when run (in a fresh namespace)."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, name, "exec"), {})
+    return out.getvalue()

@@ -12,6 +12,7 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import printed_by
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -31,10 +32,7 @@ def test_quickstart_prints_the_output_shown_in_the_readme():
     quickstart = README.split("## Quickstart", 1)[1]
     code = re.search(r"```python\n(.*?)```", quickstart, flags=re.S).group(1)
     shown = re.search(r"Output:\n\n```\n(.*?)```", quickstart, flags=re.S).group(1)
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        exec(compile(code, "README quickstart", "exec"), {})
-    assert out.getvalue() == shown
+    assert printed_by(code, "README quickstart") == shown
 
 
 def test_every_readme_link_into_the_docs_names_a_page_that_exists():

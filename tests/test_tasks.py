@@ -7,6 +7,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import printed_by
 
 from agents.bench.verify import CHEAP_SECONDS, compare, stored_seconds
 from agents.evaluate import evaluate
@@ -185,8 +186,6 @@ def test_the_optimal_policy_of_a_hard_task_scores_one(name):
 
 
 def test_the_readme_tasks_example_prints_the_output_shown():
-    import contextlib
-    import io
     import re
     from pathlib import Path
 
@@ -194,10 +193,7 @@ def test_the_readme_tasks_example_prints_the_output_shown():
     section = readme.split("### The tasks and their references", 1)[1].split("\n## ", 1)[0]
     code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
     shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        exec(compile(code, "README benchmark tasks", "exec"), {})
-    assert out.getvalue() == shown
+    assert printed_by(code, "README benchmark tasks") == shown
 
 
 @pytest.mark.parametrize(
