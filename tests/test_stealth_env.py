@@ -251,16 +251,19 @@ def test_threshold_defender_aec_and_gymnasium_views(est):
 def test_threshold_defender_rewards(est):
     # the undetectable 3-meter attack is only seen by false alarms: the attacker gets
     # (1 − α) · shift, the defender minus that minus the cost of its false-alarm rate
+    def game(**kwargs):
+        return stealth_attack_v0.parallel_env(
+            scenario=est,
+            budget=3,
+            dynamics="expected",
+            defender="threshold",
+            alphas=[0.01, 0.2],
+            **kwargs,
+        )
+
     bits = np.zeros(est.n, dtype=np.int8)
     bits[6] = 1
-    env = stealth_attack_v0.parallel_env(
-        scenario=est,
-        budget=3,
-        dynamics="expected",
-        defender="threshold",
-        alphas=[0.01, 0.2],
-        false_alarm_cost=0.5,
-    )
+    env = game(false_alarm_cost=0.5)
     for choice, alpha in enumerate((0.01, 0.2)):
         env.reset(seed=0)
         _, rewards, _, _, infos = env.step({"attacker": bits, "defender": choice})
@@ -271,14 +274,7 @@ def test_threshold_defender_rewards(est):
     # false-alarm rate lets more of it through
     bits[:] = 0
     bits[0] = 1
-    env = stealth_attack_v0.parallel_env(
-        scenario=est,
-        budget=3,
-        dynamics="expected",
-        defender="threshold",
-        alphas=[0.01, 0.2],
-        magnitude=0.004,
-    )
+    env = game(magnitude=0.004)
     seen = []
     for choice in (0, 1):
         env.reset(seed=0)
