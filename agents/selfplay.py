@@ -83,6 +83,7 @@ from agents.training import (
     make_env,
     run_setup,
     saved_env_kwargs,
+    saved_hyperparameters,
 )
 from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
@@ -470,6 +471,10 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         # a resume plays the game its run was resolved with (train.py's per-scenario defaults
         # change between versions), as the attacker and defender drivers do
         saved = saved_env_kwargs(env_kwargs, run.saved_resolved, say)
+        if algo != EXACT:  # and its learners train with the run's own hyperparameters
+            hp = saved_hyperparameters(algo, setup.hp, run.saved_resolved, say)
+            if hp != setup.hp:
+                kwargs, hyperparameters, torch_config = _learner_options(cfg, algo, hp)
         if saved != env_kwargs:
             env_kwargs = saved
             reference = _game_reference(cfg, entries, algo, kwargs, env_kwargs)

@@ -544,30 +544,38 @@ def as_saved(
     """
     if not resolved:
         return setup
-    kept = {}
     env_kwargs = saved_env_kwargs(setup.env_kwargs, resolved, say)
     members = setup.num_envs
-    hp = setup.hp
     if setup.algo != TORCH_PPO:  # torch-ppo's members are its own (--num-envs, checked)
         members = resolved.get("num_envs", num_envs)
         if members != setup.num_envs:
-            kept["native vector env members"] = (members, setup.num_envs)
-    saved_hp = resolved.get("hyperparameters")
-    today = json.loads(json.dumps(resolved_hyperparameters(setup.algo, setup.hp)))
-    if isinstance(saved_hp, dict) and saved_hp != today:
-        hp = Hyperparameters(
-            **{k: tuple(v) if isinstance(v, list) else v for k, v in saved_hp.items()}
-        )
-        changed = sorted(
-            k for k in saved_hp.keys() | today.keys() if saved_hp.get(k) != today.get(k)
-        )
-        kept["hyperparameters"] = (
-            {k: saved_hp.get(k) for k in changed},
-            {k: today.get(k) for k in changed},
-        )
-    for what, (old, new) in kept.items():
-        say(f"resuming with the run's own {what} {old} (train.py's defaults are now {new})")
+            say(
+                f"resuming with the run's own native vector env members {members} (train.py's "
+                f"defaults are now {setup.num_envs})"
+            )
+    hp = saved_hyperparameters(setup.algo, setup.hp, resolved, say)
     return replace(setup, env_kwargs=env_kwargs, num_envs=members, hp=hp)
+
+
+def saved_hyperparameters(
+    algo: str, hp: Hyperparameters, resolved: dict[str, Any], say: Callable[[str], None]
+) -> Hyperparameters:
+    """The hyperparameters a resumed run was saved with, where they differ from ``hp``'s.
+
+    ``resolved`` is the run's saved ``resolved`` entry ({} for a new run: ``hp`` unchanged);
+    ``say`` gets one line naming the hyperparameters kept and today's defaults. Every driver
+    that resumes from ``train.py``'s scenario table (attacker, defender, game) keeps them so.
+    """
+    saved = resolved.get("hyperparameters")
+    today = json.loads(json.dumps(resolved_hyperparameters(algo, hp)))
+    if not isinstance(saved, dict) or saved == today:
+        return hp
+    changed = sorted(k for k in saved.keys() | today.keys() if saved.get(k) != today.get(k))
+    say(
+        f"resuming with the run's own hyperparameters { ({k: saved.get(k) for k in changed}) } "
+        f"(train.py's defaults are now { ({k: today.get(k) for k in changed}) })"
+    )
+    return Hyperparameters(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
 
 
 def train_prefix(cfg: TrainConfig) -> str:

@@ -174,6 +174,34 @@ def test_a_game_resume_plays_the_runs_own_game_when_the_defaults_changed(
     assert resumed["env_kwargs"] == saved["env_kwargs"]
 
 
+def test_a_game_resume_trains_with_the_runs_own_hyperparameters_when_the_defaults_changed(
+    tmp_path, monkeypatch, capsys
+):
+    # as the attacker and defender commands: a resumed game's learners keep the
+    # hyperparameters its run was resolved with, not train.py's scenario table of today
+    from agents.config import SCENARIO_DEFAULTS, ScenarioDefaults
+
+    args = ["--method", "psro", "--algo", "torch-ppo", "--device", "cpu",
+            "--steps-per-iteration", "768"]  # fmt: skip
+    first = run_game(tmp_path, *args, "--iterations", "1")
+    saved = json.loads((first.run_dir / "config.json").read_text())["resolved"]
+    key = ("sensor_game_v0", saved["env_kwargs"]["scenario"])
+    assert key not in SCENARIO_DEFAULTS and saved["hyperparameters"]["ent_coef"] != 0.123
+    today = ScenarioDefaults(hyperparameters={"ent_coef": 0.123})
+    monkeypatch.setitem(SCENARIO_DEFAULTS, key, today)
+    capsys.readouterr()
+    more = run_game(tmp_path, *args, "--iterations", "2", "--resume")
+    out = capsys.readouterr().out
+    assert "resuming with the run's own hyperparameters {'ent_coef'" in out and "0.123" in out
+    assert more.history[:1] == first.history and len(more.history) == 2
+    resumed = json.loads((more.run_dir / "config.json").read_text())["resolved"]
+    assert resumed["hyperparameters"] == saved["hyperparameters"]
+    # a new run takes today's table
+    fresh = run_game(tmp_path, *args, "--iterations", "1", "--seed", "1")
+    new = json.loads((fresh.run_dir / "config.json").read_text())["resolved"]
+    assert new["hyperparameters"]["ent_coef"] == 0.123
+
+
 def test_the_game_command_runs_torch_ppo_best_responses_and_resumes_them(tmp_path):
     args = ["--method", "psro", "--algo", "torch-ppo", "--device", "cpu",
             "--steps-per-iteration", "768"]  # fmt: skip
