@@ -221,6 +221,24 @@ def test_split_bound_equals_exhaustive_on_a_42_pair_meter_grid(objective):
         assert result.nodes == 1  # proved at the root
 
 
+@pytest.mark.parametrize("objective", ["trace", "logdet"])
+@pytest.mark.parametrize("system", [dc_grid14(14), mixed_tracking(6)], ids=["grid", "tracking"])
+def test_split_step_values_equal_the_objective_of_the_dropped_posteriors(system, objective):
+    # the split bound scores the sets of its last step with b×b algebra only (tr(A⁻¹ K_DD),
+    # −log det A): the same Φ as the (n, n) posteriors it no longer forms there
+    from baselines.sparse.bound import measurement_factors
+    from fdia_env.kalman import objective as phi
+
+    problem = make_problem(system, 3, 3, objective)
+    step = split_module._Split(problem, measurement_factors(problem), None).step(2)
+    rng = np.random.default_rng(0)
+    for b in range(4):
+        sets = np.sort([rng.choice(problem.M, b, replace=False) for _ in range(64)], axis=1)
+        sets = sets.astype(np.intp).reshape(64, b)
+        want = phi(step.drop(sets), objective)
+        np.testing.assert_allclose(step.values(sets, objective), want, rtol=1e-12, atol=0)
+
+
 def test_split_bound_proves_the_300_pair_meter_level_grid_instance_at_the_root():
     # The target: prove 50 meters of the DC IEEE 14-bus model over N = 6 (300 pairs, c = 5,
     # C(300, 5) ≈ 2·10¹⁰ sets). SFS-SS stops 1.5 % short; the split bound proves the optimum.

@@ -180,16 +180,39 @@ class _Step:
         U = factors.transpose(1, 0, 2).reshape(n, M * nz)
         self.PU = self.P @ U
         self.G = sym(U.T @ self.PU)
+        self.K = sym(mT(self.PU) @ self.PU)  # tr(P_D) − tr(P) = tr((I − G_DD)⁻¹ K_DD)
         self.nz = nz
+
+    def _system(self, sets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(S, b·nz) positions of ``sets``' rows and (S, b·nz, b·nz) ``A = I − G_DD``."""
+        S, b = sets.shape
+        nz = self.nz
+        idx = (sets[:, :, None] * nz + np.arange(nz)).reshape(S, b * nz)
+        return idx, np.eye(b * nz) - self.G[idx[:, :, None], idx[:, None, :]]
+
+    def values(self, sets: np.ndarray, kind: str) -> np.ndarray:
+        """(S,) Φ of :meth:`drop`'s posteriors, without forming them.
+
+        With ``A = I − G_DD`` (b·nz × b·nz): ``tr P_D = tr P + tr(A⁻¹ K_DD)``, and by the
+        matrix determinant lemma ``log det P_D = log det P − log det A`` (``U_D' P U_D =
+        G_DD``), as :func:`baselines.sparse.tail.last_step` computes them.
+        """
+        base = float(objective(self.P, kind))
+        if sets.shape[1] == 0:
+            return np.full(len(sets), base)
+        idx, A = self._system(sets)
+        if kind == "trace":
+            K = self.K[idx[:, :, None], idx[:, None, :]]
+            return base + np.trace(np.linalg.solve(A, K), axis1=1, axis2=2)
+        sign, logdet = np.linalg.slogdet(A)
+        return np.where(sign > 0, base - logdet, np.inf)
 
     def drop(self, sets: np.ndarray) -> np.ndarray:
         """(S, n, n) posterior of step t (nominal prior) after dropping each of ``sets``."""
         S, b = sets.shape
         if b == 0:
             return np.broadcast_to(self.P, (S, *self.P.shape)).copy()
-        nz = self.nz
-        idx = (sets[:, :, None] * nz + np.arange(nz)).reshape(S, b * nz)
-        A = np.eye(b * nz) - self.G[idx[:, :, None], idx[:, None, :]]
+        idx, A = self._system(sets)
         V = self.PU[:, idx].transpose(1, 0, 2)  # (S, n, b·nz)
         return sym(self.P + V @ np.linalg.solve(A, mT(V)))
 
@@ -346,8 +369,11 @@ def split_bound(
         for sets in _subsets(M, b):
             if work.late():
                 return SplitBound(np.inf, best_value, best_pairs)
-            post = last.drop(sets)
-            values = objective(post, problem.objective)
+            if r == 0 or not per_set:  # Φ alone: b×b algebra, no (n, n) posteriors
+                post, values = None, last.values(sets, problem.objective)
+            else:
+                post = last.drop(sets)
+                values = objective(post, problem.objective)
             i = int(np.argmax(values))
             count_best = max(count_best, float(values[i]))
             if r == 0:
