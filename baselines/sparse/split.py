@@ -369,7 +369,9 @@ def split_bound(
         for sets in _subsets(M, b):
             if work.late():
                 return SplitBound(np.inf, best_value, best_pairs)
-            if r == 0 or not per_set:  # Φ alone: b×b algebra, no (n, n) posteriors
+            if (r == 0 or not per_set) and (not trace or b * last.nz <= n):
+                # Φ alone, by b·nz × b·nz algebra: no (n, n) posteriors (for the trace only
+                # where that system is no larger than the state, n ≥ b·nz)
                 post, values = None, last.values(sets, problem.objective)
             else:
                 post = last.drop(sets)
