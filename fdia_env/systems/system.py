@@ -32,6 +32,7 @@ from scipy.linalg import block_diag
 from fdia_env._validation import as_matrix, as_vector, check_positive, check_psd
 
 PBH_TOL = 1e-9  # relative tolerance of the PBH rank tests and of "marginal" (|μ| >= 1 − tol)
+_SAME_EIGENVALUE = 1e-12  # eigenvalues this close (relative) share one PBH rank test
 
 
 def check_system(value: Any, param: str = "system") -> LinearSystem:
@@ -66,13 +67,18 @@ def pbh_defects(F: np.ndarray, B: np.ndarray, *, side: str, unstable_only: bool)
     b_max = float(np.abs(B).max()) if B.size else 0.0
     B = B / b_max if b_max > 0.0 else B
     bad = []
+    tested: dict[complex, bool] = {}  # a repeated eigenvalue (F = I on the grids) tested once
     for mu in np.linalg.eigvals(F):
         radius = abs(mu)
         if (radius <= 1.0 + PBH_TOL) if unstable_only else (radius < 1.0 - PBH_TOL):
             continue
-        shifted = (F - mu * np.eye(n)) / f_scale
-        M = np.vstack([shifted, B]) if side == "rows" else np.hstack([shifted, B])
-        if np.linalg.svd(M, compute_uv=False)[n - 1] <= PBH_TOL:  # rank < n
+        same = next((v for v in tested if abs(mu - v) <= _SAME_EIGENVALUE * max(1.0, radius)), None)
+        if same is None:
+            shifted = (F - mu * np.eye(n)) / f_scale
+            M = np.vstack([shifted, B]) if side == "rows" else np.hstack([shifted, B])
+            same = complex(mu)
+            tested[same] = bool(np.linalg.svd(M, compute_uv=False)[n - 1] <= PBH_TOL)  # rank < n
+        if tested[same]:
             bad.append(complex(mu))
     return bad
 

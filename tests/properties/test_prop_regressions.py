@@ -382,6 +382,26 @@ def test_pbh_noise_test_still_flags_a_noise_free_marginal_mode():
     assert len(bad) == 2
 
 
+def test_pbh_tests_a_repeated_eigenvalue_once_and_keeps_its_multiplicity(monkeypatch):
+    """The grids' F = I has one eigenvalue n times: one rank test (one SVD), not n; every copy
+    of a failing eigenvalue is still reported, and distinct eigenvalues are each tested."""
+    calls = []
+    svd = np.linalg.svd
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return svd(*args, **kwargs)
+
+    monkeypatch.setattr(np.linalg, "svd", counted)
+    blind = np.eye(5)[:4]  # the fifth state is never measured
+    assert pbh_defects(np.eye(5), blind, side="rows", unstable_only=False) == [1.0] * 5
+    assert pbh_defects(np.eye(5), np.eye(5), side="rows", unstable_only=False) == []
+    assert len(calls) == 2
+    F = np.diag([1.0, 1.0, 1.5, 2.0])
+    bad = pbh_defects(F, np.eye(4)[[0, 2]], side="rows", unstable_only=False)
+    assert sorted(bad, key=abs) == [1.0, 1.0, 2.0] and len(calls) == 5  # 1, 1.5, 2: three tests
+
+
 def test_inv2_of_nan_entries_returns_nan_instead_of_recursing():
     out = inv2(np.full((2, 2), np.nan))
     assert out.shape == (2, 2) and np.all(np.isnan(out))
