@@ -117,3 +117,32 @@ def test_native_vector_env_matches_sync_on_ieee57(dynamics):
         np.testing.assert_allclose(r_n, r_s, rtol=1e-9, atol=1e-15)
         np.testing.assert_array_equal(te_n, te_s)
         np.testing.assert_array_equal(tr_n, tr_s)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_general_update_steps_only_the_active_members_and_leaves_the_others(backend):
+    # the vector envs pass active=False for members being reset or held (the sequential
+    # formats' members that do not commit): the (I + P J)⁻¹ P update runs on the active ones
+    # alone, each exactly as in the step of the whole batch, and the others keep their P
+    from fdia_env.backend import get_backend
+
+    xp = get_backend(backend)
+    system = scenarios.get("dc-ieee14-50").system  # 13 states: the general update
+    spec = EpisodeSpec(horizon=6)
+    B = 6
+    whole, part = BatchedSimulation(system, spec, B, xp), BatchedSimulation(system, spec, B, xp)
+    rng = np.random.default_rng(5)
+    for t in range(4):
+        used = xp.asarray(_masks(rng, B, system.M, 3))
+        active = np.array([True, False, True, True, False, t == 2])
+        before = xp.to_numpy(part.P).copy()
+        whole.step(used, None, None, False)
+        part.step(used, None, None, False, active=xp.asarray(active))
+        P_whole, P_part = xp.to_numpy(whole.P), xp.to_numpy(part.P)
+        np.testing.assert_array_equal(P_part[active], P_whole[active])
+        np.testing.assert_array_equal(P_part[~active], before[~active])
+        np.testing.assert_array_equal(xp.to_numpy(part.phi)[active], xp.to_numpy(whole.phi)[active])
+        for sim in (whole, part):  # continue both from the same state
+            sim._set_P(xp.asarray(P_whole))
+    part.step(used, None, None, False, active=xp.asarray(np.zeros(B, dtype=bool)))
+    np.testing.assert_array_equal(xp.to_numpy(part.P), P_whole)  # nobody active: nothing moves
