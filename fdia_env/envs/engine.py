@@ -440,7 +440,9 @@ class BatchedSimulation:
             leak: (B, nz, nz) bias covariance reaching each filter, or None.
             present: (B,) members with a leak (their single-env twin gets a leaked_sigma).
             steady: Restart each member from the steady state of its ``used`` subset first.
-            active: (B,) members whose step counts (the others are about to be reset).
+            active: (B,) members whose step counts; the others are about to be reset, or are
+                held and put back by the caller (the sequential formats), so their state after
+                the step is unspecified (the general update leaves their covariance as it was).
             detection: The detection game's per-member detector (then ``leak`` is the attacker's
                 Σ and ``probability`` its attack probabilities).
             probability: (B,) attack probabilities (detection game).
