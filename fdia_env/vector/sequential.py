@@ -526,10 +526,11 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
 
         The members not stepping are held (:meth:`PartialStep._save`,
         :meth:`PartialStep._restore`) around each run of window steps by the same members (a
-        plan played out is one run), not around each window step: the engine steps every member
-        with its own rows, and a held member steps with an empty set (no bias, no change of the
-        batch's flags), so the stepping members' values do not depend on it and its state is
-        put back once, at the run's end.
+        plan played out is one run), not around each window step: the engine steps the batch
+        with the held members not active (its general update, n > 2, skips them; its other
+        paths step them with an empty set: no bias, no change of the batch's flags), so the
+        stepping members' values do not depend on them and their state is put back once, at
+        the run's end.
 
         Returns:
             (B,) rewards, terminations and truncations summed over the window steps.
@@ -564,7 +565,8 @@ class SequentialVectorEnv(PartialStep, gym.vector.VectorEnv):
     def _window_step(self, stepping: Any) -> tuple[Any, Any, Any]:
         """The window step of the members ``stepping`` with their sets (in a run of :meth:`_play`).
 
-        The engine steps every member; the held ones' new state is garbage until the run's end.
+        The held members step as not active (the engine's general update skips them, its other
+        paths step them with an empty set); their state is put back at the run's end.
 
         Returns:
             (B,) rewards, terminations and truncations (zero / False for the held members).
