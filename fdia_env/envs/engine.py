@@ -653,14 +653,14 @@ class BatchedSimulation:
             # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹ computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]:
             # one LU solve instead of two inverses (I + P J is invertible: its eigenvalues are
             # those of I + P^½ J P^½, all >= 1)
-            used_info = self._used_information(used)
             if active is None or bool(xp.all(active)):
+                used_info = self._used_information(used)
                 P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
             else:  # only the members whose step counts; the others keep P (reset or put back)
                 P_new = xp.copy(P_prev)
                 if bool(xp.any(active)):
-                    sub = P_pred[active]
-                    P_new[active] = sym(xp.solve(self._eye + sub @ used_info[active], sub))
+                    sub, info = P_pred[active], self._used_information(used[active])
+                    P_new[active] = sym(xp.solve(self._eye + sub @ info, sub))
         if present is None:
             leaking = None if self.all_consistent() else ~self.consistent
         else:
