@@ -120,14 +120,21 @@ def test_native_vector_env_matches_sync_on_ieee57(dynamics):
 
 
 @pytest.mark.parametrize("backend", ["numpy", "torch"])
-def test_general_update_steps_only_the_active_members_and_leaves_the_others(backend):
+@pytest.mark.parametrize("case", ["dc-ieee14-50", "random"])
+def test_general_update_steps_only_the_active_members_and_leaves_the_others(backend, case):
     # the vector envs pass active=False for members being reset or held (the sequential
     # formats' members that do not commit): the (I + P J)⁻¹ P update runs on the active ones
     # alone, each exactly as in the step of the whole batch, and the others keep their P
+    from conftest import random_system
+
     from fdia_env.backend import get_backend
 
     xp = get_backend(backend)
-    system = scenarios.get("dc-ieee14-50").system  # 13 states: the general update
+    if case == "random":  # F ≠ I: the prediction's products, on the active members only
+        system = random_system(3, 4, [1, 2, 1, 1, 2, 1], 4, 0.9)
+    else:
+        system = scenarios.get(case).system  # 13 states, F = I: the general update
+    assert system.n > 2
     spec = EpisodeSpec(horizon=6)
     B = 6
     whole, part = BatchedSimulation(system, spec, B, xp), BatchedSimulation(system, spec, B, xp)

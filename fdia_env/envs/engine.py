@@ -631,11 +631,14 @@ class BatchedSimulation:
         xp = self.xp
         mask = self._mask_of(used)
         P_prev, M_prev = self.P, self.M
-        # P[k|k−1] = F P F' + Q; a random walk (F = I, the grid presets) skips the products
         P_new = self._low_rank_step(mask) if self._lr_on else None
+        # the general update of expected dynamics with some members not active predicts the
+        # active ones only (below)
+        partial = active is not None and not bool(xp.all(active))
+        only_active = partial and P_new is None and not self.fast and not self.sampled
         P_pred = None  # read by the full update and the sampled step's NIS only
-        if P_new is None or self.sampled:
-            P_pred = P_prev + self._Q if self._F_identity else predict_cov(P_prev, self._F, self._Q)
+        if (P_new is None or self.sampled) and not only_active:
+            P_pred = self._predict(P_prev)
         if P_new is None and self.fast:
             # 2 states, each member as its single env: the float kernel on components while no
             # bias has reached its filter nor reaches it now, else (P[k|k−1]⁻¹ + Σ J_i)⁻¹ by
@@ -653,13 +656,14 @@ class BatchedSimulation:
             # P[k|k] = (P[k|k−1]⁻¹ + Σ_used J_i)⁻¹ computed as (I + P[k|k−1] J)⁻¹ P[k|k−1]:
             # one LU solve instead of two inverses (I + P J is invertible: its eigenvalues are
             # those of I + P^½ J P^½, all >= 1)
-            if active is None or bool(xp.all(active)):
+            if not partial:
                 used_info = self._used_information(used)
                 P_new = sym(xp.solve(self._eye + P_pred @ used_info, P_pred))
             else:  # only the members whose step counts; the others keep P (reset or put back)
                 P_new = xp.copy(P_prev)
                 if bool(xp.any(active)):
-                    sub, info = P_pred[active], self._used_information(used[active])
+                    sub = self._predict(P_prev[active]) if P_pred is None else P_pred[active]
+                    info = self._used_information(used[active])
                     P_new[active] = sym(xp.solve(self._eye + sub @ info, sub))
         if present is None:
             leaking = None if self.all_consistent() else ~self.consistent
@@ -677,6 +681,10 @@ class BatchedSimulation:
         self._set_P(P_new)
         if self.sampled:
             self._sampled_step(mask, P_pred, W, leak, present, active)
+
+    def _predict(self, P: Any) -> Any:
+        """``P[k|k−1] = F P F' + Q``; a random walk (F = I, the grid presets) skips the products."""
+        return P + self._Q if self._F_identity else predict_cov(P, self._F, self._Q)
 
     def _gain(self, P_post: Any, mask: Any) -> Any:
         """(B, n, nz) nominal gain ``P H' R⁻¹`` with zero columns for the unused sensors."""
