@@ -483,6 +483,15 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         # actions are single sensors)
         n = {"defender": int(L.shape[0]), "attacker": int(L.shape[1])}
         scale = abs(value) if setup.normalize_reward and algo not in (EXACT, TORCH_PPO) else None
+        resolved = run.saved_resolved
+        for name, today in (("expected_rewards", expected), ("reward_scale", scale)):
+            if name in resolved and resolved[name] != today:  # a resume keeps the run's own
+                say(
+                    f"resuming with the run's own {name.replace('_', ' ')} {resolved[name]} "
+                    f"(train.py's defaults are now {today})"
+                )
+        expected = resolved.get("expected_rewards", expected)
+        scale = resolved.get("reward_scale", scale)
         if run.resumed:
             state = _read_state(run_dir / STATE)
             run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")

@@ -342,6 +342,30 @@ def test_the_game_command_trains_on_expected_rewards(tmp_path):
     assert [h["timesteps"] for h in run.history] == [128]
 
 
+def test_a_game_resume_keeps_the_runs_own_expected_rewards_when_the_default_changed(
+    tmp_path, monkeypatch, capsys
+):
+    # the scenario table of expected rewards (GAME_EXPECTED_REWARDS) may change between
+    # versions; a resumed game's SB3 best responses keep what the run was resolved with
+    import agents.selfplay
+
+    args = ["--method", "psro", "--algo", "PPO", "--scenario", "ch5-game",
+            "--steps-per-iteration", "64", "--n-steps", "64", "--batch-size", "64"]  # fmt: skip
+    first = run_game(tmp_path, *args, "--iterations", "1")
+    saved = json.loads((first.run_dir / "config.json").read_text())["resolved"]
+    assert saved["expected_rewards"] is False
+    monkeypatch.setattr(agents.selfplay, "GAME_EXPECTED_REWARDS", ("ch5-game",))
+    capsys.readouterr()
+    more = run_game(tmp_path, *args, "--iterations", "2", "--resume")
+    out = capsys.readouterr().out
+    assert "resuming with the run's own expected rewards False" in out
+    resumed = json.loads((more.run_dir / "config.json").read_text())["resolved"]
+    assert resumed["expected_rewards"] is False and len(more.history) == 2
+    assert resumed["reward_scale"] == saved["reward_scale"]
+    fresh = run_game(tmp_path, *args, "--iterations", "1", "--seed", "1")  # today's default
+    assert json.loads((fresh.run_dir / "config.json").read_text())["resolved"]["expected_rewards"]
+
+
 def test_the_sequential_format_s_meta_game_plays_both_pure_strategies(game):
     """PSRO's meta-game in the sequential format holds L's entries of the populations' subsets."""
     sequential = MatrixGame(
