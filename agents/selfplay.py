@@ -84,6 +84,7 @@ from agents.training import (
     run_setup,
     saved_env_kwargs,
     saved_hyperparameters,
+    say_kept,
 )
 from baselines.game import MixedStrategyPolicy, solve_zero_sum
 from fdia_env.envs.opponents import FixedMix
@@ -486,10 +487,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         resolved = run.saved_resolved
         for name, today in (("expected_rewards", expected), ("reward_scale", scale)):
             if name in resolved and resolved[name] != today:  # a resume keeps the run's own
-                say(
-                    f"resuming with the run's own {name.replace('_', ' ')} {resolved[name]} "
-                    f"(train.py's defaults are now {today})"
-                )
+                say_kept(say, name.replace("_", " "), resolved[name], today)
         expected = resolved.get("expected_rewards", expected)
         scale = resolved.get("reward_scale", scale)
         if run.resumed:

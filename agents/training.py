@@ -511,14 +511,18 @@ def setup_of(cfg: TrainConfig) -> RunSetup:
     )  # fmt: skip
 
 
+def say_kept(say: Callable[[str], None], what: str, saved: Any, today: Any) -> None:
+    """The one line a resume prints for an option it keeps from its run, not today's default."""
+    say(f"resuming with the run's own {what} {saved} (train.py's defaults are now {today})")
+
+
 def saved_env_kwargs(
     env_kwargs: dict[str, Any], resolved: dict[str, Any], say: Callable[[str], None]
 ) -> dict[str, Any]:
     """A resumed run's env options (its ``resolved`` entry's), reported where they differ."""
     saved = resolved.get("env_kwargs", env_kwargs)
     if saved != env_kwargs:
-        say(f"resuming with the run's own env options {saved} (train.py's defaults are now "
-            f"{env_kwargs})")  # fmt: skip
+        say_kept(say, "env options", saved, env_kwargs)
     return saved
 
 
@@ -549,10 +553,7 @@ def as_saved(
     if setup.algo != TORCH_PPO:  # torch-ppo's members are its own (--num-envs, checked)
         members = resolved.get("num_envs", num_envs)
         if members != setup.num_envs:
-            say(
-                f"resuming with the run's own native vector env members {members} (train.py's "
-                f"defaults are now {setup.num_envs})"
-            )
+            say_kept(say, "native vector env members", members, setup.num_envs)
     hp = saved_hyperparameters(setup.algo, setup.hp, resolved, say)
     return replace(setup, env_kwargs=env_kwargs, num_envs=members, hp=hp)
 
@@ -571,10 +572,8 @@ def saved_hyperparameters(
     if not isinstance(saved, dict) or saved == today:
         return hp
     changed = sorted(k for k in saved.keys() | today.keys() if saved.get(k) != today.get(k))
-    say(
-        f"resuming with the run's own hyperparameters { ({k: saved.get(k) for k in changed}) } "
-        f"(train.py's defaults are now { ({k: today.get(k) for k in changed}) })"
-    )
+    old, new = ({k: values.get(k) for k in changed} for values in (saved, today))
+    say_kept(say, "hyperparameters", old, new)
     return Hyperparameters(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
 
 
