@@ -632,10 +632,11 @@ class BatchedSimulation:
         mask = self._mask_of(used)
         P_prev, M_prev = self.P, self.M
         P_new = self._low_rank_step(mask) if self._lr_on else None
-        # the general update of expected dynamics with some members not active predicts the
-        # active ones only (below)
-        partial = active is not None and not bool(xp.all(active))
-        only_active = partial and P_new is None and not self.fast and not self.sampled
+        # the general update (below) with some members not active updates the active ones
+        # only, and in expected dynamics predicts them only too
+        general = P_new is None and not self.fast
+        partial = general and active is not None and not bool(xp.all(active))
+        only_active = partial and not self.sampled
         P_pred = None  # read by the full update and the sampled step's NIS only
         if (P_new is None or self.sampled) and not only_active:
             P_pred = self._predict(P_prev)
