@@ -18,12 +18,14 @@ from typing import Any
 
 from agents.bench.references import compute
 from fdia_env import tasks
+from fdia_env.tasks.payoffs import FOLDER, MANIFEST
+from fdia_env.tasks.stored import check_references, recorded, write_digests
 from fdia_env.tasks.task import References
 
 RTOL = 1e-7
 ATOL = 1e-12
 CHEAP_SECONDS = 5.0
-REFERENCES_PATH = Path(tasks.__file__).with_name(tasks.REFERENCES_FILE)
+REFERENCES_PATH = tasks.REFERENCES_PATH
 
 
 @dataclass(frozen=True)
@@ -87,13 +89,36 @@ def verify(names: Iterable[str]) -> list[Check]:
     return checks
 
 
-def write(names: Iterable[str], path: Path = REFERENCES_PATH) -> dict[str, float]:
-    """Compute the references of ``names`` and store them in ``path`` (others kept).
+def _existing(path: Path, keep: bool) -> dict[str, Any]:
+    """The stored entries ``write`` keeps: checked (and, in the package, their digest too)."""
+    if not keep or not path.exists():
+        return {}
+    package = path.resolve() == REFERENCES_PATH
+    expected = recorded().REFERENCES if package else None
+    return check_references(path, path.read_bytes(), expected)
+
+
+def write(
+    names: Iterable[str], path: Path = REFERENCES_PATH, keep: bool = True
+) -> dict[str, float]:
+    """Compute the references of ``names`` and store them in ``path``.
+
+    Writing the package's ``references.json`` rewrites its recorded SHA-256 in
+    :mod:`fdia_env.tasks.digests` too.
+
+    Args:
+        names: The tasks to compute.
+        path: The JSON file.
+        keep: Keep the other tasks' stored entries (the file must pass its checks: an edited
+            file is refused); False writes ``names`` only.
 
     Returns:
         Task name → seconds its computation took.
+
+    Raises:
+        StoredDataError: When ``keep`` and the stored file is changed or malformed.
     """
-    data = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+    data = _existing(path, keep)
     took = {}
     for name in names:
         start = time.perf_counter()
@@ -108,6 +133,10 @@ def write(names: Iterable[str], path: Path = REFERENCES_PATH) -> dict[str, float
             )
         }
         path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+        if path.resolve() == REFERENCES_PATH:
+            write_digests(path, path.with_name(MANIFEST), path.with_name(FOLDER))
+    if path.resolve() == REFERENCES_PATH:
+        tasks.stored_references.cache_clear()
     return took
 
 

@@ -17,30 +17,41 @@ versions and the date. ``task.normalise(raw)`` is the normalised score: 0 = rand
 True
 
 The references are recomputed and compared by ``python -m agents.bench verify`` (the solvers
-live outside the library, in ``baselines``).
+live outside the library, in ``baselines``). ``references.json`` is checked when it is first
+read (on the first use of :data:`TASKS`, :func:`get` or :func:`names`): its SHA-256 must be the
+one recorded in :mod:`fdia_env.tasks.digests` and every entry well formed, else a
+:class:`~fdia_env.tasks.stored.StoredDataError` names the file, the entry and the key.
 """
 
 from __future__ import annotations
 
 import difflib
-import json
 from collections.abc import Mapping
 from functools import cache
-from importlib import resources
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 from fdia_env.tasks.catalog import SPECS, TaskSpec
+from fdia_env.tasks.stored import StoredDataError, check_references, recorded
 from fdia_env.tasks.task import DIFFICULTIES, FAMILIES, PLAYERS, References, Task
 
 REFERENCES_FILE = "references.json"
 
 
+REFERENCES_PATH = Path(__file__).resolve().with_name(REFERENCES_FILE)
+
+
 @cache
 def stored_references() -> Mapping[str, Mapping[str, Any]]:
-    """Task name → the JSON form of its stored references (``references.json``)."""
-    text = resources.files(__package__).joinpath(REFERENCES_FILE).read_text(encoding="utf-8")
-    return MappingProxyType(json.loads(text))
+    """Task name → the JSON form of its stored references (``references.json``), checked.
+
+    Raises:
+        StoredDataError: Naming the file (and the entry and key) when its SHA-256 is not the
+            recorded one or an entry is malformed (a missing key, a NaN).
+    """
+    data = check_references(REFERENCES_PATH, REFERENCES_PATH.read_bytes(), recorded().REFERENCES)
+    return MappingProxyType(data)
 
 
 def build(spec: TaskSpec, references: References) -> Task:
@@ -60,22 +71,37 @@ def build(spec: TaskSpec, references: References) -> Task:
     )
 
 
-def _tasks() -> dict[str, Task]:
+def _build(spec: TaskSpec, data: Mapping[str, Any]) -> Task:
+    try:
+        return build(spec, References.from_dict(data))
+    except ValueError as exc:  # an objective or metric not known, optimum == random
+        raise StoredDataError(f"{REFERENCES_PATH}: entry {spec.name!r}: {exc}") from None
+
+
+@cache
+def _tasks() -> Mapping[str, Task]:
     stored = stored_references()
-    return {
-        spec.name: build(spec, References.from_dict(stored[spec.name]))
-        for spec in SPECS
-        if spec.name in stored
-    }
+    return MappingProxyType(
+        {spec.name: _build(spec, stored[spec.name]) for spec in SPECS if spec.name in stored}
+    )
 
 
-TASKS: Mapping[str, Task] = MappingProxyType(_tasks())
-"""Task name → :class:`Task`, for every defined task with stored references."""
+def __getattr__(name: str) -> Any:
+    # TASKS is built on first use, so that the module imports (and the command that rewrites
+    # references.json runs) even when the stored file is refused.
+    if name == "TASKS":
+        return _tasks()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+TASKS: Mapping[str, Task]
+"""Task name → :class:`Task`, for every defined task with stored references (built on first
+use from the checked ``references.json``)."""
 
 
 def pending() -> list[str]:
     """Names of defined tasks that have no stored references yet (none in a release)."""
-    return [spec.name for spec in SPECS if spec.name not in TASKS]
+    return [spec.name for spec in SPECS if spec.name not in _tasks()]
 
 
 def spec(name: str) -> TaskSpec:
@@ -105,9 +131,10 @@ def get(name: str) -> Task:
     Raises:
         ValueError: Naming ``task`` for an unknown name, listing the closest task names.
     """
-    if not isinstance(name, str) or name not in TASKS:
-        raise ValueError(_unknown(name, list(TASKS)))
-    return TASKS[name]
+    known = _tasks()
+    if not isinstance(name, str) or name not in known:
+        raise ValueError(_unknown(name, list(known)))
+    return known[name]
 
 
 def names(difficulty: str | None = None, family: str | None = None) -> list[str]:
@@ -122,7 +149,7 @@ def names(difficulty: str | None = None, family: str | None = None) -> list[str]
         raise ValueError(f"family must be one of {list(FAMILIES)}, got {family!r}")
     return [
         t.name
-        for t in TASKS.values()
+        for t in _tasks().values()
         if (difficulty is None or t.difficulty == difficulty)
         and (family is None or t.family == family)
     ]
@@ -135,6 +162,7 @@ __all__ = [
     "SPECS",
     "TASKS",
     "References",
+    "StoredDataError",
     "Task",
     "TaskSpec",
     "get",
