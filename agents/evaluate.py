@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import operator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,7 +28,42 @@ import scipy.stats
 from gymnasium import spaces
 
 from agents.registry import Reference, by_gym_id, parallel_of
+from fdia_env.envs.actions import check_action
 from fdia_env.envs.policy import MaskedPolicyBase, Policy, batch_size
+
+_CHECKED_SPACES = (spaces.Discrete, spaces.Box, spaces.MultiBinary, spaces.MultiDiscrete)
+
+
+class InvalidActionError(ValueError):
+    """A policy returned an action that is not an element of the env's action space."""
+
+
+def checked_action(policy: Any, env: gym.Env, action: Any) -> Any:
+    """``action`` if it is an element of ``env``'s action space (the env's own check).
+
+    The check is the env's (:func:`fdia_env.envs.actions.check_action`, Gymnasium's
+    ``Space.contains`` for other spaces): nothing is converted, so a float, a string, a list
+    or None for a ``Discrete`` action is refused, not rounded. A ``Discrete`` action is passed
+    on as a Python int (the same integer).
+
+    Raises:
+        InvalidActionError: Naming the policy, the action and the allowed actions.
+    """
+    space = env.action_space
+    who = str(getattr(getattr(env, "unwrapped", env), "agent", None) or "agent")
+    try:
+        if isinstance(space, _CHECKED_SPACES):
+            check_action(space, action, who)
+        elif not space.contains(action):
+            raise ValueError(f"{who} action must be an element of {space}, got {action!r}")
+    except (ValueError, TypeError) as exc:
+        raise InvalidActionError(
+            f"policy {policy_name(policy)} returned an action outside the env's action space "
+            f"{space}: {exc}"
+        ) from None
+    if isinstance(space, spaces.Discrete):
+        return operator.index(action)
+    return action
 
 
 class RandomPolicy(MaskedPolicyBase):
@@ -215,6 +251,8 @@ def play(
 
     Episode ``i`` is reset with ``seed + i``; action masks are passed to policies whose
     ``predict`` takes ``action_masks`` (sb3-contrib's MaskablePPO, :class:`RandomPolicy`).
+    Each action goes through the env's action check first (:func:`checked_action`): an action
+    outside the action space raises :class:`InvalidActionError`, naming the policy.
     ``types``, when given, receives each episode's attacker type where the learning player's
     reset info reports one (the typed sensor game's attacker).
     """
@@ -234,8 +272,7 @@ def play(
             if first:
                 first_actions.append(action)
                 first = False
-            if isinstance(env.action_space, spaces.Discrete):
-                action = int(action)
+            action = checked_action(policy, env, action)
             obs, reward, terminated, truncated, _ = env.step(action)
             total += float(reward)
             done = terminated or truncated

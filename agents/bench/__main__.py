@@ -39,7 +39,9 @@ def _parser() -> argparse.ArgumentParser:
     payoff = sub.add_parser("payoff", help="store a sensor-game task's payoff matrix")
     payoff.add_argument("--task", action="append", required=True, help="a task (repeatable)")
     table = sub.add_parser("table", help="write the tasks table of docs/benchmark.md")
-    table.add_argument("--page", default="docs/benchmark.md", help="the page to update")
+    table.add_argument(
+        "--page", default="docs/benchmark.md", help="the page to update (an existing file)"
+    )
     sub.add_parser("score", help="score an agent on a task (see score --help)", add_help=False)
     return parser
 
@@ -114,9 +116,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "table":
             from pathlib import Path
 
+            from agents.bench.outputs import check_existing_file
             from agents.bench.verify import write_table
 
-            changed = write_table(Path(args.page))
+            changed = write_table(check_existing_file("--page", Path(args.page)))
             print(f"{args.page}: {'updated' if changed else 'unchanged'}")
             return 0
         if args.command == "payoff":

@@ -147,18 +147,25 @@ def _same_env(env_id: str, env_kwargs: Any, task: Any) -> bool:
 
 
 def check_trained_on(
-    source: str, env_id: str | None, env_kwargs: dict[str, Any], task: Any
+    source: str,
+    env_id: str | None,
+    env_kwargs: dict[str, Any],
+    task: Any,
+    config: Path | None = None,
 ) -> None:
     """Raise unless a checkpoint trained on ``env_id`` with ``env_kwargs`` fits ``task``.
 
     An option given on one side only is compared with the env's default; an option left at
-    None (the scenario's default) on either side is not compared. Another version of the
+    None (the scenario's default) on either side is not compared, except that with ``config``
+    (the run's ``config.json``, which records every option the run was trained with) an
+    option the task sets and the run leaves at None is an error. Another version of the
     sparse attack than the task's is accepted where, with the run's and the task's options,
     both build the same env (up to 16 sensors its versions are one env; above, their default
     formats differ).
 
     Raises:
-        ValueError: Naming ``agent``, the env id or the options that differ.
+        ValueError: Naming ``agent``, the env id or the options that differ (and ``config``
+            and the key for an option the run does not record).
     """
     other_version = env_id is not None and env_id != task.env_id
     if other_version and not _same_env(env_id, env_kwargs, task):
@@ -174,6 +181,12 @@ def check_trained_on(
             continue  # compared as built: the versions' defaults differ, the envs do not
         a = theirs.get(key, _plain(defaults.get(key)))
         b = ours.get(key, _plain(defaults.get(key)))
+        if config is not None and a is None and b is not None:
+            raise ValueError(
+                f"agent {source}: {config} records no value for resolved.env_kwargs.{key} "
+                f"(task {task.name} plays {key}={b!r}): the run's training options cannot be "
+                "established"
+            )
         if a is None or b is None or a == b:
             continue
         differ.append(f"{key}={a!r} (task: {b!r})")
@@ -335,24 +348,63 @@ def _rllib(run_dir: Path, env: gym.Env, config: dict[str, Any], source: str) -> 
     )
 
 
+def run_config(path: Path, source: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A run's ``config.json`` and its ``resolved`` entry, with the training options checked.
+
+    The options a run was trained with must be established before it is scored: ``resolved``
+    must be an object, its env id (``gym_id``; ``env`` for an RLlib run) a non-empty string
+    and its ``env_kwargs`` an object without null values (train.py writes every option).
+
+    Raises:
+        ValueError: Naming ``agent``, ``path`` and the key that is missing or null.
+    """
+    config = _read_json(path, "run config")
+    resolved = config.get("resolved")
+    lost = "the run's training options cannot be established (score an intact train.py run)"
+    if not isinstance(resolved, dict):
+        raise ValueError(
+            f"agent {source}: {path} has no 'resolved' object (got {resolved!r}): {lost}"
+        )
+    key = "env" if resolved.get("backend") == "rllib" else "gym_id"
+    env_id = resolved.get(key)
+    if not isinstance(env_id, str) or not env_id:
+        raise ValueError(
+            f"agent {source}: {path}: resolved.{key} is {env_id!r}, not an env id: {lost}"
+        )
+    env_kwargs = resolved.get("env_kwargs")
+    if not isinstance(env_kwargs, dict):
+        raise ValueError(
+            f"agent {source}: {path}: resolved.env_kwargs is {env_kwargs!r}, not an object: {lost}"
+        )
+    for name, value in env_kwargs.items():
+        if value is None:
+            raise ValueError(f"agent {source}: {path}: resolved.env_kwargs.{name} is null: {lost}")
+    return config, resolved
+
+
+def _check_run(path: Path, source: str, task: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """:func:`run_config`, then :func:`check_trained_on` with the run's env and options."""
+    config, resolved = run_config(path, source)
+    env_id = resolved["env" if resolved.get("backend") == "rllib" else "gym_id"]
+    check_trained_on(source, env_id, resolved["env_kwargs"], task, config=path)
+    return config, resolved
+
+
 def _run_folder(
     folder: Path, env: gym.Env, task: Any, source: str, algo: str | None, trusted: bool
 ) -> LoadedAgent:
-    config = _read_json(folder / "config.json", "run config")
-    resolved = config.get("resolved", {})
-    if not isinstance(resolved, dict):
-        raise ValueError(f"agent {source}: {folder / 'config.json'} is corrupt (no 'resolved')")
+    config_path = folder / "config.json"
+    config = _read_json(config_path, "run config")
     if config.get("command") not in ("attacker", "defender"):
         raise ValueError(
             f"agent {source} is a train.py {config.get('command')!r} run; score an attacker or "
             "defender run (one player's policy)"
         )
+    config, resolved = _check_run(config_path, source, task)
     if resolved.get("backend") == "rllib":
-        check_trained_on(source, resolved.get("env"), resolved.get("env_kwargs", {}), task)
         if not (folder / "rllib_state.json").is_file():
             raise ValueError(f"agent {source}: the RLlib run holds no rllib_state.json")
         return _rllib(folder, env, config, source)
-    check_trained_on(source, resolved.get("gym_id"), resolved.get("env_kwargs", {}), task)
     model = folder / "model.json"
     if not model.is_file():
         raise ValueError(
@@ -373,12 +425,7 @@ def _model_file(
     folder = path.parent
     config_path = folder / "config.json"
     if config_path.is_file():  # a model of a run folder: check what the run was trained on
-        resolved = _read_json(config_path, "run config").get("resolved", {})
-        if isinstance(resolved, dict):
-            check_trained_on(
-                source, resolved.get("gym_id") or resolved.get("env"),
-                resolved.get("env_kwargs", {}), task,
-            )  # fmt: skip
+        _check_run(config_path, source, task)
     if path.suffix == ".zip":
         return _sb3_zip(path, env, source, algo, trusted)
     if path.suffix != ".json":

@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from agents.bench.outputs import OutputPathError, check_new_file, write_text
+
 SEED_STRIDE = 100_000  # evaluation seed s plays the episodes reset with s·SEED_STRIDE + i
 
 
@@ -314,11 +316,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="the most likely action (the default in single-player tasks)",
     )
-    parser.add_argument("--json", type=Path, default=None, help="also write the score as JSON")
+    parser.add_argument(
+        "--json",
+        type=Path,
+        default=None,
+        help="also write the score as JSON to this file (missing parent folders are created)",
+    )
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.seeds < 1:
         parser.error(f"--seeds must be >= 1, got {args.seeds}")
     try:
+        if args.json is not None:  # before scoring: a bad path is reported at once
+            check_new_file("--json", args.json)
         task = _task(args.task)
         result = score(
             task,
@@ -334,5 +343,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     print(report(result, task))
     if args.json is not None:
-        args.json.write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+        try:
+            write_text("--json", args.json, json.dumps(result.to_dict(), indent=2) + "\n")
+        except OutputPathError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     return 0

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from agents.bench.outputs import read_text, write_text
 from agents.bench.references import compute
 from fdia_env import tasks
 from fdia_env.tasks.payoffs import FOLDER, MANIFEST
@@ -176,13 +177,15 @@ def write_table(page: Path) -> bool:
 
     Raises:
         ValueError: When ``page`` lacks the markers.
+        agents.bench.outputs.OutputPathError: (a ValueError) Naming ``--page`` and the path
+            when it cannot be read or written.
     """
-    text = page.read_text(encoding="utf-8")
+    text = read_text("--page", page)
     if TABLE_START not in text or TABLE_END not in text:
         raise ValueError(f"page {page} has no {TABLE_START} ... {TABLE_END} markers")
     head, rest = text.split(TABLE_START, 1)
     _, tail = rest.split(TABLE_END, 1)
     new = f"{head}{TABLE_START}\n\n{tasks_table()}\n\n{TABLE_END}{tail}"
     if new != text:
-        page.write_text(new, encoding="utf-8")
+        write_text("--page", page, new)
     return new != text
