@@ -478,3 +478,211 @@ def test_a_run_of_another_sparse_version_is_accepted_only_where_the_env_is_the_s
     # another env altogether stays refused
     with pytest.raises(ValueError, match="trained on fdia_env/CovarianceAttack-v0"):
         check_trained_on("run", "fdia_env/CovarianceAttack-v0", {}, pinned)
+
+
+# ------------------------------------------------------------------------------ actions
+
+
+def _plan():
+    from baselines.sparse import exhaustive
+
+    return exhaustive("ch4-position", budget=5, horizon=6).policy()
+
+
+@pytest.mark.parametrize(
+    "bad", [1.5, "3", None, [3], np.array([3]), float("inf"), float("nan"), 3.0, np.float64(3.0)]
+)
+def test_an_action_outside_the_space_is_refused_naming_the_agent(task, bad):
+    from agents.bench.agents import CallablePolicy
+    from agents.evaluate import InvalidActionError
+
+    policy = CallablePolicy(lambda obs: bad, "mine")
+    with pytest.raises(InvalidActionError) as info:
+        score_policy(task, policy, seeds=(0,), episodes=1, agent="my_agent:act")
+    text = str(info.value)
+    assert text.startswith("agent my_agent:act: policy CallablePolicy returned an action")
+    assert "Discrete(8)" in text and "[0, 8)" in text  # the allowed actions
+    assert repr(bad) in text
+
+
+def test_integer_actions_of_any_integer_type_score_alike(task):
+    from agents.bench.agents import CallablePolicy
+
+    plan = _plan()
+    means = []
+    for kind in (int, np.int64, np.int32, np.asarray):
+        policy = CallablePolicy(lambda obs, kind=kind: kind(int(plan.predict(obs)[0])), "k")
+        means.append(score_policy(task, policy, seeds=(0,), episodes=2).mean)
+    assert means == pytest.approx([task.references.optimum.value] * 4, rel=1e-12)
+
+
+def test_the_command_reports_a_bad_action_as_an_error(task, tmp_path, monkeypatch, capsys):
+    (tmp_path / "half_agent.py").write_text("def act(observation):\n    return 1.5\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main(["--task", TASK, "--agent", "half_agent:act", "--seeds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "agent half_agent:act: policy CallablePolicy returned an action outside" in err
+    assert "got 1.5" in err
+
+
+# ------------------------------------------------------------------------------ run configs
+
+
+def _drop(key):
+    def edit(resolved):
+        resolved.pop(key)
+
+    return edit
+
+
+def _null_option(key):
+    def edit(resolved):
+        resolved["env_kwargs"][key] = None
+
+    return edit
+
+
+def _drop_option(key):
+    def edit(resolved):
+        resolved["env_kwargs"].pop(key)
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        ("no resolved", r"config\.json has no 'resolved' object \(got None\)"),
+        ("null resolved", r"config\.json has no 'resolved' object \(got None\)"),
+        (_drop("gym_id"), r"config\.json: resolved\.gym_id is None, not an env id"),
+        (lambda r: r.update(gym_id=None), r"config\.json: resolved\.gym_id is None"),
+        (lambda r: r.update(gym_id=""), r"config\.json: resolved\.gym_id is '', not an env id"),
+        (_drop("env_kwargs"), r"config\.json: resolved\.env_kwargs is None, not an object"),
+        (lambda r: r.update(env_kwargs=[]), r"config\.json: resolved\.env_kwargs is \[\]"),
+        (_null_option("budget"), r"config\.json: resolved\.env_kwargs\.budget is null"),
+        (_null_option("horizon"), r"config\.json: resolved\.env_kwargs\.horizon is null"),
+        (
+            _drop_option("budget"),
+            r"config\.json records no value for resolved\.env_kwargs\.budget \(task "
+            r"sparse/ch4-position-v0 plays budget=5\)",
+        ),
+    ],
+    ids=[
+        "no-resolved", "null-resolved", "no-gym_id", "null-gym_id", "empty-gym_id",
+        "no-env_kwargs", "list-env_kwargs", "null-budget", "null-horizon", "no-budget",
+    ],
+)  # fmt: skip
+def test_a_run_whose_training_options_cannot_be_established_is_refused(
+    task, sb3_run, tmp_path, edit, message
+):
+    run = tmp_path / "run"
+    shutil.copytree(sb3_run, run)
+    (run / ".lock").unlink(missing_ok=True)
+    config = json.loads((run / "config.json").read_text())
+    if edit == "no resolved":
+        del config["resolved"]
+    elif edit == "null resolved":
+        config["resolved"] = None
+    else:
+        edit(config["resolved"])
+    (run / "config.json").write_text(json.dumps(config))
+    for agent in (run, run / "model.json"):
+        with pytest.raises(ValueError, match=message) as info:
+            score(task, agent, seeds=(0,), episodes=1)
+        assert str(info.value).startswith(f"agent {agent}: {run / 'config.json'}")
+
+
+def test_a_run_of_another_budget_with_its_budget_nulled_is_refused(task, sb3_run, tmp_path):
+    """A budget-3 run whose recorded budget is nulled is not scored on the budget-5 task."""
+    run = tmp_path / "run"
+    shutil.copytree(sb3_run, run)
+    (run / ".lock").unlink(missing_ok=True)
+    config = json.loads((run / "config.json").read_text())
+    config["resolved"]["env_kwargs"]["budget"] = 3
+    (run / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match=r"budget=3 \(task: 5\)"):
+        score(task, run, seeds=(0,), episodes=1)
+    config["resolved"]["env_kwargs"]["budget"] = None
+    (run / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match=r"resolved\.env_kwargs\.budget is null"):
+        score(task, run, seeds=(0,), episodes=1)
+
+
+# ------------------------------------------------------------------------------ output paths
+
+
+def _read_only_folder(tmp_path):
+    """A folder no file can be created in (a read-only mode, or a read-only file system)."""
+    folder = tmp_path / "read-only"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        (folder / "probe").write_text("x")
+    except OSError:
+        return folder
+    (folder / "probe").unlink()  # root ignores the mode: a read-only file system then
+    for candidate in (Path("/sys"), Path("/proc/sys/kernel")):
+        try:
+            with open(candidate / "fdia_env_probe.json", "a"):
+                pass
+        except OSError:
+            return candidate
+    pytest.skip("no read-only location on this machine")
+
+
+def _read_only_file(tmp_path):
+    """An existing file that cannot be opened for writing."""
+    page = tmp_path / "page.md"
+    page.write_text("x")
+    page.chmod(0o444)
+    try:
+        with open(page, "r+"):
+            pass
+    except OSError:
+        return page
+    candidate = Path("/proc/sys/kernel/ostype")
+    try:
+        with open(candidate, "r+"):
+            pass
+    except OSError:
+        return candidate
+    pytest.skip("no read-only file on this machine")
+
+
+def test_score_json_to_a_folder_a_file_parent_or_a_read_only_place_is_refused_first(
+    tmp_path, capsys
+):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    cases = [
+        (tmp_path, f"--json {tmp_path}: is a folder; give a file path"),
+        (a_file / "score.json", f"its parent {a_file} is not a folder"),
+        (_read_only_folder(tmp_path) / "score.json", "cannot"),
+    ]  # fmt: skip
+    for path, message in cases:
+        argv = ["--task", TASK, "--agent", "random", "--seeds", "1", "--episodes", "1"]
+        assert main([*argv, "--json", str(path)]) == 2
+        out, err = capsys.readouterr()
+        assert message in err and err.startswith(f"error: --json {path}")
+        assert "normalised" not in out  # refused before scoring
+
+
+def test_score_json_creates_its_missing_folders(tmp_path, capsys):
+    path = tmp_path / "new" / "deeper" / "score.json"
+    argv = ["--task", TASK, "--agent", "random", "--seeds", "1", "--episodes", "1"]
+    assert main([*argv, "--json", str(path)]) == 0
+    assert json.loads(path.read_text())["task"] == TASK
+
+
+def test_table_page_a_folder_a_missing_file_or_a_read_only_one_is_a_clear_error(tmp_path, capsys):
+    from agents.bench.__main__ import main as bench
+
+    read_only = _read_only_file(tmp_path)
+    for page, message in (
+        (tmp_path, "is a folder"),
+        (tmp_path / "missing" / "page.md", "does not exist"),
+        (read_only, "cannot be read and written"),
+    ):
+        assert bench(["table", "--page", str(page)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"error: --page {page}: {message}")
