@@ -128,8 +128,11 @@ def score_policy(
 
     Raises:
         ValueError: For a bad task name (naming ``task``), bad ``seeds`` or ``episodes``.
+        agents.evaluate.InvalidActionError: (a ValueError) Naming ``agent`` when the policy
+            returns an action outside the env's action space (the env's own check; nothing is
+            rounded or converted).
     """
-    from agents.evaluate import evaluate, t_interval
+    from agents.evaluate import InvalidActionError, evaluate, t_interval
 
     task = _task(task)
     seeds = _check_seeds(seeds)
@@ -144,6 +147,8 @@ def score_policy(
             evaluate(policy, env, n, seed=s * SEED_STRIDE, deterministic=deterministic)
             for s in seeds
         ]
+    except InvalidActionError as exc:
+        raise InvalidActionError(f"agent {agent}: {exc}") from None
     finally:
         env.close()
     returns = np.stack([r.returns for r in runs])
