@@ -632,7 +632,7 @@ def _read_only_folder(tmp_path):
 
 def _read_only_file(tmp_path):
     """An existing file that cannot be opened for writing."""
-    page = tmp_path / "page.md"
+    page = tmp_path / "page.txt"
     page.write_text("x")
     page.chmod(0o444)
     try:
@@ -680,7 +680,7 @@ def test_table_page_a_folder_a_missing_file_or_a_read_only_one_is_a_clear_error(
     read_only = _read_only_file(tmp_path)
     for page, message in (
         (tmp_path, "is a folder"),
-        (tmp_path / "missing" / "page.md", "does not exist"),
+        (tmp_path / "missing" / "page.txt", "does not exist"),
         (read_only, "cannot be read and written"),
     ):
         assert bench(["table", "--page", str(page)]) == 2
