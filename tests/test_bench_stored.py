@@ -354,3 +354,25 @@ def test_a_corrupted_payoff_manifest_loads_pristine_or_raises_naming_it(key, val
     else:
         assert loaded[name]["shape"] == data[name]["shape"]
         assert loaded[name]["sha256"] == data[name]["sha256"]
+
+
+def test_the_digests_module_is_what_the_commands_write(tmp_path, monkeypatch):
+    from fdia_env.tasks import stored
+
+    committed = stored.DIGESTS_PATH.read_text()
+    monkeypatch.setattr(stored, "DIGESTS_PATH", tmp_path / "digests.py")
+    stored.write_digests(PACKAGE / "references.json", PACKAGE / "payoffs.json", PACKAGE / "payoffs")
+    assert (tmp_path / "digests.py").read_text() == committed
+
+
+def test_compute_refuses_to_keep_the_entries_of_a_bad_file(tmp_path):
+    """``write`` keeps the other tasks' entries only from a file that passes its checks."""
+    from agents.bench.verify import write
+
+    data = pristine()
+    data[TASK]["optimum"]["value"] = math.nan
+    path = tmp_path / "references.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(StoredDataError, match=rf"{path}: entry '{TASK}', optimum\.value"):
+        write(["sparse/ch4-random-v0"], path=path)
+    assert math.isnan(json.loads(path.read_text())[TASK]["optimum"]["value"])  # left as it was

@@ -2,8 +2,10 @@
 
 - ``verify [--task T ...] [--cheap]``: recompute the stored references and compare (exit 1 on a
   difference);
-- ``compute [--task T ...] [--pending]``: compute references and write them to
-  ``fdia_env/tasks/references.json``;
+- ``compute [--task T ...] [--pending] [--all]``: compute references and write them to
+  ``fdia_env/tasks/references.json`` (and its SHA-256 to ``fdia_env/tasks/digests.py``); the
+  other tasks' entries are kept, so the stored file must pass its checks, except with ``--all``,
+  which rewrites every entry;
 - ``payoff --task T``: build a sensor-game task's payoff matrix and store it with the task
   references (``fdia_env.tasks.payoffs``; scoring then reads it instead of rebuilding it);
 - ``table [--page docs/benchmark.md]``: rewrite the page's table of tasks from the stored
@@ -86,7 +88,7 @@ def _compute(args: argparse.Namespace) -> int:
     else:
         print("compute: give --task T, --pending or --all", file=sys.stderr)
         return 2
-    for name, seconds in write(names).items():
+    for name, seconds in write(names, keep=not args.all).items():
         print(f"{name:55s} {seconds:7.2f} s")
     return 0
 

@@ -40,14 +40,15 @@ def recorded() -> Any:
     return importlib.import_module(DIGESTS_MODULE)
 
 
-def check_digest(path: Path, data: bytes, expected: str | None, how: str) -> None:
+def check_digest(path: Path, data: bytes, expected: str | None, how: str, fix: str = "") -> None:
     """Raise unless ``data`` (the bytes of ``path``) has the SHA-256 ``expected``.
 
     Args:
         path: The file, for the message.
         data: Its bytes.
         expected: The recorded digest (None: the file has none recorded).
-        how: The command that rewrites the file and its digest, for the message.
+        how: The command that writes the file and its digest, for the message.
+        fix: Another way to a good file than ``git checkout``, for the message.
 
     Raises:
         StoredDataError: Naming ``path`` and both digests.
@@ -56,13 +57,13 @@ def check_digest(path: Path, data: bytes, expected: str | None, how: str) -> Non
     if expected is None:
         raise StoredDataError(
             f"{path}: no SHA-256 is recorded for this file in {DIGESTS_PATH.name} (a file "
-            f"added by hand); write it with {how}"
+            f"added by hand); only {how} writes it with its digest"
         )
     if got != expected:
         raise StoredDataError(
             f"{path}: SHA-256 {got} is not the one recorded in {DIGESTS_PATH.name} "
-            f"({expected}): the file was changed outside {how}; restore it (git checkout "
-            f"{path.name}) or rewrite it with {how}"
+            f"({expected}): the file was changed by hand (only {how} writes it with its "
+            f"digest); restore it with git checkout{fix}"
         )
 
 
@@ -228,7 +229,13 @@ def check_references(path: Path, data: bytes, expected: str | None) -> dict[str,
     import json
 
     if expected is not None:
-        check_digest(path, data, expected, "python -m agents.bench compute")
+        check_digest(
+            path,
+            data,
+            expected,
+            "python -m agents.bench compute",
+            " or recompute every task with python -m agents.bench compute --all",
+        )
     try:
         parsed = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, ValueError) as exc:
