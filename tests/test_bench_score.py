@@ -686,3 +686,39 @@ def test_table_page_a_folder_a_missing_file_or_a_read_only_one_is_a_clear_error(
         assert bench(["table", "--page", str(page)]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"error: --page {page}: {message}")
+
+
+def test_the_runner_refuses_bad_output_paths_before_training(tmp_path, capsys):
+    from experiments.cli import main as experiments
+
+    page = tmp_path / "board.txt"
+    page.write_text("# Benchmark\n\n<!-- leaderboard:start -->\n<!-- leaderboard:end -->\n")
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    rows = tmp_path / "rows.json"
+    for argv, needle in (
+        (["--out", str(tmp_path), "--page", str(page)], f"--out {tmp_path}: is a folder"),
+        (["--out", str(rows), "--page", str(tmp_path)], f"--page {tmp_path}: is a folder"),
+        (
+            ["--out", str(rows), "--page", str(tmp_path / "none.txt")],
+            f"--page {tmp_path / 'none.txt'}: does not exist",
+        ),
+        (
+            ["--out", str(rows), "--page", str(page), "--figures", str(a_file)],
+            f"--figures {a_file}: is a file",
+        ),
+    ):
+        with pytest.raises(SystemExit):
+            experiments(
+                [
+                    "bench",
+                    "--tasks",
+                    TASK,
+                    "--render-only",
+                    "--figures",
+                    str(tmp_path / "fig"),
+                    *argv,
+                ]
+            )
+        assert needle in capsys.readouterr().err
+    assert page.read_text().count("leaderboard") == 2  # nothing rendered

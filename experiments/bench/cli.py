@@ -101,6 +101,28 @@ def render(rows: list[dict[str, Any]], page: Path, figures: Path, tasks: list[An
     write_section(page, leaderboard(tasks, rows, figures, header))
 
 
+def check_outputs(args: argparse.Namespace) -> None:
+    """Check ``--out``, ``--page`` and ``--figures`` before any run is trained.
+
+    ``--out`` is a file (its missing folders are created), ``--page`` an existing page that
+    can be written, ``--figures`` a folder (created when missing).
+
+    Raises:
+        agents.bench.outputs.OutputPathError: Naming the option and the path.
+    """
+    from agents.bench.outputs import OutputPathError, check_existing_file, check_new_file
+
+    if args.render_only:
+        if Path(args.out).is_dir():
+            raise OutputPathError(f"--out {args.out}: is a folder; give the rows file")
+    else:
+        check_new_file("--out", args.out)
+    if not args.no_render:
+        check_existing_file("--page", args.page)
+        if Path(args.figures).exists() and not Path(args.figures).is_dir():
+            raise OutputPathError(f"--figures {args.figures}: is a file; give a folder")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse the command line, train and score, write the rows and the page."""
     from agents.config import parse_env_kwargs
@@ -161,6 +183,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_hyperparameters(hp)
         tasks = select_tasks(args.tasks)
     except (TypeError, ValueError) as exc:
+        parser.error(str(exc))
+    try:
+        check_outputs(args)
+    except ValueError as exc:
         parser.error(str(exc))
     rows = read_rows(args.out)
     failed: list[str] = []
