@@ -532,7 +532,7 @@ def train_torch_ppo(
                 f"resume state: {resume.timesteps} env steps after {resume.iteration} iterations "
                 f"of {B} x {T}: it is not a state of this config"
             )
-        check_shapes(spec, resume.model, Path("the resume state"), Path("the run's config"))
+        check_shapes(spec, resume.model, "resume state does not fit this network and config")
     model = ActorCritic(spec).to(device)
     if config.stop_prob is not None and resume is None:
         if spec.kind != "discrete" or spec.n < 2:
@@ -634,8 +634,7 @@ def train_torch_ppo(
         b_logp, b_adv, b_ret = logp_buf.reshape(-1), adv.reshape(-1), returns.reshape(-1)
         b_mask = mask_buf.reshape(B * T, spec.n) if masked else None
         mb = B * T // config.num_minibatches
-        bad_loss = torch.zeros((), device=device, dtype=torch.bool)
-        bad_grad = torch.zeros((), device=device, dtype=torch.bool)
+        first_bad = torch.zeros((), device=device, dtype=torch.int8)  # 1 loss, 2 gradient
         for _ in range(config.update_epochs):
             order = torch.randperm(B * T, generator=gen, device=device)
             for k in range(config.num_minibatches):
@@ -655,10 +654,10 @@ def train_torch_ppo(
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 norm = nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
-                bad_loss |= ~torch.isfinite(loss.detach())
-                bad_grad |= ~torch.isfinite(norm)
+                now = torch.where(~torch.isfinite(loss.detach()), 1, 2 * ~torch.isfinite(norm))
+                first_bad = torch.where(first_bad == 0, now.to(first_bad.dtype), first_bad)
                 optimizer.step()
-        _check_finite(model, bad_loss, bad_grad, timesteps)
+        _check_finite(model, first_bad, timesteps)
 
         n_ended = float(ended_n)  # one host sync per iteration
         record = {
@@ -685,13 +684,12 @@ def train_torch_ppo(
     return TorchPPOResult(TorchPolicy(model, seed), timesteps, seconds, history, interrupted)
 
 
-def _check_finite(
-    model: ActorCritic, bad_loss: torch.Tensor, bad_grad: torch.Tensor, timesteps: int
-) -> None:
+def _check_finite(model: ActorCritic, first_bad: torch.Tensor, timesteps: int) -> None:
     """Raise :class:`~agents.interrupt.Diverged` after an iteration that went non-finite.
 
-    ``bad_loss`` and ``bad_grad`` are the iteration's flags (on the device); the weights and
-    observation statistics are checked too, in one host sync.
+    ``first_bad`` is the iteration's flag on the device (0: fine; 1: a loss, 2: a gradient
+    was the first non-finite value); the weights and observation statistics are checked too,
+    in one host sync.
 
     Raises:
         Diverged: Naming the first of the loss, the gradient or a tensor that is not finite.
@@ -699,12 +697,13 @@ def _check_finite(
     from agents.interrupt import Diverged
 
     state = [(k, v) for k, v in model.state_dict().items() if v.is_floating_point()]
-    bad = torch.stack([bad_loss, bad_grad, *(~torch.isfinite(v).all() for _, v in state)])
-    flags = bad.cpu().tolist()
-    if not any(flags):
-        return
-    names = ["the loss", "the gradient", *(f"the network's {k}" for k, _ in state)]
-    raise Diverged(names[flags.index(True)], timesteps)
+    bad = [(~torch.isfinite(v).all()).long() for _, v in state]
+    flags = torch.stack([first_bad.long(), *bad])
+    first, *tensors = flags.cpu().tolist()
+    if first:
+        raise Diverged("the loss" if first == 1 else "the gradient", timesteps)
+    if any(tensors):
+        raise Diverged(f"the network's {state[tensors.index(True)][0]}", timesteps)
 
 
 def _resume_seed(seed: int, iteration: int) -> int:
@@ -839,7 +838,7 @@ def load_policy(path: Path, root: Path, device: str = "cpu", seed: int = 0) -> T
     tensors = tensor_file(meta, path, root)
     payload = load_tensors(tensors, device)
     state = payload["state_dicts"].get("policy")
-    check_shapes(spec, state, tensors, path)
+    check_shapes(spec, state, f"tensor file {tensors} does not hold the network {path} describes")
     model = ActorCritic(spec).to(device)
     try:
         model.load_state_dict(state, strict=True)
@@ -869,26 +868,24 @@ def _spec_of(raw: Any, path: Path) -> PolicySpec:
     return spec
 
 
-def check_shapes(spec: PolicySpec, state: Any, tensors: Path, path: Path) -> None:
+def check_shapes(spec: PolicySpec, state: Any, refusal: str) -> None:
     """Raise unless ``state`` holds exactly the tensors of ``spec``'s network, by name and shape.
 
     The network is laid out on torch's ``meta`` device (no memory), so a description asking
     for a network far larger than its tensor file is refused before anything is allocated.
 
     Raises:
-        ValueError: Naming both files and the first tensor that differs.
+        ValueError: ``refusal`` (naming the files), and the first tensor that differs.
     """
     with torch.device("meta"):
         wanted = {k: tuple(v.shape) for k, v in ActorCritic(spec).state_dict().items()}
     if not isinstance(state, dict):
-        raise ValueError(f"tensor file {tensors} holds no policy state dict")
+        raise ValueError(f"{refusal}: it holds no policy state dict")
     got = {k: tuple(v.shape) if isinstance(v, torch.Tensor) else None for k, v in state.items()}
     if got != wanted:
-        diff = sorted(k for k in wanted.keys() | got.keys() if wanted.get(k) != got.get(k))
-        name = diff[0]
+        name = sorted(k for k in wanted.keys() | got.keys() if wanted.get(k) != got.get(k))[0]
         raise ValueError(
-            f"tensor file {tensors} does not hold the network {path} describes: {name} has "
-            f"shape {got.get(name)}, the network needs {wanted.get(name)}"
+            f"{refusal}: {name} has shape {got.get(name)}, the network needs {wanted.get(name)}"
         )
 
 

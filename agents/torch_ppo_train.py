@@ -143,6 +143,18 @@ def train_torch_ppo_run(
         env_kwargs = setup.env_kwargs
         config, hyperparameters = torch_ppo_config(cfg, setup.hp)
         check_env_kwargs(entry.gym_id, env_kwargs)
+        resume: TrainingState | None = None
+        if run.resumed and not run.checkpointed:
+            say(run.restart_note())
+        if run.checkpointed:  # checked before any env is built
+            resume = load_training_state(run.path / CHECKPOINT, run.path)
+            run.check_not_shorter("total_timesteps", cfg.total_timesteps, resume.timesteps)
+            if resume.timesteps != resume.iteration * config.batch_size:
+                raise ValueError(
+                    f"training state {run.path / CHECKPOINT}: {resume.timesteps} env steps after "
+                    f"{resume.iteration} iterations of {config.num_envs} x {config.num_steps}: "
+                    "it is not a state of this run's config"
+                )
         try:
             eval_env = gym.make(entry.gym_id, **env_kwargs)
             venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
@@ -153,12 +165,6 @@ def train_torch_ppo_run(
         stack.callback(eval_env.close)
         stack.callback(venv.close)
         reference = entry.reference_of(eval_env)
-        resume: TrainingState | None = None
-        if run.resumed and not run.checkpointed:
-            say(run.restart_note())
-        if run.checkpointed:
-            resume = load_training_state(run.path / CHECKPOINT, run.path)
-            run.check_not_shorter("total_timesteps", cfg.total_timesteps, resume.timesteps)
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         run_dir = run.begin()
         run.write_config(
