@@ -99,8 +99,8 @@ class Diverged(ValueError):
     def __init__(self, what: str, step: int, last_good: str | None = None) -> None:
         self.what, self.step, self.last_good = what, int(step), last_good
         where = (
-            f"the last good checkpoint is {last_good}, which --resume continues (try a smaller "
-            "--learning-rate)"
+            f"the last good checkpoint is {last_good}, which --resume continues (or start a "
+            "new run with a smaller --learning-rate)"
             if last_good is not None
             else "no checkpoint was written before it"
         )

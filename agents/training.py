@@ -50,6 +50,8 @@ from agents.algos import build_model
 from agents.checkpoint import (
     STAGED,
     UntrustedCheckpointError,
+    check_count,
+    check_seconds,
     hyperparameters_from,
     inside,
     load_model,
@@ -250,11 +252,8 @@ def read_checkpoint_state(folder: Path, root: Path, trusted: bool = False) -> Ch
     """
     state_path = Path(folder) / "state.json"
     state = read_json(state_path, "checkpoint state")
-    steps, seconds = state.get("timesteps"), state.get("train_seconds")
-    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
-        raise ValueError(f"checkpoint state {state_path} is corrupt: timesteps {steps!r}")
-    if isinstance(seconds, bool) or not isinstance(seconds, int | float) or seconds < 0:
-        raise ValueError(f"checkpoint state {state_path} is corrupt: train_seconds {seconds!r}")
+    steps = check_count(state.get("timesteps"), "timesteps", state_path)
+    seconds = check_seconds(state.get("train_seconds"), "train_seconds", state_path)
     files = {}
     for key, unsafe in (("model", ".zip"), ("replay_buffer", ".pkl")):
         name = state.get(key)

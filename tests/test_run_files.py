@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # train.py live
 
 import train
 from agents.bench.score import main as score_main
-from agents.runs import CorruptLogLine, read_jsonl, run_lock
+from agents.runs import read_jsonl, run_lock
 
 TASK = "sparse/ch4-position-v0"  # train.py's default attacker settings
 TINY = ["--no-progress-bar", "--final-eval-episodes", "2", "--eval-episodes", "1"]
@@ -243,7 +243,7 @@ def test_a_torch_ppo_model_of_a_huge_network_is_refused_before_allocating(
 @pytest.mark.parametrize(
     "hyperparameters, message",
     [
-        ({"net_arch": [60000, 60000]}, "net_arch [60000, 60000] needs at least 3,600,120,000"),
+        ({"net_arch": [1000, 1000]}, "net_arch [1000, 1000] needs at least 1,002,000 weights"),
         ({"net_arch": [10**9]}, "net_arch (1000000000,) is too large (at most 65536 each)"),
         ({"learning_rate": "fast"}, "learning_rate (--learning-rate) must be a number > 0"),
         ({"not_a_hyperparameter": 3}, "unknown hyperparameter(s) not_a_hyperparameter"),
@@ -291,6 +291,8 @@ def test_a_corrupt_log_line_is_skipped_with_a_warning_naming_file_and_line(
     tmp_path, sb3_run, torch_run, backend
 ):
     run_dir = copy_run(sb3_run if backend == "sb3" else torch_run, tmp_path)
+    from agents.runs import CorruptLogLine
+
     log = run_dir / "evaluations.jsonl"
     lines = log.read_text().splitlines()
     log.write_text("\n".join([lines[0], "{'timesteps': 1,", '{"timesteps": "x"}', *lines[1:]]))
@@ -335,7 +337,8 @@ def test_a_diverging_torch_ppo_run_stops_naming_what_and_the_last_good_checkpoin
     assert str(info.value) == (
         "training diverged at step 768: the gradient is not finite (NaN or infinity); no "
         "checkpoint of the diverged weights was written; the last good checkpoint is "
-        f"{state} at 384 steps, which --resume continues (try a smaller --learning-rate)"
+        f"{state} at 384 steps, which --resume continues (or start a new run with a smaller "
+        "--learning-rate)"
     )
     assert json.loads(state.read_text())["timesteps"] == 384
     assert [h["timesteps"] for h in read_jsonl(run_dir / "evaluations.jsonl")] == [384]
