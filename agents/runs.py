@@ -293,23 +293,26 @@ def _open_lock(lock_path: Path) -> int:
         return os.open(lock_path, flags | os.O_CREAT | os.O_EXCL, 0o666)
     except FileExistsError:
         pass
-    refuse = (
-        f"run folder lock {lock_path} is not a lock file written by train.py ({{}}); it was not "
-        "opened: remove it if no run is training in this folder"
-    )
+
+    def refuse(why: str) -> ValueError:
+        return ValueError(
+            f"run folder lock {lock_path} is not a lock file written by train.py ({why}); it was "
+            "not opened: remove it if no run is training in this folder"
+        )
+
     try:
         fd = os.open(lock_path, flags)
     except OSError as exc:
         why = "a symlink" if Path(lock_path).is_symlink() else exc.strerror or str(exc)
-        raise ValueError(refuse.format(why)) from None
+        raise refuse(why) from None
     try:
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise ValueError(refuse.format("not a regular file"))
+            raise refuse("not a regular file")
         if info.st_nlink != 1:
-            raise ValueError(refuse.format(f"a file with {info.st_nlink} hard links"))
+            raise refuse(f"a file with {info.st_nlink} hard links")
         if not _LOCK_CONTENT.match(os.pread(fd, 64, 0)):
-            raise ValueError(refuse.format("it holds something other than a PID"))
+            raise refuse("it holds something other than a PID")
     except BaseException:
         os.close(fd)
         raise

@@ -314,13 +314,29 @@ def best_model_file(run_dir: Path, trusted: bool = False) -> Path | None:
     best_path = Path(run_dir) / "best.json"
     if not best_path.is_file():
         return None
-    record = read_json(best_path, "best-model record")
+    record = read_best(best_path)
     path = inside(run_dir, record.get("model", "best_model.zip"), run_dir, "best model file")
     if not path.is_file():
         raise ValueError(f"best model file {path}, named by {best_path}, does not exist")
     if path.suffix == ".zip":
         require_trusted(path, trusted)
     return path
+
+
+def read_best(path: Path) -> dict[str, Any]:
+    """The ``best.json`` record at ``path``: its step, score and the score's name, checked.
+
+    Raises:
+        ValueError: For a corrupt record (naming ``path`` and the key).
+    """
+    record = read_json(path, "best-model record")
+    check_count(record.get("timesteps"), "timesteps", path)
+    score, name = record.get("score"), record.get("score_name")
+    if isinstance(score, bool) or not isinstance(score, int | float) or not math.isfinite(score):
+        raise ValueError(f"{path} is corrupt: score must be a finite number, got {score!r:.80}")
+    if not isinstance(name, str):
+        raise ValueError(f"{path} is corrupt: score_name must be a string, got {name!r:.80}")
+    return record
 
 
 class CheckpointCallback(BaseCallback):
@@ -424,7 +440,7 @@ class ScoreCallback(BaseCallback):
         self.save_best = save_best
         self.next_at = 0
         best_path = history_path.parent / "best.json"
-        self.best = read_json(best_path, "best-model record") if best_path.is_file() else None
+        self.best = read_best(best_path) if best_path.is_file() else None
 
     def _on_training_start(self) -> None:
         self.next_at = (self.model.num_timesteps // self.every + 1) * self.every
@@ -943,7 +959,7 @@ def _train_and_score(
     learned = evaluations[f"learned ({algo})"]
     best_file = best_model_file(run_dir, cfg.run.trust_checkpoint)
     if best_file is not None:
-        best = read_json(run_dir / "best.json", "best-model record")
+        best = read_best(run_dir / "best.json")
         if best["timesteps"] != model.num_timesteps and improves(
             best["score"], best["score_name"], {"score": learned.score}
         ):

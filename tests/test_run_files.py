@@ -244,7 +244,7 @@ def test_a_torch_ppo_model_of_a_huge_network_is_refused_before_allocating(
     "hyperparameters, message",
     [
         ({"net_arch": [1000, 1000]}, "net_arch [1000, 1000] needs at least 1,002,000 weights"),
-        ({"net_arch": [10**9]}, "net_arch (1000000000,) is too large (at most 65536 each)"),
+        ({"net_arch": [100_000]}, "net_arch (100000,) is too large (at most 65536 each)"),
         ({"learning_rate": "fast"}, "learning_rate (--learning-rate) must be a number > 0"),
         ({"not_a_hyperparameter": 3}, "unknown hyperparameter(s) not_a_hyperparameter"),
         ({"gamma": None, "net_arch": "64"}, "net_arch (--net-arch) must be a sequence"),
