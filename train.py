@@ -124,7 +124,8 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
     else:
         from agents.training import CHECKPOINT_STATE as marker
         from agents.training import train_prefix as prefix_of
-    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix_of(cfg), marker)
+    fresh = isinstance(cfg, TrainConfig) and cfg.run.backend != "rllib"  # starts from step 0
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix_of(cfg), marker, fresh)
     config_path = Path(run_dir) / "config.json"
     saved = read_json(config_path, "run config").get("config")
     if not isinstance(saved, dict):
@@ -300,7 +301,9 @@ def _backend_of(run_dir: Path) -> str:
         saved = json.loads((Path(run_dir) / "config.json").read_text())
     except (OSError, ValueError):
         return "sb3"
-    return (saved.get("resolved") or {}).get("backend", "sb3")
+    resolved = saved.get("resolved") if isinstance(saved, dict) else None
+    backend = resolved.get("backend", "sb3") if isinstance(resolved, dict) else "sb3"
+    return backend if isinstance(backend, str) else "sb3"
 
 
 def cli(argv: Sequence[str] | None = None) -> int:

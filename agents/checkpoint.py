@@ -30,9 +30,10 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import itertools
 import json
+import math
 import os
-import pickle
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,7 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.save_util import recursive_getattr
 
 from agents.algos import ALGO_CLASSES, build_model
-from agents.config import Hyperparameters, algo_kwargs
+from agents.config import HYPERPARAMETERS, Hyperparameters, algo_kwargs
 from agents.runs import atomic_write, write_json
 
 FORMAT = "fdia_env-sb3-state-v1"
@@ -102,6 +103,112 @@ def read_json(path: Path, what: str = "file") -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f"{what} {path} is corrupt: expected a JSON object")
     return data
+
+
+# The largest step count or counter a run file may hold (2**53: exact as a JSON number).
+MAX_COUNT = 2**53
+# Hyperparameters whose size is allocated when a model is built: their largest allowed value.
+SIZE_LIMITS = {"n_steps": 2**24, "batch_size": 2**24, "buffer_size": 2**31, "net_arch": 2**16}
+
+
+def check_count(value: Any, what: str, path: Path, maximum: int = MAX_COUNT) -> int:
+    """``value`` as an int, if it is an integer in ``[0, maximum]`` (a bool is not).
+
+    Raises:
+        ValueError: Naming ``what`` (the key), ``path`` and the allowed range.
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= maximum:
+        raise ValueError(
+            f"{path} is corrupt: {what} must be an integer in [0, {maximum}], got {value!r}"
+        )
+    return value
+
+
+def check_seconds(value: Any, what: str, path: Path) -> float:
+    """``value`` as a float, if it is a finite number >= 0 (a bool is not).
+
+    Raises:
+        ValueError: Naming ``what`` and ``path``.
+    """
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not math.isfinite(value)
+        or value < 0
+    ):
+        raise ValueError(f"{path} is corrupt: {what} must be a finite number >= 0, got {value!r}")
+    return float(value)
+
+
+def hyperparameters_from(data: Any, path: Path, key: str = "hyperparameters") -> Hyperparameters:
+    """The :class:`~agents.config.Hyperparameters` a run file holds under ``key``, checked.
+
+    Every key must be a field of the dataclass, every value of its type and range (lists
+    become tuples), and the sizes a model allocates (:data:`SIZE_LIMITS`) bounded.
+
+    Raises:
+        ValueError: Naming ``path``, ``key`` and the offending hyperparameter.
+    """
+    where = f"{path}: {key}"
+    if not isinstance(data, dict):
+        raise ValueError(f"{where} must be a JSON object of hyperparameters, got {data!r:.80}")
+    unknown = sorted(str(k) for k in data if k not in HYPERPARAMETERS)
+    if unknown:
+        raise ValueError(
+            f"{where} holds unknown hyperparameter(s) {', '.join(unknown)}; known: "
+            f"{', '.join(HYPERPARAMETERS)}"
+        )
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+    try:
+        hp = Hyperparameters(**values)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where} is invalid: {exc}") from None
+    for name, limit in SIZE_LIMITS.items():
+        value = getattr(hp, name)
+        sizes = value if isinstance(value, tuple) else () if value is None else (value,)
+        if any(size > limit for size in sizes):
+            raise ValueError(f"{where}: {name} {value!r} is too large (at most {limit} each)")
+    return hp
+
+
+def check_finite(payload: Any, path: Path, name: str = "") -> None:
+    """Raise unless every floating-point tensor in ``payload`` (nested) is finite.
+
+    Raises:
+        ValueError: Naming ``path`` and the first tensor holding NaN or infinity.
+    """
+    if isinstance(payload, torch.Tensor):
+        if payload.is_floating_point() and not bool(torch.isfinite(payload).all()):
+            raise ValueError(
+                f"tensor file {path} holds NaN or infinite weights ({name or 'a tensor'}); it "
+                "was not loaded (a diverged run: resume from an earlier checkpoint)"
+            )
+    elif isinstance(payload, dict):
+        for key, value in payload.items():
+            check_finite(value, path, f"{name}.{key}" if name else str(key))
+    elif isinstance(payload, list | tuple):
+        for i, value in enumerate(payload):
+            check_finite(value, path, f"{name}[{i}]")
+
+
+def check_network_fits(net_arch: Any, tensors: dict[str, Any], path: Path, source: Path) -> None:
+    """Raise when the hidden sizes ``net_arch`` need more weights than the stored ``tensors``.
+
+    A network of hidden sizes h₁…h_k holds at least Σhᵢ + Σhᵢ₋₁hᵢ parameters; a description
+    asking for more than its tensor file stores does not describe it (and would allocate
+    memory for nothing): it is refused before anything is built.
+
+    Raises:
+        ValueError: Naming ``source`` (the description), its sizes and what ``path`` stores.
+    """
+    sizes = list(net_arch or [])
+    need = sum(sizes) + sum(a * b for a, b in itertools.pairwise(sizes))
+    stored = sum(t.numel() for t in tensors.values() if isinstance(t, torch.Tensor))
+    if need > stored:
+        raise ValueError(
+            f"model description {source}: net_arch {sizes} needs at least {need:,} weights, "
+            f"its tensor file {path} holds {stored:,}: they do not belong together"
+        )
 
 
 def _sha256(path: Path) -> str:
@@ -282,14 +389,29 @@ def load_model(
         raise ValueError(f"model description {path}: format {meta.get('format')!r}, not {FORMAT}")
     if algo is not None and meta.get("algo") != algo:
         raise ValueError(f"model description {path} holds a {meta.get('algo')} model, not {algo}")
-    if meta.get("algo") not in ALGO_CLASSES:
+    if not isinstance(meta.get("algo"), str) or meta["algo"] not in ALGO_CLASSES:
         raise ValueError(f"model description {path}: unknown algorithm {meta.get('algo')!r}")
+    check_count(meta.get("num_timesteps", 0), "num_timesteps", path)
+    counters = meta.get("counters", {})
+    if not isinstance(counters, dict):
+        raise ValueError(f"{path} is corrupt: counters must be a JSON object, got {counters!r:.80}")
+    hp = hyperparameters_from(meta.get("hyperparameters"), path)
     tensors = tensor_file(meta, path, root)
     payload = load_tensors(tensors, device)
-    if kwargs is None:
-        kwargs = algo_kwargs(meta["algo"], Hyperparameters(**meta["hyperparameters"]))
-    model = build_model(meta["algo"], env, kwargs, seed=None, device=device)
-    restore(model, payload, meta.get("counters", {}), tensors)
+    if kwargs is None:  # to score it: its replay buffer is never filled, so it is kept small
+        try:
+            kwargs = algo_kwargs(meta["algo"], hp)
+        except ValueError as exc:
+            raise ValueError(f"{path}: hyperparameters: {exc}") from None
+        if "buffer_size" in kwargs:
+            kwargs["buffer_size"] = min(kwargs["buffer_size"], 2)
+    net_arch = (kwargs.get("policy_kwargs") or {}).get("net_arch")
+    check_network_fits(net_arch, payload["state_dicts"].get("policy", {}), tensors, path)
+    try:
+        model = build_model(meta["algo"], env, kwargs, seed=None, device=device)
+    except (TypeError, ValueError, AssertionError) as exc:
+        raise ValueError(f"{path}: the model it describes cannot be built: {exc}") from None
+    restore(model, payload, counters, tensors)
     return model
 
 
@@ -298,11 +420,11 @@ def load_tensors(path: Path, device: str = "cpu") -> dict[str, Any]:
 
     Raises:
         ValueError: When the file holds other objects (a pickle that could run code is refused
-            before anything in it runs) or is not a torch file.
+            before anything in it runs), is not a torch file, or holds NaN or infinite weights.
     """
     try:
         payload = torch.load(path, map_location=device, weights_only=True)
-    except (pickle.UnpicklingError, RuntimeError, EOFError, OSError, ValueError) as exc:
+    except Exception as exc:  # any failure to read untrusted bytes is a refusal
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(
             f"tensor file {path} is not a weights-only torch file and was not loaded ({first})"
@@ -311,8 +433,10 @@ def load_tensors(path: Path, device: str = "cpu") -> dict[str, Any]:
         not isinstance(payload, dict)
         or not isinstance(payload.get("state_dicts"), dict)
         or not isinstance(payload.get("variables"), dict)
+        or not all(isinstance(v, dict) for v in payload["state_dicts"].values())
     ):
         raise ValueError(f"tensor file {path} does not hold a {FORMAT} checkpoint")
+    check_finite(payload, path)
     return payload
 
 
@@ -340,7 +464,7 @@ def restore(
             if not isinstance(tensor, torch.Tensor) or tensor.shape != target.shape:
                 raise ValueError(f"variable {name} has the wrong shape")
             target.data.copy_(tensor)
-    except (RuntimeError, ValueError, KeyError) as exc:
+    except (RuntimeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
         raise ValueError(
             f"checkpoint {source} does not fit the model built from the run's config: {exc}"
         ) from None

@@ -87,6 +87,29 @@ def stop_on_signals(report: Callable[[str], None] | None = _stderr) -> Iterator[
             signal.signal(s, signal.SIG_DFL if old is None else old)
 
 
+class Diverged(ValueError):
+    """Training produced a non-finite loss, gradient or parameter; nothing after it was saved.
+
+    Attributes:
+        what: What became non-finite (``"the loss"``, ``"the gradient"``, a parameter's name).
+        step: The env step at which it was found.
+        last_good: The last checkpoint written before it (a description), or None.
+    """
+
+    def __init__(self, what: str, step: int, last_good: str | None = None) -> None:
+        self.what, self.step, self.last_good = what, int(step), last_good
+        where = (
+            f"the last good checkpoint is {last_good}, which --resume continues (or start a "
+            "new run with a smaller --learning-rate)"
+            if last_good is not None
+            else "no checkpoint was written before it"
+        )
+        super().__init__(
+            f"training diverged at step {self.step}: {what} is not finite (NaN or infinity); "
+            f"no checkpoint of the diverged weights was written; {where}"
+        )
+
+
 class StopTrainingCallback(BaseCallback):
     """Ends SB3's ``learn`` at the next environment step once ``stop`` is requested."""
 

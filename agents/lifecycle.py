@@ -35,17 +35,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from agents.checkpoint import read_json
-from agents.interrupt import StopRequest, stop_on_signals
+from agents.interrupt import Diverged, StopRequest, stop_on_signals
 from agents.runs import (
     check_not_shorter,
     check_resumable,
     config_dict,
     new_run_dir,
+    read_jsonl,
     remove_stale_temp_files,
     removed_unless,
     resume_dir,
     run_lock,
     write_json,
+    write_jsonl,
 )
 from agents.seeding import derived_seed
 
@@ -53,6 +55,26 @@ if TYPE_CHECKING:
     from agents.evaluate import Evaluation
 
 SCORES = "scores.json"
+EVALUATIONS = "evaluations.jsonl"
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def is_evaluation(record: dict[str, Any]) -> bool:
+    """Whether an ``evaluations.jsonl`` record has what the learning curve and a resume read.
+
+    Its ``timesteps`` an integer >= 0, its ``mean`` a number and its ``ci95`` a number or null.
+    """
+    steps, ci95 = record.get("timesteps"), record.get("ci95")
+    return (
+        isinstance(steps, int)
+        and not isinstance(steps, bool)
+        and steps >= 0
+        and _number(record.get("mean"))
+        and (ci95 is None or _number(ci95))
+    )
 
 
 def _silent(line: str) -> None:
@@ -107,6 +129,31 @@ class RunFolder:
         """Whether the run continues a saved one."""
         return self.saved is not None
 
+    @property
+    def checkpointed(self) -> bool:
+        """Whether a resumed run has a checkpoint (False: it starts again from step 0)."""
+        return self.resumed and (self.path / self.marker).is_file()
+
+    def last_checkpoint(self) -> str | None:
+        """The run's checkpoint as one phrase (``<path> at <N> steps``), or None: none yet."""
+        path = self.path / self.marker
+        try:
+            steps = read_json(path, "checkpoint").get("timesteps")
+        except ValueError:
+            return None
+        return f"{path} at {steps} steps"
+
+    def diverged(self, exc: Diverged) -> Diverged:
+        """``exc`` naming the run's last good checkpoint (:meth:`last_checkpoint`)."""
+        return Diverged(exc.what, exc.step, self.last_checkpoint())
+
+    def restart_note(self) -> str:
+        """The line a resume of a run without a checkpoint prints."""
+        return (
+            f"resuming {self.path}: it has no checkpoint ({self.marker}; it was stopped before "
+            "its first), so training starts again from step 0"
+        )
+
     def check_not_shorter(self, name: str, given: int, done: int, unit: str = "steps") -> None:
         """On a resume, refuse ``--<name> given`` below the ``done`` the run has trained.
 
@@ -118,7 +165,7 @@ class RunFolder:
 
     def resume_seed(self, seed: int, done: int) -> int:
         """The run's seed, or after a resume at ``done`` steps a fresh one derived from it."""
-        return derived_seed(seed, done) if self.resumed else seed
+        return derived_seed(seed, done) if self.checkpointed else seed
 
     def begin(self) -> Path:
         """Create and lock a new run's folder (nothing to do for a resumed one).
@@ -136,6 +183,18 @@ class RunFolder:
         if not self.resumed:
             self.stack.close()
             shutil.rmtree(self.path, ignore_errors=True)
+
+    def evaluations(self, upto: int) -> list[dict[str, Any]]:
+        """The run's ``evaluations.jsonl`` up to step ``upto``, rewritten without the rest.
+
+        The evaluations after the checkpoint a run continues from belong to the training it
+        repeats; they are dropped (and done again). A corrupt line is skipped with a warning
+        (:func:`agents.runs.read_jsonl`).
+        """
+        path = self.path / EVALUATIONS
+        history = [h for h in read_jsonl(path, is_evaluation) if h["timesteps"] <= upto]
+        write_jsonl(path, history)
+        return history
 
     def write_config(self, command: str, cfg: Any, resolved: dict[str, Any]) -> Path:
         """Write ``config.json``: the command, the options given and what they resolved to."""
@@ -220,6 +279,7 @@ def open_run(
     marker: str,
     report: Callable[[str], None] | None = print,
     backend: str | None = None,
+    fresh: bool = False,
 ) -> RunFolder:
     """The run folder of ``cfg``: a new one's path (not created), or the one ``--resume`` picks.
 
@@ -234,6 +294,8 @@ def open_run(
         marker: The checkpoint file a resumable folder holds (relative to it).
         report: Called with one line per removed temporary file (None: silent).
         backend: When given, a resumed folder must have been written by this backend.
+        fresh: Also resume a run without a checkpoint (killed before its first), which the
+            driver starts again from step 0 (:attr:`RunFolder.checkpointed` is False).
 
     Raises:
         ValueError: Nothing to resume, a folder in use, a run of another backend, options
@@ -243,16 +305,23 @@ def open_run(
     say = report or _silent
     if not cfg.run.resume:
         return RunFolder(new_run_dir(cfg.run.runs_root, cfg.run.run_dir, prefix), marker, stack)
-    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix, marker)
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix, marker, fresh)
     stack.enter_context(run_lock(run_dir))
-    saved = read_json(run_dir / "config.json", "run config")
+    config_path = run_dir / "config.json"
+    saved = read_json(config_path, "run config")
     resolved = saved.get("resolved") or {}
+    options = saved.get("config", {})
+    for key, value in (("resolved", resolved), ("config", options)):
+        if not isinstance(value, dict):
+            raise ValueError(
+                f"run config {config_path} is corrupt: {key} must be a JSON object, got "
+                f"{value!r:.80}"
+            )
     if backend is not None and resolved.get("backend", "sb3") != backend:
         raise ValueError(
             f"cannot resume {run_dir} with --backend {backend}: it is not an "
             f"{'RLlib' if backend == 'rllib' else backend} run"
         )
-    options = saved.get("config", {})
     check_resumable(options, config_dict(cfg), run_dir)
     for stale in remove_stale_temp_files(run_dir):
         say(f"removed a temporary file left by an interrupted write: {stale}")

@@ -15,9 +15,11 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 import time
 import typing
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -219,12 +221,17 @@ def latest_run(runs_root: Path, prefix: str, marker: str | None = None) -> Path 
     return found[-1] if found else None
 
 
-def resume_dir(runs_root: Path, run_dir: Path | None, prefix: str, marker: str) -> Path:
+def resume_dir(
+    runs_root: Path, run_dir: Path | None, prefix: str, marker: str, fresh: bool = False
+) -> Path:
     """The run folder ``--resume`` continues: ``run_dir`` or the latest ``<prefix>-*`` one.
 
-    Only a folder holding a checkpoint (``marker``, relative to the folder) and a config.json
-    can be resumed; folders without one (a launch that failed or was killed before its first
-    checkpoint) are skipped.
+    A folder holding a checkpoint (``marker``, relative to the folder) and a config.json can be
+    resumed; folders without a checkpoint (a launch that failed or was killed before its first
+    checkpoint) are skipped in the search for the latest one. With ``fresh``, a run killed
+    before its first checkpoint (a config.json and no ``marker``) is returned too, when
+    ``run_dir`` names it or no folder of ``prefix`` holds a checkpoint: its driver starts it
+    again from step 0.
 
     Raises:
         ValueError: Nothing to resume (naming the folders looked at).
@@ -235,13 +242,15 @@ def resume_dir(runs_root: Path, run_dir: Path | None, prefix: str, marker: str) 
             raise ValueError(f"nothing to resume: run folder {path} (--run-dir) does not exist")
     else:
         path = latest_run(runs_root, prefix, marker)
+        if path is None and fresh:
+            path = latest_run(runs_root, prefix, "config.json")
         if path is None:
             skipped = latest_run(runs_root, prefix)
             raise ValueError(
                 f"nothing to resume: no run folder {Path(runs_root) / prefix}-* holds a checkpoint"
                 f" ({marker})" + (f"; {skipped} has none" if skipped is not None else "")
             )
-    for name in ("config.json", marker):
+    for name in ("config.json", marker)[: 1 if fresh else 2]:
         if not (path / name).is_file():
             raise ValueError(f"nothing to resume in {path}: it has no {name}")
     return path
@@ -263,15 +272,66 @@ def new_run_dir(runs_root: Path, run_dir: Path | None, prefix: str) -> Path:
     return path
 
 
+LOCK = ".lock"
+# What run_lock writes into the lock file: the PID of its holder (empty while it writes it).
+_LOCK_CONTENT = re.compile(rb"^\d{0,20}\n?$")
+
+
+def _open_lock(lock_path: Path) -> int:
+    """A descriptor of ``lock_path``, created here or a plain lock file an earlier run left.
+
+    The file is never followed through a symlink (``O_NOFOLLOW``) and an existing one is used
+    only when it is a regular file with one link holding nothing but a PID: no other file is
+    ever written or truncated through it.
+
+    Raises:
+        ValueError: For a ``.lock`` that is a symlink, not a regular file, has other links or
+            holds anything but a PID (naming it and how to clear it).
+    """
+    flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    try:
+        return os.open(lock_path, flags | os.O_CREAT | os.O_EXCL, 0o666)
+    except FileExistsError:
+        pass
+
+    def refuse(why: str) -> ValueError:
+        return ValueError(
+            f"run folder lock {lock_path} is not a lock file written by train.py ({why}); it was "
+            "not opened: remove it if no run is training in this folder"
+        )
+
+    try:
+        fd = os.open(lock_path, flags)
+    except OSError as exc:
+        why = "a symlink" if Path(lock_path).is_symlink() else exc.strerror or str(exc)
+        raise refuse(why) from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise refuse("not a regular file")
+        if info.st_nlink != 1:
+            raise refuse(f"a file with {info.st_nlink} hard links")
+        if not _LOCK_CONTENT.match(os.pread(fd, 64, 0)):
+            raise refuse("it holds something other than a PID")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
 @contextmanager
 def run_lock(run_dir: Path) -> Iterator[Path]:
     """Hold an exclusive lock on ``run_dir/.lock`` (released when the process ends, too).
 
+    The lock file is created without following symlinks; one left by an earlier run (a dead
+    process holds no lock) is reused only when it is a plain lock file (:func:`_open_lock`).
+
     Raises:
-        ValueError: When another process holds it (is training in this folder).
+        ValueError: When another process holds it (is training in this folder), or for a
+            ``.lock`` that is not a plain lock file.
     """
-    lock_path = Path(run_dir) / ".lock"
-    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+    lock_path = Path(run_dir) / LOCK
+    fd = _open_lock(lock_path)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -313,11 +373,49 @@ def remove_stale_temp_files(run_dir: Path) -> list[Path]:
     return stale
 
 
-def read_jsonl(path: Path) -> list[dict[str, Any]]:
-    """The records of a JSON-lines file ([] if missing)."""
-    if not Path(path).is_file():
+class CorruptLogLine(UserWarning):
+    """A line of a JSON-lines log that is not a valid record; it was skipped."""
+
+
+def read_jsonl(
+    path: Path, valid: Callable[[dict[str, Any]], bool] | None = None
+) -> list[dict[str, Any]]:
+    """The records of a JSON-lines log ([] if missing), skipping the lines that are not records.
+
+    A log is not a run's state: a truncated or corrupt line (a kill mid-write, a bad edit)
+    is skipped with a :class:`CorruptLogLine` warning naming the file and the line, and the
+    other records are kept.
+
+    Args:
+        path: The ``.jsonl`` file.
+        valid: A record's check (a line that parses to a JSON object is a record when it
+            returns True); None: every object.
+
+    Raises:
+        ValueError: When the file exists but cannot be read (naming it).
+    """
+    path = Path(path)
+    if not path.is_file():
         return []
-    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+    try:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as exc:
+        raise ValueError(f"log {path} cannot be read: {exc.strerror or exc}") from None
+    records = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except ValueError as exc:
+            reason = f"not JSON ({exc})"
+        else:
+            if isinstance(record, dict) and (valid is None or valid(record)):
+                records.append(record)
+                continue
+            reason = "not a valid record"
+        warnings.warn(f"skipped line {number} of {path}: {reason}", CorruptLogLine, stacklevel=2)
+    return records
 
 
 def write_jsonl(path: Path, records: Iterable[dict[str, Any]]) -> Path:

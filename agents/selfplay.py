@@ -473,7 +473,9 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         # change between versions), as the attacker and defender drivers do
         saved = saved_env_kwargs(env_kwargs, run.saved_resolved, say)
         if algo != EXACT:  # and its learners train with the run's own hyperparameters
-            hp = saved_hyperparameters(algo, setup.hp, run.saved_resolved, say)
+            hp = saved_hyperparameters(
+                algo, setup.hp, run.saved_resolved, say, run_dir / "config.json"
+            )
             if hp != setup.hp:
                 kwargs, hyperparameters, torch_config = _learner_options(cfg, algo, hp)
         if saved != env_kwargs:

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +41,16 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
-from agents.checkpoint import inside, load_tensors, read_json, save_pair, tensor_file
+from agents.checkpoint import (
+    MAX_COUNT,
+    check_count,
+    check_seconds,
+    inside,
+    load_tensors,
+    read_json,
+    save_pair,
+    tensor_file,
+)
 from agents.options import check_int, check_real
 
 ALGO = "torch-ppo"
@@ -294,7 +303,7 @@ class ActorCritic(nn.Module):
         """The log-probability log π(action | x) and the entropy of π(· | x), each (N,)."""
         a, b = self.distribution(x, mask)
         if self.box:
-            dist = torch.distributions.Normal(a, b)
+            dist = torch.distributions.Normal(a, b, validate_args=False)  # NaN: Diverged
             return dist.log_prob(action).sum(-1), dist.entropy().sum(-1)
         logp_all = torch.log_softmax(a, -1)
         probs = logp_all.exp()
@@ -497,6 +506,8 @@ def train_torch_ppo(
         ValueError: For an env that is not a torch vector env in SAME_STEP mode, or whose B
             differs from ``config.num_envs``, a bad ``checkpoint_freq``, or a ``resume`` state
             that does not fit the network.
+        agents.interrupt.Diverged: When an iteration's loss, gradient or weights are not
+            finite (before its evaluation and checkpoint: the last checkpoint is a good one).
     """
     if getattr(env, "backend", None) != "torch":
         raise ValueError("env must be a torch vector env (make_torch_env / backend='torch')")
@@ -515,6 +526,13 @@ def train_torch_ppo(
         hidden=tuple(config.hidden),
         init_log_std=config.init_log_std,
     )
+    if resume is not None:
+        if resume.timesteps != resume.iteration * B * T:
+            raise ValueError(
+                f"resume state: {resume.timesteps} env steps after {resume.iteration} iterations "
+                f"of {B} x {T}: it is not a state of this config"
+            )
+        check_shapes(spec, resume.model, "resume state does not fit this network and config")
     model = ActorCritic(spec).to(device)
     if config.stop_prob is not None and resume is None:
         if spec.kind != "discrete" or spec.n < 2:
@@ -616,6 +634,7 @@ def train_torch_ppo(
         b_logp, b_adv, b_ret = logp_buf.reshape(-1), adv.reshape(-1), returns.reshape(-1)
         b_mask = mask_buf.reshape(B * T, spec.n) if masked else None
         mb = B * T // config.num_minibatches
+        first_bad = torch.zeros((), device=device, dtype=torch.int8)  # 1 loss, 2 gradient
         for _ in range(config.update_epochs):
             order = torch.randperm(B * T, generator=gen, device=device)
             for k in range(config.num_minibatches):
@@ -634,8 +653,11 @@ def train_torch_ppo(
                 loss = pg_loss - config.ent_coef * entropy.mean() + config.vf_coef * v_loss
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
+                norm = nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
+                now = torch.where(~torch.isfinite(loss.detach()), 1, 2 * ~torch.isfinite(norm))
+                first_bad = torch.where(first_bad == 0, now.to(first_bad.dtype), first_bad)
                 optimizer.step()
+        _check_finite(model, first_bad, timesteps)
 
         n_ended = float(ended_n)  # one host sync per iteration
         record = {
@@ -660,6 +682,28 @@ def train_torch_ppo(
             break
     seconds = time.perf_counter() - start
     return TorchPPOResult(TorchPolicy(model, seed), timesteps, seconds, history, interrupted)
+
+
+def _check_finite(model: ActorCritic, first_bad: torch.Tensor, timesteps: int) -> None:
+    """Raise :class:`~agents.interrupt.Diverged` after an iteration that went non-finite.
+
+    ``first_bad`` is the iteration's flag on the device (0: fine; 1: a loss, 2: a gradient
+    was the first non-finite value); the weights and observation statistics are checked too,
+    in one host sync.
+
+    Raises:
+        Diverged: Naming the first of the loss, the gradient or a tensor that is not finite.
+    """
+    from agents.interrupt import Diverged
+
+    state = [(k, v) for k, v in model.state_dict().items() if v.is_floating_point()]
+    bad = [(~torch.isfinite(v).all()).long() for _, v in state]
+    flags = torch.stack([first_bad.long(), *bad])
+    first, *tensors = flags.cpu().tolist()
+    if first:
+        raise Diverged("the loss" if first == 1 else "the gradient", timesteps)
+    if any(tensors):
+        raise Diverged(f"the network's {state[tensors.index(True)][0]}", timesteps)
 
 
 def _resume_seed(seed: int, iteration: int) -> int:
@@ -775,23 +819,74 @@ def load_policy(path: Path, root: Path, device: str = "cpu", seed: int = 0) -> T
     meta = read_json(path, "model description")
     if meta.get("format") != FORMAT:
         raise ValueError(f"model description {path}: format {meta.get('format')!r}, not {FORMAT}")
+    check_count(meta.get("num_timesteps", 0), "num_timesteps", path)
+    config = meta.get("hyperparameters")
+    if config is not None:
+        known = {f.name for f in fields(TorchPPOConfig)}
+        unknown = (
+            sorted(str(k) for k in config)
+            if not isinstance(config, dict)
+            else sorted(str(k) for k in config if k not in known)
+        )
+        try:
+            if unknown:
+                raise ValueError(f"unknown key(s) {', '.join(unknown)}; known: {', '.join(known)}")
+            TorchPPOConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in config.items()})
+        except (TypeError, ValueError, AttributeError) as exc:
+            raise ValueError(f"model description {path}: bad hyperparameters ({exc})") from None
+    spec = _spec_of(meta.get("spec"), path)
     tensors = tensor_file(meta, path, root)
-    try:
-        raw = dict(meta["spec"])
-        for key in ("hidden", "low", "high"):
-            raw[key] = tuple(raw.get(key, ()))
-        spec = PolicySpec(**raw)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"model description {path}: bad network spec ({exc})") from None
     payload = load_tensors(tensors, device)
+    state = payload["state_dicts"].get("policy")
+    check_shapes(spec, state, f"tensor file {tensors} does not hold the network {path} describes")
     model = ActorCritic(spec).to(device)
     try:
-        model.load_state_dict(payload["state_dicts"]["policy"], strict=True)
-    except (KeyError, RuntimeError) as exc:
+        model.load_state_dict(state, strict=True)
+    except (KeyError, RuntimeError, TypeError) as exc:
         raise ValueError(
             f"checkpoint {tensors} does not fit the network of {path}: {exc}"
         ) from None
     return TorchPolicy(model, seed)
+
+
+def _spec_of(raw: Any, path: Path) -> PolicySpec:
+    """The :class:`PolicySpec` a model description holds, checked (naming ``path``)."""
+    try:
+        if not isinstance(raw, dict):
+            raise TypeError(f"expected a JSON object, got {raw!r:.80}")
+        raw = dict(raw)
+        for key in ("hidden", "low", "high"):
+            value = raw.get(key, ())
+            if not isinstance(value, list | tuple):
+                raise TypeError(f"{key} must be a list, got {value!r:.80}")
+            raw[key] = tuple(value)
+        spec = PolicySpec(**raw)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"model description {path}: bad network spec ({exc})") from None
+    if not isinstance(spec.init_log_std, int | float) or isinstance(spec.init_log_std, bool):
+        raise ValueError(f"model description {path}: bad network spec (init_log_std)")
+    return spec
+
+
+def check_shapes(spec: PolicySpec, state: Any, refusal: str) -> None:
+    """Raise unless ``state`` holds exactly the tensors of ``spec``'s network, by name and shape.
+
+    The network is laid out on torch's ``meta`` device (no memory), so a description asking
+    for a network far larger than its tensor file is refused before anything is allocated.
+
+    Raises:
+        ValueError: ``refusal`` (naming the files), and the first tensor that differs.
+    """
+    with torch.device("meta"):
+        wanted = {k: tuple(v.shape) for k, v in ActorCritic(spec).state_dict().items()}
+    if not isinstance(state, dict):
+        raise ValueError(f"{refusal}: it holds no policy state dict")
+    got = {k: tuple(v.shape) if isinstance(v, torch.Tensor) else None for k, v in state.items()}
+    if got != wanted:
+        name = sorted(k for k in wanted.keys() | got.keys() if wanted.get(k) != got.get(k))[0]
+        raise ValueError(
+            f"{refusal}: {name} has shape {got.get(name)}, the network needs {wanted.get(name)}"
+        )
 
 
 STATE_FORMAT = "fdia_env-torch-ppo-state-v1"
@@ -838,21 +933,31 @@ def load_training_state(path: Path, root: Path) -> TrainingState:
     if meta.get("format") != STATE_FORMAT:
         fmt = meta.get("format")
         raise ValueError(f"training state {path}: format {fmt!r}, not {STATE_FORMAT}")
+    iteration = check_count(meta.get("iteration"), "iteration", path)
+    timesteps = check_count(meta.get("timesteps"), "timesteps", path, MAX_COUNT)
+    seconds = check_seconds(meta.get("seconds"), "seconds", path)
+    history = meta.get("history", [])
+    if not isinstance(history, list) or not all(isinstance(h, dict) for h in history):
+        raise ValueError(f"{path} is corrupt: history must be a list of JSON objects")
     tensors = tensor_file(meta, path, root)
     payload = load_tensors(tensors, "cpu")
     try:
-        return TrainingState(
-            iteration=int(meta["iteration"]),
-            timesteps=int(meta["timesteps"]),
-            seconds=float(meta["seconds"]),
+        state = TrainingState(
+            iteration=iteration,
+            timesteps=timesteps,
+            seconds=seconds,
             model=payload["state_dicts"]["policy"],
             optimizer=payload["state_dicts"]["optimizer"],
             generator=payload["variables"]["generator"],
             ret_stats=payload["variables"]["ret_stats"],
-            history=list(meta.get("history", [])),
+            history=list(history),
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"training state {path} is incomplete ({exc})") from None
+    for name in ("generator", "ret_stats"):
+        if not isinstance(getattr(state, name), torch.Tensor):
+            raise ValueError(f"training state {tensors}: {name} is not a tensor")
+    return state
 
 
 def _jsonable(d: dict[str, Any]) -> dict[str, Any]:

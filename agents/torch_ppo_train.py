@@ -34,8 +34,9 @@ from agents.config import (
     resolved_hyperparameters,
 )
 from agents.evaluate import evaluate
-from agents.lifecycle import RunResult, open_run
-from agents.runs import read_jsonl, write_jsonl
+from agents.interrupt import Diverged
+from agents.lifecycle import EVALUATIONS, RunResult, open_run
+from agents.runs import write_jsonl
 from agents.seeding import derived_seed, seed_everything
 from agents.torch_ppo import (
     TorchPolicy,
@@ -135,12 +136,25 @@ def train_torch_ppo_run(
     torch_ppo_config(cfg, setup.hp)  # checked before the run folder exists
 
     with ExitStack() as stack:
-        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report)
+        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report, fresh=True)
         # a resume continues with the env options and hyperparameters its run was resolved with
-        setup = as_saved(setup, run.saved_resolved, cfg.num_envs, report or (lambda _: None))
+        say = report or (lambda _: None)
+        setup = as_saved(setup, run.saved_resolved, cfg.num_envs, say, run.path / "config.json")
         env_kwargs = setup.env_kwargs
         config, hyperparameters = torch_ppo_config(cfg, setup.hp)
         check_env_kwargs(entry.gym_id, env_kwargs)
+        resume: TrainingState | None = None
+        if run.resumed and not run.checkpointed:
+            say(run.restart_note())
+        if run.checkpointed:  # checked before any env is built
+            resume = load_training_state(run.path / CHECKPOINT, run.path)
+            run.check_not_shorter("total_timesteps", cfg.total_timesteps, resume.timesteps)
+            if resume.timesteps != resume.iteration * config.batch_size:
+                raise ValueError(
+                    f"training state {run.path / CHECKPOINT}: {resume.timesteps} env steps after "
+                    f"{resume.iteration} iterations of {config.num_envs} x {config.num_steps}: "
+                    "it is not a state of this run's config"
+                )
         try:
             eval_env = gym.make(entry.gym_id, **env_kwargs)
             venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
@@ -151,10 +165,6 @@ def train_torch_ppo_run(
         stack.callback(eval_env.close)
         stack.callback(venv.close)
         reference = entry.reference_of(eval_env)
-        resume: TrainingState | None = None
-        if run.resumed:
-            resume = load_training_state(run.path / CHECKPOINT, run.path)
-            run.check_not_shorter("total_timesteps", cfg.total_timesteps, resume.timesteps)
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         run_dir = run.begin()
         run.write_config(
@@ -172,12 +182,9 @@ def train_torch_ppo_run(
             },
         )
         stop = run.watch_signals()
-        history_path = run_dir / "evaluations.jsonl"
-        history: list[dict[str, Any]] = []
+        history_path = run_dir / EVALUATIONS
         done = 0 if resume is None else resume.timesteps
-        if resume is not None:
-            history = [h for h in read_jsonl(history_path) if h["timesteps"] <= done]
-            write_jsonl(history_path, history)
+        history: list[dict[str, Any]] = run.evaluations(done) if run.resumed else []
         eval_seed = derived_seed(cfg.run.seed, 10_000)
         state = {"next": (done // cfg.eval_freq + 1) * cfg.eval_freq if cfg.eval_freq else 0}
 
@@ -189,16 +196,19 @@ def train_torch_ppo_run(
             history.append(history_record(ev, record["timesteps"], record["seconds"]))
             write_jsonl(history_path, history)
 
-        result = train_torch_ppo(
-            venv,
-            config,
-            seed=cfg.run.seed,
-            stop=lambda: stop.requested,
-            log=on_iteration,
-            resume=resume,
-            checkpoint=lambda st: save_training_state(st, run_dir / CHECKPOINT),
-            checkpoint_freq=cfg.checkpoint_freq,
-        )
+        try:
+            result = train_torch_ppo(
+                venv,
+                config,
+                seed=cfg.run.seed,
+                stop=lambda: stop.requested,
+                log=on_iteration,
+                resume=resume,
+                checkpoint=lambda st: save_training_state(st, run_dir / CHECKPOINT),
+                checkpoint_freq=cfg.checkpoint_freq,
+            )
+        except Diverged as exc:
+            raise run.diverged(exc) from None
         save_policy(result.policy, run_dir / "model.json", config, result.timesteps)
 
         final_seed = derived_seed(cfg.run.seed, 20_000)

@@ -29,6 +29,7 @@ import importlib
 import inspect
 import json
 import math
+import numbers
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -38,6 +39,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
@@ -48,6 +50,9 @@ from agents.algos import build_model
 from agents.checkpoint import (
     STAGED,
     UntrustedCheckpointError,
+    check_count,
+    check_seconds,
+    hyperparameters_from,
     inside,
     load_model,
     load_replay_buffer,
@@ -71,11 +76,11 @@ from agents.config import (
     with_defaults,
 )
 from agents.evaluate import Evaluation, evaluate
-from agents.interrupt import StopTrainingCallback
-from agents.lifecycle import RunFolder, open_run, run_name, tensorboard
+from agents.interrupt import Diverged, StopTrainingCallback
+from agents.lifecycle import EVALUATIONS, RunFolder, open_run, run_name, tensorboard
 from agents.plots import learning_curve
 from agents.registry import Reference, Trainable, get
-from agents.runs import read_jsonl, run_prefix, write_json, write_jsonl
+from agents.runs import run_prefix, write_json, write_jsonl
 from agents.seeding import derived_seed, seed_everything
 
 __all__ = [
@@ -247,11 +252,8 @@ def read_checkpoint_state(folder: Path, root: Path, trusted: bool = False) -> Ch
     """
     state_path = Path(folder) / "state.json"
     state = read_json(state_path, "checkpoint state")
-    steps, seconds = state.get("timesteps"), state.get("train_seconds")
-    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
-        raise ValueError(f"checkpoint state {state_path} is corrupt: timesteps {steps!r}")
-    if isinstance(seconds, bool) or not isinstance(seconds, int | float) or seconds < 0:
-        raise ValueError(f"checkpoint state {state_path} is corrupt: train_seconds {seconds!r}")
+    steps = check_count(state.get("timesteps"), "timesteps", state_path)
+    seconds = check_seconds(state.get("train_seconds"), "train_seconds", state_path)
     files = {}
     for key, unsafe in (("model", ".zip"), ("replay_buffer", ".pkl")):
         name = state.get(key)
@@ -312,13 +314,29 @@ def best_model_file(run_dir: Path, trusted: bool = False) -> Path | None:
     best_path = Path(run_dir) / "best.json"
     if not best_path.is_file():
         return None
-    record = read_json(best_path, "best-model record")
+    record = read_best(best_path)
     path = inside(run_dir, record.get("model", "best_model.zip"), run_dir, "best model file")
     if not path.is_file():
         raise ValueError(f"best model file {path}, named by {best_path}, does not exist")
     if path.suffix == ".zip":
         require_trusted(path, trusted)
     return path
+
+
+def read_best(path: Path) -> dict[str, Any]:
+    """The ``best.json`` record at ``path``: its step, score and the score's name, checked.
+
+    Raises:
+        ValueError: For a corrupt record (naming ``path`` and the key).
+    """
+    record = read_json(path, "best-model record")
+    check_count(record.get("timesteps"), "timesteps", path)
+    score, name = record.get("score"), record.get("score_name")
+    if isinstance(score, bool) or not isinstance(score, int | float) or not math.isfinite(score):
+        raise ValueError(f"{path} is corrupt: score must be a finite number, got {score!r:.80}")
+    if not isinstance(name, str):
+        raise ValueError(f"{path} is corrupt: score_name must be a string, got {name!r:.80}")
+    return record
 
 
 class CheckpointCallback(BaseCallback):
@@ -342,6 +360,46 @@ class CheckpointCallback(BaseCallback):
             self.save(self.model, self.clock())
             self.next_at = (self.model.num_timesteps // self.every + 1) * self.every
         return True
+
+
+class DivergenceCallback(BaseCallback):
+    """Raises :class:`~agents.interrupt.Diverged` once training goes non-finite.
+
+    After every update (at the start of the next rollout, and when training ends) the losses
+    SB3 logged (``train/*loss``), the gradients and the parameters of the policy are checked,
+    before any later callback evaluates or checkpoints the weights.
+    """
+
+    def _on_rollout_start(self) -> None:
+        self.check()
+
+    def _on_training_end(self) -> None:
+        self.check()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def check(self) -> None:
+        """Raise :class:`~agents.interrupt.Diverged` naming the first non-finite value.
+
+        Raises:
+            Diverged: With the step (``num_timesteps``).
+        """
+        for key, value in self.logger.name_to_value.items():
+            if (
+                key.startswith("train/")
+                and key.endswith("loss")
+                and isinstance(value, numbers.Real)
+                and not math.isfinite(value)
+            ):
+                raise Diverged(f"the loss ({key})", self.model.num_timesteps)
+        named = list(self.model.policy.named_parameters())
+        grads = [(k, p.grad) for k, p in named if p.grad is not None]
+        for kind, tensors in (("the gradient of", grads), ("the parameter", named)):
+            flags = [bool(torch.isfinite(t).all()) for _, t in tensors]
+            if not all(flags):
+                name = tensors[flags.index(False)][0]
+                raise Diverged(f"{kind} {name}", self.model.num_timesteps)
 
 
 def improves(score: float | None, score_name: str, best: dict[str, Any] | None) -> bool:
@@ -382,7 +440,7 @@ class ScoreCallback(BaseCallback):
         self.save_best = save_best
         self.next_at = 0
         best_path = history_path.parent / "best.json"
-        self.best = read_json(best_path, "best-model record") if best_path.is_file() else None
+        self.best = read_best(best_path) if best_path.is_file() else None
 
     def _on_training_start(self) -> None:
         self.next_at = (self.model.num_timesteps // self.every + 1) * self.every
@@ -531,6 +589,7 @@ def as_saved(
     resolved: dict[str, Any],
     num_envs: int | None,
     say: Callable[[str], None],
+    config_path: Path = Path("config.json"),
 ) -> RunSetup:
     """``setup`` with the env options, members and hyperparameters a resumed run was saved with.
 
@@ -545,36 +604,61 @@ def as_saved(
         resolved: The run's saved ``resolved`` entry ({}: a new run, ``setup`` unchanged).
         num_envs: ``--num-envs`` (the members of a run saved before ``resolved`` named them).
         say: Reports the options kept.
+        config_path: The run's config.json (named in errors).
+
+    Raises:
+        ValueError: For a ``resolved`` entry that is corrupt (naming ``config_path``).
     """
     if not resolved:
         return setup
     env_kwargs = saved_env_kwargs(setup.env_kwargs, resolved, say)
+    if not isinstance(env_kwargs, dict) or not isinstance(env_kwargs.get("scenario"), str):
+        raise ValueError(
+            f"run config {config_path} is corrupt: resolved.env_kwargs must be a JSON object "
+            f"naming the scenario, got {env_kwargs!r:.80}"
+        )
     members = setup.num_envs
     if setup.algo != TORCH_PPO:  # torch-ppo's members are its own (--num-envs, checked)
         members = resolved.get("num_envs", num_envs)
+        if members is not None and (
+            isinstance(members, bool) or not isinstance(members, int) or members < 1
+        ):
+            raise ValueError(
+                f"run config {config_path} is corrupt: resolved.num_envs must be an integer "
+                f">= 1 or null, got {members!r:.80}"
+            )
         if members != setup.num_envs:
             say_kept(say, "native vector env members", members, setup.num_envs)
-    hp = saved_hyperparameters(setup.algo, setup.hp, resolved, say)
+    hp = saved_hyperparameters(setup.algo, setup.hp, resolved, say, config_path)
     return replace(setup, env_kwargs=env_kwargs, num_envs=members, hp=hp)
 
 
 def saved_hyperparameters(
-    algo: str, hp: Hyperparameters, resolved: dict[str, Any], say: Callable[[str], None]
+    algo: str,
+    hp: Hyperparameters,
+    resolved: dict[str, Any],
+    say: Callable[[str], None],
+    config_path: Path = Path("config.json"),
 ) -> Hyperparameters:
     """The hyperparameters a resumed run was saved with, where they differ from ``hp``'s.
 
     ``resolved`` is the run's saved ``resolved`` entry ({} for a new run: ``hp`` unchanged);
     ``say`` gets one line naming the hyperparameters kept and today's defaults. Every driver
     that resumes from ``train.py``'s scenario table (attacker, defender, game) keeps them so.
+
+    Raises:
+        ValueError: For saved hyperparameters that are not valid (naming ``config_path``, the
+            run's config.json, and the key).
     """
     saved = resolved.get("hyperparameters")
     today = json.loads(json.dumps(resolved_hyperparameters(algo, hp)))
-    if not isinstance(saved, dict) or saved == today:
+    if saved is None or saved == today:
         return hp
+    kept = hyperparameters_from(saved, config_path, "resolved.hyperparameters")
     changed = sorted(k for k in saved.keys() | today.keys() if saved.get(k) != today.get(k))
     old, new = ({k: values.get(k) for k in changed} for values in (saved, today))
     say_kept(say, "hyperparameters", old, new)
-    return Hyperparameters(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
+    return kept
 
 
 def train_prefix(cfg: TrainConfig) -> str:
@@ -726,9 +810,11 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
     trusted = cfg.run.trust_checkpoint
 
     with ExitStack() as stack:
-        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say)
+        run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT_STATE, say, fresh=True)
         # a resume continues with the options its run was resolved with ({} for a new run)
-        setup = as_saved(setup_of(cfg), run.saved_resolved, cfg.num_envs, say)
+        setup = as_saved(
+            setup_of(cfg), run.saved_resolved, cfg.num_envs, say, run.path / "config.json"
+        )
         entry, algo, env_kwargs = setup.entry, setup.algo, setup.env_kwargs
         kwargs = algo_kwargs(algo, setup.hp)
         hyperparameters = resolved_hyperparameters(algo, setup.hp)
@@ -738,7 +824,11 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
         checkpoint: CheckpointState | None = None
-        if run.resumed:
+        if run.resumed and not run.checkpointed:
+            say(run.restart_note())
+            for name in ("best.json", "best_model.json", "best_model.pt"):  # of the lost part
+                (run.path / name).unlink(missing_ok=True)
+        if run.checkpointed:
             checkpoint = read_checkpoint_state(run.path / "checkpoints", run.path, trusted)
             run.check_not_shorter("total_timesteps", cfg.total_timesteps, checkpoint.timesteps)
             best_model_file(run.path, trusted)  # refuse an unsafe one now, not after training
@@ -788,7 +878,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
         model.set_logger(
             tensorboard(
                 run.path / "tb",
-                model.num_timesteps + 1 if checkpoint else None,
+                model.num_timesteps + 1 if checkpoint else 0 if run.resumed else None,
                 cfg.run.verbose > 0,
             )
         )
@@ -815,9 +905,8 @@ def _train_and_score(
     """Learn (until done or stopped), write the final checkpoint, model and scores."""
     run_dir, resumed, stop = run.path, run.resumed, run.stop
     ckpt_dir = run_dir / "checkpoints"
-    history_path = run_dir / "evaluations.jsonl"
-    history = [h for h in read_jsonl(history_path) if h["timesteps"] <= model.num_timesteps]
-    write_jsonl(history_path, history)
+    history_path = run_dir / EVALUATIONS
+    history = run.evaluations(model.num_timesteps)
     start = time.perf_counter()
 
     def clock() -> float:
@@ -829,9 +918,9 @@ def _train_and_score(
     def save_best(m: BaseAlgorithm) -> Path:
         return save_model(m, run_dir / "best_model.json", algo, hyperparameters)
 
-    callbacks: list[BaseCallback] = [StopTrainingCallback(stop)]
-    if cfg.checkpoint_freq:
-        callbacks.append(CheckpointCallback(cfg.checkpoint_freq, clock, checkpoint))
+    # an evaluation is written before the checkpoint of its step: a kill between the two
+    # leaves the earlier checkpoint, from which the resumed run evaluates that step again
+    callbacks: list[BaseCallback] = [StopTrainingCallback(stop), DivergenceCallback()]
     if cfg.eval_freq:
         callbacks.append(
             ScoreCallback(
@@ -846,14 +935,19 @@ def _train_and_score(
                 save_best,
             )
         )
+    if cfg.checkpoint_freq:
+        callbacks.append(CheckpointCallback(cfg.checkpoint_freq, clock, checkpoint))
     remaining = cfg.total_timesteps - model.num_timesteps
     if remaining > 0 and not stop.requested:
-        model.learn(
-            remaining,
-            callback=callbacks,
-            reset_num_timesteps=not resumed,
-            progress_bar=cfg.run.progress_bar,
-        )
+        try:
+            model.learn(
+                remaining,
+                callback=callbacks,
+                reset_num_timesteps=not run.checkpointed,
+                progress_bar=cfg.run.progress_bar,
+            )
+        except Diverged as exc:
+            raise run.diverged(exc) from None
     train_seconds = clock()
     checkpoint(model, train_seconds)
     save_model(model, run_dir / "model.json", algo, hyperparameters)
@@ -865,7 +959,7 @@ def _train_and_score(
     learned = evaluations[f"learned ({algo})"]
     best_file = best_model_file(run_dir, cfg.run.trust_checkpoint)
     if best_file is not None:
-        best = read_json(run_dir / "best.json", "best-model record")
+        best = read_best(run_dir / "best.json")
         if best["timesteps"] != model.num_timesteps and improves(
             best["score"], best["score_name"], {"score": learned.score}
         ):
