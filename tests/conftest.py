@@ -164,7 +164,7 @@ def command_output(command: str, cwd: os.PathLike | str, timeout: float = 600) -
     the checkout's root first on ``PYTHONPATH``, one BLAS thread, in ``cwd`` (where a run
     folder it writes goes). A nonzero exit status fails with the end of its stderr.
     """
-    args = shlex.split(command)
+    args = shlex.split(command.replace("\\\n", " "))  # a line continued with a backslash
     if args[0] != "python":
         raise ValueError(f"command must start with 'python', got {command!r}")
     root = Path(__file__).resolve().parent.parent

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from conftest import command_output, printed_by
 
-from fdia_env.registration import ENVS
+from fdia_env.registration import ENVS, GYM_IDS
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -43,6 +43,10 @@ def test_the_landing_page_has_a_picture_and_the_way_in():
     assert (DOCS / figure).stat().st_size > 10_000
     assert "getting_started" in page and "environments/gallery.md" in page
     assert "make demo" not in page.split("```{toctree}")[0]  # a command cut off at the edge
+    words = {9: "nine", 12: "twelve"}
+    assert (
+        f"the {words[len(ENVS)]} PettingZoo modules and {words[len(GYM_IDS)]} Gymnasium ids" in page
+    )
 
 
 def test_the_getting_started_page_takes_four_steps_in_order():
@@ -66,6 +70,7 @@ def test_the_getting_started_commands_print_what_the_page_shows(tmp_path):
     assert [c.split()[1] for c, _ in commands] == ["train.py", "-m"]
     for command, shown in commands:
         printed = command_output(command.strip(), tmp_path)
+        assert max(len(line) for line in command.splitlines()) <= 90  # fits the page's width
         assert _timing_free(printed.strip("\n")) == _timing_free(shown.strip("\n")), command
     assert (tmp_path / "runs" / "first" / "config.json").is_file()
 
