@@ -117,8 +117,9 @@ class Instance:
 
     def make_env(self) -> _ScaledReward:
         """The training env: sequential format, rewards in units of ``unattacked``."""
-        # pinned to v0 (the README's figures were made there; its sequential format's order
-        # is the time-major one), built like a benchmark task's pinned env: no out-of-date notice
+        # pinned to v0 (docs/results/training_runs.md's figures were made there; its sequential
+        # format's order is the time-major one), built like a benchmark task's pinned env: no
+        # out-of-date notice
         kwargs = {"budget": self.budget, "horizon": self.horizon, "action": "sequential"}
         env = make_pinned(ENV_ID, None, {"scenario": self.scenario, **kwargs})
         return _ScaledReward(env, self.unattacked)

@@ -233,7 +233,7 @@ def _solved_game(
 
     A grid preset's game (596 × 595 on grid-ieee14) takes seconds to build and solve, and a
     run asks for it for every view it scores; a game whose matrix the benchmark stores
-    (:func:`fdia_env.tasks.payoffs.stored_payoff`: IEEE 118, 14 minutes to build) is read.
+    (:func:`fdia_env.tasks.payoffs.stored_payoff`: IEEE 118, minutes to build) is read.
     Keyed by the scenario object (presets are built once per process), which the cache holds
     so its id is not reused.
     """

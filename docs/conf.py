@@ -13,6 +13,7 @@ import fdia_env  # noqa: E402
 
 project = "fdia_env"
 author = "fdia_env developers"
+copyright = "the fdia_env developers (MIT license)"  # the footer: "Copyright © ..."
 release = fdia_env.__version__
 extensions = [
     "myst_parser",

@@ -1,8 +1,9 @@
 """Screenshots of the built site in headless Chromium, checked to show content.
 
 Run after ``make docs``: ``python docs/screenshot.py [--out docs/_build/screenshots]``. Takes the
-index and the ``sparse_attack_v0`` page, and fails unless each picture has enough non-background
-pixels to be a rendered page (an empty or unstyled page fails). Needs Debian's ``chromium``.
+landing page, the getting-started page, the gallery and the ``sparse_attack_v0`` page, and fails
+unless each picture has enough non-background pixels to be a rendered page (an empty or unstyled
+page fails). Needs Debian's ``chromium``.
 """
 
 from __future__ import annotations
@@ -18,7 +19,12 @@ import numpy as np
 from matplotlib.image import imread
 
 HTML = Path(__file__).resolve().parent / "_build" / "html"
-PAGES = {"index": "index.html", "sparse_attack_v0": "environments/sparse_attack_v0.html"}
+PAGES = {
+    "index": "index.html",
+    "getting_started": "getting_started.html",
+    "gallery": "environments/gallery.html",
+    "sparse_attack_v0": "environments/sparse_attack_v0.html",
+}
 FLAGS = [
     "--headless",
     "--no-sandbox",

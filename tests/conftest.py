@@ -9,6 +9,11 @@ import contextlib
 import io
 import itertools
 import os
+import shlex
+import subprocess
+import sys
+import warnings
+from pathlib import Path
 
 import numpy as np
 from hypothesis import HealthCheck, Phase, settings
@@ -139,8 +144,41 @@ def attacker_return(env, policy, seed: int = 0) -> float:
 
 
 def printed_by(code: str, name: str) -> str:
-    """What a documented Python block prints when run (in a fresh namespace)."""
+    """What a documented Python block prints when run (in a fresh namespace).
+
+    Warnings are errors: a page's example that makes Gymnasium, PettingZoo or numpy warn (an
+    out-of-date env id, a deprecated call) fails.
+    """
     out = io.StringIO()
-    with contextlib.redirect_stdout(out):
+    with contextlib.redirect_stdout(out), warnings.catch_warnings():
+        warnings.simplefilter("error")
         exec(compile(code, name, "exec"), {})
     return out.getvalue()
+
+
+def command_output(command: str, cwd: os.PathLike | str, timeout: float = 600) -> str:
+    """What a documented shell command prints (stdout), run from the checkout's code.
+
+    ``command`` is one ``python ...`` line of a page (``python train.py ...``, ``python -m
+    agents.bench ...``): it runs with this interpreter and ``-W error`` (a warning fails it),
+    the checkout's root first on ``PYTHONPATH``, one BLAS thread, in ``cwd`` (where a run
+    folder it writes goes). A nonzero exit status fails with the end of its stderr.
+    """
+    args = shlex.split(command.replace("\\\n", " "))  # a line continued with a backslash
+    if args[0] != "python":
+        raise ValueError(f"command must start with 'python', got {command!r}")
+    root = Path(__file__).resolve().parent.parent
+    if len(args) > 1 and args[1].endswith(".py"):
+        args[1] = str(root / args[1])  # a script of the checkout (train.py)
+    path = os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH")) if p)
+    env = {**os.environ, "PYTHONPATH": path, "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run(
+        [sys.executable, "-W", "error", *args[1:]],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+    assert done.returncode == 0, f"{command} exited {done.returncode}:\n{done.stderr[-3000:]}"
+    return done.stdout

@@ -37,7 +37,7 @@ def test_a_failing_benchmark_is_reported_not_hidden(tmp_path, monkeypatch):
 
 def test_a_script_that_exits_1_keeps_all_its_figures(tmp_path, monkeypatch):
     # a script that exits 1 for a missed target (seq_throughput.py) and warns on stderr: every
-    # line it printed stays in the page (the README row is parsed from them), then its errors
+    # line it printed stays in the page (the summary row is parsed from them), then its errors
     (tmp_path / "benchmarks").mkdir()
     script = (
         "import sys\nfor i in range(30): print(f'figure {i}')\n"
@@ -70,18 +70,18 @@ def test_one_machine_line_for_the_whole_run(tmp_path, monkeypatch):
     assert text.count("machine:") == 1
 
 
-def test_the_readme_table_is_rebuilt_from_the_run(tmp_path):
+def test_the_summary_table_is_rebuilt_from_the_run(tmp_path):
     # every row comes from this run's output, with the reference's rate of the same run; a
     # rerun replaces the table, so a figure of an earlier run cannot survive
     vector = next(b for b in report.BENCHES if b.name == "vector")
-    readme = tmp_path / "README.md"
-    readme.write_text(
-        f"# x\n\n## Performance\n\nProse.\n\n{report.README_BEGIN}\n| old | 9.99× | |\n"
-        f"{report.README_END}\n\n## Next\n"
+    page = tmp_path / "benchmarks.md"
+    page.write_text(
+        f"# x\n\n## At a glance\n\nProse.\n\n{report.SUMMARY_BEGIN}\n| old | 9.99× | |\n"
+        f"{report.SUMMARY_END}\n\n## Next\n"
     )
-    table = report.readme_table([(vector, "python benchmarks/vector.py", VECTOR_OUTPUT)], False)
-    report.write_page(readme, table, report.README_BEGIN, report.README_END)
-    text = readme.read_text()
+    table = report.summary_table([(vector, "python benchmarks/vector.py", VECTOR_OUTPUT)], False)
+    report.write_page(page, table, report.SUMMARY_BEGIN, report.SUMMARY_END)
+    text = page.read_text()
     assert "9.99" not in text and "Prose." in text and text.endswith("## Next\n")
     rows = [line for line in text.splitlines() if line.startswith("| native")]
     assert rows[0].split(" | ")[1:] == [
@@ -89,32 +89,43 @@ def test_the_readme_table_is_rebuilt_from_the_run(tmp_path):
         "CartPole native 25,000,000 env-steps/s |",
     ]
     assert "400.0×" in text and "`SyncVectorEnv` 20,000 env-steps/s" in text
-    assert "machine:" in text and text.count(report.README_BEGIN) == 1
-    failed = report.readme_table(
+    assert "machine:" in text and text.count(report.SUMMARY_BEGIN) == 1
+    failed = report.summary_table(
         [(vector, "python benchmarks/vector.py", "(failed with exit status 1)\nboom")], False
     )
     assert "`vector.py` failed in this run" in failed and "2.00" not in failed
     # a script that prints its figures and exits 1 for a missed target keeps them, flagged
-    missed = report.readme_table(
+    missed = report.summary_table(
         [(vector, "python benchmarks/vector.py", f"(failed with exit status 1)\n{VECTOR_OUTPUT}")],
         False,
     )
     assert "2.00× (50,000,000 env-steps/s) (`vector.py` failed with exit status 1)" in missed
 
 
+def test_a_run_writes_the_summary_table_above_the_outputs_of_one_page(tmp_path, monkeypatch):
+    # one page holds both generated sections, the summary first; the README holds no figures
+    page = tmp_path / "benchmarks.md"
+    page.write_text("# Performance\n\nProse.\n")
+    monkeypatch.setattr(report, "run", lambda b, q, t: (f"python benchmarks/{b.script}", ""))
+    assert report.main(["--page", str(page), "--only", "vector"]) == 0
+    text = page.read_text()
+    assert text.index(report.SUMMARY_BEGIN) < text.index(report.BEGIN) < text.index("Prose.")
+    assert text.count(report.SUMMARY_END) == 1 and text.count(report.END) == 1
+    assert report.SUMMARY_BEGIN not in (ROOT / "README.md").read_text()
+
+
 def test_only_reruns_its_benchmarks_and_keeps_the_others_with_their_dates(tmp_path, monkeypatch):
     # --only replaces its blocks and keeps the page's others (a full run replaces all), each
-    # kept block and the README's header naming the run it came from
-    page, readme = tmp_path / "benchmarks.md", tmp_path / "README.md"
+    # kept block and the summary table's header naming the run it came from
+    page = tmp_path / "benchmarks.md"
     page.write_text("# Performance\n\nProse.\n")
-    readme.write_text(f"# x\n\n{report.README_BEGIN}\n{report.README_END}\n")
     rates = {"vector": VECTOR_OUTPUT, "single_view": "view / CartPole-v1: 0.31x"}
     monkeypatch.setattr(
         report, "run", lambda b, q, t: (f"python benchmarks/{b.script}", rates[b.name])
     )
     now = ["2026-01-01 00:00 UTC"]
     monkeypatch.setattr(report, "_now", lambda: now[0])
-    args = ["--page", str(page), "--readme", str(readme), "--only"]
+    args = ["--page", str(page), "--only"]
     assert report.main([*args, "single_view", "vector"]) == 0
     rates["single_view"], now[0] = "view / CartPole-v1: 0.42x", "2026-02-02 00:00 UTC"
     assert report.main([*args, "single_view"]) == 0
@@ -127,19 +138,19 @@ def test_only_reruns_its_benchmarks_and_keeps_the_others_with_their_dates(tmp_pa
     ]
     assert "Kept from the run of 2026-01-01 00:00 UTC." in text
     assert "reran single_view; the other blocks are kept" in text
-    table = readme.read_text()
+    table = text.split(report.SUMMARY_BEGIN)[1].split(report.SUMMARY_END)[0]
     assert "0.42×" in table and "2.00× (50,000,000 env-steps/s)" in table
     assert "reran the others), the run of 2026-01-01 00:00 UTC: `vector.py`." in table
     # a run of every benchmark keeps nothing
     assert report.section([(blocks[0].bench, "c", "o")], False, kept=None).count("block:") == 1
 
 
-def test_every_benchmark_of_the_run_names_its_readme_figures():
+def test_every_benchmark_of_the_run_names_its_summary_figures():
     # each benchmark contributes rows; an output without its figures says so, never blank
     for bench in report.BENCHES:
         rows = bench.summary("")
         assert rows, bench.name
-        table = report.readme_table([(bench, "cmd", "unrelated output")], False)
+        table = report.summary_table([(bench, "cmd", "unrelated output")], False)
         assert table.count(f"not in `{bench.script}`'s output") == len(rows), bench.name
 
 
@@ -147,21 +158,17 @@ FIGURE = re.compile(r"\d(?:[\d,.]*\d)?\s?(?:×|x\b|steps/s|µs|ms\b|%|s\b)")
 
 
 def test_no_figure_outside_the_generated_sections():
-    # the page's and the README performance section's figures all lie between the markers that
-    # make bench rewrites
+    # the page's figures all lie between the markers that make bench rewrites
     page = (ROOT / "docs" / "benchmarks.md").read_text()
-    head, rest = page.split(report.BEGIN)
-    outside = head + rest.split(report.END)[1]
-    readme = (ROOT / "README.md").read_text()
-    section = readme.split("## Performance at a glance")[1].split("\n## ")[0]
-    before, after = section.split(report.README_BEGIN)
-    outside += before + after.split(report.README_END)[1]
+    head, rest = page.split(report.SUMMARY_BEGIN)
+    between, rest = rest.split(report.SUMMARY_END)[1].split(report.BEGIN)
+    outside = head + between + rest.split(report.END)[1]
     assert FIGURE.findall(outside) == []
     assert FIGURE.findall("took 1.5× and 12 s, 30 %, 165 µs") == ["1.5×", "12 s", "30 %", "165 µs"]
 
 
-def test_the_readme_rows_are_read_again_from_the_pages_outputs():
-    # the README's figures are the ones its rows' patterns read from the outputs the page holds
+def test_the_summary_rows_are_read_again_from_the_pages_outputs():
+    # the summary table's figures are the ones its rows' patterns read from the page's outputs
     # (both are written by the same run): every row, its figure and its reference, to the letter
     page = (ROOT / "docs" / "benchmarks.md").read_text()
     blocks = re.findall(
@@ -170,9 +177,8 @@ def test_the_readme_rows_are_read_again_from_the_pages_outputs():
     outputs = dict(blocks)  # a run of some benchmarks (--only) writes both with those only
     results = [(b, "cmd", outputs[b.script]) for b in report.BENCHES if b.script in outputs]
     assert results
-    rows = [r for r in report.readme_table(results, False).splitlines() if r.startswith("| ")]
-    readme = (ROOT / "README.md").read_text()
-    table = readme.split(report.README_BEGIN)[1].split(report.README_END)[0]
+    rows = [r for r in report.summary_table(results, False).splitlines() if r.startswith("| ")]
+    table = page.split(report.SUMMARY_BEGIN)[1].split(report.SUMMARY_END)[0]
     assert rows == [r for r in table.splitlines() if r.startswith("| ")]
     assert len(rows) == 1 + sum(len(b.summary("")) for b, *_ in results)  # the header, each row
 

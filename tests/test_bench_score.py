@@ -722,3 +722,31 @@ def test_the_runner_refuses_bad_output_paths_before_training(tmp_path, capsys):
             )
         assert needle in capsys.readouterr().err
     assert page.read_text().count("leaderboard") == 2  # nothing rendered
+
+
+def test_a_task_whose_optimum_is_only_bounded_says_what_1_is():
+    # the dynamic stealth task's reference is the best of 8 constant-sign biases, bounded above
+    # by 0.1801988903 (raw): its score's 1 is that best known value, never "1 = optimum"
+    from agents.bench.score import Score, report
+
+    task = get("stealth/ch4-position-dynamic-bias-v0")
+    best = task.references.optimum
+    assert not best.certified
+    result = Score(
+        task.name,
+        "x",
+        "",
+        (0,),
+        np.full((1, 2), best.value),
+        best.value,
+        0.0,
+        1.0,
+        (1.0, 1.0),
+        (1.0,),
+    )
+    text = report(result, task)
+    bound = (best.bound - task.references.random.mean) / (best.value - task.references.random.mean)
+    assert f"1 = best known ({best.name}); the optimum is at most {bound:.4f})" in text
+    assert "1 = optimum" not in text and f"{bound:.4f}" == "1.1232"
+    certified = get(TASK)
+    assert "(0 = random, 1 = optimum)" in report(result, certified)

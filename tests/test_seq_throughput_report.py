@@ -1,4 +1,4 @@
-"""benchmarks/seq_throughput.py and its rows of the README's performance table."""
+"""benchmarks/seq_throughput.py and its rows of the summary table of docs/benchmarks.md."""
 
 import importlib.util
 import sys
@@ -37,7 +37,7 @@ target: every sequential setting >= 20x the bitmask, 1 env: NOT met
 target: every sequential setting >= 20x the bitmask, 8 envs: met"""
 
 
-def test_readme_rows_read_each_way_and_the_zero_cost_bound():
+def test_summary_rows_read_each_way_and_the_zero_cost_bound():
     bench = next(b for b in report.BENCHES if b.name == "seq_throughput")
     one, eight = bench.summary(OUTPUT)
     assert "1 env" in one[0] and "8 envs" in eight[0]

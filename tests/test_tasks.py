@@ -7,7 +7,6 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import printed_by
 
 from agents.bench.verify import CHEAP_SECONDS, compare, stored_seconds
 from agents.evaluate import evaluate
@@ -183,17 +182,6 @@ def test_the_optimal_policy_of_a_hard_task_scores_one(name):
     assert task.normalise(result.mean) == 1.0
     heuristic = task.references.heuristic_score
     assert heuristic is not None and heuristic <= 0.9  # the greedy answer is far below it
-
-
-def test_the_readme_tasks_example_prints_the_output_shown():
-    import re
-    from pathlib import Path
-
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text("utf-8")
-    section = readme.split("### The tasks and their references", 1)[1].split("\n## ", 1)[0]
-    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
-    shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
-    assert printed_by(code, "README benchmark tasks") == shown
 
 
 @pytest.mark.parametrize(

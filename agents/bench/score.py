@@ -252,6 +252,21 @@ def reference_rows(task: Any) -> list[tuple[str, float | None, str]]:
     return rows
 
 
+def scale_legend(task: Any) -> str:
+    """What 0 and 1 of the normalised score are: random play, and the optimum or the best known.
+
+    Where the optimum is only bounded, 1 is the best known value, and the certified bound's own
+    normalised score says how far above it the optimum can lie.
+    """
+    best = task.references.optimum
+    if best.certified:
+        return "0 = random, 1 = optimum"
+    return (
+        f"0 = random, 1 = best known ({best.name}); the optimum is at most "
+        f"{task.normalise(best.bound):.4f}"
+    )
+
+
 def report(result: Score, task: Any) -> str:
     """The text ``score`` prints."""
     n_seeds, n_eps = result.returns.shape
@@ -271,7 +286,7 @@ def report(result: Score, task: Any) -> str:
             f"{_fmt(result.raw)}"
         )
     lines += [
-        f"normalised  {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] (0 = random, 1 = optimum)",
+        f"normalised  {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] ({scale_legend(task)})",
         "per seed    " + ", ".join(f"{v:.4f}" for v in result.per_seed),
         f"references ({unit}, normalised):",
     ]

@@ -36,7 +36,7 @@ against it, to compare with the game's value.
 (0.166667, True, [(3,), (6,), (7,)])
 
 On IEEE 14 (``a_max = 0.5``) one protected meter stops every 3-meter attack (value 0); with 5
-meters against 2 protected the value is 0.02996 rad (15 restricted games, about 3 minutes).
+meters against 2 protected the value is 0.02996 rad (15 restricted games).
 """
 
 from __future__ import annotations

@@ -67,6 +67,8 @@ def env_page(name: str, static: Path) -> str:
     summary = first.split(":", 1)[1].strip() if ":" in first else first
     env = module.parallel_env(render_mode="rgb_array")
     env.reset(seed=0)
+    for agent in env.agents:  # the same random step, so the same image, at every build
+        env.action_space(agent).seed(0)
     env.step({a: env.action_space(a).sample() for a in env.agents})
     image = env.render()
     _write_png(static / f"{name}.png", image)

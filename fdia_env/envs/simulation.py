@@ -200,8 +200,8 @@ class Simulation:
         """(:func:`~fdia_env.kalman.small.shape_features2`, log det) of ``p2``, memoised.
 
         Expected dynamics revisit the same covariances (a covariance is a function of the
-        attack history), and numpy's logarithm on a float costs about 0.2 µs a call, so each
-        covariance's logarithms are taken once (up to ``MEMO_SIZE`` covariances).
+        attack history), and each numpy logarithm of a float is a call through numpy's machinery,
+        so each covariance's logarithms are taken once (up to ``MEMO_SIZE`` covariances).
         """
         out = self._memo.get(p2)
         if out is None:

@@ -9,7 +9,7 @@ reward 0); ``autoreset_mode=AutoresetMode.SAME_STEP`` resets it in the same step
 observation and info in ``infos["final_obs"]`` / ``infos["final_info"]`` (what
 :func:`agents.torch_ppo.make_torch_env` asks for; see :mod:`fdia_env.stealth.vector_base`).
 ``action="linear"`` computes each member's detection probability by a numerical
-integral (Imhof's), about 10–40 ms a member-step unless the window is strictly stealthy.
+integral (Imhof's), the dominant cost of a member-step unless the window is strictly stealthy.
 
 ``backend="torch", device="cpu" | "cuda"`` runs either attack (``action="bias"``, the default,
 or ``"linear"``) on float64 tensors of that device: actions are tensors of the device,

@@ -2,7 +2,7 @@
 
 Scoring a policy in a sensor game needs the game's whole payoff matrix (its exploitability is
 a best response on it). On the IEEE 118 grid building that matrix solves one 117-state Riccati
-equation per defender subset: about 14 minutes. The matrix is small (305 × 304 numbers), so it
+equation per defender subset, which takes minutes. The matrix is small (305 × 304 numbers), so it
 is stored beside the task references (``payoffs.json`` lists each file with the game it
 belongs to) and :func:`stored_payoff` hands it to the scoring code instead of rebuilding it.
 

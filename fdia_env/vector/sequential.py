@@ -35,11 +35,8 @@ Cost: the engine steps the whole batch, so the members that do not take a window
 (their state saved, then put back) once per run of window steps by the same members, e.g. once
 for a plan's N window steps, not once per window step; the budget left, the forced stops and the
 masks are computed once per change of the decision state (``infos["action_mask"]`` and
-:meth:`SequentialVectorEnv.action_masks` after a step share one computation). Both leave every
-value as it was: on 8 members of ``grid-ieee14`` (c = 6, N = 6, log det, ``"increasing"``,
-masked random play through :mod:`fdia_env.vector.sb3`) a decision went from about 1.70 ms to
-1.25 ms on a 2-core machine, and MaskablePPO's training rate on it
-(``benchmarks/seq_throughput.py``, one run each) from 1,771 to 1,909 decisions per CPU second.
+:meth:`SequentialVectorEnv.action_masks` after a step share one computation). Neither changes a
+value; ``benchmarks/seq_throughput.py`` measures the training rate (docs/benchmarks.md).
 """
 
 from __future__ import annotations
