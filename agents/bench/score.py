@@ -5,8 +5,9 @@ RLlib run's state, a torch-ppo policy or a ``module:function`` callable; see
 :mod:`agents.bench.agents`) plays the task's env for ``episodes`` episodes under each of
 ``seeds`` evaluation seeds (seed ``s`` plays episodes reset with ``s·SEED_STRIDE + i``). The
 report gives the raw mean return with its 95 % Student-t interval over all those episodes, the
-normalised score of that mean (``task.normalise``: 0 = random play, 1 = the certified optimum;
-for games the exploitability-based score relative to the game value), its interval (the raw
+normalised score of that mean (``task.normalise``: 0 = random play, 1 = the certified optimum,
+or on a task whose reference is only bounded the best known value, the report then giving the
+certified bound's score and the gap: :func:`scale_note`; for games the exploitability-based score relative to the game value), its interval (the raw
 interval's ends normalised), the normalised score of each seed, and the task's stored
 references beside it (random play, each heuristic, the optimum or best known value with its
 certified bound).
@@ -245,6 +246,22 @@ def reference_rows(task: Any) -> list[tuple[str, float | None, str]]:
     return rows
 
 
+def scale_note(task: Any) -> str:
+    """What 0 and 1 of the normalised score are on ``task``.
+
+    1 is the stored optimum when it is certified; on a task whose reference is only bounded it
+    is the best known value, and the note gives the certified bound's normalised score and the
+    gap between them (``Optimum.gap``).
+    """
+    best = task.references.optimum
+    if best.certified:
+        return "0 = random, 1 = optimum"
+    return (
+        "0 = random, 1 = the best known value, not a proved optimum; the certified bound "
+        f"{_fmt(best.bound)} scores {task.normalise(best.bound):.4f} (gap {best.gap:.2%})"
+    )
+
+
 def report(result: Score, task: Any) -> str:
     """The text ``score`` prints."""
     n_seeds, n_eps = result.returns.shape
@@ -264,7 +281,7 @@ def report(result: Score, task: Any) -> str:
             f"{_fmt(result.raw)}"
         )
     lines += [
-        f"normalised  {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] (0 = random, 1 = optimum)",
+        f"normalised  {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] ({scale_note(task)})",
         "per seed    " + ", ".join(f"{v:.4f}" for v in result.per_seed),
         f"references ({unit}, normalised):",
     ]
@@ -282,7 +299,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m agents.bench score",
         description="Score an agent on a benchmark task: raw return, normalised score "
-        "(0 = random play, 1 = the certified optimum) with its 95 % CI, and the references.",
+        "(0 = random play, 1 = the certified optimum, or the best known value where the task's "
+        "reference is only bounded) with its 95 % CI, and the references.",
     )
     parser.add_argument(
         "--task", required=True, help="task name (fdia_env.tasks.names() lists them)"
