@@ -12,15 +12,18 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 
-# torch first, pinned to the CPU wheel of constraints.txt (any other spec pulls the CUDA builds)
+# torch first, pinned to the CPU wheel of constraints.txt (any other spec pulls the CUDA builds);
+# the editable install in compat mode (a .pth file naming the checkout), which setuptools builds
+# without a warning
+EDITABLE := --config-settings editable_mode=compat -e
 $(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q -c constraints.txt torch==2.13.0
-	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients,docs,grid,rllib]"
+	$(BIN)/python -m pip install -q -c constraints.txt $(EDITABLE) ".[dev,clients,docs,grid,rllib]"
 	touch $(STAMP) $(DEMO_STAMP)
 
 $(DEMO_STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q -c constraints.txt torch==2.13.0
-	$(BIN)/python -m pip install -q -c constraints.txt -e .
+	$(BIN)/python -m pip install -q -c constraints.txt $(EDITABLE) .
 	touch $(DEMO_STAMP)
 
 setup: $(STAMP)
