@@ -174,6 +174,7 @@ def _report(name: str) -> str:
 
 
 def test_a_bounded_reference_says_1_is_the_best_known_value_and_scores_the_bound():
+    """The legend is agents.bench.score.scale_legend (the same code as the docs branch's)."""
     stored = json.loads((ROOT / "fdia_env" / "tasks" / "references.json").read_text())[BOUNDED]
     best, random = stored["optimum"], stored["random"]["mean"]
     assert best["certified"] is False
@@ -182,8 +183,8 @@ def test_a_bounded_reference_says_1_is_the_best_known_value_and_scores_the_bound
     assert bound_score == pytest.approx(1.12320, abs=1e-5)
     line = next(s for s in _report(BOUNDED).splitlines() if s.startswith("normalised"))
     assert line == (
-        "normalised  0.0000 [0.0000, 0.0000] (0 = random, 1 = the best known value, not a "
-        "proved optimum; the certified bound 0.180199 scores 1.1232 (gap 3.73%))"
+        "normalised  0.0000 [0.0000, 0.0000] (0 = random, 1 = best known (best of the 2^3 "
+        "constant-sign biases); the optimum is at most 1.1232)"
     )
     assert "1 = optimum" not in _report(BOUNDED)
 

@@ -6,8 +6,8 @@ RLlib run's state, a torch-ppo policy or a ``module:function`` callable; see
 ``seeds`` evaluation seeds (seed ``s`` plays episodes reset with ``s·SEED_STRIDE + i``). The
 report gives the raw mean return with its 95 % Student-t interval over all those episodes, the
 normalised score of that mean (``task.normalise``: 0 = random play, 1 = the certified optimum,
-or on a task whose reference is only bounded the best known value, the report then giving the
-certified bound's score and the gap: :func:`scale_note`; for games the exploitability-based score relative to the game value), its interval (the raw
+or on a task whose reference is only bounded the best known value: :func:`scale_legend`; for
+games the exploitability-based score relative to the game value), its interval (the raw
 interval's ends normalised), the normalised score of each seed, and the task's stored
 references beside it (random play, each heuristic, the optimum or best known value with its
 certified bound).
@@ -246,19 +246,18 @@ def reference_rows(task: Any) -> list[tuple[str, float | None, str]]:
     return rows
 
 
-def scale_note(task: Any) -> str:
-    """What 0 and 1 of the normalised score are on ``task``.
+def scale_legend(task: Any) -> str:
+    """What 0 and 1 of the normalised score are: random play, and the optimum or the best known.
 
-    1 is the stored optimum when it is certified; on a task whose reference is only bounded it
-    is the best known value, and the note gives the certified bound's normalised score and the
-    gap between them (``Optimum.gap``).
+    Where the optimum is only bounded, 1 is the best known value, and the certified bound's own
+    normalised score says how far above it the optimum can lie.
     """
     best = task.references.optimum
     if best.certified:
         return "0 = random, 1 = optimum"
     return (
-        "0 = random, 1 = the best known value, not a proved optimum; the certified bound "
-        f"{_fmt(best.bound)} scores {task.normalise(best.bound):.4f} (gap {best.gap:.2%})"
+        f"0 = random, 1 = best known ({best.name}); the optimum is at most "
+        f"{task.normalise(best.bound):.4f}"
     )
 
 
@@ -281,7 +280,7 @@ def report(result: Score, task: Any) -> str:
             f"{_fmt(result.raw)}"
         )
     lines += [
-        f"normalised  {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] ({scale_note(task)})",
+        f"normalised  {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] ({scale_legend(task)})",
         "per seed    " + ", ".join(f"{v:.4f}" for v in result.per_seed),
         f"references ({unit}, normalised):",
     ]
