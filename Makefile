@@ -12,20 +12,17 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 
-# torch first, pinned to the CPU wheel of constraints.txt (any other spec pulls the CUDA builds);
-# the editable install in compat mode (a .pth file naming the checkout), which setuptools builds
-# without a warning
-EDITABLE := --config-settings editable_mode=compat -e
+# torch first, pinned to the CPU wheel of constraints.txt (any other spec pulls the CUDA builds)
 $(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q -c constraints.txt torch==2.13.0
-	$(BIN)/python -m pip install -q -c constraints.txt $(EDITABLE) ".[dev,clients,docs,grid,rllib]"
+	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients,docs,grid,rllib]"
 	touch $(STAMP) $(DEMO_STAMP)
 
 # --no-compile: Python compiles the modules the demo imports when it first imports them (about
 # 45 MB of bytecode) instead of pip compiling every module of the dependencies (about 210 MB)
 $(DEMO_STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q --no-compile -c constraints.txt torch==2.13.0
-	$(BIN)/python -m pip install -q --no-compile -c constraints.txt $(EDITABLE) .
+	$(BIN)/python -m pip install -q --no-compile -c constraints.txt -e .
 	touch $(DEMO_STAMP)
 
 setup: $(STAMP)
