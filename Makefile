@@ -1,16 +1,29 @@
 PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
+# every extra (make setup, test, lint, docs, bench)
 STAMP := $(VENV)/.installed
+# the core dependencies only (make demo); a later make setup adds the extras to the same venv
+DEMO_STAMP := $(VENV)/.installed-core
 
 .PHONY: setup test lint demo bench docs clean
 
-$(STAMP): pyproject.toml constraints.txt
-	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
+
+# torch first, pinned to the CPU wheel of constraints.txt (any other spec pulls the CUDA builds)
+$(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q -c constraints.txt torch==2.13.0
 	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients,docs,grid,rllib]"
-	touch $(STAMP)
+	touch $(STAMP) $(DEMO_STAMP)
+
+# --no-compile: Python compiles the modules the demo imports when it first imports them (about
+# 45 MB of bytecode) instead of pip compiling every module of the dependencies (about 210 MB)
+$(DEMO_STAMP): pyproject.toml constraints.txt | $(BIN)/python
+	$(BIN)/python -m pip install -q --no-compile -c constraints.txt torch==2.13.0
+	$(BIN)/python -m pip install -q --no-compile -c constraints.txt -e .
+	touch $(DEMO_STAMP)
 
 setup: $(STAMP)
 
@@ -27,7 +40,7 @@ test: lint
 docs: $(STAMP)
 	$(BIN)/sphinx-build -E -W --keep-going -q -b html docs docs/_build/html
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	$(BIN)/python -m agents.demo
 
 bench: $(STAMP)

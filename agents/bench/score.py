@@ -5,8 +5,9 @@ RLlib run's state, a torch-ppo policy or a ``module:function`` callable; see
 :mod:`agents.bench.agents`) plays the task's env for ``episodes`` episodes under each of
 ``seeds`` evaluation seeds (seed ``s`` plays episodes reset with ``s·SEED_STRIDE + i``). The
 report gives the raw mean return with its 95 % Student-t interval over all those episodes, the
-normalised score of that mean (``task.normalise``: 0 = random play, 1 = the certified optimum;
-for games the exploitability-based score relative to the game value), its interval (the raw
+normalised score of that mean (``task.normalise``: 0 = random play, 1 = the certified optimum,
+or on a task whose reference is only bounded the best known value: :func:`scale_legend`; for
+games the exploitability-based score relative to the game value), its interval (the raw
 interval's ends normalised), the normalised score of each seed, and the task's stored
 references beside it (random play, each heuristic, the optimum or best known value with its
 certified bound).
@@ -304,7 +305,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m agents.bench score",
         description="Score an agent on a benchmark task: raw return, normalised score "
-        "(0 = random play, 1 = the certified optimum) with its 95 % CI, and the references.",
+        "(0 = random play, 1 = the certified optimum, or the best known value where the task's "
+        "reference is only bounded) with its 95 % CI, and the references.",
     )
     parser.add_argument(
         "--task", required=True, help="task name (fdia_env.tasks.names() lists them)"

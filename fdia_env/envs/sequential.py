@@ -161,6 +161,15 @@ def state_groups(system: LinearSystem, horizon: int) -> np.ndarray:
     return groups.reshape(horizon * n, horizon * M)
 
 
+def _fresh(info: dict[str, Any]) -> dict[str, Any]:
+    """A decision's info: a new dict with its arrays copied.
+
+    The wrapped env's info stays the same over the decisions of one window step (or round), and
+    a user who keeps the infos (a rollout buffer) must not hold one array that later changes.
+    """
+    return {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in info.items()}
+
+
 class SequentialBase(ParallelEnv):
     """What the sequential wrappers share: the wrapped env's delegation and the checks.
 
@@ -412,7 +421,7 @@ class SequentialSetEnv(SequentialBase):
         self._info = infos["attacker"]
         self._obs[self._n_box : -1] = 0.0
         self._played_out()
-        return {"attacker": self._observe()}, {"attacker": dict(self._info)}
+        return {"attacker": self._observe()}, {"attacker": _fresh(self._info)}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Take one decision: add a sensor (pair) to the set, or stop and take the window step.
@@ -453,7 +462,7 @@ class SequentialSetEnv(SequentialBase):
             self._played_out()
         trunc = trunc or self._limit(term)
         obs = {"attacker": self._observe()}
-        infos = {"attacker": dict(self._info)}
+        infos = {"attacker": _fresh(self._info)}
         if term or trunc:
             self.agents = []
         return obs, {"attacker": reward}, {"attacker": term}, {"attacker": trunc}, infos
@@ -782,7 +791,7 @@ class SequentialSubsetEnv(SequentialBase):
     def _start(self, obs: dict, infos: dict) -> tuple[dict, dict]:
         """The first decision is the first pick of round 1."""
         self._new_round(obs, infos)
-        return self._observe_all(), {p: dict(self._infos[p]) for p in self.agents}
+        return self._observe_all(), {p: _fresh(self._infos[p]) for p in self.agents}
 
     def _new_round(self, obs: dict, infos: dict) -> None:
         self._box = dict(obs)
@@ -835,7 +844,7 @@ class SequentialSubsetEnv(SequentialBase):
             rewards,
             {p: bool(t) for p, t in terms.items()},
             {p: bool(t) for p, t in truncs.items()},
-            {p: dict(self._infos[p]) for p in self.agents},
+            {p: _fresh(self._infos[p]) for p in self.agents},
         )
         if any(terms.values()) or any(truncs.values()):
             self.agents = []
