@@ -102,7 +102,7 @@ def test_python_train_py_and_python_m_experiments_bench_still_run(tmp_path):
         cwd=ROOT, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert bench.returncode == 2
-    assert f"python -m experiments bench: error: --page {page}: no such file" in bench.stderr
+    assert f"python -m experiments bench: error: --page {page}: does not exist" in bench.stderr
 
 
 # --- metadata: license and version -----------------------------------------------------------

@@ -172,11 +172,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "fdia-leaderboard") -> i
     parser.add_argument("--no-render", action="store_true", help="write the rows only")
     parser.add_argument("--render-only", action="store_true", help="render the rows written")
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
-    if not args.no_render and not args.page.is_file():
-        parser.error(
-            f"--page {args.page}: no such file; give the leaderboard page (it holds the "
-            "leaderboard's markers) or --no-render"
-        )
     if args.seeds < 1:
         parser.error(f"--seeds must be >= 1, got {args.seeds}")
     if args.first_seed < 0:
