@@ -17,7 +17,7 @@ anything ``np.asarray(action, dtype)`` turns into an array of the space's shape 
 bounds (so no NaN). :func:`check_action` is that rule for one action, and every face (the
 parallel and AEC envs, the Gymnasium views, the sequential formats, the stealth envs) calls
 it; :func:`check_vector_actions` is the same rule member by member for a native vector env's
-batch. Both return the action's meaning (an ``int`` for ``Discrete``, float64 values for
+batch. Both return the action's meaning (an ``int`` for ``Discrete``, float values for
 ``Box``, 0/1 in the space's dtype for ``MultiBinary``), so the models see one type per space;
 anything refused is a ``ValueError`` naming the player, the action and the space.
 """
@@ -47,10 +47,10 @@ def check_action(space: spaces.Space, action: Any, who: str) -> Any:
         who: The player (``"attacker"``, ``"defender"``), for the message.
 
     Returns:
-        ``int`` for ``Discrete``; a float64 array of the space's shape for ``Box`` (clipped to
-        the bounds: a float64 value the float32 cast puts on a bound is that bound); 0/1 in the
-        space's dtype for ``MultiBinary``; int64 for ``MultiDiscrete``; the action itself for
-        any other space.
+        ``int`` for ``Discrete``; for ``Box`` a float array of the space's shape (a float32 or
+        float64 array as given, anything else as float64; a value the float32 cast puts on a
+        bound is that bound); 0/1 in the space's dtype for ``MultiBinary``; int64 for
+        ``MultiDiscrete``; the action itself for any other space.
 
     Raises:
         ValueError: Naming ``who``, the action, the space and what it takes.
@@ -133,6 +133,12 @@ def _meaning(space: spaces.Space, action: Any) -> Any:
     return action
 
 
+@functools.cache
+def _safe_cast(source: np.dtype, target: np.dtype) -> bool:
+    """``np.can_cast(source, target)`` (safe casting), as ``contains`` asks it (cached)."""
+    return bool(np.can_cast(source, target))
+
+
 def _discrete_rule(space: spaces.Discrete) -> str:
     return (
         f"must be an integer in [{space.start}, {space.start + space.n}): a Python int (True "
@@ -149,7 +155,7 @@ def _discrete(space: spaces.Discrete, action: Any) -> int:
         isinstance(action, np.generic | np.ndarray)
         and action.shape == ()
         and action.dtype.kind in "iu"
-        and np.can_cast(action.dtype, space.dtype)
+        and _safe_cast(action.dtype, space.dtype)
     ):
         value = int(action)
     else:
@@ -181,10 +187,13 @@ def _box(space: spaces.Box, action: Any) -> np.ndarray:
         raise _Refused(f"must have shape {space.shape}, got shape {arr.shape}")
     with np.errstate(all="ignore"):
         cast = arr.astype(space.dtype, copy=False)
-        if not bool(np.all((cast >= space.low) & (cast <= space.high))):
+        if not (bool(np.all(cast >= space.low)) and bool(np.all(cast <= space.high))):
             raise _Refused(_box_values(space, cast))
-        values = np.asarray(arr if arr is action else action, dtype=np.float64)
-    return _clip(space, values)
+        if arr is action and arr.dtype == space.dtype:
+            return arr  # within the bounds as it is
+        if arr is action and arr.dtype.kind == "f":
+            return _clip(space, arr)
+        return _clip(space, np.asarray(action, dtype=np.float64))
 
 
 def _box_values(space: spaces.Box, cast: Any) -> str:
@@ -195,10 +204,9 @@ def _box_values(space: spaces.Box, cast: Any) -> str:
 
 
 def _clip(space: spaces.Box, values: Any) -> Any:
-    """``values`` (float64, or the given float array), on the bounds where round-off left it."""
-    low, high = _bounds(space)
-    if bool(np.any(values < low)) or bool(np.any(values > high)):
-        return np.clip(values, low, high)
+    """Float ``values`` on the bounds where the cast's round-off left them outside."""
+    if bool(np.any(values < space.low)) or bool(np.any(values > space.high)):
+        return np.clip(values, *_bounds(space))
     return values
 
 
@@ -251,7 +259,7 @@ def _multidiscrete(space: spaces.MultiDiscrete, action: Any) -> np.ndarray:
     arr = _as_array(action)
     if not isinstance(arr, np.ndarray) or arr.shape != space.shape:
         raise _Refused(rule)
-    if not np.can_cast(arr.dtype, space.dtype):
+    if not _safe_cast(arr.dtype, space.dtype):
         raise _Refused(f"{rule}, got dtype {arr.dtype}")
     if not bool(np.all((space.start <= arr) & (arr - space.start < space.nvec))):
         raise _Refused(rule)
@@ -282,6 +290,15 @@ def check_batch_actions(space: spaces.Space, actions: Any, batch: int, who: str)
         and ``MultiDiscrete``, the space's dtype for ``MultiBinary``, float for ``Box`` (a
         float array as given, on the bounds where round-off left it; float64 otherwise).
     """
+    if (  # the common case first: a policy's integer batch for Discrete
+        type(actions) is np.ndarray
+        and isinstance(space, spaces.Discrete)
+        and actions.shape == (batch,)
+        and actions.dtype.kind in "iu"
+        and _safe_cast(actions.dtype, space.dtype)
+        and (not batch or (space.start <= actions.min() and actions.max() < space.start + space.n))
+    ):
+        return actions.astype(np.int64, copy=False)
     want = (batch, *(space.shape or ()))
     arr = actions
     if not isinstance(arr, np.ndarray | list | tuple):
@@ -336,7 +353,7 @@ def _batch_array(space: spaces.Space, arr: np.ndarray, batch: int, who: str) -> 
             f"of the {batch} members), got shape {arr.shape}"
         )
     if isinstance(space, spaces.Discrete | spaces.MultiDiscrete):
-        if arr.dtype.kind not in "iu" or not np.can_cast(arr.dtype, space.dtype):
+        if arr.dtype.kind not in "iu" or not _safe_cast(arr.dtype, space.dtype):
             raise ValueError(
                 f"{who} actions must be integers (an integer dtype that casts safely to "
                 f"{space.dtype}, as for a single env) for {space}, got dtype {arr.dtype}"
@@ -347,8 +364,8 @@ def _batch_array(space: spaces.Space, arr: np.ndarray, batch: int, who: str) -> 
         else:
             low, high = space.start, space.start + space.nvec
             allowed = f"in {space}"
-        bad = ((arr < low) | (arr >= high)).reshape(batch, -1).any(axis=1)
-        if bool(bad.any()):
+        if batch and (np.any(arr < low) or np.any(arr >= high)):  # the rare case: find it
+            bad = ((arr < low) | (arr >= high)).reshape(batch, -1).any(axis=1)
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
                 f"{who} actions must be {allowed}; member {i} has {arr[i].tolist()!r} (the "
@@ -455,7 +472,7 @@ def check_batch_tensor_actions(
     dtype = actions.dtype
     if isinstance(space, spaces.Discrete | spaces.MultiDiscrete):
         np_dtype = _numpy_dtype(dtype)
-        ok = np_dtype is not None and np_dtype.kind in "iu" and np.can_cast(np_dtype, space.dtype)
+        ok = np_dtype is not None and np_dtype.kind in "iu" and _safe_cast(np_dtype, space.dtype)
         allowed = f"an integer dtype that casts safely to {space.dtype} (torch.int64, ...)"
     elif isinstance(space, spaces.Box):
         ok, allowed = not dtype.is_complex, "a real dtype (bool, integer or float)"
