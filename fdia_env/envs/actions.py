@@ -227,7 +227,7 @@ def _as_array(action: Any) -> Any:
 
 
 def _multibinary(space: spaces.MultiBinary, action: Any) -> np.ndarray:
-    rule = f"must be a numpy array, list or tuple of shape {space.shape} holding 0/1 (any dtype)"
+    rule = f"must be a 0/1 array of shape {space.shape} (a numpy array, list or tuple; any dtype)"
     arr = _as_array(action)
     if not isinstance(arr, np.ndarray):
         raise _Refused(rule)
