@@ -406,3 +406,18 @@ def test_batches_are_checked_member_by_member_with_the_single_rule():
     mb = spaces.MultiBinary(2)
     out = check_batch_actions(mb, np.array([[1, 0], [0, 1]], dtype=object), 2, "attacker")
     assert out.dtype == np.int8 and out.tolist() == [[1, 0], [0, 1]]
+
+
+@pytest.mark.parametrize("action", ["bitmask", "sequential"])
+def test_the_system_family_env_takes_its_actions_by_the_same_rule(action):
+    from fdia_env.envs.system_family import SystemFamilyEnv, TrackingFamily
+
+    env = SystemFamilyEnv(TrackingFamily(), system_seeds=range(3), action=action, max_sensors=12)
+    space = env.action_space
+    seen = []
+    for variant in discrete_variants(space):
+        env.reset(seed=0)
+        ok = _outcome(env.step, variant, "attacker", space)
+        assert ok == in_space(space, variant), (space, variant)
+        seen.append(ok)
+    _both_outcomes(seen)
