@@ -148,6 +148,7 @@ def parallel_env(
             the wrong length, negative or not summing to 1, an unknown or repeated type.
     """
     check_choice("action", action, ACTIONS)
+    check_choice("attacker_model", attacker_model, ATTACKER_MODELS)
     if action == "sequential":
         inner = parallel_env(
             scenario, power, allocation, rounds, reward_mode, dynamics, render_mode,
@@ -163,7 +164,6 @@ def parallel_env(
         if priors is not None:
             raise ValueError("priors needs types: pass types=(...) with one prior per type")
         if attacker_model != "informed":
-            check_choice("attacker_model", attacker_model, ATTACKER_MODELS)
             raise ValueError(
                 f"attacker_model={attacker_model!r} needs types: without types there is one "
                 "attacker type and nothing to be informed of"

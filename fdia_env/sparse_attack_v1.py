@@ -63,8 +63,8 @@ import inspect
 from collections.abc import Callable
 
 from fdia_env import sparse_attack_v0
-from fdia_env._validation import check_int
-from fdia_env.attacks.sparse import MAX_SENSORS
+from fdia_env._validation import check_choice, check_int
+from fdia_env.attacks.sparse import ACTION_FORMATS, MAX_SENSORS
 from fdia_env.envs.factory import aec_views, scenario_default
 from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.envs.sequential import SequentialSetEnv
@@ -108,6 +108,7 @@ def sequential_above_16(
         sc = kw["scenario"] = resolve(kw["scenario"])
         # the attack model checks the budget too; here first, before its truth is tested
         c = check_int("budget", scenario_default(sc, "budget", kw["budget"]), minimum=0)
+        check_choice("action", kw["action"], (*ACTION_FORMATS, "sequential"))
         if kw["action"] == "auto" and sc.system.M > MAX_SENSORS and c:
             kw["action"] = "sequential"  # (a budget of 0 has no decision to make: v0's format)
         if kw["order"] is None:

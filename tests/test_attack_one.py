@@ -92,9 +92,9 @@ def test_single_calls_equal_member_zero_of_the_numpy_batch(scenario, make):
 def test_single_apply_checks_the_action_and_changes_nothing_on_error():
     attack = _bound(SparseAttack(2, illegal_action="error"))
     attack.reset()
-    with pytest.raises(ValueError, match=r"attacker action must be an element of Discrete\(8\)"):
+    with pytest.raises(ValueError, match=r"attacker action must be an integer in \[0, 8\)"):
         attack.apply(8)
-    with pytest.raises(ValueError, match="attacker action must be an element of Discrete"):
+    with pytest.raises(ValueError, match=r"attacker action must .*Discrete\(8\).*'big'"):
         attack.apply("big")
     assert attack.remaining == 2
     attack.apply(3)  # sensors 1 and 2: the whole budget

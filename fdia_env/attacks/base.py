@@ -182,8 +182,7 @@ class AttackModel(ABC, BatchOfOneModel):
 
     def apply(self, action: Any) -> AttackEffect:
         """Validate ``action`` (``ValueError`` if outside the space) and act."""
-        check_space(self.action_space, action, "attacker")
-        return self.apply_checked(action)
+        return self.apply_checked(check_space(self.action_space, action, "attacker"))
 
     def apply_checked(self, action: Any) -> AttackEffect:
         """Act on an action already checked against :attr:`action_space` (the env's step)."""
@@ -260,19 +259,15 @@ class AttackModel(ABC, BatchOfOneModel):
         return None
 
 
-def check_space(space: spaces.Space, action: Any, who: str) -> None:
-    """Raise ``ValueError`` unless ``action`` is an element of ``space`` (Gymnasium's check).
+def check_space(space: spaces.Space, action: Any, who: str) -> Any:
+    """The meaning of ``action`` if ``space`` accepts it, else ``ValueError`` naming ``who``.
 
-    The envs check a step's actions first, with messages per space
-    (:mod:`fdia_env.envs.actions`); this is the models' own check for a direct call.
+    The models' own check for a direct call: the envs' rule,
+    :func:`fdia_env.envs.actions.check_action` (Gymnasium's ``contains``).
     """
-    try:  # a Box takes any real dtype (as the envs' check), compared in the space's dtype
-        boxed = isinstance(space, spaces.Box) and not isinstance(action, str | bytes)
-        inside = space.contains(np.asarray(action, dtype=space.dtype) if boxed else action)
-    except (TypeError, ValueError):
-        inside = False
-    if not inside:
-        raise ValueError(f"{who} action must be an element of {space}, got {action!r}")
+    from fdia_env.envs.actions import check_action  # the envs package imports the models
+
+    return check_action(space, action, who)
 
 
 def as_index(action: Any) -> int | None:

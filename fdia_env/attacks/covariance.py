@@ -173,7 +173,7 @@ class CovarianceAttack(AttackModel):
 
         The power left is the single env's (the full power before its first reset).
         """
-        check_space(self.action_space, action, "attacker")
+        action = check_space(self.action_space, action, "attacker")
         remaining = self.remaining if hasattr(self, "b_remaining") else self.power
         a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
         spend, entries = self._spend(ONE, a, remaining)

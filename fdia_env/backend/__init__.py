@@ -39,7 +39,7 @@ def get_backend(name: str = "numpy", device: Any = None) -> Backend:
     if not isinstance(name, str) or name not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {name!r}")
     if name == "numpy":
-        if device not in (None, "cpu"):
+        if not (device is None or (isinstance(device, str) and device == "cpu")):
             raise ValueError(
                 f"device must be None or 'cpu' for backend='numpy' (numpy runs on the CPU; use "
                 f"backend='torch' for another device), got {device!r}"

@@ -141,7 +141,7 @@ class DefenseModel(ABC, BatchOfOneModel):
     def apply(self, action: Any, effect: AttackEffect) -> FilterInput:
         """Decide what the filter uses given the defender's action (checked) and the attack."""
         if self.action_space is not None:
-            check_space(self.action_space, action, "defender")
+            action = check_space(self.action_space, action, "defender")
         return self.apply_checked(action, effect)
 
     def apply_checked(self, action: Any, effect: AttackEffect) -> FilterInput:

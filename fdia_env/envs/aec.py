@@ -54,7 +54,7 @@ class FdiaAECEnv(parallel_to_aec_wrapper):
                 )
             super().step(action)
             return
-        check_action(self.env.action_space(agent), action, agent)
+        action = check_action(self.env.action_space(agent), action, agent)
         if not self._agent_selector.is_last():
             super().step(action)
             return

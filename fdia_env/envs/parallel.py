@@ -208,7 +208,7 @@ class FdiaParallelEnv(ParallelEnv):
             ValueError: For a missing or unknown agent's action, or an action outside its
                 space; nothing changes before every action has passed.
         """
-        check_step_actions(
+        actions = check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
         reward, done, truncated = self._advance(actions)

@@ -432,9 +432,7 @@ class SequentialSetEnv(SequentialBase):
                 space, or (with ``illegal_action="error"``) outside the mask.
         """
         self._check_step(actions)
-        action = actions["attacker"]
-        check_action(self._action_space, action, "attacker")
-        j = int(action)
+        j = check_action(self._action_space, actions["attacker"], "attacker")
         if not self._mask[j]:
             if self.illegal_action == "error":
                 raise ValueError(self._illegal_message(j, self.action_mask()))
@@ -813,8 +811,7 @@ class SequentialSubsetEnv(SequentialBase):
         self._check_step(actions)
         moves = {}
         for p in self.agents:
-            check_action(self._action_space, actions[p], p)
-            j = int(actions[p])
+            j = check_action(self._action_space, actions[p], p)
             mask = self.action_mask(p)
             if not mask[j]:
                 if self.illegal_action == "error":

@@ -155,7 +155,8 @@ def make_single_agent(
             the torch backend is the native vector env's.
     """
     backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", "cpu")
-    if backend != "numpy" or device not in ("cpu", None):
+    numpy_backend = isinstance(backend, str) and backend == "numpy"
+    if not numpy_backend or not (device is None or (isinstance(device, str) and device == "cpu")):
         raise ValueError(
             f"backend={backend!r}, device={device!r}: the single env runs numpy on the CPU "
             "(backend='numpy', device='cpu'); for torch tensors on a device use "

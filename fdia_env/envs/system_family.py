@@ -103,6 +103,7 @@ from gymnasium import spaces
 from fdia_env._validation import check_choice, check_int
 from fdia_env.attacks.sparse import MAX_SENSORS, SparseAttack
 from fdia_env.defenses import PerfectDetection
+from fdia_env.envs.actions import check_action
 from fdia_env.envs.factory import episode_spec
 from fdia_env.envs.family import NumberedFamily, check_range
 from fdia_env.envs.grid_family import GridFamily
@@ -445,9 +446,7 @@ class SystemFamilyEnv(gym.Env):
         """Play ``action``: a bitmask (absent sensors' bits ignored) or a sequential decision."""
         if self._inner is None:
             raise RuntimeError("call reset() before step()")
-        a = int(action)
-        if not 0 <= a < self.action_space.n:
-            raise ValueError(f"action must be in [0, {self.action_space.n}), got {action!r}")
+        a = check_action(self.action_space, action, "attacker")
         if self.sequential:
             if a > 0:  # pick sensor a − 1 for this step; an illegal pick changes nothing
                 if self._mask[a]:

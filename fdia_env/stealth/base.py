@@ -101,7 +101,7 @@ class StealthParallelEnv(ParallelEnv):
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES)
         self.render_mode = render_mode
-        if defender not in defenders:
+        if defender is not None and not (isinstance(defender, str) and defender in defenders):
             raise ValueError(f"defender must be one of {list(defenders)}, got {defender!r}")
         self.defender = defender
         self.alphas = check_alphas(DEFAULT_ALPHAS if alphas is None else alphas)

@@ -138,7 +138,7 @@ class StealthDynamicEnv(StealthParallelEnv):
             RuntimeError: Before :meth:`reset` or after the episode ended.
             ValueError: For a missing or unknown agent's action, or one outside its space.
         """
-        check_step_actions(
+        actions = check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
         rate, free, guarded = self._default_rate(), None, self.protected

@@ -22,6 +22,7 @@ ACTIONS = ("shift", "box_shift", "free")
 DYNAMICS = ("expected", "sampled")
 ON_DETECT = ("zero", "penalty", "end")
 DEFENDERS = (None, "threshold")
+TESTS = ("chi2", "lnr")
 MAX_RATIO = 10.0
 """Cap of the observed χ² statistic, in units of the threshold."""
 
@@ -66,7 +67,7 @@ class StealthAttackEnv(StealthParallelEnv):
                     est, alpha=float(alpha), lnr_threshold=sidak_threshold(float(alpha), est.m)
                 )
         else:
-            est = static_estimation(scenario, alpha=0.05 if alpha is None else alpha)
+            est = _estimation(scenario, check_alpha(0.05 if alpha is None else alpha))
         self.estimation = est
         self.budget = check_int("budget", budget, minimum=1, maximum=est.m)
         self._init_episode(horizon, max_cycles, default_horizon=1)  # one snapshot
@@ -74,8 +75,7 @@ class StealthAttackEnv(StealthParallelEnv):
         self.magnitude = check_positive("magnitude", magnitude)
         self.a_max = check_positive("a_max", a_max)
         self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
-        if test not in ("chi2", "lnr"):
-            raise ValueError(f"test must be one of ['chi2', 'lnr'], got {test!r}")
+        check_choice("test", test, TESTS)
         if test == "lnr" and self.dynamics == "expected":
             raise ValueError(
                 "test='lnr' needs dynamics='sampled': the largest-normalised-residual test has "
@@ -156,7 +156,7 @@ class StealthAttackEnv(StealthParallelEnv):
             RuntimeError: Before :meth:`reset` or after the episode ended.
             ValueError: For a missing or unknown agent's action, or one outside its space.
         """
-        check_step_actions(
+        actions = check_step_actions(
             actions, self.agents, self._action_spaces, self._reset_called, self._done
         )
         est = self.estimation
@@ -225,3 +225,23 @@ def box_scale(a: np.ndarray, a_max: float) -> np.ndarray:
     """
     size = np.max(np.abs(a), axis=1, keepdims=True)
     return a_max / np.where(size > 0.0, size, a_max)
+
+
+def _estimation(scenario: Any, alpha: float) -> StaticEstimation:
+    """:func:`static_estimation` of ``scenario``, or ``ValueError`` naming ``scenario``.
+
+    ``alpha`` is already checked, so every error of the call is about ``scenario``.
+    """
+    from fdia_env.systems.grid import CASES
+
+    allowed = (
+        f"a grid case {sorted(CASES)}, a grid preset ('grid-ieee14', ...), a GridModel, a "
+        "StaticEstimation or an (m, n) matrix H (m > n, full column rank)"
+    )
+    if scenario is None or isinstance(scenario, bool | bytes | dict):  # not read as an H
+        raise ValueError(f"scenario must be {allowed}, got {scenario!r}")
+    try:
+        return static_estimation(scenario, alpha=alpha)
+    except (TypeError, ValueError) as exc:
+        why = "" if isinstance(scenario, str) else f" ({exc})"
+        raise ValueError(f"scenario must be {allowed}, got {scenario!r}{why}") from exc

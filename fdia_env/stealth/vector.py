@@ -103,7 +103,7 @@ class StealthVectorEnv(StealthVectorBase):
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
         """One snapshot for every member (NEXT_STEP: members that ended last step reset instead)."""
         env, est, xp, B = self.env, self.env.estimation, self.xp, self.num_envs
-        check_vector_actions(self.single_action_space, actions, B, "attacker", xp)
+        actions = check_vector_actions(self.single_action_space, actions, B, "attacker", xp)
         a = self.injections(actions)
         damage = self._max_abs(a @ self._KT)
         p = self._detection_probability(a) if env.test == "chi2" else xp.zeros(B)

@@ -228,9 +228,10 @@ def vector_options(kwargs: dict, label: str) -> tuple[str, Any, AutoresetMode]:
     backend, device = kwargs.pop("backend", "numpy"), kwargs.pop("device", None)
     agent = kwargs.pop("agent", "attacker")
     kwargs.pop("module", None)
-    if agent != "attacker" or kwargs.get("defender") is not None:
+    if not (isinstance(agent, str) and agent == "attacker") or kwargs.get("defender") is not None:
         raise ValueError(
-            f"the {label}'s native vector env plays the attacker alone (defender=None); use "
+            f"the {label}'s native vector env plays the attacker alone (agent='attacker', "
+            f"defender=None), got agent={agent!r}, defender={kwargs.get('defender')!r}; use "
             "vectorization_mode='sync' for the defender's view"
         )
     autoreset = check_autoreset_mode(kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP))
