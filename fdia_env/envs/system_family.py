@@ -16,7 +16,11 @@ Systems are indexed by an integer *system seed* ``k``: ``family.system(k)`` is
 ``system_seeds`` (a ``range``) with its own generator, which ``reset(seed=...)`` seeds, so a
 seeded reset sequence is reproducible. ``reset(options={"system_seed": k})`` pins the system
 (any ``k >= 0``, also outside ``system_seeds``: that is how held-out systems are scored).
-``info["system_seed"]`` says which system the episode runs.
+``info["system_seed"]`` says which system the episode runs. What an episode needs of a system
+(the system itself, its sparse env, its steady state, description, slot order and reward scale)
+is prepared the first time the system is drawn and kept (up to :data:`CACHED_SYSTEMS` systems,
+the least recently drawn dropped first), so a reset on a family of a few systems costs a reset
+of the sparse env; a kept system replays exactly as a freshly prepared one.
 
 ## Observation
 
@@ -92,6 +96,7 @@ across systems; ``info["phi"]`` is always the raw objective.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -119,6 +124,20 @@ LOGDET_EFFECT_MAX = 30.0
 SIGMA_W_FLOOR = 1e-6  # as ch4-random: U(0, 1) can return exactly 0; a sensor needs R > 0
 MAX_SEQUENTIAL_SENSORS = 128
 """Largest ``max_sensors`` of ``action="sequential"`` (the bitmask action stops at 16)."""
+CACHED_SYSTEMS = 4096
+"""Systems whose precomputed episode setup a :class:`SystemFamilyEnv` keeps (least recently
+drawn dropped first)."""
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """What a reset needs of one system, computed once per system seed."""
+
+    system: LinearSystem
+    inner: SingleAgentEnv
+    order: np.ndarray
+    description: np.ndarray
+    scale: float
 
 
 @dataclass(frozen=True)
@@ -177,6 +196,9 @@ def describe_system(
     max_sensors: int,
     objective_name: str = "trace",
     order: np.ndarray | None = None,
+    *,
+    steady: tuple[np.ndarray, np.ndarray] | None = None,
+    effect: np.ndarray | None = None,
 ) -> np.ndarray:
     """The fixed-size description of ``system`` (see the module docstring), float64.
 
@@ -186,6 +208,10 @@ def describe_system(
         objective_name: ``"trace"`` or ``"logdet"`` (the attack effect terms' objective).
         order: Slot j describes sensor ``order[j]`` (a permutation of ``range(M)``; default
             the identity).
+        steady: ``(P̄, P)``, the system's steady-state predicted and filtered covariances,
+            where the caller has them (default: solved here).
+        effect: The sensors' attack effects ``e_j`` , where the caller
+            has them (default: computed here, as in the module docstring).
 
     Raises:
         ValueError: For a system with a non-scalar sensor or more than ``max_sensors``.
@@ -199,7 +225,7 @@ def describe_system(
     if any(s.dim != 1 for s in system.sensors):
         raise ValueError("system must have scalar sensors (one measurement row each)")
     n = system.n
-    P_pred, P, _ = steady_state(system)
+    P_pred, P = steady_state(system)[:2] if steady is None else steady
     s = float(np.trace(P_pred))
     head = [
         [np.clip(math.log10(s), -CLIP, CLIP)],
@@ -208,13 +234,8 @@ def describe_system(
         _upper(P) / s,
     ]
     slots = np.zeros((max_sensors, n + 3))
-    drop_one = ~np.eye(system.M, dtype=bool)  # row j: every sensor but j
-    P_minus = information_update(P_pred, system.J, drop_one)  # (M, n, n)
-    if objective_name == "trace":
-        effect = (np.trace(P_minus, axis1=-2, axis2=-1) - np.trace(P)) / s
-    else:
-        effect = objective(P_minus, "logdet") - objective(P, "logdet")
-        effect = np.clip(effect, 0.0, LOGDET_EFFECT_MAX)
+    if effect is None:
+        effect = _attack_effect(system, P_pred, P, objective_name)
     order = np.arange(system.M) if order is None else np.asarray(order)
     if sorted(order.tolist()) != list(range(system.M)):
         raise ValueError(f"order must be a permutation of range({system.M}), got {order!r}")
@@ -228,6 +249,18 @@ def describe_system(
         slots[j, 1 + n] = np.clip(math.log10(snr), -CLIP, CLIP) if snr > 0 else -CLIP
         slots[j, 2 + n] = effect[i]
     return np.concatenate([*(np.asarray(h, float) for h in head), slots.reshape(-1)])
+
+
+def _attack_effect(
+    system: LinearSystem, P_pred: np.ndarray, P: np.ndarray, objective_name: str
+) -> np.ndarray:
+    """Every sensor's attack effect ``e_j`` from the steady state ``(P̄, P)`` (module docstring)."""
+    drop_one = ~np.eye(system.M, dtype=bool)  # row j: every sensor but j
+    P_minus = information_update(P_pred, system.J, drop_one)  # (M, n, n)
+    if objective_name == "trace":
+        return (np.trace(P_minus, axis1=-2, axis2=-1) - np.trace(P)) / float(np.trace(P_pred))
+    effect = objective(P_minus, "logdet") - objective(P, "logdet")
+    return np.clip(effect, 0.0, LOGDET_EFFECT_MAX)
 
 
 def effect_order(system: LinearSystem, objective_name: str = "trace") -> np.ndarray:
@@ -267,9 +300,9 @@ class SystemFamilyEnv(gym.Env):
         normalize_reward: Divide the terminal reward by ``s = tr P̄`` (trace) or subtract
             ``log det P̄`` (log det).
         reward_reference: ``None``, or a callable ``(system, budget, horizon) -> float`` (a
-            positive number, computed once per reset, e.g. a heuristic's value of the
-            system's sparse problem): the terminal reward is then divided by it (trace only;
-            replaces ``normalize_reward``'s scale). The env itself calls no solver.
+            positive number, computed once per system and kept with it, e.g. a heuristic's
+            value of the system's sparse problem): the terminal reward is then divided by it
+            (trace only; replaces ``normalize_reward``'s scale). The env itself calls no solver.
         describe: Append the description; ``False`` gives the sparse env's observation alone
             (the ablation "no description").
         action: ``"bitmask"`` (one subset per window step, ``Discrete(2**max_sensors)``) or
@@ -371,6 +404,7 @@ class SystemFamilyEnv(gym.Env):
         self._chosen = 0  # sequential: bitmask picked for the current window step
         self._left = 0  # sequential: budget left after the committed steps
         self._commits = 0  # sequential: window steps played
+        self._cache: OrderedDict[int, _Prepared] = OrderedDict()
 
     def _sparse_env(self, system: LinearSystem) -> FdiaParallelEnv:
         """``sparse_attack_v0``'s env on ``system``, composed from the models.
@@ -380,6 +414,36 @@ class SystemFamilyEnv(gym.Env):
         sc, spec = episode_spec(system, horizon=self.family.horizon, objective=self.objective)
         attack = SparseAttack(self.family.budget)
         return FdiaParallelEnv(sc, attack, PerfectDetection(), spec, name="sparse_attack_v0")
+
+    def _prepared(self, k: int) -> _Prepared:
+        """System ``k``'s episode setup, from the cache or computed (and cached) now.
+
+        The system, its sparse env, the slot order, the description and the reward scale
+        depend on ``k`` alone, so a system drawn again reuses them (its sparse env is reset).
+        """
+        cached = self._cache.get(k)
+        if cached is not None:
+            self._cache.move_to_end(k)
+            return cached
+        system = self.family.system(k)
+        inner = SingleAgentEnv(self._sparse_env(system), agent="attacker")
+        P_pred, P, _ = steady_state(system)
+        effect = _attack_effect(system, P_pred, P, self.objective)
+        order = np.argsort(-effect, kind="stable") if self.sort_sensors else np.arange(system.M)
+        description = describe_system(
+            system, self.max_sensors, self.objective, order, steady=(P_pred, P), effect=effect
+        )
+        scale = float(objective(P_pred, self.objective))
+        if self.reward_reference is not None:
+            ref = self.reward_reference(system, self.family.budget, self.family.horizon)
+            if not (isinstance(ref, (int, float, np.floating)) and math.isfinite(ref) and ref > 0):
+                raise ValueError(f"reward_reference must return a number > 0, got {ref!r}")
+            scale = float(ref)
+        prepared = _Prepared(system, inner, order, description, scale)
+        self._cache[k] = prepared
+        if len(self._cache) > CACHED_SYSTEMS:
+            self._cache.popitem(last=False)
+        return prepared
 
     def _observation(self, sparse_obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
         self._sparse_obs = np.asarray(sparse_obs, dtype=np.float64)
@@ -421,21 +485,10 @@ class SystemFamilyEnv(gym.Env):
         else:
             k = int(self.system_seeds[int(self.np_random.integers(len(self.system_seeds)))])
         self.system_seed = k
-        self.system = self.family.system(k)
-        self._inner = SingleAgentEnv(self._sparse_env(self.system), agent="attacker")
-        M = self.system.M
-        self.order = effect_order(self.system, self.objective) if self.sort_sensors else None
-        self.order = np.arange(M) if self.order is None else self.order
-        self.description = describe_system(
-            self.system, self.max_sensors, self.objective, self.order
-        )
-        P_pred = steady_state(self.system)[0]
-        self._scale = float(objective(P_pred, self.objective))
-        if self.reward_reference is not None:
-            ref = self.reward_reference(self.system, self.family.budget, self.family.horizon)
-            if not (isinstance(ref, (int, float, np.floating)) and math.isfinite(ref) and ref > 0):
-                raise ValueError(f"reward_reference must return a number > 0, got {ref!r}")
-            self._scale = float(ref)
+        prepared = self._prepared(k)
+        self.system, self._inner = prepared.system, prepared.inner
+        self.order, self.description = prepared.order, prepared.description
+        self._scale = prepared.scale
         self._chosen, self._left, self._commits = 0, self.family.budget, 0
         obs, info = self._inner.reset(seed=int(self.np_random.integers(2**31)))
         out = self._observation(obs, info.get("action_mask"))
