@@ -11,6 +11,7 @@ import io
 import re
 import shlex
 import struct
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -135,7 +136,13 @@ def test_the_readme_stays_a_front_page():
         assert f"\n## {title}\n" in README, title
     for extra in ("grid", "rllib", "clients", "docs", "dev"):
         assert f"`{extra}`" in section(README, "Install"), extra
-    assert 'pip install "fdia-env[grid]"' in README and 'pip install -e ".[dev]"' in README
+    install = section(README, "Install")
+    for line in ("pip install torch==2.13.0", "pip install -c constraints.txt .", '".[grid]"'):
+        assert line in install, line
+    assert "torch==2.13.0" in (ROOT / "constraints.txt").read_text()  # the pin the page names
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    for name in re.findall(r"`(fdia-[a-z]+)`", install):
+        assert name in scripts, name
     assert re.search(r"```bibtex\n@software\{fdia_env,.*?\n\}\n```", README, flags=re.S)
     assert not re.search(r"20\d\d-\d\d-\d\d", README), "a dated sentence"
     assert fdia_env.__version__ in section(README, "Citing")
