@@ -273,24 +273,51 @@ def child_bounds(
 # --- the allocation bound -------------------------------------------------------------------
 
 
+def unit_information(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each sensor's information split as ``J_i = w_i U_i``: ``(U, w)``, ``w_i = tr J_i``.
+
+    ``U_i`` has unit trace; a sensor that carries no information (``J_i = 0``: a zero row of H,
+    or an R so large that ``H' R⁻¹ H`` underflows) has ``w_i = 0`` and ``U_i = 0``. It never
+    matters to any attack, and no division by its zero trace happens.
+    """
+    w = np.trace(J, axis1=1, axis2=2)
+    positive = w > 0.0
+    unit = np.zeros_like(J)
+    unit[positive] = J[positive] / w[positive, None, None]
+    return unit, np.where(positive, w, 0.0)
+
+
 def information_groups(J: np.ndarray, rtol: float = 1e-9) -> list[tuple[np.ndarray, np.ndarray]]:
     """Sensors whose information matrices are proportional: ``[(indices, weights), ...]``.
 
-    Within a group ``J_i = w_i J_g`` with ``J_g`` the group's first matrix scaled to unit trace;
-    weights are returned sorted descending with their indices.
+    Within a group ``J_i = w_i U_g`` with ``U_g`` the group's first unit-trace matrix
+    (:func:`unit_information`); weights are returned sorted descending with their indices.
+    Sensors without information (``w_i = 0``) join the first group with weight 0 (``0 = 0·U_g``
+    for any g), so they never split a group that is otherwise one. One pass over the sensors:
+    each joins the first group whose matrix it matches, or opens a new one.
     """
-    M = J.shape[0]
-    unit = J / np.trace(J, axis1=1, axis2=2)[:, None, None]
-    left = list(range(M))
+    unit, weight = unit_information(J)
+    members: list[list[int]] = []
+    empty = []
+    for i in range(J.shape[0]):
+        if weight[i] == 0.0:
+            empty.append(i)
+            continue
+        for group in members:
+            g = group[0]
+            if np.abs(unit[i] - unit[g]).max() <= rtol * np.abs(unit[g]).max():
+                group.append(i)
+                break
+        else:
+            members.append([i])
+    if not members:  # no sensor carries information: one group of weight-0 sensors
+        members.append([])
+    members[0] += empty
     groups = []
-    while left:
-        g = left[0]
-        scale = np.abs(unit[g]).max()
-        members = [i for i in left if np.abs(unit[i] - unit[g]).max() <= rtol * scale]
-        left = [i for i in left if i not in members]
-        w = np.trace(J[members], axis1=1, axis2=2)
+    for group in members:
+        w = weight[group]
         order = np.argsort(-w, kind="stable")
-        groups.append((np.asarray(members)[order], w[order]))
+        groups.append((np.asarray(group)[order], w[order]))
     return groups
 
 
@@ -303,7 +330,7 @@ def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
     """
     sys, N, c = problem.system, problem.horizon, problem.budget
     groups = information_groups(sys.J)
-    unit = sys.J / np.trace(sys.J, axis1=1, axis2=2)[:, None, None]
+    unit = unit_information(sys.J)[0]
     cap = min(c, max(len(idx) for idx, _ in groups))
     # D[r] for r = 0..cap
     D = np.zeros((cap + 1, sys.n, sys.n))

@@ -44,6 +44,7 @@ from math import comb
 
 import numpy as np
 
+from baselines.sparse.bound import unit_information
 from baselines.sparse.problem import SparseProblem
 from fdia_env.kalman import objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
@@ -252,7 +253,7 @@ class TailTable:
 def _kept_free(problem: SparseProblem, groups, free: np.ndarray, e: int) -> np.ndarray:
     """(R, n, n) Loewner lower bound on the information of the free sensors after any e drops."""
     J = problem.system.J
-    unit = J / np.trace(J, axis1=1, axis2=2)[:, None, None]
+    unit = unit_information(J)[0]
     out = np.zeros((free.shape[0], problem.system.n, problem.system.n))
     for idx, w in groups:
         wf = free[:, idx] * w  # (R, |g|), weights descending
