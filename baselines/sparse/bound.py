@@ -54,6 +54,15 @@ from fdia_env.kalman.linalg import mT, spd_inv, sym
 
 # Upper bound on how many Gram entries (rows × T² × M²) one smoother call materialises.
 GRAM_ENTRIES = 1 << 22
+# Leverage above which ``1 − l_q`` is recomputed from information sums (no cancellation).
+HIGH_LEVERAGE = 0.5
+# A high-leverage pair's smoother terms are used only where the recomputed ``1 − l_q`` is at
+# least COMPLEMENT_MIN and the subtraction ``1 − l_q`` agrees with it to COMPLEMENT_RTOL: the
+# disagreement is the rounding of ``G_qq``, which ``a_q`` and the Gram entries share, relative
+# to ``1 − l_q``, the factor by which the bound amplifies it. Elsewhere the pair's terms are
+# ``inf`` (a valid bound; the other bounds of branch and bound take over).
+COMPLEMENT_MIN = 1e-6
+COMPLEMENT_RTOL = 1e-6
 
 
 def measurement_factors(problem: SparseProblem) -> np.ndarray:
@@ -117,18 +126,24 @@ class PairTerms:
         base: (R,) Φ of the node's base set (every other pair used).
         a: (R, T·M) ``‖c_q‖²`` (trace) or ``tr(P⁻¹ c_q' c_q)`` (log det).
         lev: (R, T·M) leverages ``l_q = λ_max(B_q' Σ_kk B_q)``.
+        comp: (R, T·M) their complements ``1 − l_q`` (for a leverage above
+            :data:`HIGH_LEVERAGE` computed without cancellation, see :func:`_complements`).
         e: (R, T·M) ``a_q / (1 − l_q)``.
         cross: (R, T·M, T·M) ``‖Ô_qq'‖_F`` (zero on the diagonal), or None when not computed.
         vectors: (R, T·M, nz, n) the ``c_q`` themselves (trace objective only, else None).
+        unreliable: (R, T·M) pairs whose terms are rounding, not value (``a``, ``e`` and
+            their ``cross`` entries are ``inf`` there; see :data:`COMPLEMENT_MIN`).
     """
 
     start: int
     base: np.ndarray
     a: np.ndarray
     lev: np.ndarray
+    comp: np.ndarray
     e: np.ndarray
     cross: np.ndarray | None
     vectors: np.ndarray | None = None
+    unreliable: np.ndarray | None = None
 
 
 def pair_terms(
@@ -137,6 +152,7 @@ def pair_terms(
     posts: np.ndarray,
     start: int,
     with_cross: bool = True,
+    attacked: np.ndarray | None = None,
 ) -> PairTerms:
     """Smoother quantities of the bound for every pair at steps ``start..N−1`` (batched RTS).
 
@@ -176,11 +192,24 @@ def pair_terms(
     else:
         lev = np.linalg.eigvalsh(sym(diag))[..., -1]
     lev = np.clip(lev.reshape(R_, T * M), 0.0, None)
+    comp = np.clip(1.0 - lev, 0.0, None)
+    high = lev > HIGH_LEVERAGE
+    unreliable = np.zeros_like(high)
+    if high.any():
+        exact = _complements(problem, factors, posts, start, attacked, high)
+        # the subtraction's error is the rounding of G along B_q, which a_q and the Gram
+        # entries carry as well: where it is not small against 1 − l_q, no smoother term
+        unreliable[high] = (exact < COMPLEMENT_MIN) | (
+            np.abs(comp[high] - exact) > COMPLEMENT_RTOL * exact
+        )
+        comp[high] = exact
+        lev[high] = 1.0 - exact
+    a_term = np.where(unreliable, np.inf, a_term)
     with np.errstate(divide="ignore"):
-        e = np.where(lev < 1.0, a_term / np.maximum(1.0 - lev, 1e-300), np.inf)
+        e = np.where(comp > 0.0, a_term / np.maximum(comp, 1e-300), np.inf)
     cross = None
     if with_cross:
-        scale = 1.0 / np.sqrt(np.maximum(1.0 - lev, 1e-300))  # (R, T·M)
+        scale = 1.0 / np.sqrt(np.maximum(comp, 1e-300))  # (R, T·M)
         cross = np.empty((R_, T * M, T * M))
         for a in range(T):
             # G[(a, i), (b, j)] = B_i' Σ_ab B_j for every b, i, j
@@ -188,10 +217,55 @@ def pair_terms(
             norm = np.sqrt((G**2).sum(axis=(-1, -2))).reshape(R_, M, T * M)
             cross[:, a * M : (a + 1) * M] = norm
         cross *= scale[:, :, None] * scale[:, None, :]
+        cross = np.where(unreliable[:, :, None] | unreliable[:, None, :], np.inf, cross)
         idx = np.arange(T * M)
         cross[:, idx, idx] = 0.0
     vectors = c.reshape(R_, T * M, *c.shape[-2:]) if problem.objective == "trace" else None
-    return PairTerms(start, base, a_term, lev, e, cross, vectors)
+    return PairTerms(start, base, a_term, lev, comp, e, cross, vectors, unreliable)
+
+
+def _complements(
+    problem: SparseProblem,
+    factors: np.ndarray,
+    posts: np.ndarray,
+    start: int,
+    attacked: np.ndarray | None,
+    high: np.ndarray,
+) -> np.ndarray:
+    """``1 − l_q`` of the pairs flagged ``high``, without the cancellation of ``1 − l_q``.
+
+    ``I − B_q' Σ_kk B_q = (I + B_q' Σ⁻_kk B_q)⁻¹`` (Woodbury), with ``Σ⁻_kk`` the smoothed
+    covariance of ``x_k`` without the pair q: the inverse of the information ``Y_k + Ω_k +
+    Σ_{j used at k, j ≠ i} J_j``, built as a sum of positive semidefinite terms (``Y_k`` the
+    filter's predicted information, ``Ω_k`` the backward information of steps k+1..N−1).
+    So ``1 − l_q = 1 / (1 + λ_max(B_q' Σ⁻_kk B_q))``. Returns the values in ``high``'s order.
+    """
+    sys = problem.system
+    N, M, n = problem.horizon, problem.M, sys.n
+    T = N - start
+    R_ = posts.shape[0]
+    J_all = sys.J.sum(axis=0)
+    omega = np.zeros((R_, T, n, n))  # Ω_{start+a}: information of the later measurements
+    eye = np.eye(n)
+    for a in range(T - 2, -1, -1):
+        lam = omega[:, a + 1] + J_all  # every pair after the node's step is used
+        omega[:, a] = sym(mT(sys.F) @ np.linalg.solve(eye + lam @ sys.Q, lam) @ sys.F)
+    rows, flat = np.nonzero(high)
+    steps, sensors = flat // M, flat % M
+    k = start + steps
+    prev = np.where(
+        (k > 0)[:, None, None], posts[rows, np.maximum(k - 1, 0)], problem.P_start[None]
+    )
+    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + omega[rows, steps]
+    used = np.ones((len(rows), M))
+    if attacked is not None:
+        used = (~attacked[rows, k]).astype(float)
+    used[np.arange(len(rows)), sensors] = 0.0
+    Sm = spd_inv(info + np.einsum("qm,mij->qij", used, sys.J))
+    B = factors[sensors]  # (Q, n, nz)
+    g = sym(mT(B) @ Sm @ B)
+    top = g[:, 0, 0] if g.shape[-1] == 1 else np.linalg.eigvalsh(g)[:, -1]
+    return 1.0 / (1.0 + np.clip(top, 0.0, None))
 
 
 # --- combining terms into subtree bounds ---------------------------------------------------
@@ -215,10 +289,21 @@ def suffix_top_sums(x: np.ndarray, r: int) -> np.ndarray:
     return out
 
 
-def increase_bound(objective_name: str, total: np.ndarray, mu: np.ndarray, m: int) -> np.ndarray:
-    """``total / (1 − μ)`` (trace) or ``m log(1 + total / (m (1 − μ)))`` (log det); inf if μ ≥ 1."""
+def increase_bound(
+    objective_name: str,
+    total: np.ndarray,
+    mu: np.ndarray,
+    m: int,
+    slack: np.ndarray | None = None,
+) -> np.ndarray:
+    """``total / (1 − μ)`` (trace) or ``m log(1 + total / (m (1 − μ)))`` (log det); inf if μ ≥ 1.
+
+    ``slack``, when given, is ``1 − μ`` computed without cancellation (and used instead).
+    """
+    if slack is None:
+        slack = 1.0 - mu
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        scaled = np.where(mu < 1.0, total / np.maximum(1.0 - mu, 1e-300), np.inf)
+        scaled = np.where(slack > 0.0, total / np.maximum(slack, 1e-300), np.inf)
         if objective_name == "trace":
             out = scaled
         else:
@@ -252,11 +337,12 @@ def child_bounds(
     m = min(problem.system.n, (remaining + 1) * nz_max)
     # Weyl: λ_max(G_T) ≤ Σ l_q
     tot_a = terms.a + suffix_top_sums(a, remaining)[:, 1:]
-    mu = terms.lev + suffix_top_sums(lev, remaining)[:, 1:]
-    inc = increase_bound(problem.objective, tot_a, mu, m)
+    # 1 − μ as comp_q − Σ l (the complement of q's own leverage without cancellation)
+    slack = terms.comp - suffix_top_sums(lev, remaining)[:, 1:]
+    inc = increase_bound(problem.objective, tot_a, 1.0 - slack, m, slack)
     tot_e = terms.e + suffix_top_sums(e, remaining)[:, 1:]
     if remaining == 0:
-        inc = np.minimum(inc, increase_bound(problem.objective, tot_e, np.zeros_like(mu), m))
+        inc = np.minimum(inc, increase_bound(problem.objective, tot_e, np.zeros_like(slack), m))
     elif terms.cross is not None:
         # Gershgorin on the normalised off-diagonal: row q sums its r largest entries over the
         # free columns; ω(p) is the largest such row sum over the candidates q ≥ p.
@@ -332,13 +418,12 @@ def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
     groups = information_groups(sys.J)
     unit = unit_information(sys.J)[0]
     cap = min(c, max(len(idx) for idx, _ in groups))
-    # D[r] for r = 0..cap
-    D = np.zeros((cap + 1, sys.n, sys.n))
-    for r in range(1, cap + 1):
+    # information used with r dropped at a step, J_all − D(r): summed from the weights each
+    # group keeps (a difference of the two would cancel where one sensor dominates)
+    info = np.zeros((cap + 1, sys.n, sys.n))
+    for r in range(cap + 1):
         for idx, w in groups:
-            D[r] += w[: min(r, len(idx))].sum() * unit[idx[0]]
-    J_all = sys.J.sum(axis=0)
-    info = J_all[None] - D  # information used with r dropped at a step
+            info[r] += w[min(r, len(idx)) :].sum() * unit[idx[0]]
     if len(groups) == 1:  # attained: sum what is left, as the reference recursion does
         order = groups[0][0]
         info = np.stack([sys.J[np.sort(order[r:])].sum(axis=0) for r in range(cap + 1)])

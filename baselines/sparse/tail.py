@@ -53,6 +53,10 @@ from fdia_env.kalman.linalg import mT, spd_inv, sym
 # recursion by a few ulps times the condition number of I − G_DD. Tail bounds are raised by
 # this relative amount (of max(|Φ|, 1) for log det) so that rounding can never make them invalid.
 SAFETY = 1e-9
+# Rounding of the Gram matrix ``G = U' P U`` in units of eps·‖Λ‖·‖P‖ (Λ = P⁻¹ the information):
+# a backward-stable inverse errs by ``P δΛ P`` with ``‖δΛ‖ ≲ eps ‖Λ‖``, so an entry of G with
+# ``G ⪯ I`` errs by at most about ``eps ‖Λ‖ ‖P‖``; the constant covers the few operations.
+GRAM_ROUNDING = 64.0
 # Largest number of (row, subset) small problems materialised at once.
 CHUNK = 1 << 15
 # Grid of the table: σ_j = SIGMA_0 · SIGMA_RATIO^j, j = 0..; σ beyond the last point: no bound.
@@ -91,6 +95,32 @@ def _raise(problem: SparseProblem, values: np.ndarray) -> np.ndarray:
         return np.where(np.isfinite(values), values + SAFETY * scale, values)
 
 
+def downdate_floor(info: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """(R,) smallest ``λ_min(I − G_DD)`` for which the Woodbury downdate is trusted.
+
+    A downdate whose ``λ_min(A)``, ``A = I − G_DD``, is below the rounding of G divided by
+    :data:`SAFETY` loses more than the safety margin to cancellation in ``1 − G`` (a sensor
+    far more precise than the prior); such sets are evaluated from the kept sensors'
+    information instead, as the reference recursion does. ``info`` and ``P`` are (R, n, n)
+    information matrices and their inverses.
+    """
+    norm = np.linalg.norm(info, axis=(-2, -1)) * np.linalg.norm(P, axis=(-2, -1))
+    return GRAM_ROUNDING * np.finfo(float).eps * norm / SAFETY
+
+
+def well_conditioned(A: np.ndarray, floor: np.ndarray | float) -> np.ndarray:
+    """(S,) whether ``λ_min(A) >= floor`` for the (S, d, d) symmetric ``A`` (per-row floor)."""
+    floor = np.broadcast_to(np.asarray(floor, dtype=float), A.shape[:1])
+    if A.shape[-1] == 1:
+        return A[:, 0, 0] >= floor
+    eye = np.eye(A.shape[-1])
+    try:  # the common case: every set passes, one batched Cholesky says so
+        np.linalg.cholesky(A - floor[:, None, None] * eye)
+        return np.ones(len(A), dtype=bool)
+    except np.linalg.LinAlgError:
+        return np.linalg.eigvalsh(sym(A))[:, 0] >= floor
+
+
 def _information(
     problem: SparseProblem, prev: np.ndarray, fixed_info: np.ndarray, free: np.ndarray
 ) -> np.ndarray:
@@ -99,9 +129,27 @@ def _information(
     The prior predicted from the posterior ``prev``, plus ``fixed_info`` (the decided, used
     sensors) and the information of the sensors still ``free``.
     """
+    return _prior_information(problem, prev, fixed_info) + _kept(problem, free)
+
+
+def _prior_information(
+    problem: SparseProblem, prev: np.ndarray, fixed_info: np.ndarray
+) -> np.ndarray:
+    """(R, n, n) predicted information from ``prev`` plus the decided, used sensors'."""
     sys = problem.system
-    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
-    return info + np.einsum("rm,mij->rij", free.astype(float), sys.J)
+    return spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
+
+
+def _kept(problem: SparseProblem, keep: np.ndarray) -> np.ndarray:
+    """(R, n, n) ``Σ_{i kept} J_i`` for (R, M) booleans: a sum, never a difference."""
+    return np.einsum("rm,mij->rij", keep.astype(float), problem.system.J)
+
+
+def _without(free: np.ndarray, sets: np.ndarray) -> np.ndarray:
+    """(R, M) ``free`` rows with the sensors of the matching (R, s) ``sets`` rows removed."""
+    keep = free.copy()
+    np.put_along_axis(keep, sets, False, axis=1)
+    return keep
 
 
 def last_step(
@@ -128,7 +176,10 @@ def last_step(
     sys = problem.system
     R_, M = free.shape
     nz = factors.shape[2]
-    P = spd_inv(_information(problem, prev, fixed_info, free))
+    prior = _prior_information(problem, prev, fixed_info)
+    info = prior + _kept(problem, free)
+    P = spd_inv(info)
+    floor = downdate_floor(info, P)
     U = factors.transpose(1, 0, 2).reshape(sys.n, M * nz)  # (n, M·nz)
     PU = P @ U  # (R, n, M·nz)
     G = sym(U.T @ PU)  # (R, M·nz, M·nz)
@@ -147,18 +198,23 @@ def last_step(
             rr, cc = rows[lo : lo + CHUNK], cols[lo : lo + CHUNK]
             ii = idx[cc]
             A = eye - G[rr[:, None, None], ii[:, :, None], ii[:, None, :]]
-            sign, logdet = np.linalg.slogdet(A)
+            ok = well_conditioned(A, floor[rr])
             if problem.objective == "trace":
                 Kd = K[rr[:, None, None], ii[:, :, None], ii[:, None, :]]
                 with np.errstate(all="ignore"):
                     inc = np.trace(
-                        np.linalg.solve(np.where(sign[:, None, None] > 0, A, eye), Kd),
+                        np.linalg.solve(np.where(ok[:, None, None], A, eye), Kd),
                         axis1=1,
                         axis2=2,
                     )
-                vals = np.where(sign > 0, base[rr] + inc, np.inf)
+                vals = base[rr] + inc
             else:
-                vals = np.where(sign > 0, base[rr] - logdet, np.inf)
+                vals = base[rr] - np.linalg.slogdet(np.where(ok[:, None, None], A, eye))[1]
+            if not ok.all():  # I − G_DD cancels: the kept sensors' information instead
+                bad = np.flatnonzero(~ok)
+                keep = _without(free[rr[bad]], sets[cc[bad]])
+                post = spd_inv(prior[rr[bad]] + _kept(problem, keep))
+                vals[bad] = objective(post, problem.objective)
             np.maximum.at(out[:, s], rr, vals)
     return out
 
@@ -176,9 +232,8 @@ def two_steps(
     The drops at N−2 are among its ``free`` sensors, those at N−1 among all; ``prev`` is the
     posterior before step N−2 (other arguments as :func:`last_step`).
     """
-    sys = problem.system
     R_, M = free.shape
-    info = _information(problem, prev, fixed_info, free)
+    prior = _prior_information(problem, prev, fixed_info)
     out = np.full((R_, r + 1), -np.inf)
     for a in range(0, min(r, M) + 1):
         sets = combos(M, a)
@@ -186,8 +241,7 @@ def two_steps(
         step = max(1, CHUNK // max(len(combos(M, min(r - a, M))), 1))
         for lo in range(0, len(rows), step):
             rr, cc = rows[lo : lo + step], cols[lo : lo + step]
-            Y = info[rr] - sys.J[sets[cc]].sum(axis=1)
-            post = spd_inv(Y)
+            post = spd_inv(prior[rr] + _kept(problem, _without(free[rr], sets[cc])))
             zeros = np.zeros_like(post)
             tail = last_step(problem, factors, post, zeros, np.ones((len(rr), M), bool), r - a)
             for s in range(r - a + 1):
