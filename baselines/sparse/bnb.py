@@ -375,7 +375,7 @@ def branch_and_bound(
     for heuristic in (sfs_ss, dp):
         result = heuristic(problem.system, problem.budget, problem.horizon, objective)
         search.offer(result.value, list(result.attacks))
-    alloc, alloc_pairs = allocation_bound(problem)
+    alloc, alloc_pairs = allocation_bound(problem, deadline)
     if alloc_pairs is not None:
         search.offer(problem.evaluate(alloc_pairs), alloc_pairs)
     root = alloc

@@ -27,6 +27,17 @@ theorem gives ``λ_max(Ô) ≤ max_q Σ_{q'≠q} ‖Ô_qq'‖_F``. Hence
 the smaller is used. For log det, ``log det(P + Z) − log det P ≤ m log(1 + tr(P⁻¹Z)/m)`` for
 ``rank Z ≤ m`` (Jensen on the eigenvalues), with the same per-pair terms weighted by ``P⁻¹``.
 A subtree "base S plus up to r of the free pairs" is bounded by taking the r largest terms.
+
+**Computing ``1 − l_q``.** A measurement far more precise than the prior has ``l_q`` within
+rounding of 1, and ``1 − l_q`` formed by subtraction is then the rounding of ``G_qq`` (it can
+even come out negative), which the terms divide by: the bound falls below the optimum. So a
+leverage above :data:`HIGH_LEVERAGE` takes its complement from the identity ``I − B_q' Σ B_q =
+(I + B_q' Σ₋ B_q)⁻¹``, ``Σ₋`` the smoothed covariance without the pair, whose information
+(predicted, backward and the other sensors') is a sum of positive semidefinite terms; Weyl's
+denominator is ``(1 − l_q) − Σ_{q'≠q} l_q'``, never ``1 − Σ l``. Where the subtraction and the
+identity disagree by more than :data:`COMPLEMENT_RTOL`, or the complement is below
+:data:`COMPLEMENT_MIN`, ``a_q`` and the Gram entries of q carry the same rounding amplified by
+``1/(1 − l_q)``: the pair gets no smoother term (``inf``) and the other bounds decide.
 No submodularity is used (it does not hold: dropping the same sensor at consecutive steps is
 worth more than the sum of the single drops, see tests/test_bnb.py); the interaction between
 dropped pairs is what the ``1/(1 − ω)`` factor covers.
@@ -36,14 +47,18 @@ the Riccati map is monotone. Group sensors whose information matrices are propor
 ``J_i = w_i J_g``; any r sensors dropped at one step remove at most
 ``D(r) = Σ_g (sum of the min(r, |g|) largest w_i of g) J_g`` (Loewner). Propagating the filter
 with information ``J_all − D(r_k)`` at each step and maximising over every count allocation
-``(r_0, ..., r_{N−1})``, ``Σ r_k ≤ c``, bounds every attack. With one group (scalar position
-sensors sharing H, as in ch4-position and ch4-random) ``D(r)`` is attained by the r
-largest-information sensors, so the bound *is* the optimum and its argmax is an optimal set.
+``(r_0, ..., r_{N−1})``, ``Σ r_k ≤ c``, bounds every attack. The information kept,
+``J_all − D(r)``, is summed from the weights each group keeps (a difference would cancel where
+one sensor dominates). A sensor without information (``J_i = 0``) has weight 0 in any group.
+With one group (scalar position sensors sharing H, as in ch4-position and ch4-random) ``D(r)``
+is attained by the r largest-information sensors, so the bound *is* the optimum and its argmax
+is an optimal set.
 """
 
 from __future__ import annotations
 
 import itertools
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -407,8 +422,15 @@ def information_groups(J: np.ndarray, rtol: float = 1e-9) -> list[tuple[np.ndarr
     return groups
 
 
-def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
+def allocation_bound(
+    problem: SparseProblem, deadline: float | None = None
+) -> tuple[float, list[Pair] | None]:
     """The Loewner allocation bound and, when it is attained (one group), an optimal set.
+
+    Args:
+        problem: The instance.
+        deadline: ``time.perf_counter()`` value after which the recursion gives up (checked at
+            every step): the bound is then ``inf`` (valid, uninformative) and no set is given.
 
     Returns:
         ``(bound, pairs)``: ``pairs`` has exactly ``budget`` pairs and value equal to the bound
@@ -431,6 +453,8 @@ def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
     spent = np.zeros(1, dtype=int)
     history = np.zeros((1, 0), dtype=int)
     for _ in range(N):
+        if deadline is not None and time.perf_counter() > deadline:
+            return np.inf, None
         Y = spd_inv(predict_cov(states, sys.F, sys.Q))
         rs = np.arange(cap + 1)
         parent, r = np.meshgrid(np.arange(len(states)), rs, indexing="ij")

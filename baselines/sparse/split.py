@@ -15,7 +15,9 @@ the nominal prediction into the last step. Two facts about the filter are used, 
    ``S_D = Y P_D Φ'(P_D) P_D Y`` (``Φ' = I`` for trace, ``P_D⁻¹`` for log det), ``P_D`` the
    last posterior of ``D``. ``V(D)`` and ``S_D`` come from one Woodbury downdate per set
    (:func:`baselines.sparse.tail.last_step` is the same algebra), every set of the last step
-   enumerated.
+   enumerated; a set whose downdate ``I − G_DD`` is ill-conditioned (a sensor far more precise
+   than the prior: ``1 − G`` cancels) is evaluated from the kept sensors' information, as the
+   reference recursion does (:func:`baselines.sparse.tail.downdate_floor`).
 2. **The head as a weighted smoother downdate.** ``P_{N−2}(H) − P̂_{N−2} = C_H' (I − G_HH)⁻¹
    C_H`` over the head window (the smoother bound of :mod:`baselines.sparse.bound`), so
    ``tr(W C_H' (I − G_HH)⁻¹ C_H)`` with ``W = F' S_D F`` is at most

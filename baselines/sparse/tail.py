@@ -13,7 +13,11 @@ candidate set ``D`` is a Woodbury downdate of the posterior ``P`` that uses ever
     tr P_D = tr P + tr((I − G_DD)⁻¹ K_DD),  K = U' P² U,
     log det P_D = log det P − log det(I − G_DD),
 
-small ``(s·nz)``-square problems built from one ``(M·nz)``-square matrix per posterior. At step
+small ``(s·nz)``-square problems built from one ``(M·nz)``-square matrix per posterior. Where
+``λ_min(I − G_DD)`` is below the rounding of G over :data:`SAFETY` (:func:`downdate_floor`: a
+sensor far more precise than the prior, ``1 − G`` cancels) the set is evaluated from the kept
+sensors' information instead, ``(Y + Σ_{i ∉ D} J_i)⁻¹``, the reference recursion's arithmetic;
+information is only ever summed, never differenced. At step
 N−2 every subset of the free sensors is enumerated explicitly (one inversion each), then the last
 step as above. This is the exact maximum (up to rounding, see :data:`SAFETY`).
 
