@@ -69,6 +69,10 @@ from fdia_env.kalman.linalg import mT, spd_inv, sym
 
 # Upper bound on how many Gram entries (rows × T² × M²) one smoother call materialises.
 GRAM_ENTRIES = 1 << 22
+# Rounding of the Gram matrix ``G = U' P U`` in units of eps·‖Λ‖·‖P‖ (Λ = P⁻¹ the information):
+# a backward-stable inverse errs by ``P δΛ P`` with ``‖δΛ‖ ≲ eps ‖Λ‖``, so an entry of G with
+# ``G ⪯ I`` errs by at most about ``eps ‖Λ‖ ‖P‖``; the constant covers the few operations.
+GRAM_ROUNDING = 64.0
 # Leverage above which ``1 − l_q`` is recomputed from information sums (no cancellation).
 HIGH_LEVERAGE = 0.5
 # A high-leverage pair's smoother terms are used only where the recomputed ``1 − l_q`` is at
@@ -148,6 +152,7 @@ class PairTerms:
         vectors: (R, T·M, nz, n) the ``c_q`` themselves (trace objective only, else None).
         unreliable: (R, T·M) pairs whose terms are rounding, not value (``a``, ``e`` and
             their ``cross`` entries are ``inf`` there; see :data:`COMPLEMENT_MIN`).
+        floor: (R,) smallest trusted denominator ``1 − μ`` (:func:`gram_floor`).
     """
 
     start: int
@@ -159,6 +164,7 @@ class PairTerms:
     cross: np.ndarray | None
     vectors: np.ndarray | None = None
     unreliable: np.ndarray | None = None
+    floor: np.ndarray | None = None
 
 
 def pair_terms(
@@ -236,7 +242,25 @@ def pair_terms(
         idx = np.arange(T * M)
         cross[:, idx, idx] = 0.0
     vectors = c.reshape(R_, T * M, *c.shape[-2:]) if problem.objective == "trace" else None
-    return PairTerms(start, base, a_term, lev, comp, e, cross, vectors, unreliable)
+    floor = gram_floor(posts[:, start:])
+    return PairTerms(start, base, a_term, lev, comp, e, cross, vectors, unreliable, floor)
+
+
+def gram_floor(posts: np.ndarray) -> np.ndarray:
+    """(R,) smallest denominator ``1 − μ`` (or ``1 − ω``) the bounds divide by, per row.
+
+    The Gram entries carry a rounding of about ``GRAM_ROUNDING · eps · κ`` (κ the condition
+    number of the (R, T, n, n) posteriors, the largest over the steps); a denominator below
+    that over :data:`baselines.sparse.tail.SAFETY` would let the rounding, amplified by its
+    inverse, exceed the safety margin, so the bound is ``inf`` there (valid, uninformative).
+    """
+    w = np.linalg.eigvalsh(posts)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kappa = np.where(w[..., 0] > 0.0, w[..., -1] / w[..., 0], np.inf)
+    kappa = kappa.reshape(len(posts), -1).max(axis=1)
+    from baselines.sparse.tail import SAFETY  # tail imports this module
+
+    return GRAM_ROUNDING * np.finfo(float).eps * kappa / SAFETY
 
 
 def _complements(
@@ -354,6 +378,8 @@ def child_bounds(
     tot_a = terms.a + suffix_top_sums(a, remaining)[:, 1:]
     # 1 − μ as comp_q − Σ l (the complement of q's own leverage without cancellation)
     slack = terms.comp - suffix_top_sums(lev, remaining)[:, 1:]
+    floor = terms.floor[:, None]
+    slack = np.where(slack >= floor, slack, 0.0)  # below the rounding of G: no bound
     inc = increase_bound(problem.objective, tot_a, 1.0 - slack, m, slack)
     tot_e = terms.e + suffix_top_sums(e, remaining)[:, 1:]
     if remaining == 0:
@@ -366,6 +392,7 @@ def child_bounds(
         rows = -np.sort(-cross, axis=2)[:, :, :k].sum(axis=2) if k > 0 else np.zeros((R_, L))
         rows = np.where(free, rows, -np.inf)
         omega = np.maximum.accumulate(rows[:, ::-1], axis=1)[:, ::-1]
+        omega = np.where(1.0 - omega >= floor, omega, np.inf)
         inc = np.minimum(inc, increase_bound(problem.objective, tot_e, omega, m))
     out = terms.base[:, None] + inc
     return np.where(feasible, out, -np.inf)

@@ -105,6 +105,7 @@ class _Head:
     lev: np.ndarray  # (L,)
     comp: np.ndarray  # (L,) 1 − lev without cancellation
     unreliable: np.ndarray  # (L,) pairs without smoother terms (bound.pair_terms)
+    floor: float  # smallest trusted denominator 1 − μ (bound.gram_floor)
     omega: np.ndarray  # (r_max + 1,) ω for heads of r pairs
     full: np.ndarray  # (n²,) P_{N−2} with every head pair dropped, minus the nominal
     cross: np.ndarray  # (L, L) normalised off-diagonal norms ‖Ô_qq'‖ (zero diagonal)
@@ -127,9 +128,14 @@ class _Head:
             # 1 − Σ of the k largest leverages: the largest enters by its complement
             order = np.argsort(self.lev)
             slack = self.comp[order[-1]] - self.lev[order[-k:-1]].sum()
-            weyl = top_a / slack if slack > 0.0 else np.full(len(W), np.inf)
+            # a denominator below the rounding of G gives no bound (bound.gram_floor)
+            weyl = top_a / slack if slack > 0.0 and slack >= self.floor else np.full(len(W), np.inf)
             omega = self.omega[min(r, len(self.omega) - 1)]
-            gersh = top_e / (1.0 - omega) if omega < 1.0 else np.full(len(W), np.inf)
+            gersh = (
+                top_e / (1.0 - omega)
+                if 1.0 - omega >= self.floor and omega < 1.0
+                else np.full(len(W), np.inf)
+            )
         out = np.minimum(weyl, gersh)
         out = np.where(np.isnan(out), np.inf, out)
         # dropping every head pair is a Loewner upper bound on any head (monotonicity)
@@ -144,7 +150,8 @@ class _Head:
         """(S,) ``max_{q≠q'} (e_q + e_q') / (1 − ‖Ô_qq'‖)`` (inf where the norm is ≥ 1)."""
         L = e.shape[1]
         with np.errstate(divide="ignore"):
-            inv = np.where(self.cross < 1.0, 1.0 / np.maximum(1.0 - self.cross, 1e-300), np.inf)
+            ok = (self.cross < 1.0) & (1.0 - self.cross >= self.floor)
+            inv = np.where(ok, 1.0 / np.maximum(1.0 - self.cross, 1e-300), np.inf)
         np.fill_diagonal(inv, 0.0)
         out = np.empty(len(e))
         step = max(1, (1 << 23) // (L * L))
@@ -170,7 +177,16 @@ def _head(problem: SparseProblem, factors: np.ndarray, posts: np.ndarray, end: i
     every = np.empty_like(posts[:, : end + 1])
     forward(head, every, np.ones((1, end + 1, problem.M), dtype=bool), 0)
     full = (every[0, end] - posts[0, end]).reshape(-1)
-    return _Head(outer, terms.lev[0], terms.comp[0], terms.unreliable[0], omega, full, cross)
+    return _Head(
+        outer,
+        terms.lev[0],
+        terms.comp[0],
+        terms.unreliable[0],
+        float(terms.floor[0]),
+        omega,
+        full,
+        cross,
+    )
 
 
 class _Step:

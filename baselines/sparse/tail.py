@@ -48,7 +48,7 @@ from math import comb
 
 import numpy as np
 
-from baselines.sparse.bound import unit_information
+from baselines.sparse.bound import GRAM_ROUNDING, unit_information
 from baselines.sparse.problem import SparseProblem
 from fdia_env.kalman import objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
@@ -57,10 +57,6 @@ from fdia_env.kalman.linalg import mT, spd_inv, sym
 # recursion by a few ulps times the condition number of I − G_DD. Tail bounds are raised by
 # this relative amount (of max(|Φ|, 1) for log det) so that rounding can never make them invalid.
 SAFETY = 1e-9
-# Rounding of the Gram matrix ``G = U' P U`` in units of eps·‖Λ‖·‖P‖ (Λ = P⁻¹ the information):
-# a backward-stable inverse errs by ``P δΛ P`` with ``‖δΛ‖ ≲ eps ‖Λ‖``, so an entry of G with
-# ``G ⪯ I`` errs by at most about ``eps ‖Λ‖ ‖P‖``; the constant covers the few operations.
-GRAM_ROUNDING = 64.0
 # Largest number of (row, subset) small problems materialised at once.
 CHUNK = 1 << 15
 # Grid of the table: σ_j = SIGMA_0 · SIGMA_RATIO^j, j = 0..; σ beyond the last point: no bound.
