@@ -157,7 +157,7 @@ class _Search:
                 raise _Timeout  # the caller keeps these nodes' own bounds
             sl = slice(lo, lo + max(1, self._rows_per_call(start)))
             cross = self._with_cross(len(last[sl]), p.horizon - start)
-            terms = pair_terms(p, self.factors, posts[sl], start, cross)
+            terms = pair_terms(p, self.factors, posts[sl], start, cross, attacked[sl])
             b = child_bounds(p, terms, last[sl] + 1, remaining, self.nz)
             if self.tail:
                 tail = tail_child_bounds(
@@ -375,7 +375,7 @@ def branch_and_bound(
     for heuristic in (sfs_ss, dp):
         result = heuristic(problem.system, problem.budget, problem.horizon, objective)
         search.offer(result.value, list(result.attacks))
-    alloc, alloc_pairs = allocation_bound(problem)
+    alloc, alloc_pairs = allocation_bound(problem, deadline)
     if alloc_pairs is not None:
         search.offer(problem.evaluate(alloc_pairs), alloc_pairs)
     root = alloc

@@ -27,6 +27,17 @@ theorem gives ``λ_max(Ô) ≤ max_q Σ_{q'≠q} ‖Ô_qq'‖_F``. Hence
 the smaller is used. For log det, ``log det(P + Z) − log det P ≤ m log(1 + tr(P⁻¹Z)/m)`` for
 ``rank Z ≤ m`` (Jensen on the eigenvalues), with the same per-pair terms weighted by ``P⁻¹``.
 A subtree "base S plus up to r of the free pairs" is bounded by taking the r largest terms.
+
+**Computing ``1 − l_q``.** A measurement far more precise than the prior has ``l_q`` within
+rounding of 1, and ``1 − l_q`` formed by subtraction is then the rounding of ``G_qq`` (it can
+even come out negative), which the terms divide by: the bound falls below the optimum. So a
+leverage above :data:`HIGH_LEVERAGE` takes its complement from the identity ``I − B_q' Σ B_q =
+(I + B_q' Σ₋ B_q)⁻¹``, ``Σ₋`` the smoothed covariance without the pair, whose information
+(predicted, backward and the other sensors') is a sum of positive semidefinite terms; Weyl's
+denominator is ``(1 − l_q) − Σ_{q'≠q} l_q'``, never ``1 − Σ l``. Where the subtraction and the
+identity disagree by more than :data:`COMPLEMENT_RTOL`, or the complement is below
+:data:`COMPLEMENT_MIN`, ``a_q`` and the Gram entries of q carry the same rounding amplified by
+``1/(1 − l_q)``: the pair gets no smoother term (``inf``) and the other bounds decide.
 No submodularity is used (it does not hold: dropping the same sensor at consecutive steps is
 worth more than the sum of the single drops, see tests/test_bnb.py); the interaction between
 dropped pairs is what the ``1/(1 − ω)`` factor covers.
@@ -36,14 +47,18 @@ the Riccati map is monotone. Group sensors whose information matrices are propor
 ``J_i = w_i J_g``; any r sensors dropped at one step remove at most
 ``D(r) = Σ_g (sum of the min(r, |g|) largest w_i of g) J_g`` (Loewner). Propagating the filter
 with information ``J_all − D(r_k)`` at each step and maximising over every count allocation
-``(r_0, ..., r_{N−1})``, ``Σ r_k ≤ c``, bounds every attack. With one group (scalar position
-sensors sharing H, as in ch4-position and ch4-random) ``D(r)`` is attained by the r
-largest-information sensors, so the bound *is* the optimum and its argmax is an optimal set.
+``(r_0, ..., r_{N−1})``, ``Σ r_k ≤ c``, bounds every attack. The information kept,
+``J_all − D(r)``, is summed from the weights each group keeps (a difference would cancel where
+one sensor dominates). A sensor without information (``J_i = 0``) has weight 0 in any group.
+With one group (scalar position sensors sharing H, as in ch4-position and ch4-random) ``D(r)``
+is attained by the r largest-information sensors, so the bound *is* the optimum and its argmax
+is an optimal set.
 """
 
 from __future__ import annotations
 
 import itertools
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +69,19 @@ from fdia_env.kalman.linalg import mT, spd_inv, sym
 
 # Upper bound on how many Gram entries (rows × T² × M²) one smoother call materialises.
 GRAM_ENTRIES = 1 << 22
+# Rounding of the Gram matrix ``G = U' P U`` in units of eps·‖Λ‖·‖P‖ (Λ = P⁻¹ the information):
+# a backward-stable inverse errs by ``P δΛ P`` with ``‖δΛ‖ ≲ eps ‖Λ‖``, so an entry of G with
+# ``G ⪯ I`` errs by at most about ``eps ‖Λ‖ ‖P‖``; the constant covers the few operations.
+GRAM_ROUNDING = 64.0
+# Leverage above which ``1 − l_q`` is recomputed from information sums (no cancellation).
+HIGH_LEVERAGE = 0.5
+# A high-leverage pair's smoother terms are used only where the recomputed ``1 − l_q`` is at
+# least COMPLEMENT_MIN and the subtraction ``1 − l_q`` agrees with it to COMPLEMENT_RTOL: the
+# disagreement is the rounding of ``G_qq``, which ``a_q`` and the Gram entries share, relative
+# to ``1 − l_q``, the factor by which the bound amplifies it. Elsewhere the pair's terms are
+# ``inf`` (a valid bound; the other bounds of branch and bound take over).
+COMPLEMENT_MIN = 1e-6
+COMPLEMENT_RTOL = 1e-6
 
 
 def measurement_factors(problem: SparseProblem) -> np.ndarray:
@@ -117,18 +145,26 @@ class PairTerms:
         base: (R,) Φ of the node's base set (every other pair used).
         a: (R, T·M) ``‖c_q‖²`` (trace) or ``tr(P⁻¹ c_q' c_q)`` (log det).
         lev: (R, T·M) leverages ``l_q = λ_max(B_q' Σ_kk B_q)``.
+        comp: (R, T·M) their complements ``1 − l_q`` (for a leverage above
+            :data:`HIGH_LEVERAGE` computed without cancellation, see :func:`_complements`).
         e: (R, T·M) ``a_q / (1 − l_q)``.
         cross: (R, T·M, T·M) ``‖Ô_qq'‖_F`` (zero on the diagonal), or None when not computed.
         vectors: (R, T·M, nz, n) the ``c_q`` themselves (trace objective only, else None).
+        unreliable: (R, T·M) pairs whose terms are rounding, not value (``a``, ``e`` and
+            their ``cross`` entries are ``inf`` there; see :data:`COMPLEMENT_MIN`).
+        floor: (R,) smallest trusted denominator ``1 − μ`` (:func:`gram_floor`).
     """
 
     start: int
     base: np.ndarray
     a: np.ndarray
     lev: np.ndarray
+    comp: np.ndarray
     e: np.ndarray
     cross: np.ndarray | None
     vectors: np.ndarray | None = None
+    unreliable: np.ndarray | None = None
+    floor: np.ndarray | None = None
 
 
 def pair_terms(
@@ -137,6 +173,7 @@ def pair_terms(
     posts: np.ndarray,
     start: int,
     with_cross: bool = True,
+    attacked: np.ndarray | None = None,
 ) -> PairTerms:
     """Smoother quantities of the bound for every pair at steps ``start..N−1`` (batched RTS).
 
@@ -176,11 +213,24 @@ def pair_terms(
     else:
         lev = np.linalg.eigvalsh(sym(diag))[..., -1]
     lev = np.clip(lev.reshape(R_, T * M), 0.0, None)
+    comp = np.clip(1.0 - lev, 0.0, None)
+    high = lev > HIGH_LEVERAGE
+    unreliable = np.zeros_like(high)
+    if high.any():
+        exact = _complements(problem, factors, posts, start, attacked, high)
+        # the subtraction's error is the rounding of G along B_q, which a_q and the Gram
+        # entries carry as well: where it is not small against 1 − l_q, no smoother term
+        unreliable[high] = (exact < COMPLEMENT_MIN) | (
+            np.abs(comp[high] - exact) > COMPLEMENT_RTOL * exact
+        )
+        comp[high] = exact
+        lev[high] = 1.0 - exact
+    a_term = np.where(unreliable, np.inf, a_term)
     with np.errstate(divide="ignore"):
-        e = np.where(lev < 1.0, a_term / np.maximum(1.0 - lev, 1e-300), np.inf)
+        e = np.where(comp > 0.0, a_term / np.maximum(comp, 1e-300), np.inf)
     cross = None
     if with_cross:
-        scale = 1.0 / np.sqrt(np.maximum(1.0 - lev, 1e-300))  # (R, T·M)
+        scale = 1.0 / np.sqrt(np.maximum(comp, 1e-300))  # (R, T·M)
         cross = np.empty((R_, T * M, T * M))
         for a in range(T):
             # G[(a, i), (b, j)] = B_i' Σ_ab B_j for every b, i, j
@@ -188,10 +238,73 @@ def pair_terms(
             norm = np.sqrt((G**2).sum(axis=(-1, -2))).reshape(R_, M, T * M)
             cross[:, a * M : (a + 1) * M] = norm
         cross *= scale[:, :, None] * scale[:, None, :]
+        cross = np.where(unreliable[:, :, None] | unreliable[:, None, :], np.inf, cross)
         idx = np.arange(T * M)
         cross[:, idx, idx] = 0.0
     vectors = c.reshape(R_, T * M, *c.shape[-2:]) if problem.objective == "trace" else None
-    return PairTerms(start, base, a_term, lev, e, cross, vectors)
+    floor = gram_floor(posts[:, start:])
+    return PairTerms(start, base, a_term, lev, comp, e, cross, vectors, unreliable, floor)
+
+
+def gram_floor(posts: np.ndarray) -> np.ndarray:
+    """(R,) smallest denominator ``1 − μ`` (or ``1 − ω``) the bounds divide by, per row.
+
+    The Gram entries carry a rounding of about ``GRAM_ROUNDING · eps · κ`` (κ the condition
+    number of the (R, T, n, n) posteriors, the largest over the steps); a denominator below
+    that over :data:`baselines.sparse.tail.SAFETY` would let the rounding, amplified by its
+    inverse, exceed the safety margin, so the bound is ``inf`` there (valid, uninformative).
+    """
+    w = np.linalg.eigvalsh(posts)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kappa = np.where(w[..., 0] > 0.0, w[..., -1] / w[..., 0], np.inf)
+    kappa = kappa.reshape(len(posts), -1).max(axis=1)
+    from baselines.sparse.tail import SAFETY  # tail imports this module
+
+    return GRAM_ROUNDING * np.finfo(float).eps * kappa / SAFETY
+
+
+def _complements(
+    problem: SparseProblem,
+    factors: np.ndarray,
+    posts: np.ndarray,
+    start: int,
+    attacked: np.ndarray | None,
+    high: np.ndarray,
+) -> np.ndarray:
+    """``1 − l_q`` of the pairs flagged ``high``, without the cancellation of ``1 − l_q``.
+
+    ``I − B_q' Σ_kk B_q = (I + B_q' Σ⁻_kk B_q)⁻¹`` (Woodbury), with ``Σ⁻_kk`` the smoothed
+    covariance of ``x_k`` without the pair q: the inverse of the information ``Y_k + Ω_k +
+    Σ_{j used at k, j ≠ i} J_j``, built as a sum of positive semidefinite terms (``Y_k`` the
+    filter's predicted information, ``Ω_k`` the backward information of steps k+1..N−1).
+    So ``1 − l_q = 1 / (1 + λ_max(B_q' Σ⁻_kk B_q))``. Returns the values in ``high``'s order.
+    """
+    sys = problem.system
+    N, M, n = problem.horizon, problem.M, sys.n
+    T = N - start
+    R_ = posts.shape[0]
+    J_all = sys.J.sum(axis=0)
+    omega = np.zeros((R_, T, n, n))  # Ω_{start+a}: information of the later measurements
+    eye = np.eye(n)
+    for a in range(T - 2, -1, -1):
+        lam = omega[:, a + 1] + J_all  # every pair after the node's step is used
+        omega[:, a] = sym(mT(sys.F) @ np.linalg.solve(eye + lam @ sys.Q, lam) @ sys.F)
+    rows, flat = np.nonzero(high)
+    steps, sensors = flat // M, flat % M
+    k = start + steps
+    prev = np.where(
+        (k > 0)[:, None, None], posts[rows, np.maximum(k - 1, 0)], problem.P_start[None]
+    )
+    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + omega[rows, steps]
+    used = np.ones((len(rows), M))
+    if attacked is not None:
+        used = (~attacked[rows, k]).astype(float)
+    used[np.arange(len(rows)), sensors] = 0.0
+    Sm = spd_inv(info + np.einsum("qm,mij->qij", used, sys.J))
+    B = factors[sensors]  # (Q, n, nz)
+    g = sym(mT(B) @ Sm @ B)
+    top = g[:, 0, 0] if g.shape[-1] == 1 else np.linalg.eigvalsh(g)[:, -1]
+    return 1.0 / (1.0 + np.clip(top, 0.0, None))
 
 
 # --- combining terms into subtree bounds ---------------------------------------------------
@@ -215,10 +328,21 @@ def suffix_top_sums(x: np.ndarray, r: int) -> np.ndarray:
     return out
 
 
-def increase_bound(objective_name: str, total: np.ndarray, mu: np.ndarray, m: int) -> np.ndarray:
-    """``total / (1 − μ)`` (trace) or ``m log(1 + total / (m (1 − μ)))`` (log det); inf if μ ≥ 1."""
+def increase_bound(
+    objective_name: str,
+    total: np.ndarray,
+    mu: np.ndarray,
+    m: int,
+    slack: np.ndarray | None = None,
+) -> np.ndarray:
+    """``total / (1 − μ)`` (trace) or ``m log(1 + total / (m (1 − μ)))`` (log det); inf if μ ≥ 1.
+
+    ``slack``, when given, is ``1 − μ`` computed without cancellation (and used instead).
+    """
+    if slack is None:
+        slack = 1.0 - mu
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        scaled = np.where(mu < 1.0, total / np.maximum(1.0 - mu, 1e-300), np.inf)
+        scaled = np.where(slack > 0.0, total / np.maximum(slack, 1e-300), np.inf)
         if objective_name == "trace":
             out = scaled
         else:
@@ -252,11 +376,14 @@ def child_bounds(
     m = min(problem.system.n, (remaining + 1) * nz_max)
     # Weyl: λ_max(G_T) ≤ Σ l_q
     tot_a = terms.a + suffix_top_sums(a, remaining)[:, 1:]
-    mu = terms.lev + suffix_top_sums(lev, remaining)[:, 1:]
-    inc = increase_bound(problem.objective, tot_a, mu, m)
+    # 1 − μ as comp_q − Σ l (the complement of q's own leverage without cancellation)
+    slack = terms.comp - suffix_top_sums(lev, remaining)[:, 1:]
+    floor = terms.floor[:, None]
+    slack = np.where(slack >= floor, slack, 0.0)  # below the rounding of G: no bound
+    inc = increase_bound(problem.objective, tot_a, 1.0 - slack, m, slack)
     tot_e = terms.e + suffix_top_sums(e, remaining)[:, 1:]
     if remaining == 0:
-        inc = np.minimum(inc, increase_bound(problem.objective, tot_e, np.zeros_like(mu), m))
+        inc = np.minimum(inc, increase_bound(problem.objective, tot_e, np.zeros_like(slack), m))
     elif terms.cross is not None:
         # Gershgorin on the normalised off-diagonal: row q sums its r largest entries over the
         # free columns; ω(p) is the largest such row sum over the candidates q ≥ p.
@@ -265,6 +392,7 @@ def child_bounds(
         rows = -np.sort(-cross, axis=2)[:, :, :k].sum(axis=2) if k > 0 else np.zeros((R_, L))
         rows = np.where(free, rows, -np.inf)
         omega = np.maximum.accumulate(rows[:, ::-1], axis=1)[:, ::-1]
+        omega = np.where(1.0 - omega >= floor, omega, np.inf)
         inc = np.minimum(inc, increase_bound(problem.objective, tot_e, omega, m))
     out = terms.base[:, None] + inc
     return np.where(feasible, out, -np.inf)
@@ -273,29 +401,63 @@ def child_bounds(
 # --- the allocation bound -------------------------------------------------------------------
 
 
+def unit_information(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each sensor's information split as ``J_i = w_i U_i``: ``(U, w)``, ``w_i = tr J_i``.
+
+    ``U_i`` has unit trace; a sensor that carries no information (``J_i = 0``: a zero row of H,
+    or an R so large that ``H' R⁻¹ H`` underflows) has ``w_i = 0`` and ``U_i = 0``. It never
+    matters to any attack, and no division by its zero trace happens.
+    """
+    w = np.trace(J, axis1=1, axis2=2)
+    positive = w > 0.0
+    unit = np.zeros_like(J)
+    unit[positive] = J[positive] / w[positive, None, None]
+    return unit, np.where(positive, w, 0.0)
+
+
 def information_groups(J: np.ndarray, rtol: float = 1e-9) -> list[tuple[np.ndarray, np.ndarray]]:
     """Sensors whose information matrices are proportional: ``[(indices, weights), ...]``.
 
-    Within a group ``J_i = w_i J_g`` with ``J_g`` the group's first matrix scaled to unit trace;
-    weights are returned sorted descending with their indices.
+    Within a group ``J_i = w_i U_g`` with ``U_g`` the group's first unit-trace matrix
+    (:func:`unit_information`); weights are returned sorted descending with their indices.
+    Sensors without information (``w_i = 0``) join the first group with weight 0 (``0 = 0·U_g``
+    for any g), so they never split a group that is otherwise one. One pass over the sensors:
+    each joins the first group whose matrix it matches, or opens a new one.
     """
-    M = J.shape[0]
-    unit = J / np.trace(J, axis1=1, axis2=2)[:, None, None]
-    left = list(range(M))
+    unit, weight = unit_information(J)
+    members: list[list[int]] = []
+    empty = []
+    for i in range(J.shape[0]):
+        if weight[i] == 0.0:
+            empty.append(i)
+            continue
+        for group in members:
+            g = group[0]
+            if np.abs(unit[i] - unit[g]).max() <= rtol * np.abs(unit[g]).max():
+                group.append(i)
+                break
+        else:
+            members.append([i])
+    if not members:  # no sensor carries information: one group of weight-0 sensors
+        members.append([])
+    members[0] += empty
     groups = []
-    while left:
-        g = left[0]
-        scale = np.abs(unit[g]).max()
-        members = [i for i in left if np.abs(unit[i] - unit[g]).max() <= rtol * scale]
-        left = [i for i in left if i not in members]
-        w = np.trace(J[members], axis1=1, axis2=2)
+    for group in members:
+        w = weight[group]
         order = np.argsort(-w, kind="stable")
-        groups.append((np.asarray(members)[order], w[order]))
+        groups.append((np.asarray(group)[order], w[order]))
     return groups
 
 
-def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
+def allocation_bound(
+    problem: SparseProblem, deadline: float | None = None
+) -> tuple[float, list[Pair] | None]:
     """The Loewner allocation bound and, when it is attained (one group), an optimal set.
+
+    Args:
+        problem: The instance.
+        deadline: ``time.perf_counter()`` value after which the recursion gives up (checked at
+            every step): the bound is then ``inf`` (valid, uninformative) and no set is given.
 
     Returns:
         ``(bound, pairs)``: ``pairs`` has exactly ``budget`` pairs and value equal to the bound
@@ -303,15 +465,14 @@ def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
     """
     sys, N, c = problem.system, problem.horizon, problem.budget
     groups = information_groups(sys.J)
-    unit = sys.J / np.trace(sys.J, axis1=1, axis2=2)[:, None, None]
+    unit = unit_information(sys.J)[0]
     cap = min(c, max(len(idx) for idx, _ in groups))
-    # D[r] for r = 0..cap
-    D = np.zeros((cap + 1, sys.n, sys.n))
-    for r in range(1, cap + 1):
+    # information used with r dropped at a step, J_all − D(r): summed from the weights each
+    # group keeps (a difference of the two would cancel where one sensor dominates)
+    info = np.zeros((cap + 1, sys.n, sys.n))
+    for r in range(cap + 1):
         for idx, w in groups:
-            D[r] += w[: min(r, len(idx))].sum() * unit[idx[0]]
-    J_all = sys.J.sum(axis=0)
-    info = J_all[None] - D  # information used with r dropped at a step
+            info[r] += w[min(r, len(idx)) :].sum() * unit[idx[0]]
     if len(groups) == 1:  # attained: sum what is left, as the reference recursion does
         order = groups[0][0]
         info = np.stack([sys.J[np.sort(order[r:])].sum(axis=0) for r in range(cap + 1)])
@@ -319,6 +480,8 @@ def allocation_bound(problem: SparseProblem) -> tuple[float, list[Pair] | None]:
     spent = np.zeros(1, dtype=int)
     history = np.zeros((1, 0), dtype=int)
     for _ in range(N):
+        if deadline is not None and time.perf_counter() > deadline:
+            return np.inf, None
         Y = spd_inv(predict_cov(states, sys.F, sys.Q))
         rs = np.arange(cap + 1)
         parent, r = np.meshgrid(np.arange(len(states)), rs, indexing="ij")

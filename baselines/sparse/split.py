@@ -15,7 +15,9 @@ the nominal prediction into the last step. Two facts about the filter are used, 
    ``S_D = Y P_D Φ'(P_D) P_D Y`` (``Φ' = I`` for trace, ``P_D⁻¹`` for log det), ``P_D`` the
    last posterior of ``D``. ``V(D)`` and ``S_D`` come from one Woodbury downdate per set
    (:func:`baselines.sparse.tail.last_step` is the same algebra), every set of the last step
-   enumerated.
+   enumerated; a set whose downdate ``I − G_DD`` is ill-conditioned (a sensor far more precise
+   than the prior: ``1 − G`` cancels) is evaluated from the kept sensors' information, as the
+   reference recursion does (:func:`baselines.sparse.tail.downdate_floor`).
 2. **The head as a weighted smoother downdate.** ``P_{N−2}(H) − P̂_{N−2} = C_H' (I − G_HH)⁻¹
    C_H`` over the head window (the smoother bound of :mod:`baselines.sparse.bound`), so
    ``tr(W C_H' (I − G_HH)⁻¹ C_H)`` with ``W = F' S_D F`` is at most
@@ -63,7 +65,7 @@ from baselines.sparse.bound import (
     root_bound,
 )
 from baselines.sparse.problem import Pair, SparseProblem, make_problem
-from baselines.sparse.tail import SAFETY
+from baselines.sparse.tail import SAFETY, downdate_floor, well_conditioned
 from fdia_env.kalman import objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
 from fdia_env.scenarios import Scenario
@@ -101,6 +103,9 @@ class _Head:
 
     outer: np.ndarray  # (L, n²)
     lev: np.ndarray  # (L,)
+    comp: np.ndarray  # (L,) 1 − lev without cancellation
+    unreliable: np.ndarray  # (L,) pairs without smoother terms (bound.pair_terms)
+    floor: float  # smallest trusted denominator 1 − μ (bound.gram_floor)
     omega: np.ndarray  # (r_max + 1,) ω for heads of r pairs
     full: np.ndarray  # (n²,) P_{N−2} with every head pair dropped, minus the nominal
     cross: np.ndarray  # (L, L) normalised off-diagonal norms ‖Ô_qq'‖ (zero diagonal)
@@ -113,16 +118,24 @@ class _Head:
         if r == 0:
             return np.zeros(len(W))
         a = np.clip(W.reshape(len(W), -1) @ self.outer.T, 0.0, None)  # (S, L)
+        a[:, self.unreliable] = np.inf
         L = a.shape[1]
         k = min(r, L)
         with np.errstate(divide="ignore", invalid="ignore"):
-            e = np.where(self.lev < 1.0, a / np.maximum(1.0 - self.lev, 1e-300), np.inf)
+            e = np.where(self.comp > 0.0, a / np.maximum(self.comp, 1e-300), np.inf)
             top_a = -np.partition(-a, k - 1, axis=1)[:, :k].sum(axis=1)
             top_e = -np.partition(-e, k - 1, axis=1)[:, :k].sum(axis=1)
-            lev_sum = np.sort(self.lev)[-k:].sum()
-            weyl = top_a / (1.0 - lev_sum) if lev_sum < 1.0 else np.full(len(W), np.inf)
+            # 1 − Σ of the k largest leverages: the largest enters by its complement
+            order = np.argsort(self.lev)
+            slack = self.comp[order[-1]] - self.lev[order[-k:-1]].sum()
+            # a denominator below the rounding of G gives no bound (bound.gram_floor)
+            weyl = top_a / slack if slack > 0.0 and slack >= self.floor else np.full(len(W), np.inf)
             omega = self.omega[min(r, len(self.omega) - 1)]
-            gersh = top_e / (1.0 - omega) if omega < 1.0 else np.full(len(W), np.inf)
+            gersh = (
+                top_e / (1.0 - omega)
+                if 1.0 - omega >= self.floor and omega < 1.0
+                else np.full(len(W), np.inf)
+            )
         out = np.minimum(weyl, gersh)
         out = np.where(np.isnan(out), np.inf, out)
         # dropping every head pair is a Loewner upper bound on any head (monotonicity)
@@ -137,7 +150,8 @@ class _Head:
         """(S,) ``max_{q≠q'} (e_q + e_q') / (1 − ‖Ô_qq'‖)`` (inf where the norm is ≥ 1)."""
         L = e.shape[1]
         with np.errstate(divide="ignore"):
-            inv = np.where(self.cross < 1.0, 1.0 / np.maximum(1.0 - self.cross, 1e-300), np.inf)
+            ok = (self.cross < 1.0) & (1.0 - self.cross >= self.floor)
+            inv = np.where(ok, 1.0 / np.maximum(1.0 - self.cross, 1e-300), np.inf)
         np.fill_diagonal(inv, 0.0)
         out = np.empty(len(e))
         step = max(1, (1 << 23) // (L * L))
@@ -163,7 +177,16 @@ def _head(problem: SparseProblem, factors: np.ndarray, posts: np.ndarray, end: i
     every = np.empty_like(posts[:, : end + 1])
     forward(head, every, np.ones((1, end + 1, problem.M), dtype=bool), 0)
     full = (every[0, end] - posts[0, end]).reshape(-1)
-    return _Head(outer, terms.lev[0], omega, full, cross)
+    return _Head(
+        outer,
+        terms.lev[0],
+        terms.comp[0],
+        terms.unreliable[0],
+        float(terms.floor[0]),
+        omega,
+        full,
+        cross,
+    )
 
 
 class _Step:
@@ -182,6 +205,8 @@ class _Step:
         self.G = sym(U.T @ self.PU)
         self.K = sym(mT(self.PU) @ self.PU)  # tr(P_D) − tr(P) = tr((I − G_DD)⁻¹ K_DD)
         self.nz = nz
+        self.J = sys.J
+        self.floor = float(downdate_floor((self.Y + sys.J.sum(axis=0))[None], self.P[None])[0])
 
     def _system(self, sets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(S, b·nz) positions of ``sets``' rows and (S, b·nz, b·nz) ``A = I − G_DD``."""
@@ -190,22 +215,41 @@ class _Step:
         idx = (sets[:, :, None] * nz + np.arange(nz)).reshape(S, b * nz)
         return idx, np.eye(b * nz) - self.G[idx[:, :, None], idx[:, None, :]]
 
+    def _direct(self, sets: np.ndarray) -> np.ndarray:
+        """(S, n, n) posteriors of ``sets`` from the information of the kept sensors.
+
+        ``(Y + Σ_{i ∉ D} J_i)⁻¹``: a sum of positive semidefinite terms, the reference
+        recursion's arithmetic, exact where the downdate ``A = I − G_DD`` is ill-conditioned.
+        """
+        keep = np.ones((len(sets), self.J.shape[0]))
+        np.put_along_axis(keep, sets, 0.0, axis=1)
+        return spd_inv(self.Y + np.einsum("sm,mij->sij", keep, self.J))
+
     def values(self, sets: np.ndarray, kind: str) -> np.ndarray:
-        """(S,) Φ of :meth:`drop`'s posteriors, without forming them.
+        """(S,) Φ of :meth:`drop`'s posteriors, without forming them where that is exact.
 
         With ``A = I − G_DD`` (b·nz × b·nz): ``tr P_D = tr P + tr(A⁻¹ K_DD)``, and by the
         matrix determinant lemma ``log det P_D = log det P − log det A`` (``U_D' P U_D =
-        G_DD``), as :func:`baselines.sparse.tail.last_step` computes them.
+        G_DD``), as :func:`baselines.sparse.tail.last_step` computes them. Where
+        ``λ_min(A)`` is below :func:`baselines.sparse.tail.downdate_floor` the rounding of G
+        dominates A (``1 − G`` cancels: a sensor far more precise than the prior), and the
+        value is the reference recursion's (:meth:`_direct`).
         """
         base = float(objective(self.P, kind))
         if sets.shape[1] == 0:
             return np.full(len(sets), base)
         idx, A = self._system(sets)
-        if kind == "trace":
-            K = self.K[idx[:, :, None], idx[:, None, :]]
-            return base + np.trace(np.linalg.solve(A, K), axis1=1, axis2=2)
-        sign, logdet = np.linalg.slogdet(A)
-        return np.where(sign > 0, base - logdet, np.inf)
+        ok = well_conditioned(A, self.floor)
+        out = np.empty(len(sets))
+        if ok.any():
+            if kind == "trace":
+                K = self.K[idx[ok][:, :, None], idx[ok][:, None, :]]
+                out[ok] = base + np.trace(np.linalg.solve(A[ok], K), axis1=1, axis2=2)
+            else:
+                out[ok] = base - np.linalg.slogdet(A[ok])[1]
+        if not ok.all():
+            out[~ok] = objective(self._direct(sets[~ok]), kind)
+        return out
 
     def drop(self, sets: np.ndarray) -> np.ndarray:
         """(S, n, n) posterior of step t (nominal prior) after dropping each of ``sets``."""
@@ -213,8 +257,14 @@ class _Step:
         if b == 0:
             return np.broadcast_to(self.P, (S, *self.P.shape)).copy()
         idx, A = self._system(sets)
-        V = self.PU[:, idx].transpose(1, 0, 2)  # (S, n, b·nz)
-        return sym(self.P + V @ np.linalg.solve(A, mT(V)))
+        ok = well_conditioned(A, self.floor)
+        out = np.empty((S, *self.P.shape))
+        if ok.any():
+            V = self.PU[:, idx[ok]].transpose(1, 0, 2)  # (S, n, b·nz)
+            out[ok] = sym(self.P + V @ np.linalg.solve(A[ok], mT(V)))
+        if not ok.all():
+            out[~ok] = self._direct(sets[~ok])
+        return out
 
 
 class _Split:

@@ -13,7 +13,11 @@ candidate set ``D`` is a Woodbury downdate of the posterior ``P`` that uses ever
     tr P_D = tr P + tr((I − G_DD)⁻¹ K_DD),  K = U' P² U,
     log det P_D = log det P − log det(I − G_DD),
 
-small ``(s·nz)``-square problems built from one ``(M·nz)``-square matrix per posterior. At step
+small ``(s·nz)``-square problems built from one ``(M·nz)``-square matrix per posterior. Where
+``λ_min(I − G_DD)`` is below the rounding of G over :data:`SAFETY` (:func:`downdate_floor`: a
+sensor far more precise than the prior, ``1 − G`` cancels) the set is evaluated from the kept
+sensors' information instead, ``(Y + Σ_{i ∉ D} J_i)⁻¹``, the reference recursion's arithmetic;
+information is only ever summed, never differenced. At step
 N−2 every subset of the free sensors is enumerated explicitly (one inversion each), then the last
 step as above. This is the exact maximum (up to rounding, see :data:`SAFETY`).
 
@@ -44,6 +48,7 @@ from math import comb
 
 import numpy as np
 
+from baselines.sparse.bound import GRAM_ROUNDING, unit_information
 from baselines.sparse.problem import SparseProblem
 from fdia_env.kalman import objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
@@ -90,6 +95,32 @@ def _raise(problem: SparseProblem, values: np.ndarray) -> np.ndarray:
         return np.where(np.isfinite(values), values + SAFETY * scale, values)
 
 
+def downdate_floor(info: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """(R,) smallest ``λ_min(I − G_DD)`` for which the Woodbury downdate is trusted.
+
+    A downdate whose ``λ_min(A)``, ``A = I − G_DD``, is below the rounding of G divided by
+    :data:`SAFETY` loses more than the safety margin to cancellation in ``1 − G`` (a sensor
+    far more precise than the prior); such sets are evaluated from the kept sensors'
+    information instead, as the reference recursion does. ``info`` and ``P`` are (R, n, n)
+    information matrices and their inverses.
+    """
+    norm = np.linalg.norm(info, axis=(-2, -1)) * np.linalg.norm(P, axis=(-2, -1))
+    return GRAM_ROUNDING * np.finfo(float).eps * norm / SAFETY
+
+
+def well_conditioned(A: np.ndarray, floor: np.ndarray | float) -> np.ndarray:
+    """(S,) whether ``λ_min(A) >= floor`` for the (S, d, d) symmetric ``A`` (per-row floor)."""
+    floor = np.broadcast_to(np.asarray(floor, dtype=float), A.shape[:1])
+    if A.shape[-1] == 1:
+        return A[:, 0, 0] >= floor
+    eye = np.eye(A.shape[-1])
+    try:  # the common case: every set passes, one batched Cholesky says so
+        np.linalg.cholesky(A - floor[:, None, None] * eye)
+        return np.ones(len(A), dtype=bool)
+    except np.linalg.LinAlgError:
+        return np.linalg.eigvalsh(sym(A))[:, 0] >= floor
+
+
 def _information(
     problem: SparseProblem, prev: np.ndarray, fixed_info: np.ndarray, free: np.ndarray
 ) -> np.ndarray:
@@ -98,9 +129,27 @@ def _information(
     The prior predicted from the posterior ``prev``, plus ``fixed_info`` (the decided, used
     sensors) and the information of the sensors still ``free``.
     """
+    return _prior_information(problem, prev, fixed_info) + _kept(problem, free)
+
+
+def _prior_information(
+    problem: SparseProblem, prev: np.ndarray, fixed_info: np.ndarray
+) -> np.ndarray:
+    """(R, n, n) predicted information from ``prev`` plus the decided, used sensors'."""
     sys = problem.system
-    info = spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
-    return info + np.einsum("rm,mij->rij", free.astype(float), sys.J)
+    return spd_inv(predict_cov(prev, sys.F, sys.Q)) + fixed_info
+
+
+def _kept(problem: SparseProblem, keep: np.ndarray) -> np.ndarray:
+    """(R, n, n) ``Σ_{i kept} J_i`` for (R, M) booleans: a sum, never a difference."""
+    return np.einsum("rm,mij->rij", keep.astype(float), problem.system.J)
+
+
+def _without(free: np.ndarray, sets: np.ndarray) -> np.ndarray:
+    """(R, M) ``free`` rows with the sensors of the matching (R, s) ``sets`` rows removed."""
+    keep = free.copy()
+    np.put_along_axis(keep, sets, False, axis=1)
+    return keep
 
 
 def last_step(
@@ -127,7 +176,10 @@ def last_step(
     sys = problem.system
     R_, M = free.shape
     nz = factors.shape[2]
-    P = spd_inv(_information(problem, prev, fixed_info, free))
+    prior = _prior_information(problem, prev, fixed_info)
+    info = prior + _kept(problem, free)
+    P = spd_inv(info)
+    floor = downdate_floor(info, P)
     U = factors.transpose(1, 0, 2).reshape(sys.n, M * nz)  # (n, M·nz)
     PU = P @ U  # (R, n, M·nz)
     G = sym(U.T @ PU)  # (R, M·nz, M·nz)
@@ -146,18 +198,23 @@ def last_step(
             rr, cc = rows[lo : lo + CHUNK], cols[lo : lo + CHUNK]
             ii = idx[cc]
             A = eye - G[rr[:, None, None], ii[:, :, None], ii[:, None, :]]
-            sign, logdet = np.linalg.slogdet(A)
+            ok = well_conditioned(A, floor[rr])
             if problem.objective == "trace":
                 Kd = K[rr[:, None, None], ii[:, :, None], ii[:, None, :]]
                 with np.errstate(all="ignore"):
                     inc = np.trace(
-                        np.linalg.solve(np.where(sign[:, None, None] > 0, A, eye), Kd),
+                        np.linalg.solve(np.where(ok[:, None, None], A, eye), Kd),
                         axis1=1,
                         axis2=2,
                     )
-                vals = np.where(sign > 0, base[rr] + inc, np.inf)
+                vals = base[rr] + inc
             else:
-                vals = np.where(sign > 0, base[rr] - logdet, np.inf)
+                vals = base[rr] - np.linalg.slogdet(np.where(ok[:, None, None], A, eye))[1]
+            if not ok.all():  # I − G_DD cancels: the kept sensors' information instead
+                bad = np.flatnonzero(~ok)
+                keep = _without(free[rr[bad]], sets[cc[bad]])
+                post = spd_inv(prior[rr[bad]] + _kept(problem, keep))
+                vals[bad] = objective(post, problem.objective)
             np.maximum.at(out[:, s], rr, vals)
     return out
 
@@ -175,9 +232,8 @@ def two_steps(
     The drops at N−2 are among its ``free`` sensors, those at N−1 among all; ``prev`` is the
     posterior before step N−2 (other arguments as :func:`last_step`).
     """
-    sys = problem.system
     R_, M = free.shape
-    info = _information(problem, prev, fixed_info, free)
+    prior = _prior_information(problem, prev, fixed_info)
     out = np.full((R_, r + 1), -np.inf)
     for a in range(0, min(r, M) + 1):
         sets = combos(M, a)
@@ -185,8 +241,7 @@ def two_steps(
         step = max(1, CHUNK // max(len(combos(M, min(r - a, M))), 1))
         for lo in range(0, len(rows), step):
             rr, cc = rows[lo : lo + step], cols[lo : lo + step]
-            Y = info[rr] - sys.J[sets[cc]].sum(axis=1)
-            post = spd_inv(Y)
+            post = spd_inv(prior[rr] + _kept(problem, _without(free[rr], sets[cc])))
             zeros = np.zeros_like(post)
             tail = last_step(problem, factors, post, zeros, np.ones((len(rr), M), bool), r - a)
             for s in range(r - a + 1):
@@ -252,7 +307,7 @@ class TailTable:
 def _kept_free(problem: SparseProblem, groups, free: np.ndarray, e: int) -> np.ndarray:
     """(R, n, n) Loewner lower bound on the information of the free sensors after any e drops."""
     J = problem.system.J
-    unit = J / np.trace(J, axis1=1, axis2=2)[:, None, None]
+    unit = unit_information(J)[0]
     out = np.zeros((free.shape[0], problem.system.n, problem.system.n))
     for idx, w in groups:
         wf = free[:, idx] * w  # (R, |g|), weights descending
