@@ -275,6 +275,9 @@ def _budget_milp(
     unit = float(np.max(bound))
     value, c, limit = _budget_milp_unit(est, t, budget, bound / unit, prot, time_limit)
     value, c, limit = value * unit, c * unit, limit * unit
+    over = float(np.max(np.abs(est.H @ c) / bound))
+    if over > 1.0:  # rounding of the scaling: back inside the box
+        c, value = c / over, value / over
     if not (np.isfinite(value) and np.all(np.isfinite(c))):
         raise ValueError(
             f"a_max = {unit:g} is too large for this model: the shift of state {t} overflows "

@@ -3,25 +3,31 @@
 For state k, ``α_k = min |supp(H c)|`` over ``c`` with ``c_k = 1`` (Sandberg, Teixeira &
 Johansson 2010), optionally with some meters protected (``a_i = 0`` forced). Four methods:
 
-- ``"milp"`` (exact; any H): ``min Σ y`` s.t. ``−M_i y_i ≤ (D H c)_i ≤ M_i y_i``, ``c_k = 1``,
-  ``|c_j| ≤ c_max``, ``y ∈ {0, 1}^m``, solved by scipy's HiGHS. ``D`` scales every row of H to
-  max-abs 1 (so the integrality tolerance means the same on every meter) and
-  ``M_i = c_max |(D H)_i|_1`` is implied by the bound on c: the MILP is exact over the attacks
-  whose c (scaled to ``c_k = 1``) has entries at most ``c_max`` (default 100) in size. The
-  MILP's support is then re-solved in exact linear algebra (the attack returned is the smallest
-  null-space vector with those zeros), so every reported attack is verified.
-- ``"mincut"`` (grid models): restrict c to 0/1 angle shifts (1 on a set S of buses holding bus
-  k, 0 on the slack). With positive susceptances a meter's reading changes iff the set of buses
-  in its row (a flow: its two ends; an injection: the bus and its neighbours) is split by S, so
-  ``|supp(H c)|`` is the number of meters *cut* by S: a minimum s–t cut in the hypergraph whose
-  hyperedges are the meters, computed as a max flow on Lawler's graph (one arc of capacity 1 per
-  meter between two auxiliary nodes). Protected meters get infinite capacity. With every branch
-  flow and every bus injection metered (the full-measurement case of Hendrickx, Johansson,
-  Jungers, Sandberg & Sou 2014) an optimal attack is of this form and the cut is exact; in
-  general it is an upper bound. ``tests/test_stealth_baselines.py`` checks it equals the MILP on
-  every state of the grid presets it runs.
-- ``"binary"`` (grid models, ≤ 20 angles): every 0/1 shift c, enumerated: the brute-force check
-  of the min cut.
+- ``"milp"`` (exact; any H, any protected meters): ``α_k = min |S|`` over the meter sets S
+  that *hit* every set T of free meters whose rows, with the protected ones, span k's unit
+  vector (rows spanning it force ``c_k = 0``). That minimum hitting set is found by a
+  cutting-plane loop: solve it over the sets T found so far (a branch and bound on bit
+  masks), test the rank of the rows it leaves (``attack_on_state``); if they still span k's vector, add the minimal sets T they contain.
+  Every master optimum is a lower bound, and the first S that passes the rank test is an
+  attack of that size, so the index and its bound are exact, whatever the scale of H. A
+  big-M MILP (``|(D H c)_i| ≤ M_i y_i``, ``c_k = 1``, ``|c_j| ≤ c_max``, HiGHS; D scales
+  H's rows to max-abs 1, ``M_i = c_max |(D H)_i|_1``) supplies a first attack, re-solved by
+  the rank test; ``c_max`` only scales that first pass (an attack whose c needs more is
+  still found by the loop).
+- ``"mincut"`` (grid models, no protected meters): restrict c to 0/1 angle shifts (1 on a
+  set S of buses holding bus k, 0 on the slack). With positive susceptances a meter's
+  reading changes iff the set of buses in its row (a flow: its two ends; an injection: the
+  bus and its neighbours) is split by S, so ``|supp(H c)|`` is the number of meters *cut*
+  by S: a minimum s–t cut in the hypergraph whose hyperedges are the meters, computed as a
+  max flow on Lawler's graph (one arc of capacity 1 per meter between two auxiliary nodes).
+  With every branch flow and every bus injection metered and positive susceptances (the
+  full-measurement case of Hendrickx, Johansson, Jungers, Sandberg & Sou 2014) an optimal
+  attack is of this form and the cut is exact; otherwise it is an upper bound and its
+  ``lower_bounds`` are 1. Protected meters are refused: attacks that spare them need not be
+  0/1 shifts (use ``"milp"``). ``tests/test_stealth_baselines.py`` checks the cut equals the
+  MILP on every state of the grid presets it runs.
+- ``"binary"`` (grid models, ≤ 20 angles, no protected meters): every 0/1 shift c,
+  enumerated: the brute-force check of the min cut (certified where the cut is).
 - ``"brute"`` (any H, ≤ 20 meters): every meter set in order of size, by a rank test (state k is
   attackable with the meters A iff the k-th unit vector is not in the row space of H without A).
 
@@ -71,10 +77,11 @@ class SecurityIndex:
         meters: Meter names.
         seconds: Wall time.
         lower_bounds: (n,) float: a certified lower bound on each index: equal to ``indices``
-            where the index is proved (always, except for ``"milp"`` states whose solve stopped
-            at ``time_limit``: there ``indices`` is the best attack found and this is HiGHS'
-            dual bound, rounded up). ``"mincut"`` is exact only in the full-measurement case
-            (module docstring) and reports its own value as the bound.
+            where the index is proved (always for ``"brute"``, and for ``"milp"`` except on
+            states whose solve stopped at ``time_limit``: there ``indices`` is the best attack
+            found and this the hitting-set loop's bound). ``"mincut"`` and ``"binary"`` prove
+            their values only in the full-measurement case (module docstring); elsewhere
+            their bound is 1.
     """
 
     indices: np.ndarray
@@ -140,16 +147,18 @@ def security_index(
         method: ``"milp"``, ``"mincut"``, ``"binary"`` or ``"brute"`` (module docstring).
         states: State positions to compute (default all).
         protected: Meters the attacker cannot touch (positions or names).
-        c_max: MILP only: bound on the entries of c scaled to ``c_k = 1`` (> 0).
-        time_limit: MILP only: seconds per state (HiGHS), ``None`` for none.
+        c_max: MILP only: the bound on c (at ``c_k = 1``) of the first, big-M pass (finite,
+            > 0). A numerical scaling only: the indices are exact for every value.
+        time_limit: MILP only: seconds per state, ``None`` for none. A state stopped there
+            keeps its best attack and a certified lower bound (``proved`` False).
 
     Returns:
         The :class:`SecurityIndex`.
 
     Raises:
         ValueError: Naming the parameter: an unknown method, meters or states; ``"mincut"`` or
-            ``"binary"`` on an H without a grid model; ``"brute"`` above 20 meters, ``"binary"``
-            above 20 angles.
+            ``"binary"`` on an H without a grid model or with protected meters; ``"brute"``
+            above 20 meters, ``"binary"`` above 20 angles.
 
     Example:
         >>> from baselines.stealth import security_index
@@ -344,8 +353,10 @@ def _cut(est: Any, k: int, prot: np.ndarray, P: np.ndarray, zfree: np.ndarray) -
 
 
 def _cuts(est: Any, k: int, prot: np.ndarray, zfree: np.ndarray) -> list[tuple[int, ...]]:
-    """Cuts for the zeros ``zfree`` (their rows span k's): one, one avoiding each of its
-    meters, and disjoint ones in what is left (each holds a meter of every attack)."""
+    """Cuts for the zeros ``zfree``, whose rows (with the protected ones) span state k's.
+
+    One cut, one avoiding each of its meters, and disjoint ones in what is left.
+    """
     P = null_space(est.H[prot], est.n)
     first = _cut(est, k, prot, P, zfree)
     if first is None:
