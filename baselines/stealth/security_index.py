@@ -7,13 +7,14 @@ Johansson 2010), optionally with some meters protected (``a_i = 0`` forced). Fou
   that *hit* every set T of free meters whose rows, with the protected ones, span k's unit
   vector (rows spanning it force ``c_k = 0``). That minimum hitting set is found by a
   cutting-plane loop: solve it over the sets T found so far (a branch and bound on bit
-  masks), test the rank of the rows it leaves (``attack_on_state``); if they still span k's vector, add the minimal sets T they contain.
-  Every master optimum is a lower bound, and the first S that passes the rank test is an
-  attack of that size, so the index and its bound are exact, whatever the scale of H. A
-  big-M MILP (``|(D H c)_i| ≤ M_i y_i``, ``c_k = 1``, ``|c_j| ≤ c_max``, HiGHS; D scales
-  H's rows to max-abs 1, ``M_i = c_max |(D H)_i|_1``) supplies a first attack, re-solved by
-  the rank test; ``c_max`` only scales that first pass (an attack whose c needs more is
-  still found by the loop).
+  masks), test the rank of the rows it leaves (``attack_on_state``); if they still span k's
+  vector, add the minimal sets T they contain. Every master optimum is a lower bound, and
+  the first S that passes the rank test is an attack of that size, so the index and its
+  bound are exact, whatever the scale of H. A big-M MILP (``|(D H c)_i| ≤ M_i y_i``,
+  ``c_k = 1``, ``|c_j| ≤ c_max``, HiGHS; D scales H's rows to max-abs 1,
+  ``M_i = c_max |(D H)_i|_1``) supplies a first attack, re-solved by the rank test;
+  ``c_max`` only scales that first pass (an attack whose c needs more is still found by the
+  loop).
 - ``"mincut"`` (grid models, no protected meters): restrict c to 0/1 angle shifts (1 on a
   set S of buses holding bus k, 0 on the slack). With positive susceptances a meter's
   reading changes iff the set of buses in its row (a flow: its two ends; an injection: the
@@ -278,7 +279,10 @@ def _milp(
         while size < upper:  # the smallest hitting set of the cuts (sizes below lower: none)
             if deadline is not None and time.perf_counter() >= deadline:
                 break
-            found = _hitting_set(masks, size)
+            try:
+                found = _hitting_set(masks, size, deadline)
+            except _OutOfTime:  # sizes below ``size`` are ruled out, ``size`` is not
+                break
             if found is not None:
                 break
             size += 1
@@ -289,10 +293,20 @@ def _milp(
     return best, min(lower, float(upper))
 
 
-def _hitting_set(cuts: list[int], size: int) -> int | None:
-    """A set of at most ``size`` elements (a bitmask) meeting every cut (bitmasks), or None."""
+class _OutOfTime(Exception):
+    """The hitting-set search reached its deadline."""
+
+
+def _hitting_set(cuts: list[int], size: int, deadline: float | None = None) -> int | None:
+    """A set of at most ``size`` elements (a bitmask) meeting every cut (bitmasks), or None.
+
+    Raises:
+        _OutOfTime: At ``deadline`` (a ``time.perf_counter`` value).
+    """
 
     def search(chosen: int, left: list[int], budget: int) -> int | None:
+        if deadline is not None and time.perf_counter() >= deadline:
+            raise _OutOfTime
         open_ = [c for c in left if not c & chosen]
         if not open_:
             return chosen
