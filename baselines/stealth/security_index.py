@@ -201,9 +201,13 @@ def security_index(
     lower = np.full(est.n, np.nan)
     attacks = np.zeros((est.n, est.m))
     shifts = np.zeros((est.n, est.n))
-    graph = _lawler(est, prot) if method == "mincut" else None
+    # the full-measurement theorem makes the cut a certified bound for the MILP too
+    cut_bounds = method == "milp" and not prot.size and _cut_is_exact(est)
+    graph = _lawler(est, prot) if method == "mincut" or cut_bounds else None
     solve = {
-        "milp": lambda k: _milp(est, k, prot, c_max, time_limit),
+        "milp": lambda k: _milp(
+            est, k, prot, c_max, time_limit, _mincut(est, k, prot, graph) if cut_bounds else None
+        ),
         "mincut": lambda k: _mincut(est, k, prot, graph),
     }
     if method == "brute":
@@ -241,7 +245,12 @@ def security_index(
 
 
 def _milp(
-    est: Any, k: int, prot: np.ndarray, c_max: float, time_limit: float | None
+    est: Any,
+    k: int,
+    prot: np.ndarray,
+    c_max: float,
+    time_limit: float | None,
+    cut: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[tuple[np.ndarray, np.ndarray] | None, float]:
     """The sparsest attack found on state k and the certified lower bound on its size.
 
@@ -249,7 +258,10 @@ def _milp(
     MILP's (:func:`_big_m`) and the first support of the hitting-set loop that admits one. The
     loop's master (a minimum hitting set of the cuts) is a relaxation of the problem, so its
     optimum is a lower bound; the loop stops when that bound reaches the attack's size or at
-    ``time_limit`` (``(None, inf)``: the protected meters shield state k).
+    ``time_limit`` (``(None, inf)``: the protected meters shield state k). ``cut``: the min
+    cut's attack where the full-measurement theorem makes its size the index: a lower bound
+    as well, unless an attack found is sparser (then the theorem's premise fails and it is
+    ignored).
     """
     deadline = None if time_limit is None else time.perf_counter() + time_limit
     best = attack_on_state(est, k, prot)
@@ -259,12 +271,16 @@ def _milp(
     if first is not None and len(support(first[1])) < len(support(best[1])):
         best = first
     upper = len(support(best[1]))
+    lower = 1.0
+    if cut is not None and len(support(cut[1])) <= upper:
+        if len(support(cut[1])) < upper:
+            best, upper = cut, len(support(cut[1]))
+        lower = float(upper)
     free = np.setdiff1d(np.arange(est.m), prot)
     pos = np.full(est.m, -1)
     pos[free] = np.arange(free.size)
     cuts: set[tuple[int, ...]] = set()
     chosen = np.zeros(0, dtype=np.int64)
-    lower = 1.0
     while lower < upper:
         if deadline is not None and time.perf_counter() >= deadline:
             break
