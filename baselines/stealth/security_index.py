@@ -14,7 +14,8 @@ Johansson 2010), optionally with some meters protected (``a_i = 0`` forced). Fou
   ``c_k = 1``, ``|c_j| ≤ c_max``, HiGHS; D scales H's rows to max-abs 1,
   ``M_i = c_max |(D H)_i|_1``) supplies a first attack, re-solved by the rank test;
   ``c_max`` only scales that first pass (an attack whose c needs more is still found by the
-  loop).
+  loop). In the full-measurement case below, with nothing protected, the min cut's size is
+  the certified bound and the loop is skipped.
 - ``"mincut"`` (grid models, no protected meters): restrict c to 0/1 angle shifts (1 on a
   set S of buses holding bus k, 0 on the slack). With positive susceptances a meter's
   reading changes iff the set of buses in its row (a flow: its two ends; an injection: the
