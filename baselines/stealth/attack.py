@@ -270,6 +270,31 @@ def _budget_milp(
     The bound is the shift itself when proved, HiGHS' dual bound when the solve stopped at
     ``time_limit``.
     """
+    # the problem is linear in the bound: solve it with the largest bound scaled to 1 (HiGHS
+    # reads coefficients above 1e20 as infinite) and scale the shift back
+    unit = float(np.max(bound))
+    value, c, limit = _budget_milp_unit(est, t, budget, bound / unit, prot, time_limit)
+    value, c, limit = value * unit, c * unit, limit * unit
+    over = float(np.max(np.abs(est.H @ c) / bound))
+    if over > 1.0:  # rounding of the scaling: back inside the box
+        c, value = c / over, value / over
+    if not (np.isfinite(value) and np.all(np.isfinite(c))):
+        raise ValueError(
+            f"a_max = {unit:g} is too large for this model: the shift of state {t} overflows "
+            "a float; use a smaller a_max (the shift is linear in it)"
+        )
+    return value, c, limit
+
+
+def _budget_milp_unit(
+    est: Any,
+    t: int,
+    budget: int,
+    bound: np.ndarray,
+    prot: np.ndarray,
+    time_limit: float | None,
+) -> tuple[float, np.ndarray, float]:
+    """:func:`_budget_milp` for bounds of largest entry 1."""
     m, n = est.m, est.n
     scale = np.max(np.abs(est.H), axis=1)
     scale[scale == 0.0] = 1.0  # a meter that sees no state: any a_i on it is detected

@@ -3,25 +3,33 @@
 For state k, ``α_k = min |supp(H c)|`` over ``c`` with ``c_k = 1`` (Sandberg, Teixeira &
 Johansson 2010), optionally with some meters protected (``a_i = 0`` forced). Four methods:
 
-- ``"milp"`` (exact; any H): ``min Σ y`` s.t. ``−M_i y_i ≤ (D H c)_i ≤ M_i y_i``, ``c_k = 1``,
-  ``|c_j| ≤ c_max``, ``y ∈ {0, 1}^m``, solved by scipy's HiGHS. ``D`` scales every row of H to
-  max-abs 1 (so the integrality tolerance means the same on every meter) and
-  ``M_i = c_max |(D H)_i|_1`` is implied by the bound on c: the MILP is exact over the attacks
-  whose c (scaled to ``c_k = 1``) has entries at most ``c_max`` (default 100) in size. The
-  MILP's support is then re-solved in exact linear algebra (the attack returned is the smallest
-  null-space vector with those zeros), so every reported attack is verified.
-- ``"mincut"`` (grid models): restrict c to 0/1 angle shifts (1 on a set S of buses holding bus
-  k, 0 on the slack). With positive susceptances a meter's reading changes iff the set of buses
-  in its row (a flow: its two ends; an injection: the bus and its neighbours) is split by S, so
-  ``|supp(H c)|`` is the number of meters *cut* by S: a minimum s–t cut in the hypergraph whose
-  hyperedges are the meters, computed as a max flow on Lawler's graph (one arc of capacity 1 per
-  meter between two auxiliary nodes). Protected meters get infinite capacity. With every branch
-  flow and every bus injection metered (the full-measurement case of Hendrickx, Johansson,
-  Jungers, Sandberg & Sou 2014) an optimal attack is of this form and the cut is exact; in
-  general it is an upper bound. ``tests/test_stealth_baselines.py`` checks it equals the MILP on
-  every state of the grid presets it runs.
-- ``"binary"`` (grid models, ≤ 20 angles): every 0/1 shift c, enumerated: the brute-force check
-  of the min cut.
+- ``"milp"`` (exact; any H, any protected meters): ``α_k = min |S|`` over the meter sets S
+  that *hit* every set T of free meters whose rows, with the protected ones, span k's unit
+  vector (rows spanning it force ``c_k = 0``). That minimum hitting set is found by a
+  cutting-plane loop: solve it over the sets T found so far (a branch and bound on bit
+  masks), test the rank of the rows it leaves (``attack_on_state``); if they still span k's
+  vector, add the minimal sets T they contain. Every master optimum is a lower bound, and
+  the first S that passes the rank test is an attack of that size, so the index and its
+  bound are exact, whatever the scale of H. A big-M MILP (``|(D H c)_i| ≤ M_i y_i``,
+  ``c_k = 1``, ``|c_j| ≤ c_max``, HiGHS; D scales H's rows to max-abs 1,
+  ``M_i = c_max |(D H)_i|_1``) supplies a first attack, re-solved by the rank test;
+  ``c_max`` only scales that first pass (an attack whose c needs more is still found by the
+  loop). In the full-measurement case below, with nothing protected, the min cut's size is
+  the certified bound and the loop is skipped.
+- ``"mincut"`` (grid models, no protected meters): restrict c to 0/1 angle shifts (1 on a
+  set S of buses holding bus k, 0 on the slack). With positive susceptances a meter's
+  reading changes iff the set of buses in its row (a flow: its two ends; an injection: the
+  bus and its neighbours) is split by S, so ``|supp(H c)|`` is the number of meters *cut*
+  by S: a minimum s–t cut in the hypergraph whose hyperedges are the meters, computed as a
+  max flow on Lawler's graph (one arc of capacity 1 per meter between two auxiliary nodes).
+  With every branch flow and every bus injection metered and positive susceptances (the
+  full-measurement case of Hendrickx, Johansson, Jungers, Sandberg & Sou 2014) an optimal
+  attack is of this form and the cut is exact; otherwise it is an upper bound and its
+  ``lower_bounds`` are 1. Protected meters are refused: attacks that spare them need not be
+  0/1 shifts (use ``"milp"``). ``tests/test_stealth_baselines.py`` checks the cut equals the
+  MILP on every state of the grid presets it runs.
+- ``"binary"`` (grid models, ≤ 20 angles, no protected meters): every 0/1 shift c,
+  enumerated: the brute-force check of the min cut (certified where the cut is).
 - ``"brute"`` (any H, ≤ 20 meters): every meter set in order of size, by a rank test (state k is
   attackable with the meters A iff the k-th unit vector is not in the row space of H without A).
 
@@ -36,7 +44,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import optimize, sparse
+from scipy import linalg, optimize, sparse
 
 from baselines.stealth.common import (
     as_estimation,
@@ -71,10 +79,11 @@ class SecurityIndex:
         meters: Meter names.
         seconds: Wall time.
         lower_bounds: (n,) float: a certified lower bound on each index: equal to ``indices``
-            where the index is proved (always, except for ``"milp"`` states whose solve stopped
-            at ``time_limit``: there ``indices`` is the best attack found and this is HiGHS'
-            dual bound, rounded up). ``"mincut"`` is exact only in the full-measurement case
-            (module docstring) and reports its own value as the bound.
+            where the index is proved (always for ``"brute"``, and for ``"milp"`` except on
+            states whose solve stopped at ``time_limit``: there ``indices`` is the best attack
+            found and this the hitting-set loop's bound). ``"mincut"`` and ``"binary"`` prove
+            their values only in the full-measurement case (module docstring); elsewhere
+            their bound is 1.
     """
 
     indices: np.ndarray
@@ -140,16 +149,18 @@ def security_index(
         method: ``"milp"``, ``"mincut"``, ``"binary"`` or ``"brute"`` (module docstring).
         states: State positions to compute (default all).
         protected: Meters the attacker cannot touch (positions or names).
-        c_max: MILP only: bound on the entries of c scaled to ``c_k = 1`` (> 0).
-        time_limit: MILP only: seconds per state (HiGHS), ``None`` for none.
+        c_max: MILP only: the bound on c (at ``c_k = 1``) of the first, big-M pass (finite,
+            > 0). A numerical scaling only: the indices are exact for every value.
+        time_limit: MILP only: seconds per state, ``None`` for none. A state stopped there
+            keeps its best attack and a certified lower bound (``proved`` False).
 
     Returns:
         The :class:`SecurityIndex`.
 
     Raises:
         ValueError: Naming the parameter: an unknown method, meters or states; ``"mincut"`` or
-            ``"binary"`` on an H without a grid model; ``"brute"`` above 20 meters, ``"binary"``
-            above 20 angles.
+            ``"binary"`` on an H without a grid model or with protected meters; ``"brute"``
+            above 20 meters, ``"binary"`` above 20 angles.
 
     Example:
         >>> from baselines.stealth import security_index
@@ -171,6 +182,11 @@ def security_index(
             f"method {method!r} needs a grid model (a case, a grid preset or a GridModel); "
             "use 'milp' or 'brute' for your own H"
         )
+    if method in ("mincut", "binary") and prot.size:
+        raise ValueError(
+            f"method {method!r} searches 0/1 shifts, which miss attacks that spare protected "
+            "meters: use method='milp' (or 'brute' up to 20 meters) with protected meters"
+        )
     if method == "brute" and est.m > MAX_BRUTE:
         raise ValueError(
             f"method 'brute' enumerates meter sets: at most {MAX_BRUTE} meters, "
@@ -186,9 +202,13 @@ def security_index(
     lower = np.full(est.n, np.nan)
     attacks = np.zeros((est.n, est.m))
     shifts = np.zeros((est.n, est.n))
-    graph = _lawler(est, prot) if method == "mincut" else None
+    # the full-measurement theorem makes the cut a certified bound for the MILP too
+    cut_bounds = method == "milp" and not prot.size and _cut_is_exact(est)
+    graph = _lawler(est, prot) if method == "mincut" or cut_bounds else None
     solve = {
-        "milp": lambda k: _milp(est, k, prot, c_max, time_limit),
+        "milp": lambda k: _milp(
+            est, k, prot, c_max, time_limit, _mincut(est, k, prot, graph) if cut_bounds else None
+        ),
         "mincut": lambda k: _mincut(est, k, prot, graph),
     }
     if method == "brute":
@@ -197,6 +217,7 @@ def security_index(
         found = _binary(est, todo, prot)
     else:
         found = {k: solve[method](k) for k in todo}
+    exact = method in ("milp", "brute") or _cut_is_exact(est)
     for k, hit in found.items():
         bound = None
         if method == "milp":
@@ -206,7 +227,9 @@ def security_index(
             continue
         c, a = hit
         indices[k] = len(support(a))
-        lower[k] = indices[k] if bound is None else min(bound, indices[k])
+        if bound is None:
+            bound = indices[k] if exact else 1.0
+        lower[k] = min(bound, indices[k])
         attacks[k], shifts[k] = on_support(a), c  # no rounding residue off the support
     for arr in (indices, lower, attacks, shifts):
         arr.setflags(write=False)
@@ -223,17 +246,177 @@ def security_index(
 
 
 def _milp(
-    est: Any, k: int, prot: np.ndarray, c_max: float, time_limit: float | None
-) -> tuple[tuple[np.ndarray, np.ndarray] | None, float | None]:
-    """The attack found for state k and the lower bound certified where it is not proved.
+    est: Any,
+    k: int,
+    prot: np.ndarray,
+    c_max: float,
+    time_limit: float | None,
+    cut: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[tuple[np.ndarray, np.ndarray] | None, float]:
+    """The sparsest attack found on state k and the certified lower bound on its size.
 
-    The bound is None when the attack is proved optimal (the solve did not stop at
-    ``time_limit``).
+    The attack is the best of three verified ones: the attack on every free meter, the big-M
+    MILP's (:func:`_big_m`) and the first support of the hitting-set loop that admits one. The
+    loop's master (a minimum hitting set of the cuts) is a relaxation of the problem, so its
+    optimum is a lower bound; the loop stops when that bound reaches the attack's size or at
+    ``time_limit`` (``(None, inf)``: the protected meters shield state k). ``cut``: the min
+    cut's attack where the full-measurement theorem makes its size the index: a lower bound
+    as well, unless an attack found is sparser (then the theorem's premise fails and it is
+    ignored).
+    """
+    deadline = None if time_limit is None else time.perf_counter() + time_limit
+    best = attack_on_state(est, k, prot)
+    if best is None:
+        return None, np.inf
+    first = _big_m(est, k, prot, c_max, None if time_limit is None else time_limit / 2)
+    if first is not None and len(support(first[1])) < len(support(best[1])):
+        best = first
+    upper = len(support(best[1]))
+    lower = 1.0
+    if cut is not None and len(support(cut[1])) <= upper:
+        if len(support(cut[1])) < upper:
+            best, upper = cut, len(support(cut[1]))
+        lower = float(upper)
+    free = np.setdiff1d(np.arange(est.m), prot)
+    pos = np.full(est.m, -1)
+    pos[free] = np.arange(free.size)
+    cuts: set[tuple[int, ...]] = set()
+    chosen = np.zeros(0, dtype=np.int64)
+    while lower < upper:
+        if deadline is not None and time.perf_counter() >= deadline:
+            break
+        hit = attack_on_state(est, k, np.setdiff1d(np.arange(est.m), chosen))
+        if hit is not None and support(hit[1]).size:
+            if len(support(hit[1])) < upper:
+                best, upper = hit, len(support(hit[1]))
+            break  # the master's optimum admits an attack: lower == its size == upper
+        cuts.update(_cuts(est, k, prot, np.setdiff1d(free, chosen)))
+        masks = [sum(1 << int(pos[i]) for i in cut) for cut in cuts]
+        size, found = int(lower), None
+        while size < upper:  # the smallest hitting set of the cuts (sizes below lower: none)
+            if deadline is not None and time.perf_counter() >= deadline:
+                break
+            try:
+                found = _hitting_set(masks, size, deadline)
+            except _OutOfTime:  # sizes below ``size`` are ruled out, ``size`` is not
+                break
+            if found is not None:
+                break
+            size += 1
+        lower = float(size)
+        if size >= upper or found is None:
+            break
+        chosen = free[[i for i in range(free.size) if found >> i & 1]]
+    return best, min(lower, float(upper))
+
+
+class _OutOfTime(Exception):
+    """The hitting-set search reached its deadline."""
+
+
+def _hitting_set(cuts: list[int], size: int, deadline: float | None = None) -> int | None:
+    """A set of at most ``size`` elements (a bitmask) meeting every cut (bitmasks), or None.
+
+    Raises:
+        _OutOfTime: At ``deadline`` (a ``time.perf_counter`` value).
+    """
+
+    def search(chosen: int, left: list[int], budget: int) -> int | None:
+        if deadline is not None and time.perf_counter() >= deadline:
+            raise _OutOfTime
+        open_ = [c for c in left if not c & chosen]
+        if not open_:
+            return chosen
+        if budget == 0:
+            return None
+        open_.sort(key=int.bit_count)
+        if not open_[0]:
+            return None
+        used, disjoint = 0, 0
+        for c in open_:
+            if not c & used:
+                used |= c
+                disjoint += 1
+                if disjoint > budget:
+                    return None
+        branch = open_[0]
+        while branch:
+            e = branch & -branch
+            branch ^= e
+            found = search(chosen | e, open_, budget - 1)
+            if found is not None:
+                return found
+            open_ = [c & ~e for c in open_]  # e is ruled out in the remaining branches
+            if not all(open_):
+                return None
+        return None
+
+    return search(0, list(cuts), size)
+
+
+def _admits(est: Any, k: int, zero: np.ndarray) -> bool:
+    """Whether an attack on state k is zero on the meters ``zero`` (the rank test)."""
+    return attack_on_state(est, k, zero) is not None
+
+
+def _cut(est: Any, k: int, prot: np.ndarray, P: np.ndarray, zfree: np.ndarray) -> np.ndarray | None:
+    """Free meters T ⊆ ``zfree`` with no attack on k zero on ``prot ∪ T``, few; None if none.
+
+    Every attack on state k corrupts a meter of T (were T ∪ prot all zero, the rank test
+    fails), so ``Σ_{i ∈ T} y_i ≥ 1`` is a valid cut. T is the support of the coefficients
+    expressing k's row ``P_k`` of the protected rows' null space in independent rows of
+    ``H[zfree] P`` (minimal: those rows are independent), verified by the rank test; where
+    rounding makes that fail, all of ``zfree``.
+    """
+    if _admits(est, k, np.union1d(prot, zfree)):
+        return None
+    Hr = est.H[zfree] @ P
+    _, R, piv = linalg.qr(Hr.T, pivoting=True, mode="economic")
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > max(Hr.shape) * np.finfo(float).eps * (d[0] if d.size else 0.0)))
+    basis = piv[:rank]
+    lam = np.linalg.lstsq(Hr[basis].T, P[k], rcond=None)[0]
+    keep = np.abs(lam) > 1e-12 * float(np.max(np.abs(lam), initial=0.0))
+    cut = np.sort(zfree[basis[keep]])
+    if cut.size == 0 or _admits(est, k, np.union1d(prot, cut)):
+        return zfree
+    return cut
+
+
+def _cuts(est: Any, k: int, prot: np.ndarray, zfree: np.ndarray) -> list[tuple[int, ...]]:
+    """Cuts for the zeros ``zfree``, whose rows (with the protected ones) span state k's.
+
+    One cut, one avoiding each of its meters, and disjoint ones in what is left.
+    """
+    P = null_space(est.H[prot], est.n)
+    first = _cut(est, k, prot, P, zfree)
+    if first is None:
+        return []
+    found = [first]
+    found += [c for i in first if (c := _cut(est, k, prot, P, zfree[zfree != i])) is not None]
+    rest = np.setdiff1d(zfree, first)
+    while rest.size and (more := _cut(est, k, prot, P, rest)) is not None:
+        found.append(more)
+        rest = np.setdiff1d(rest, more)
+    return [tuple(int(i) for i in c) for c in found]
+
+
+def _big_m(
+    est: Any, k: int, prot: np.ndarray, c_max: float, time_limit: float | None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """A verified attack on state k from the big-M MILP over ``|c_j| ≤ c_max``, or None.
+
+    ``min Σ y`` s.t. ``|(D H c)_i| ≤ M_i y_i``, ``c_k = 1``, ``|c_j| ≤ c_max`` (D scales the
+    rows of H to max-abs 1, ``M_i = c_max |(D H)_i|_1``). It only supplies a first attack: its
+    support is re-solved by the rank test (:func:`attack_on_state`), and a solve that fails
+    (numerically, at ``time_limit``, or because the bound cuts every attack off) gives None.
     """
     m, n = est.m, est.n
     scale = np.max(np.abs(est.H), axis=1, keepdims=True)
     Hn = est.H / np.where(scale == 0.0, 1.0, scale)
     M = c_max * np.sum(np.abs(Hn), axis=1)
+    if not np.all(np.isfinite(M)) or np.max(M) >= 1e15:  # beyond HiGHS' numerics
+        return None
     A = sparse.bmat([[Hn, -sparse.diags(M)], [-Hn, -sparse.diags(M)]], format="csr")
     cons = optimize.LinearConstraint(A, -np.inf, 0.0)
     lb = np.concatenate([np.full(n, -c_max), np.zeros(m)])
@@ -242,7 +425,7 @@ def _milp(
     ub[n + prot] = 0.0
     cost = np.concatenate([np.zeros(n), np.ones(m)])
     integrality = np.concatenate([np.zeros(n), np.ones(m)])
-    options = {"mip_rel_gap": 0.0}
+    options: dict[str, Any] = {"mip_rel_gap": 0.0}
     if time_limit is not None:
         options["time_limit"] = time_limit
     res = milp(
@@ -252,35 +435,26 @@ def _milp(
         bounds=optimize.Bounds(lb, ub),
         options=options,
     )
-    if res.x is None:
-        if res.status == 2:  # infeasible: the protected meters shield state k
-            return None, None
-        if res.status == 1:
-            raise RuntimeError(
-                f"time_limit={time_limit} s ran out before HiGHS found any attack on state {k}: "
-                "raise time_limit (or use method='mincut' on a grid model)"
-            )
-        raise RuntimeError(f"HiGHS found no security index for state {k}: {res.message}")
-    bound = None
-    if res.status == 1:  # time limit: the incumbent is an upper bound, the dual bound a lower
-        dual = getattr(res, "mip_dual_bound", None)
-        bound = 1.0 if dual is None or not np.isfinite(dual) else max(1.0, np.ceil(dual - 1e-6))
-    c = res.x[:n]
-    a = Hn @ c
+    if res.x is None or not np.all(np.isfinite(res.x)):
+        return None
+    a = Hn @ res.x[:n]
     zero = np.flatnonzero(np.abs(a) <= 1e-7 * max(float(np.max(np.abs(a))), 1e-300))
-    zero = np.union1d(zero, prot)
-    hit = attack_on_state(est, k, zero)
-    if hit is None:  # pragma: no cover - a tolerance artefact of the MILP
-        raise RuntimeError(f"the MILP's attack on state {k} does not verify in exact arithmetic")
-    return hit, bound
+    return attack_on_state(est, k, np.union1d(zero, prot))
 
 
-def _grid_layout(est: Any) -> tuple[np.ndarray, np.ndarray, int]:
-    """Bus sets of every meter (the supports of H_full's rows), state buses and the slack."""
+def _cut_is_exact(est: Any) -> bool:
+    """Whether 0/1 shifts reach every index: Hendrickx et al.'s full-measurement case.
+
+    A grid model with an injection meter on every bus, a flow meter on every branch and
+    positive susceptances (no protected meters: the methods refuse them).
+    """
     grid = est.grid
-    Nb, slack = grid.network.n_buses, grid.network.slack
-    state_bus = np.array([p for p in range(Nb) if p != slack])
-    return grid.H_full != 0.0, state_bus, slack
+    if grid is None:
+        return False
+    net = grid.network
+    buses = {m.bus for m in grid.meters if m.kind == "injection"}
+    branches = {m.branch for m in grid.meters if m.kind != "injection"}
+    return len(buses) == net.n_buses and len(branches) == len(net.b) and bool(np.all(net.b > 0))
 
 
 def _lawler(est: Any, prot: np.ndarray) -> tuple[sparse.csr_matrix, int]:
