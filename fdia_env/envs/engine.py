@@ -53,9 +53,11 @@ from fdia_env.kalman import (
     psd_sqrt,
     small,
     spd_inv,
+    spd_inv_sum,
     steady_state,
     sym,
 )
+from fdia_env.kalman.linalg import mT
 from fdia_env.systems import LinearSystem
 
 # the largest (M, n²) sensor-information matrix summed member by member (grid-ieee14: 34 × 169,
@@ -349,6 +351,7 @@ class BatchedSimulation:
         xp = self.xp
         B, n = self.B, self.system.n
         full = where is None or xp.all(where)
+        self._split = None  # (leaking, log det) of the last step's bias, read by _measure_all
         if full:
             if self.fast:
                 self._comp = xp.broadcast_to(self._start_comp, (3, B))
@@ -450,6 +453,7 @@ class BatchedSimulation:
         Returns:
             (B,) Φ after the step.
         """
+        self._split = None
         if detection is not None:  # the detection game: the detector decides per measurement
             self._detection_step(detection, leak, probability, active)
             self.k += 1
@@ -674,8 +678,14 @@ class BatchedSimulation:
         # the (B, n, nz) gain only where it is read (large for the power-grid systems)
         W = self._gain(P_new, mask) if any_leak or self.sampled else None
         if any_leak:  # Joseph form for the members whose filter is not optimal
-            noise = self._R if leak is None else self._R + leak
-            M_new = joseph_update(predict_cov(M_prev, self._F, self._Q), W, self._H, noise)
+            M_new = joseph_update(predict_cov(M_prev, self._F, self._Q), W, self._H, self._R)
+            if leak is not None:
+                # M = M_R + W Σ W': log det from the two terms (spd_inv_sum), since their sum
+                # loses M_R's small eigenvalues in float64 under a huge rank-deficient Σ
+                added = sym(W @ leak @ mT(W))
+                if self.spec.objective == "logdet" and not self.sampled:
+                    self._split = (leaking, spd_inv_sum(M_new, added)[1])
+                M_new = sym(M_new + added)
             self._M = xp.where(leaking[:, None, None], M_new, P_new)
             self.consistent = self.consistent & ~leaking
             self._clean = False
@@ -747,7 +757,7 @@ class BatchedSimulation:
             e = self.x - self.x_hat
             return xp.einsum("bi,bi->b", e, e)
         if self._c is None:
-            return objective(self.M, self.spec.objective)
+            return self._objective_of_M()
         # 2 states: small.trace2 / small.logdet2 of P's components where M is P (the single
         # env's float kernel), the generic objective of M where a bias reached the filter (the
         # single env's engine step): each member by its own state, as its single env
@@ -760,7 +770,15 @@ class BatchedSimulation:
                 phi = xp.where(det > 0, xp.log(det), -np.inf)
         if self._clean or self.all_consistent():
             return phi
-        return xp.where(self.consistent, phi, objective(self.M, self.spec.objective))
+        return xp.where(self.consistent, phi, self._objective_of_M())
+
+    def _objective_of_M(self) -> Any:
+        """(B,) Φ(M); log det from the step's two terms where a bias entered (``_split``)."""
+        phi = objective(self.M, self.spec.objective)
+        if self._split is None:
+            return phi
+        where, value = self._split
+        return self.xp.where(where, value, phi)
 
     def _components_of_M(self) -> tuple[Any, Any, Any]:
         """(a, b, d) of each member's M, (B,) each (2-state models)."""
