@@ -41,6 +41,7 @@ from scipy import integrate, stats
 
 from fdia_env.backend import NUMPY, Backend
 from fdia_env.kalman import steady_state
+from fdia_env.stealth.tails import ncx2_sf
 from fdia_env.systems import LinearSystem
 
 ACTIONS = ("bias", "linear")
@@ -255,11 +256,11 @@ class DynamicModel:
         if self.action == "bias":
             total = state["nc"].sum(1)
             if xp is NUMPY:
-                tail = stats.ncx2.sf(threshold, dof, np.maximum(total, 1e-300))
+                tail = ncx2_sf(threshold, dof, np.maximum(total, 1e-300))
             else:
-                from fdia_env.stealth.torch_ops import ncx2_sf
+                from fdia_env.stealth.torch_ops import ncx2_sf as torch_ncx2_sf
 
-                tail = ncx2_sf(threshold, dof, total)
+                tail = torch_ncx2_sf(threshold, dof, total)
             p = xp.where(total > 0.0, tail, alpha)
             mean = dof + total
         else:

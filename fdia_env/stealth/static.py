@@ -45,6 +45,7 @@ from fdia_env._validation import (
     check_psd,
     check_symmetric,
 )
+from fdia_env.stealth.tails import ncx2_sf
 
 TESTS = ("chi2", "lnr")
 """Bad-data tests: the χ² residual test and the largest-normalised-residual test."""
@@ -228,13 +229,9 @@ class StaticEstimation:
         lam, size = self._parts(self.injection(a))
         stealthy = np.sqrt(lam) <= 1e-9 * np.maximum(size, 1e-300)
         out = np.full(lam.shape, self.alpha)
-        # Laurent & Massart: P[χ²_D(λ) ≤ D + λ − 2 sqrt((D + 2λ) x)] ≤ e^{−x}; with x = 750 the
-        # miss probability is below the smallest double, so p is 1.0 exactly (no ncx2 call)
-        certain = self.dof + lam - self.threshold >= 2.0 * np.sqrt((self.dof + 2.0 * lam) * 750.0)
-        out[certain & ~stealthy] = 1.0
-        seen = ~stealthy & ~certain
-        if np.any(seen):
-            out[seen] = stats.ncx2.sf(self.threshold, self.dof, lam[seen])
+        seen = ~stealthy
+        if np.any(seen):  # 1.0 exactly far in the tail (fdia_env.stealth.tails)
+            out[seen] = ncx2_sf(self.threshold, self.dof, lam[seen])
         return out if out.ndim else float(out)
 
     def detection_rate(

@@ -176,11 +176,10 @@ class StealthVectorEnv(StealthVectorBase):
         w = a * self._Linv.diagonal() if est._diag_Linv is not None else a @ self._Linv.T
         r = w - (w @ self._Q) @ self._Q.T
         lam, size = (r * r).sum(1), torch.linalg.vector_norm(w, dim=1)
-        # as StaticEstimation.detection_probability: α where stealthy, 1 where certain
+        # as StaticEstimation.detection_probability: α where stealthy, else the tail
         stealthy = torch.sqrt(lam) <= 1e-9 * torch.clamp(size, min=1e-300)
-        certain = est.dof + lam - est.threshold >= 2.0 * torch.sqrt((est.dof + 2.0 * lam) * 750.0)
         out = torch.where(stealthy, torch.full_like(lam, est.alpha), torch.ones_like(lam))
-        seen = torch.nonzero(~stealthy & ~certain).flatten()
+        seen = torch.nonzero(~stealthy).flatten()
         if seen.numel():
             out[seen] = ncx2_sf(est.threshold, est.dof, lam[seen])
         return out
