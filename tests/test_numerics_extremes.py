@@ -6,6 +6,7 @@ import pytest
 
 from baselines.covariance import det_optimal
 from fdia_env import covariance_attack_v0
+from fdia_env.stealth import stealth_attack_v0
 
 torch = pytest.importorskip("torch")
 
@@ -166,3 +167,273 @@ def test_stealth_dynamic_detection_probability_is_one_past_scipys_range(a_max, d
     assert np.isfinite(rewards).all()
     if dynamics == "expected":  # (1 − p) · phi + p · 0 with p = 1: nothing
         assert (rewards == 0.0).all(), rewards
+
+
+# --- stealthy injections of any size; scales refused past float64's reach ----------------------
+
+STEALTH_ID = "fdia_env/StealthAttack-v0"
+
+
+def _stealth_statistics(magnitude: float, backend: str, test: str) -> tuple[np.ndarray, np.ndarray]:
+    """(statistic, detected) of 6 sampled steps of the all-ones shift (an undetectable a = H c)."""
+    kw = {"magnitude": magnitude, "test": test, "horizon": 6}
+    if backend == "single":
+        env = stealth_attack_v0.parallel_env(**kw)
+        env.reset(seed=3)
+        out = []
+        for _ in range(6):
+            act = np.ones(env.action_space("attacker").shape, np.int8)
+            info = env.step({"attacker": act})[4]["attacker"]
+            out.append((info["statistic"], info["detected"]))
+        stat, det = zip(*out, strict=True)
+        return np.array(stat), np.array(det)
+    env = gym.make_vec(
+        STEALTH_ID, num_envs=2, vectorization_mode="vector_entry_point", backend=backend, **kw
+    )
+    env.reset(seed=3)
+    stat, det = [], []
+    for _ in range(6):
+        act = np.ones((2, *env.single_action_space.shape), np.int8)
+        info = env.step(torch.as_tensor(act) if backend == "torch" else act)[4]
+        stat.append(
+            np.asarray(info["statistic"].numpy() if backend == "torch" else info["statistic"])
+        )
+        d = info["detected"]
+        det.append(np.asarray(d.numpy() if backend == "torch" else d))
+    return np.array(stat), np.array(det)
+
+
+@pytest.mark.parametrize("test", ["chi2", "lnr"])
+@pytest.mark.parametrize("backend", ["single", "numpy", "torch"])
+def test_an_undetectable_shift_is_undetectable_at_every_magnitude(backend, test):
+    """a = H c leaves the residual unchanged: the same statistic and alarms at 0.05 and 1e100.
+
+    The residual of e + a carried a's rounding, |a| · 1e-16: from a magnitude of ~1e12 it raised
+    the alarm on its own (always at 1e13).
+    """
+    want_stat, want_det = _stealth_statistics(0.05, backend, test)
+    for magnitude in (1e13, 1e40, 1e100):
+        stat, det = _stealth_statistics(magnitude, backend, test)
+        np.testing.assert_allclose(stat, want_stat, rtol=1e-12)
+        np.testing.assert_array_equal(det, want_det)
+
+
+@pytest.mark.parametrize(
+    ("module", "name", "kwargs"),
+    [
+        ("stealth_attack_v0", "magnitude", {}),
+        ("stealth_attack_v0", "a_max", {"action": "free"}),
+        ("stealth_dynamic_v0", "a_max", {}),
+        ("stealth_dynamic_v0", "b_max", {"action": "linear"}),
+    ],
+)
+def test_scales_past_float64s_reach_are_refused_by_name(module, name, kwargs):
+    """1e300 overflowed the squared statistic and phi to inf; 1e100 is the largest accepted."""
+    from fdia_env.stealth import stealth_attack_v0, stealth_dynamic_v0
+
+    make = {"stealth_attack_v0": stealth_attack_v0, "stealth_dynamic_v0": stealth_dynamic_v0}
+    build = make[module].parallel_env
+    with pytest.raises(
+        ValueError, match=rf"{name} must satisfy 0 < {name} <= 1e\+100, got 1e\+300"
+    ):
+        build(**kwargs, **{name: 1e300})
+    env = build(**kwargs, **{name: 1e100}, horizon=2)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        space = env.action_space("attacker")
+        act = np.ones(space.shape, space.dtype) if rng.random() < 0.5 else space.sample()
+        _, rewards, _, _, infos = env.step({"attacker": act})
+        assert np.isfinite(rewards["attacker"])
+        assert all(
+            np.isfinite(v).all()
+            for v in infos["attacker"].values()
+            if np.asarray(v).dtype.kind == "f"
+        ), infos
+
+
+def test_linear_gain_spread_past_float64s_reach_is_refused_by_name():
+    """t_max = 1e8 rounded the innovation law's small eigenvalues to 0: a KL of +inf."""
+    from fdia_env.stealth import stealth_dynamic_v0
+
+    with pytest.raises(ValueError, match=r"t_max must satisfy 0 < t_max <= 1e\+06, got 1e\+08"):
+        stealth_dynamic_v0.parallel_env(action="linear", t_max=1e8)
+
+
+# --- every scale parameter over its whole accepted range ----------------------------------------
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from fdia_env import detection_game_v0, sensor_game_v0  # noqa: E402
+from fdia_env.stealth import stealth_dynamic_v0  # noqa: E402
+
+LOG_UNIFORM = st.floats(-300.0, 300.0).map(lambda e: 10.0**e)  # 1e-300 .. 1e300
+RATE = st.floats(-300.0, -1e-12).map(lambda e: 10.0**e)  # a probability in (0, 1)
+
+CASES = {  # module, the env's gym id of the native vector env (None: none), kwargs strategies
+    "covariance_attack_v0": (
+        covariance_attack_v0,
+        COV_ID,
+        {
+            "scenario": st.sampled_from(["ch2-position", "ch2-pv-2", "ch4-position"]),
+            "power": LOG_UNIFORM,
+            "objective": st.sampled_from(["trace", "logdet"]),
+            "structure": st.sampled_from(["full", "diagonal"]),
+            "power_mode": st.sampled_from(["per_step", "budget"]),
+            "horizon": st.integers(1, 3),
+        },
+    ),
+    "detection_game_v0": (
+        detection_game_v0,
+        "fdia_env/DetectionDefender-v0",
+        {
+            "scenario": st.sampled_from(["ch3-static", "ch3-tracking"]),
+            "power": LOG_UNIFORM,
+            "statistic": st.sampled_from(["quadratic", "chi2"]),
+            "on_detect": st.sampled_from(["discard", "incorporate"]),
+            "criterion": st.sampled_from(["mse", "bayes_cost"]),
+            "dynamics": st.sampled_from(["expected", "sampled"]),
+        },
+    ),
+    "sensor_game_v0": (sensor_game_v0, "fdia_env/SensorGameAttacker-v0", {"power": LOG_UNIFORM}),
+    "stealth_attack_v0": (
+        stealth_attack_v0,
+        "fdia_env/StealthAttack-v0",
+        {
+            "scenario": st.just("grid-ieee14"),
+            "action": st.sampled_from(["shift", "box_shift", "free"]),
+            "magnitude": LOG_UNIFORM,
+            "a_max": LOG_UNIFORM,
+            "alpha": RATE,
+            "penalty": LOG_UNIFORM,
+            "on_detect": st.sampled_from(["zero", "penalty"]),
+            "dynamics": st.sampled_from(["sampled", "expected"]),
+        },
+    ),
+    "stealth_dynamic_v0": (
+        stealth_dynamic_v0,
+        STEALTH_DYNAMIC_ID,
+        {
+            "action": st.sampled_from(["bias", "linear"]),
+            "a_max": LOG_UNIFORM,
+            "t_max": LOG_UNIFORM,
+            "b_max": LOG_UNIFORM,
+            "alpha": RATE,
+            "penalty": LOG_UNIFORM,
+            "on_detect": st.sampled_from(["zero", "penalty"]),
+            "dynamics": st.sampled_from(["sampled", "expected"]),
+            "horizon": st.integers(1, 4),
+        },
+    ),
+}
+
+
+def assert_finite_tree(value, where: str) -> None:
+    """Every float in ``value`` (dicts, sequences, arrays, tensors) is finite."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if key != "threshold" or np.asarray(item).dtype.kind != "f":
+                assert_finite_tree(item, f"{where}[{key!r}]")
+            else:  # the detector's τ: +inf exactly where its action is 1 (never detects)
+                assert not np.isnan(np.asarray(item, dtype=np.float64)).any(), where
+        return
+    if isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            assert_finite_tree(item, f"{where}[{i}]")
+        return
+    if isinstance(value, torch.Tensor):
+        value = value.cpu().numpy()
+    arr = np.asarray(value)
+    if arr.dtype.kind in "fc":
+        assert np.isfinite(arr).all(), f"{where} = {value!r}"
+
+
+def _actions(space, rng: np.random.Generator, k: int) -> np.ndarray:
+    """Step k's action: the space's corners first (all high, all low), then random draws."""
+    if isinstance(space, gym.spaces.Box):
+        if k < 2:
+            return np.full(space.shape, space.high if k == 0 else space.low, dtype=space.dtype)
+        return rng.uniform(space.low, space.high).astype(space.dtype)
+    if isinstance(space, gym.spaces.MultiBinary):
+        return (
+            np.full(space.shape, 1 - k % 2, dtype=space.dtype)
+            if k < 2
+            else (rng.integers(0, 2, space.shape).astype(space.dtype))
+        )
+    if isinstance(space, gym.spaces.Discrete):
+        return np.int64(space.start + (space.n - 1 if k == 0 else rng.integers(space.n)))
+    return space.sample()
+
+
+def _refused(exc: ValueError, kwargs: dict) -> None:
+    """A refusal names one of the parameters given."""
+    assert any(name in str(exc) for name in kwargs), (str(exc), kwargs)
+
+
+def _run_parallel(module, kwargs: dict, seed: int) -> None:
+    try:
+        env = module.parallel_env(**kwargs)
+    except ValueError as exc:
+        _refused(exc, kwargs)
+        return
+    rng = np.random.default_rng(seed)
+    _, infos = env.reset(seed=seed)
+    assert_finite_tree(infos, "reset info")
+    for k in range(4):
+        actions = {a: _actions(env.action_space(a), rng, k) for a in env.agents}
+        _, rewards, term, trunc, infos = env.step(actions)
+        assert_finite_tree(rewards, f"step {k} reward")
+        assert_finite_tree(infos, f"step {k} info")
+        if any(term.values()) or any(trunc.values()) or not env.agents:
+            _, infos = env.reset(seed=seed + k + 1)
+
+
+def _run_vector(env_id: str, kwargs: dict, seed: int, backend: str) -> None:
+    try:
+        env = gym.make_vec(
+            env_id, num_envs=3, vectorization_mode="vector_entry_point", backend=backend, **kwargs
+        )
+    except ValueError as exc:
+        _refused(exc, kwargs)
+        return
+    rng = np.random.default_rng(seed)
+    _, infos = env.reset(seed=seed)
+    assert_finite_tree(infos, "reset info")
+    space = env.single_action_space
+    for k in range(3):
+        batch = np.stack([_actions(space, rng, k + j) for j in range(3)])
+        if backend == "torch":
+            batch = torch.as_tensor(batch)
+        _, rewards, _, _, infos = env.step(batch)
+        assert_finite_tree(rewards, f"step {k} reward")
+        assert_finite_tree(infos, f"step {k} info")
+
+
+@pytest.mark.filterwarnings("ignore")
+@pytest.mark.parametrize("name", list(CASES))
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data(), seed=st.integers(0, 2**16))
+def test_extreme_parameters_give_a_named_error_or_finite_rewards_and_infos(name, data, seed):
+    """Log-uniform scales over 1e-300..1e300 in every env: refused by name, or all finite."""
+    module, _, strategies = CASES[name]
+    kwargs = data.draw(st.fixed_dictionaries(strategies), label="kwargs")
+    _run_parallel(module, kwargs, seed)
+
+
+@pytest.mark.filterwarnings("ignore")
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+@pytest.mark.parametrize("name", list(CASES))
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data(), seed=st.integers(0, 2**16))
+def test_extreme_parameters_in_native_vector_envs(name, backend, data, seed):
+    """The same on the native vector env's numpy and torch backends."""
+    _, env_id, strategies = CASES[name]
+    kwargs = data.draw(st.fixed_dictionaries(strategies), label="kwargs")
+    if (
+        name == "detection_game_v0"
+        and kwargs["dynamics"] == "expected"
+        and (kwargs["scenario"] == "ch3-tracking")
+    ):
+        kwargs["horizon"] = 1
+    _run_vector(env_id, kwargs, seed, backend)
