@@ -125,6 +125,39 @@ def torch_ncx2(x: float, dof: int, lams: list[float]) -> np.ndarray:
     return cpu
 
 
+def _mp_mixture_cdf_small(weights: list[float], x: float) -> float:
+    """``P[Σ w_i χ²₁ <= x]`` for x far below every weight (40 digits, relative error (x/w)²).
+
+    The Laplace transform ``Π (1 + 2 w_i t)^{−1/2} = (2t)^{−m/2} Π w_i^{−1/2} (1 − Σ 1/(4 w_i t)
+    + O(t⁻²))`` inverts term by term to ``Π w_i^{−1/2} 2^{−m/2} (x^{m/2} / Γ(m/2 + 1) −
+    Σ 1/(4 w_i) x^{m/2+1} / Γ(m/2 + 2))``.
+    """
+    with mpmath.workdps(40):
+        w = [mpmath.mpf(v) for v in weights]
+        y, h = mpmath.mpf(x), mpmath.mpf(len(w)) / 2
+        lead = y**h / mpmath.gamma(h + 1) - sum(1 / (4 * v) for v in w) * y ** (h + 1) / (
+            mpmath.gamma(h + 2)
+        )
+        return float(lead / (mpmath.sqrt(mpmath.fprod(w)) * 2**h))
+
+
+def test_linear_attack_detection_probability_is_exact_when_the_weights_dwarf_the_threshold():
+    """The linear attack's weighted χ²₁ tail: Imhof's integral in float gave 0.677 for ~1.
+
+    Weights 1e9 to 1e10 times the threshold put it far in the lower tail; the answer is then
+    1 − 4.86e-14 (and 1.0 exactly for weights of 1e200).
+    """
+    from fdia_env.detection.gchisq import gchisq_cdf
+    from fdia_env.stealth.dynamic_model import chi2_mix_sf
+
+    weights = [1e10, 3e9, 2e9]
+    lower = _mp_mixture_cdf_small(weights, 12.6)
+    assert abs(chi2_mix_sf(weights, 12.6) - (1.0 - lower)) < 2e-16
+    assert float(gchisq_cdf(12.6, weights)) == pytest.approx(lower, rel=1e-12)
+    assert chi2_mix_sf([1e200, 1.0, 2.0], 12.6) == 1.0
+    assert chi2_mix_sf([1e10, 3e9, 1.0], 12.6) > 0.9999716779076895  # P[1e10 χ²₁ > 12.6]
+
+
 STEALTH_DYNAMIC_ID = "fdia_env/StealthDynamic-v0"
 
 
