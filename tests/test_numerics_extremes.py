@@ -470,3 +470,30 @@ def test_extreme_parameters_in_native_vector_envs(name, backend, data, seed):
     ):
         kwargs["horizon"] = 1
     _run_vector(env_id, kwargs, seed, backend)
+
+
+@pytest.mark.parametrize("k", [-990, 0, 33, 66, 500, 990])
+def test_two_state_log_det_of_a_sum_matches_mpmath(k):
+    """logdet_sum2 (the engine's 2-state log det of P + B) against an exact determinant (mpmath).
+
+    B is exactly rank one in float64 (integer vectors times 2^k) or a multiple of I; the sum
+    P + B in float64 loses P's part across B's null direction from 2^50 on.
+    """
+    from fdia_env.kalman.linalg import logdet_sum2
+
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((6, 2, 2))
+    P = A @ A.swapaxes(1, 2) + 0.1 * np.eye(2)
+    v = np.array([[3.0, 1.0], [1.0, -2.0], [0.0, 0.0], [5.0, 4.0], [1.0, 0.0], [2.0, 7.0]])
+    S = np.einsum("bi,bj->bij", v, v) * 2.0**k
+    S[2] = 2.0**k * np.eye(2)
+    S[1] += 2.0 ** (k - 10) * np.eye(2)
+    want = []
+    with mpmath.workprec(2400):  # P + B and its determinant exactly (entries up to 2^993)
+        for p, s in zip(P, S, strict=True):
+            m = [[mpmath.mpf(p[i, j]) + mpmath.mpf(s[i, j]) for j in range(2)] for i in range(2)]
+            want.append(float(mpmath.log(m[0][0] * m[1][1] - m[0][1] * m[1][0])))
+    got = logdet_sum2(P, S)
+    np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-13)
+    got_t = logdet_sum2(torch.as_tensor(P), torch.as_tensor(S)).numpy()
+    np.testing.assert_allclose(got_t, want, rtol=1e-14, atol=1e-13)

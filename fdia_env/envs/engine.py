@@ -57,7 +57,7 @@ from fdia_env.kalman import (
     steady_state,
     sym,
 )
-from fdia_env.kalman.linalg import mT
+from fdia_env.kalman.linalg import logdet_sum2, mT
 from fdia_env.systems import LinearSystem
 
 # the largest (M, n²) sensor-information matrix summed member by member (grid-ieee14: 34 × 169,
@@ -790,7 +790,10 @@ class BatchedSimulation:
         """(B,) Φ(M); a log det of ``P + B`` from its two terms where the bias part B is kept."""
         if self.spec.objective != "logdet" or self._Mb is None:
             return objective(self.M, self.spec.objective)
-        value = spd_inv_sum(self.P, self._Mb)[1]
+        if self.system.n == 2:  # the same on the components, in closed form
+            value = logdet_sum2(self.P, self._Mb)
+        else:
+            value = spd_inv_sum(self.P, self._Mb)[1]
         return self.xp.where(self.consistent, objective(self.P, "logdet"), value)
 
     def _components_of_M(self) -> tuple[Any, Any, Any]:
