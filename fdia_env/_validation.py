@@ -14,6 +14,12 @@ _SYM_RTOL = 1e-9
 # (tests/test_numerics.py). Physically every error limit is reached long before (docs/math.md §3).
 MAX_POWER = 1e300
 
+# Largest admissible size of an injection or gain parameter (a bias in pu or in innovation
+# deviations, a magnitude, a gain spread): the statistics, errors and KL divergences square it
+# and multiply it by the system's constants, so 1e100 keeps them (~1e200 and up to 1e100 of
+# system scale and window sums on top) inside float64's 1.8e308.
+MAX_SCALE = 1e100
+
 
 def as_float_array(name: str, value: Any, expected: str) -> np.ndarray:
     """``value`` as a float64 array (a copy), or ``ValueError`` naming ``name``.
@@ -128,13 +134,15 @@ def check_int(
     return value
 
 
-def check_positive(name: str, value: Any) -> float:
-    """Return ``value`` as float if it is finite and > 0, else raise ``ValueError``."""
+def check_positive(name: str, value: Any, maximum: float | None = None) -> float:
+    """Return ``value`` as float if it is finite and > 0 (and <= ``maximum``), else raise."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be a positive number, got {value!r}")
     value = float(value)
     if not np.isfinite(value) or value <= 0.0:
         raise ValueError(f"{name} must be a finite number > 0, got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name} must satisfy 0 < {name} <= {maximum:g}, got {value:g}")
     return value
 
 

@@ -53,9 +53,11 @@ from fdia_env.kalman import (
     psd_sqrt,
     small,
     spd_inv,
+    spd_inv_sum,
     steady_state,
     sym,
 )
+from fdia_env.kalman.linalg import logdet_sum2, mT
 from fdia_env.systems import LinearSystem
 
 # the largest (M, n²) sensor-information matrix summed member by member (grid-ieee14: 34 × 169,
@@ -361,6 +363,7 @@ class BatchedSimulation:
             else:
                 self._set_P(xp.broadcast_to(self._start, (B, n, n)))
             self._M = None  # only read where a member is inconsistent
+            self._Mb = None  # M − P: the biases' part of M (None: zero, or not tracked)
             self._low_rank_reset(None)
             self.consistent = xp.ones(B, dtype=xp.bool)
             self._clean = True
@@ -378,6 +381,8 @@ class BatchedSimulation:
                 self._P[where] = self._start
             if not self.all_consistent():
                 self._M[where] = self._start
+                if self._Mb is not None:
+                    self._Mb[where] = 0.0
             self.consistent[where] = True
             self._low_rank_reset(where)
             self.k[where] = 0
@@ -557,6 +562,7 @@ class BatchedSimulation:
         if not self.sampled:
             self._set_P(xp.copy(out.P))
             self._M = out.error_cov
+            self._Mb = None  # M is the detector's mixture, not P plus a bias part
             self._set_consistent(xp.zeros(B, dtype=xp.bool))
             return
         if active is None:
@@ -620,6 +626,7 @@ class BatchedSimulation:
         self._set_P(P)
         self._lr_on = False  # P is no longer Ps + W C W'
         self._M = xp.copy(P)
+        self._Mb = None
         self.consistent = xp.ones(self.B, dtype=xp.bool)
         self._clean = True
         if self.sampled:  # a fresh error drawn from the steady-state covariance
@@ -674,8 +681,25 @@ class BatchedSimulation:
         # the (B, n, nz) gain only where it is read (large for the power-grid systems)
         W = self._gain(P_new, mask) if any_leak or self.sampled else None
         if any_leak:  # Joseph form for the members whose filter is not optimal
-            noise = self._R if leak is None else self._R + leak
-            M_new = joseph_update(predict_cov(M_prev, self._F, self._Q), W, self._H, noise)
+            if self._Mb is None and not self._clean and not self.all_consistent():
+                # M from the detection game's step: no separate bias part
+                M_new = joseph_update(predict_cov(M_prev, self._F, self._Q), W, self._H, self._R)
+                if leak is not None:
+                    M_new = sym(M_new + W @ leak @ mT(W))
+            else:
+                # M = P + B: the nominal gain makes the Joseph form of P's own noise P itself,
+                # so only the biases' part B is propagated, B ← A F B F' A' + W Σ W' with
+                # A = I − W H; log det(P + B) then comes from the two terms (spd_inv_sum),
+                # which their float64 sum loses under a huge rank-deficient Σ
+                B_prev = self._Mb if self._Mb is not None else xp.zeros(P_new.shape)
+                B_pred = B_prev if self._F_identity else self._F @ B_prev @ mT(self._F)
+                A = self._eye - W @ self._H
+                B_new = A @ B_pred @ mT(A)
+                if leak is not None:
+                    B_new = B_new + W @ leak @ mT(W)
+                B_new = sym(B_new)
+                M_new = sym(P_new + B_new)
+                self._Mb = xp.where(leaking[:, None, None], B_new, 0.0)
             self._M = xp.where(leaking[:, None, None], M_new, P_new)
             self.consistent = self.consistent & ~leaking
             self._clean = False
@@ -747,7 +771,7 @@ class BatchedSimulation:
             e = self.x - self.x_hat
             return xp.einsum("bi,bi->b", e, e)
         if self._c is None:
-            return objective(self.M, self.spec.objective)
+            return self._objective_of_M()
         # 2 states: small.trace2 / small.logdet2 of P's components where M is P (the single
         # env's float kernel), the generic objective of M where a bias reached the filter (the
         # single env's engine step): each member by its own state, as its single env
@@ -760,7 +784,17 @@ class BatchedSimulation:
                 phi = xp.where(det > 0, xp.log(det), -np.inf)
         if self._clean or self.all_consistent():
             return phi
-        return xp.where(self.consistent, phi, objective(self.M, self.spec.objective))
+        return xp.where(self.consistent, phi, self._objective_of_M())
+
+    def _objective_of_M(self) -> Any:
+        """(B,) Φ(M); a log det of ``P + B`` from its two terms where the bias part B is kept."""
+        if self.spec.objective != "logdet" or self._Mb is None:
+            return objective(self.M, self.spec.objective)
+        if self.system.n == 2:  # the same on the components, in closed form
+            value = logdet_sum2(self.P, self._Mb)
+        else:
+            value = spd_inv_sum(self.P, self._Mb)[1]
+        return self.xp.where(self.consistent, objective(self.P, "logdet"), value)
 
     def _components_of_M(self) -> tuple[Any, Any, Any]:
         """(a, b, d) of each member's M, (B,) each (2-state models)."""

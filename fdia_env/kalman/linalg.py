@@ -64,6 +64,42 @@ def spd_inv_sum(P: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return inverse, logdet(X) + xp.sum(xp.log(d), -1)
 
 
+def logdet_sum2(P: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``log det(P + S)`` of (..., 2, 2) SPD ``P`` and PSD ``S``: :func:`spd_inv_sum`'s log det.
+
+    The same computation on the components: S's eigenvalues ``(a + d) / 2 ± r``,
+    ``r = sqrt(((a − d) / 2)² + b²)`` (the small one as ``det S / w_max``, zero below
+    ``2 eps w_max``), the top eigenvector from the cancellation-free one of ``((a − d) / 2 + r,
+    b)`` and ``(b, r − (a − d) / 2)``; ``log det X`` of the unit-diagonal X is ``log(1 − x²)``.
+    """
+    xp = namespace(P)
+    a, b, d = S[..., 0, 0], 0.5 * (S[..., 0, 1] + S[..., 1, 0]), S[..., 1, 1]
+    half = 0.5 * (a - d)
+    big = xp.maximum(xp.maximum(abs(half), abs(b)), _TINY)  # scaled: no overflow at 1e300
+    hs, bs = half / big, b / big
+    root = big * xp.sqrt(hs * hs + bs * bs)
+    w_max = 0.5 * (a + d) + root
+    top = xp.where(w_max > 0.0, w_max, 1.0)
+    w_min = xp.where(w_max > 0.0, (a / top) * d - (b / top) * b, 0.0)
+    w_min = xp.where(w_min > 2.0 * _EPS * w_max, w_min, 0.0)
+    v0 = xp.where(half >= 0.0, half + root, b)
+    v1 = xp.where(half >= 0.0, b, root - half)
+    size = xp.maximum(xp.maximum(abs(v0), abs(v1)), _TINY)
+    v0, v1 = v0 / size, v1 / size
+    norm = xp.sqrt(v0 * v0 + v1 * v1)
+    none = norm == 0.0  # S = s I: any basis
+    c = xp.where(none, 1.0, v0 / xp.where(none, 1.0, norm))
+    s = xp.where(none, 0.0, v1 / xp.where(none, 1.0, norm))
+    p00, p01, p11 = P[..., 0, 0], 0.5 * (P[..., 0, 1] + P[..., 1, 0]), P[..., 1, 1]
+    # U'PU with U = [[c, −s], [s, c]] (columns: the eigenvectors of w_max, w_min)
+    q00 = c * c * p00 + 2.0 * c * s * p01 + s * s * p11
+    q11 = s * s * p00 - 2.0 * c * s * p01 + c * c * p11
+    q01 = (c * c - s * s) * p01 + c * s * (p11 - p00)
+    d0, d1 = q00 + w_max, q11 + w_min
+    x = q01 / (xp.sqrt(d0) * xp.sqrt(d1))
+    return xp.log(1.0 - x * x) + xp.log(d0) + xp.log(d1)
+
+
 _COFACTOR_SIGNS = np.array([[1.0, -1.0], [-1.0, 1.0]])
 _TINY = float(np.finfo(np.float64).tiny)
 

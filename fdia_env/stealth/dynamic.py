@@ -7,7 +7,13 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env._validation import check_choice, check_int, check_positions, check_positive
+from fdia_env._validation import (
+    MAX_SCALE,
+    check_choice,
+    check_int,
+    check_positions,
+    check_positive,
+)
 from fdia_env.envs.actions import check_step_actions
 from fdia_env.scenarios import resolve
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
@@ -22,6 +28,12 @@ MAX_LOG_ERROR = 30.0
 DEFAULT_HORIZON = 20
 DEFENDERS = (None, "threshold", "protect")
 """The defender: none (passive), the detector's false-alarm rate, or the sensors it protects."""
+
+
+# Largest t_max: the attacked innovation's covariance T P T' + Σ_b spans (1 + t_max)² in scale,
+# and its smallest eigenvalues (the KL divergence's log det) are resolved in float64 while that
+# times eps stays below ~1e-3; past it they round to zero and the KL to +inf.
+MAX_GAIN_SPREAD = 1e6
 
 
 class StealthDynamicEnv(StealthParallelEnv):
@@ -86,9 +98,9 @@ class StealthDynamicEnv(StealthParallelEnv):
             free=free,
             action=self.action_kind,
             window=window,
-            a_max=check_positive("a_max", a_max),
-            t_max=check_positive("t_max", t_max),
-            b_max=check_positive("b_max", b_max),
+            a_max=check_positive("a_max", a_max, MAX_SCALE),
+            t_max=check_positive("t_max", t_max, MAX_GAIN_SPREAD),
+            b_max=check_positive("b_max", b_max, MAX_SCALE),
         )
         self.window = window
         # the attacker alone faces alpha; with a defender, the rate it picks among alphas

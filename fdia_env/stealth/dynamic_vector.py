@@ -9,14 +9,15 @@ reward 0); ``autoreset_mode=AutoresetMode.SAME_STEP`` resets it in the same step
 observation and info in ``infos["final_obs"]`` / ``infos["final_info"]`` (what
 :func:`agents.torch_ppo.make_torch_env` asks for; see :mod:`fdia_env.stealth.vector_base`).
 ``action="linear"`` computes each member's detection probability by a numerical
-integral (Imhof's), the dominant cost of a member-step unless the window is strictly stealthy.
+integral (:func:`fdia_env.detection.gchisq.gchisq_sf`), the dominant cost of a member-step
+unless the window is strictly stealthy.
 
 ``backend="torch", device="cpu" | "cuda"`` runs either attack (``action="bias"``, the default,
 or ``"linear"``) on float64 tensors of that device: actions are tensors of the device,
 observations, rewards, flags and infos come back as tensors there; its expected dynamics equal
 numpy's to 1e-10, and so do its sampled dynamics given the same draws (it draws them from a
 ``torch.Generator`` of the device, ``seed`` an int or None). The linear attack's detection
-probability (Imhof's integral) is computed by scipy on the CPU for every backend.
+probability (that integral) is computed by scipy on the CPU for every backend.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from fdia_env._validation import check_choice, check_int, check_positive
+from fdia_env._validation import MAX_SCALE, check_choice, check_int, check_positive
 from fdia_env.envs.actions import check_step_actions
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.static import (
@@ -72,8 +72,8 @@ class StealthAttackEnv(StealthParallelEnv):
         self.budget = check_int("budget", budget, minimum=1, maximum=est.m)
         self._init_episode(horizon, max_cycles, default_horizon=1)  # one snapshot
         self.action_kind = check_choice("action", action, ACTIONS)
-        self.magnitude = check_positive("magnitude", magnitude)
-        self.a_max = check_positive("a_max", a_max)
+        self.magnitude = check_positive("magnitude", magnitude, MAX_SCALE)
+        self.a_max = check_positive("a_max", a_max, MAX_SCALE)
         self.dynamics = check_choice("dynamics", dynamics, DYNAMICS)
         check_choice("test", test, TESTS)
         if test == "lnr" and self.dynamics == "expected":
@@ -167,7 +167,8 @@ class StealthAttackEnv(StealthParallelEnv):
         p = float(est.detection_probability(a)) if self.test == "chi2" else float("nan")
         if self.dynamics == "sampled":
             e = self._L @ self.np_random.standard_normal(est.m)
-            z = e + a  # the residual does not depend on the true state
+            # the residual of e + a (it does not depend on the true state)
+            z = est.attacked_residual(e, a)
             detected = bool(est.alarm(z, self.test))
             statistic = float(est.statistic(z))
             reward = self.detected_reward if detected else damage

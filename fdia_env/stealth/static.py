@@ -45,6 +45,7 @@ from fdia_env._validation import (
     check_psd,
     check_symmetric,
 )
+from fdia_env.stealth.tails import ncx2_sf
 
 TESTS = ("chi2", "lnr")
 """Bad-data tests: the χ² residual test and the largest-normalised-residual test."""
@@ -217,8 +218,26 @@ class StaticEstimation:
         return self.injection(a) @ self.K.T
 
     def noncentrality(self, a: Any) -> np.ndarray:
-        """(...,) the non-centrality ``λ(a) = |(I − P) L⁻¹ a|²`` of J under injection ``a``."""
-        return self.statistic(self.injection(a))
+        """(...,) the non-centrality ``λ(a) = |(I − P) L⁻¹ a|²`` of J under injection ``a``.
+
+        0 where :meth:`is_stealthy`: the computed residual of ``a = H c`` is rounding of size
+        ``|a| · 1e-16``, not part of λ.
+        """
+        lam, size = self._parts(self.injection(a))
+        return np.where(rounding_residual(lam, size), 0.0, lam)
+
+    def attacked_residual(self, e: Any, a: Any) -> np.ndarray:
+        """(..., m) the residual of readings ``e + a`` (noise ``e``, injection ``a``).
+
+        ``r(e) + r(a)`` (the residual is linear), with ``r(a)`` zero where :meth:`is_stealthy`:
+        the residual of the sum would carry ``a``'s rounding, ``|a| · 1e-16``, which alone
+        raises the alarm on an undetectable ``a = H c`` from ``|a| ≈ 1e12`` of the noise's
+        scale on. Its :meth:`statistic` and :meth:`alarm` are those of ``e + a``.
+        """
+        e, a = self._z("e", e), self.injection(a)
+        lam, size = self._parts(a)
+        seen = ~rounding_residual(lam, size)
+        return e @ self.S.T + (a @ self.S.T) * seen[..., None]
 
     def detection_probability(self, a: Any) -> np.ndarray:
         """(...,) exact probability that the χ² test alarms under injection ``a``.
@@ -226,15 +245,11 @@ class StaticEstimation:
         ``P[χ²_{m−n}(λ(a)) > τ]``; exactly ``alpha`` where :meth:`is_stealthy` (``a = H c``).
         """
         lam, size = self._parts(self.injection(a))
-        stealthy = np.sqrt(lam) <= 1e-9 * np.maximum(size, 1e-300)
+        stealthy = rounding_residual(lam, size)
         out = np.full(lam.shape, self.alpha)
-        # Laurent & Massart: P[χ²_D(λ) ≤ D + λ − 2 sqrt((D + 2λ) x)] ≤ e^{−x}; with x = 750 the
-        # miss probability is below the smallest double, so p is 1.0 exactly (no ncx2 call)
-        certain = self.dof + lam - self.threshold >= 2.0 * np.sqrt((self.dof + 2.0 * lam) * 750.0)
-        out[certain & ~stealthy] = 1.0
-        seen = ~stealthy & ~certain
-        if np.any(seen):
-            out[seen] = stats.ncx2.sf(self.threshold, self.dof, lam[seen])
+        seen = ~stealthy
+        if np.any(seen):  # 1.0 exactly far in the tail (fdia_env.stealth.tails)
+            out[seen] = ncx2_sf(self.threshold, self.dof, lam[seen])
         return out if out.ndim else float(out)
 
     def detection_rate(
@@ -253,7 +268,7 @@ class StaticEstimation:
         rng = np.random.default_rng(seed)
         L = np.linalg.cholesky(self.R)
         e = rng.standard_normal((samples, self.m)) @ L.T
-        return float(np.mean(self.alarm(e + a, test)))
+        return float(np.mean(self.alarm(self.attacked_residual(e, a), test)))
 
     def is_stealthy(self, a: Any, tol: float = 1e-9) -> np.ndarray:
         """(...,) bool: ``a`` lies in the column space of H (its residual is zero to ``tol``).
@@ -261,7 +276,15 @@ class StaticEstimation:
         ``tol`` is relative to ``|L⁻¹ a|``: the injection's whitened size.
         """
         lam, size = self._parts(self.injection(a))
-        return np.sqrt(lam) <= tol * np.maximum(size, 1e-300)
+        return rounding_residual(lam, size, tol)
+
+
+def rounding_residual(lam: Any, size: Any, tol: float = 1e-9) -> Any:
+    """Where a residual of squared size ``lam`` is rounding of a whitened injection of ``size``.
+
+    ``sqrt(lam) <= tol · max(size, 1e-300)``, on numpy arrays or torch tensors.
+    """
+    return lam**0.5 <= tol * size.clip(min=1e-300)
 
 
 def _check_test(test: Any) -> str:

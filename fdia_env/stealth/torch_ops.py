@@ -27,6 +27,9 @@ from typing import Any
 
 import torch
 
+from fdia_env.stealth.tails import certain
+from fdia_env.stealth.tails import ncx2_sf as numpy_ncx2_sf
+
 _CHUNK = 1 << 22
 """Largest number of (member, term) pairs evaluated at once (32 MiB of float64)."""
 
@@ -45,15 +48,21 @@ def ncx2_sf(x: Any, dof: Any, lam: torch.Tensor) -> torch.Tensor:
     Returns:
         (N,) float64 tail probabilities in [0, 1].
     """
+    lam = lam.to(torch.float64)
+    x = torch.as_tensor(x, dtype=torch.float64, device=lam.device).expand_as(lam)
+    dof = torch.as_tensor(dof, dtype=torch.float64, device=lam.device).expand_as(lam)
+    out = torch.ones_like(lam)  # 1.0 exactly far in the tail (fdia_env.stealth.tails)
+    rest = torch.nonzero(~certain(x, dof, lam)).flatten()
+    if rest.numel() == 0:
+        return out
     if lam.device.type != "cpu":
-        return ncx2_sf_series(x, dof, lam)
-    from scipy import stats
-
-    def host(v: Any) -> Any:
-        return v.detach().to(torch.float64).numpy() if isinstance(v, torch.Tensor) else v
-
-    tail = stats.ncx2.sf(host(x), host(dof), host(lam))
-    return torch.clamp(torch.as_tensor(tail, dtype=torch.float64).reshape(lam.shape), 0.0, 1.0)
+        out[rest] = ncx2_sf_series(x[rest], dof[rest], lam[rest])
+        return out
+    out[rest] = torch.as_tensor(
+        numpy_ncx2_sf(x[rest].numpy(), dof[rest].numpy(), lam[rest].detach().numpy()),
+        dtype=torch.float64,
+    )
+    return out
 
 
 def ncx2_sf_series(x: Any, dof: Any, lam: torch.Tensor) -> torch.Tensor:

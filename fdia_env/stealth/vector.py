@@ -25,6 +25,7 @@ import numpy as np
 from fdia_env.backend import NUMPY
 from fdia_env.envs.actions import check_vector_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
+from fdia_env.stealth.static import rounding_residual
 from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 
 MAX_NUM_ENVS = 1 << 20
@@ -110,13 +111,14 @@ class StealthVectorEnv(StealthVectorBase):
         caught = env.detected_reward
         if env.dynamics == "sampled":
             e = self.noise()
-            z = (e * self._diag_L if self._diag_L is not None else e @ self._LT) + a
+            e = e * self._diag_L if self._diag_L is not None else e @ self._LT
+            z = self._attacked_residual(e, a)
             statistic = self._statistic(z)
             detected = statistic > est.threshold if env.test == "chi2" else self._lnr_alarm(z)
             reward = xp.where(detected, caught, damage)
         else:
             detected = xp.zeros(B, dtype=np.bool_)
-            statistic = self._statistic(a) + est.dof
+            statistic = self._noncentrality(a)[0] + est.dof
             reward = (1.0 - p) * damage + p * caught
         resetting = xp.copy(self._needs_reset)
         live = ~resetting
@@ -156,6 +158,27 @@ class StealthVectorEnv(StealthVectorBase):
         r = w - (w @ self._Q) @ self._Q.T
         return (r * r).sum(1)
 
+    def _noncentrality(self, a: Any) -> tuple[Any, Any]:
+        """(B,) λ of (B, m) injections (0 where stealthy) and (B,) where they are stealthy."""
+        est = self.env.estimation
+        if self.xp is NUMPY:
+            lam, size = est._parts(a)
+        else:
+            import torch
+
+            w = a * self._Linv.diagonal() if est._diag_Linv is not None else a @ self._Linv.T
+            r = w - (w @ self._Q) @ self._Q.T
+            lam, size = (r * r).sum(1), torch.linalg.vector_norm(w, dim=1)
+        stealthy = rounding_residual(lam, size)
+        return self.xp.where(stealthy, 0.0, lam), stealthy
+
+    def _attacked_residual(self, e: Any, a: Any) -> Any:
+        """(B, m) residuals of readings ``e + a`` (``StaticEstimation.attacked_residual``)."""
+        if self.xp is NUMPY:
+            return self.env.estimation.attacked_residual(e, a)
+        seen = ~self._noncentrality(a)[1]
+        return e @ self._ST + (a @ self._ST) * seen[:, None]
+
     def _lnr_alarm(self, z: Any) -> Any:
         """(B,) bool: the largest-normalised-residual test alarms."""
         est = self.env.estimation
@@ -173,14 +196,10 @@ class StealthVectorEnv(StealthVectorBase):
 
         from fdia_env.stealth.torch_ops import ncx2_sf
 
-        w = a * self._Linv.diagonal() if est._diag_Linv is not None else a @ self._Linv.T
-        r = w - (w @ self._Q) @ self._Q.T
-        lam, size = (r * r).sum(1), torch.linalg.vector_norm(w, dim=1)
-        # as StaticEstimation.detection_probability: α where stealthy, 1 where certain
-        stealthy = torch.sqrt(lam) <= 1e-9 * torch.clamp(size, min=1e-300)
-        certain = est.dof + lam - est.threshold >= 2.0 * torch.sqrt((est.dof + 2.0 * lam) * 750.0)
+        lam, stealthy = self._noncentrality(a)
+        # as StaticEstimation.detection_probability: α where stealthy, else the tail
         out = torch.where(stealthy, torch.full_like(lam, est.alpha), torch.ones_like(lam))
-        seen = torch.nonzero(~stealthy & ~certain).flatten()
+        seen = torch.nonzero(~stealthy).flatten()
         if seen.numel():
             out[seen] = ncx2_sf(est.threshold, est.dof, lam[seen])
         return out
