@@ -16,7 +16,9 @@ attacked at step K = 100, after K − 1 clean steps).
 Attacker: ``Box(-1, 1, (1 + d,))``: ``p = (a₀ + 1) / 2`` and the factor entries of Σ
 (:class:`~fdia_env.attacks.probabilistic.ProbabilisticAttack`). Defender: ``Box(-1, 1, (1,))``
 mapped to ``τ = s (1 + a) / (1 − a)`` on [0, ∞]
-(:class:`~fdia_env.defenses.detector.ThresholdDetector`).
+(:class:`~fdia_env.defenses.detector.ThresholdDetector`). The edge ``a = 1`` is the threshold
+``τ = ∞``, "never detect": the info's ``threshold`` is then ``inf`` (exactly what the action
+means; every reward and every other info stays finite).
 
 ## Observation Space
 

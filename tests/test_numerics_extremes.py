@@ -497,3 +497,17 @@ def test_two_state_log_det_of_a_sum_matches_mpmath(k):
     np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-13)
     got_t = logdet_sum2(torch.as_tensor(P), torch.as_tensor(S)).numpy()
     np.testing.assert_allclose(got_t, want, rtol=1e-14, atol=1e-13)
+
+
+@pytest.mark.parametrize("power", [1e-300, 1.0, 1e300])
+def test_the_detection_threshold_is_infinite_only_at_the_never_detect_action(power):
+    from fdia_env import detection_game_v0
+
+    for a, infinite in ((1.0, True), (np.nextafter(np.float32(1), np.float32(0)), False)):
+        env = detection_game_v0.parallel_env(scenario="ch3-static", power=power)
+        env.reset(seed=0)
+        attack = np.zeros(env.action_space("attacker").shape, dtype=np.float32)
+        defend = np.array([a], dtype=np.float32)
+        _, rewards, _, _, infos = env.step({"attacker": attack, "defender": defend})
+        assert np.isinf(infos["defender"]["threshold"]) == infinite
+        assert all(np.isfinite(r) for r in rewards.values())
