@@ -467,7 +467,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
 
     with ExitStack() as stack:
         state: dict[str, Any] = {"populations": {"attacker": [], "defender": []}, "history": []}
-        run = open_run(cfg, stack, game_prefix(cfg), STATE, report)
+        run = open_run(cfg, stack, game_prefix(cfg), STATE, report, fresh=True)
         run_dir = run.path
         # a resume plays the game its run was resolved with (train.py's per-scenario defaults
         # change between versions), as the attacker and defender drivers do
@@ -492,7 +492,7 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                 say_kept(say, name.replace("_", " "), resolved[name], today)
         expected = resolved.get("expected_rewards", expected)
         scale = resolved.get("reward_scale", scale)
-        if run.resumed:
+        if run.checkpointed:
             state = _read_state(run_dir / STATE)
             run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")
             names = policy_names(state)
@@ -505,7 +505,9 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                     run_dir, names, entries, env_kwargs, algo, kwargs, cfg.run.device, trusted
                 )
             say(f"resuming {run_dir} after iteration {len(state['history'])}")
-        else:
+        else:  # a new run, or one stopped before its first iteration's state: from iteration 0
+            if run.resumed:
+                say(run.restart_note())
             run.begin()
             names = {side: [] for side in SIDES}
             models = {side: [] for side in SIDES}

@@ -1,6 +1,8 @@
 """The one population loop (IBR, FSP, PSRO) with the exact best-response oracle."""
 
 import json
+import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -148,6 +150,25 @@ def test_the_game_command_runs_the_exact_oracle_and_resumes_it(tmp_path):
     assert more.history[-1]["relative_nash_conv"] <= 1e-12
     with pytest.raises(ValueError, match=r"--algo exact .* --learning-rate do"):
         run_game(tmp_path, "--algo", "exact", "--learning-rate", "0.1", "--run-dir", "x")
+
+
+def test_a_game_killed_before_its_first_state_starts_again_from_iteration_0(tmp_path, capsys):
+    first = run_game(tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "3")
+    for name in os.listdir(first.run_dir):  # what a kill before the first state leaves
+        if name not in ("config.json", ".lock"):
+            path = first.run_dir / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+    capsys.readouterr()
+    again = run_game(
+        tmp_path, "--method", "psro", "--algo", "exact", "--iterations", "3", "--resume"
+    )
+    out = capsys.readouterr().out
+    assert f"resuming {first.run_dir}: it has no checkpoint" in out
+    assert "training starts again from step 0" in out
+    def played(history):
+        return [{k: v for k, v in h.items() if k != "train_seconds"} for h in history]
+
+    assert again.run_dir == first.run_dir and played(again.history) == played(first.history)
 
 
 def test_a_game_resume_plays_the_runs_own_game_when_the_defaults_changed(
