@@ -291,8 +291,10 @@ def report(result: Score, task: Any) -> str:
         "per seed    " + ", ".join(f"{v:.4f}" for v in result.per_seed),
         f"references ({unit}, normalised):",
     ]
-    for name, value, note in reference_rows(task):
-        lines.append(f"  {name:<26} {_fmt(value):>12}  {task.normalise(value):7.4f}  {note}")
+    rows = reference_rows(task)
+    width = max([26, *(len(name) for name, _, _ in rows)])
+    for name, value, note in rows:
+        lines.append(f"  {name:<{width}} {_fmt(value):>12}  {task.normalise(value):7.4f}  {note}")
     return "\n".join(lines)
 
 
