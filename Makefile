@@ -8,6 +8,11 @@ DEMO_STAMP := $(VENV)/.installed-core
 
 .PHONY: setup test lint demo bench docs clean
 
+# make demo keeps .venv under 1 GB: it removes PyTorch's own C++ unit tests from its wheel
+# (torch/test and the test programs in torch/bin, about 130 MB), which nothing here runs
+PRUNE_TORCH = cd "$$($(BIN)/python -c 'import sysconfig; print(sysconfig.get_path("purelib"))')/torch" \
+	&& rm -rf test bin/test_* bin/*StoreTest
+
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
@@ -15,13 +20,14 @@ $(BIN)/python:
 # torch first, pinned to the CPU wheel of constraints.txt (any other spec pulls the CUDA builds)
 $(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q -c constraints.txt torch==2.13.0
-	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients,docs,grid,rllib]"
+	$(BIN)/python -m pip install -q -c constraints.txt -e ".[dev,clients,docs,grid,rllib,tensorboard]"
 	touch $(STAMP) $(DEMO_STAMP)
 
 # --no-compile: Python compiles the modules the demo imports when it first imports them (about
 # 45 MB of bytecode) instead of pip compiling every module of the dependencies (about 210 MB)
 $(DEMO_STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	$(BIN)/python -m pip install -q --no-compile -c constraints.txt torch==2.13.0
+	$(PRUNE_TORCH)
 	$(BIN)/python -m pip install -q --no-compile -c constraints.txt -e .
 	touch $(DEMO_STAMP)
 

@@ -16,7 +16,8 @@ A driver checks its options and builds what it trains, then:
    ends after the current step or iteration, the final checkpoint and scores are written) and
    a second one an :class:`~agents.interrupt.Aborted`;
 6. :meth:`RunFolder.write_scores` writes ``scores.json``; :func:`tensorboard` is the SB3
-   logger writing ``tb/`` (with the purge marker that keeps a resumed run's step ranges apart).
+   logger writing ``tb/`` (with the purge marker that keeps a resumed run's step ranges apart;
+   nothing, after a one-time notice, without the ``tensorboard`` extra).
 
 Every cleanup (lock, signal handlers, removal of a failed new folder) is registered on the
 driver's :class:`~contextlib.ExitStack`.
@@ -24,6 +25,8 @@ driver's :class:`~contextlib.ExitStack`.
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import shutil
 import sys
 from collections.abc import Callable
@@ -328,8 +331,32 @@ def open_run(
     return RunFolder(run_dir, marker, stack, options, resolved)
 
 
+TENSORBOARD_NOTICE = (
+    "TensorBoard is not installed: training runs write no TensorBoard logs (tb/); "
+    'pip install "fdia-env[tensorboard]" adds them'
+)
+
+
+def tensorboard_installed() -> bool:
+    """Whether the ``tensorboard`` package (the ``tensorboard`` extra) can be imported."""
+    try:
+        return importlib.util.find_spec("tensorboard") is not None
+    except ValueError:  # in sys.modules without a spec
+        return False
+
+
+@functools.cache
+def _notice_no_tensorboard() -> None:
+    """Print :data:`TENSORBOARD_NOTICE` to stderr, once per process."""
+    print(TENSORBOARD_NOTICE, file=sys.stderr)
+
+
 def tensorboard(folder: Path, purge_from: int | None = None, stdout: bool = False) -> Any:
     """SB3 logger writing TensorBoard events to ``folder`` (and a table to stdout).
+
+    Without the ``tensorboard`` extra the logger writes no events (and creates no ``folder``)
+    and :data:`TENSORBOARD_NOTICE` is printed once; training, checkpoints, evaluations and
+    scores are the same.
 
     Args:
         folder: TensorBoard folder.
@@ -341,9 +368,16 @@ def tensorboard(folder: Path, purge_from: int | None = None, stdout: bool = Fals
     """
     from stable_baselines3.common.logger import (
         HumanOutputFormat,
+        KVWriter,
         Logger,
         TensorBoardOutputFormat,
     )
+
+    formats: list[KVWriter] = [HumanOutputFormat(sys.stdout)] if stdout else []
+    if not tensorboard_installed():
+        _notice_no_tensorboard()
+        return Logger(folder=None, output_formats=formats)
+
     from torch.utils.tensorboard import SummaryWriter
 
     class _TensorBoard(TensorBoardOutputFormat):
@@ -352,5 +386,4 @@ def tensorboard(folder: Path, purge_from: int | None = None, stdout: bool = Fals
             self._is_closed = False
 
     Path(folder).mkdir(parents=True, exist_ok=True)
-    formats = [_TensorBoard()] + ([HumanOutputFormat(sys.stdout)] if stdout else [])
-    return Logger(folder=str(folder), output_formats=formats)
+    return Logger(folder=str(folder), output_formats=[_TensorBoard(), *formats])

@@ -29,9 +29,10 @@ DESCRIPTION = "\n\n".join(
         "self-play (PSRO, fictitious self-play, iterated best response) with learned best "
         "responses (--algo PPO, A2C, DQN or torch-ppo; --algo exact answers exactly on the "
         "payoff matrix), reporting the exploitability after every iteration.",
-        "Each run writes runs/<env>-<algo>-s<seed>-<time>/ (config.json, checkpoints/, tb/, "
-        "evaluations.jsonl, scores.json, learning_curve.png) and prints the learned policy, the "
-        "analytic answer and random play, scored by one evaluation loop (agents.evaluate).",
+        "Each run writes runs/<env>-<algo>-s<seed>-<time>/ (config.json, checkpoints/, tb/ with "
+        "the tensorboard extra, evaluations.jsonl, scores.json, learning_curve.png) and prints "
+        "the learned policy, the analytic answer and random play, scored by one evaluation loop "
+        "(agents.evaluate).",
         "Examples: "
         "python train.py attacker --algo MaskablePPO (the sparse attack's newest version, "
         "sparse_attack_v2; an older one by name: --env sparse_attack_v0); "

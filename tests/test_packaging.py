@@ -233,7 +233,9 @@ def _extras_only_modules() -> list[str]:
 
 def test_the_demo_imports_nothing_of_the_extras():
     blocked = _extras_only_modules()
-    assert {"ray", "torchrl", "tianshou", "pandapower", "sphinx", "pytest"} <= set(blocked)
+    assert {"ray", "torchrl", "tianshou", "pandapower", "sphinx", "pytest", "tensorboard"} <= set(
+        blocked
+    )
     code = (
         "import sys\n"
         f"BLOCKED = set({blocked!r})\n"
@@ -272,6 +274,32 @@ def test_make_demo_installs_the_core_only_and_make_test_every_extra():
         first = body.splitlines()[0]
         assert first.endswith("-c constraints.txt torch==2.13.0"), first
     assert "torch==2.13.0" in (ROOT / "constraints.txt").read_text(encoding="utf-8").split()
+
+
+def test_tensorboard_is_the_tensorboard_extra_only():
+    core = {Requirement(r).name for r in PYPROJECT["project"]["dependencies"]}
+    assert "tensorboard" not in core
+    extra = PYPROJECT["project"]["optional-dependencies"]["tensorboard"]
+    assert [Requirement(r).name for r in extra] == ["tensorboard"]
+
+
+def test_make_demo_removes_only_torchs_own_cpp_unit_tests():
+    import torch
+
+    make = (ROOT / "Makefile").read_text(encoding="utf-8")
+    recipe = re.search(r"^\$\(DEMO_STAMP\):.*\n((?:\t.*\n)+)", make, flags=re.MULTILINE)
+    lines = recipe.group(1).splitlines()
+    assert lines[1] == "\t$(PRUNE_TORCH)"  # right after torch, before the package
+    prune = re.search(r"^PRUNE_TORCH = .*\\\n\t&& rm -rf (.+)$", make, flags=re.MULTILINE)
+    here = Path(torch.__file__).parent
+    removed = [p for pattern in prune.group(1).split() for p in here.glob(pattern)]
+    if not removed:
+        pytest.skip("this venv's torch has no C++ unit tests (make demo removed them)")
+    assert here / "test" in removed and here / "bin" / "test_api" in removed
+    files = [f for p in removed for f in ([p] if p.is_file() else p.rglob("*"))]
+    assert files and (here / "bin" / "torch_shm_manager") not in files
+    # programs and test data: no module, no library torch loads
+    assert not [f for f in files if f.suffix in (".py", ".so") or ".so." in f.name]
 
 
 @pytest.mark.parametrize(

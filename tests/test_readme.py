@@ -134,7 +134,7 @@ def test_the_readme_stays_a_front_page():
     assert lines <= 200 and words <= 1500, (lines, words)
     for title in ("Install", "Quickstart", "Environments", "Train", "Score on a benchmark task"):
         assert f"\n## {title}\n" in README, title
-    for extra in ("grid", "rllib", "clients", "docs", "dev"):
+    for extra in ("grid", "rllib", "clients", "tensorboard", "docs", "dev"):
         assert f"`{extra}`" in section(README, "Install"), extra
     install = section(README, "Install")
     for line in ("pip install torch==2.13.0", "pip install -c constraints.txt .", '".[grid]"'):
