@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import tyro
 
-from agents.config import GameConfig, SweepConfig, TrainConfig, is_torch_ppo
+from agents.config import DEFENDER_ENV, GameConfig, SweepConfig, TrainConfig, is_torch_ppo
 from agents.evaluate import Evaluation
 
 COMMANDS = ("attacker", "defender", "game", "sweep")
@@ -70,7 +70,7 @@ Command = (
         TrainConfig,
         tyro.conf.subcommand(
             "defender",
-            default=TrainConfig(agent="defender", env="sensor_game_v0"),
+            default=TrainConfig(agent="defender", env=DEFENDER_ENV),
             description="Train a defender against a fixed attacker.",
         ),
     ]
@@ -158,10 +158,17 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
 
 
 def format_table(rows: dict[str, Evaluation]) -> str:
-    """The final table: policy, mean ± 95 % CI, reference, score."""
+    """The final table: policy, mean ± 95 % CI, reference, the score against it.
+
+    The score is the return as a percentage of the reference (the analytic answer of the run's
+    env), or in a game the exploitability; a ``--task`` run's normalised score is printed
+    above the table (:func:`agents.task_runs.score_lines`).
+    """
     ref = next(iter(rows.values()))
     ref_head = f"reference ({ref.reference_name})" if ref.reference_name else "reference"
-    lines = [f"  {'policy':28s} {'mean ± 95% CI':>26s} {ref_head:>26s}  score"]
+    game = any(ev.score_name == "exploitability" for ev in rows.values())
+    score_head = "exploitability" if game else "% of reference"
+    lines = [f"  {'policy':28s} {'mean ± 95% CI':>26s} {ref_head:>26s}  {score_head}"]
     for name, ev in rows.items():
         if ev.ci95 != ev.ci95:  # NaN: one episode
             ci = ""
@@ -304,6 +311,12 @@ def _summary(
     shown = "".join(f" ({mark})" for mark in marks if getattr(run, mark))
     print(headline + shown + tail)
     print(f"  run folder: {run.run_dir}")
+    task_score = getattr(run, "task_score", None)
+    if task_score is not None:
+        from fdia_env.tasks import get
+        from agents.task_runs import score_lines
+
+        print("\n".join(score_lines(task_score, get(task_score.task))))
     print(format_table(run.evaluations))
     return run
 
