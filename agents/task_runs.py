@@ -29,7 +29,7 @@ from agents.registry import (
 
 # the options of the attacker/defender commands that would change the task's env, by the
 # TrainConfig field, with their default (a value other than it is refused under --task)
-TASK_FIXED = {"env": None, "scenario": None, "env_kwargs": {}, "opponent": "uniform"}
+TASK_FIXED = {"env": "", "scenario": None, "env_kwargs": {}, "opponent": "uniform"}
 SCORE_SEEDS = 3  # python -m agents.bench score's default --seeds
 
 
@@ -68,8 +68,11 @@ def resolve_task(name: str, command: str) -> Any:
     return task
 
 
-def check_task_options(cfg: Any, default_env: str) -> None:
+def check_task_options(cfg: Any, default_envs: tuple[str, ...]) -> None:
     """Raise unless ``cfg`` leaves every option that would change the task's env unset.
+
+    ``default_envs``: the values of ``--env`` that mean it was not given (the command's
+    default).
 
     Raises:
         ValueError: Naming the option (``--env``, ``--scenario``, ``--env-kwargs``,
@@ -77,9 +80,7 @@ def check_task_options(cfg: Any, default_env: str) -> None:
     """
     for name, default in TASK_FIXED.items():
         value = getattr(cfg, name)
-        if name == "env":
-            default = default_env
-        if value != default:
+        if value != default and not (name == "env" and value in default_envs):
             raise ValueError(
                 f"{option(name)} cannot be combined with --task {cfg.task}: the task fixes its "
                 "env and options (drop the option, or train without --task)"

@@ -587,7 +587,8 @@ def task_setup(cfg: TrainConfig) -> RunSetup:
     """
     from agents.task_runs import check_task_options, task_algorithm, task_entry
 
-    check_task_options(cfg, SPARSE_ENVS[0] if cfg.agent == "attacker" else DEFENDER_ENV)
+    defaults = (SPARSE_ENVS[0],) if cfg.agent == "attacker" else (SPARSE_ENVS[0], DEFENDER_ENV)
+    check_task_options(cfg, defaults)  # the defender command's default or TrainConfig's
     entry = task_entry(cfg)
     algo = task_algorithm(entry, cfg.algo) if not is_torch_ppo(cfg.algo) else TORCH_PPO
     if algo == TORCH_PPO:

@@ -1,0 +1,124 @@
+"""``train.py attacker|defender --task NAME``: the task's env, its learners, one score scale."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from agents.algos import build_model
+from agents.bench.score import main as score_main
+from agents.config import TrainConfig, algo_kwargs
+from agents.training import env_thunk, task_setup
+from fdia_env import tasks
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # train.py lives at the root
+TINY = ["--no-progress-bar", "--final-eval-episodes", "2", "--eval-freq", "0"]
+STEPS = ["--total-timesteps", "128", "--n-steps", "64", "--batch-size", "32", "--n-epochs", "1"]
+NON_GAME = [n for n in tasks.names() if not tasks.get(n).is_game]
+GAME = next(n for n in tasks.names() if tasks.get(n).is_game)
+
+
+def train_main(argv):
+    import train
+
+    return train.main(argv)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    return tmp_path_factory.mktemp("task-runs")
+
+
+@pytest.mark.parametrize(
+    ("command", "task", "algo"),
+    [
+        ("attacker", "sparse/ch4-position-v0", "MaskablePPO"),
+        ("attacker", "system-family/tracking-m6-v0", "PPO"),
+        ("attacker", "covariance/ch2-position-v0", "PPO"),
+        ("defender", "detection-game/ch3-static-defender-v0", "PPO"),
+        ("defender", "stealth/ch4-position-dynamic-protect-defender-v0", "A2C"),
+    ],
+)
+def test_a_task_run_scores_as_agents_bench_score_on_its_folder(
+    command, task, algo, runs, tmp_path, capsys
+):
+    extra = [] if algo != "A2C" else ["--n-steps", "8"]
+    steps = STEPS if algo != "A2C" else ["--total-timesteps", "64"]
+    result = train_main(
+        [command, "--task", task, "--algo", algo, *steps, *extra, *TINY, "--runs-root", str(runs)]
+    )
+    printed = capsys.readouterr().out
+    scores = json.loads((result.run_dir / "scores.json").read_text())
+    config = json.loads((result.run_dir / "config.json").read_text())
+    assert config["resolved"]["task"] == task
+    assert config["resolved"]["gym_id"] == tasks.get(task).env_id
+    out = tmp_path / "bench.json"
+    assert score_main(["--task", task, "--agent", str(result.run_dir), "--json", str(out)]) == 0
+    bench = json.loads(out.read_text())
+    # the same seeds, episodes and loader: the same numbers, to the last digit
+    assert scores["task"]["normalised"] == bench["normalised"]
+    assert scores["task"]["normalised_ci"] == bench["normalised_ci"]
+    assert scores["task"]["mean"] == bench["mean"]
+    assert scores["task"]["per_seed"] == bench["per_seed"]
+    assert result.task_score.normalised == bench["normalised"]
+    assert f"normalised {bench['normalised']:.4f}" in printed
+    # the normalised score is printed before the table of raw returns
+    assert printed.index("normalised") < printed.index("mean ± 95% CI")
+
+
+def test_a_task_run_is_refused_on_another_task(runs, capsys):
+    result = train_main(
+        ["attacker", "--task", "sparse/ch4-position-v0", *STEPS, *TINY, "--runs-root", str(runs)]
+    )
+    capsys.readouterr()
+    code = score_main(["--task", "sparse/ch4-position-long-v0", "--agent", str(result.run_dir)])
+    assert code == 2
+    assert "trained on task 'sparse/ch4-position-v0'" in capsys.readouterr().err
+    config_path = result.run_dir / "config.json"
+    config = json.loads(config_path.read_text())
+    config["resolved"]["env_kwargs"]["budget"] = 4  # not the task's
+    config_path.write_text(json.dumps(config))
+    assert score_main(["--task", "sparse/ch4-position-v0", "--agent", str(result.run_dir)]) == 2
+    assert "other env options" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", NON_GAME)
+def test_every_single_player_task_builds_its_env_and_learner(name):
+    task = tasks.get(name)
+    setup = task_setup(TrainConfig(agent=task.player, task=name))
+    assert setup.entry.gym_id == task.env_id
+    thunk = env_thunk(setup.entry.gym_id, setup.env_kwargs, make=setup.entry.make_env)
+    vec = DummyVecEnv([thunk])
+    try:
+        model = build_model(setup.algo, vec, algo_kwargs(setup.algo, setup.hp), 0)
+        assert model.action_space == task.make_env().action_space
+        assert vec.envs[0].unwrapped.spec.id == task.env_id
+    finally:
+        vec.close()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["attacker", "--task", "sparse/ch4-postion-v0"], "close names: sparse/ch4-position-v0"),
+        (["defender", "--task", "sparse/ch4-position-v0"], "train.py attacker --task"),
+        (["attacker", "--task", GAME], "train.py game"),
+        (["attacker", "--task", "sparse/ch4-position-v0", "--env", "sparse_attack_v0"], "--env "),
+        (["attacker", "--task", "sparse/ch4-position-v0", "--scenario", "ch4-random"], "--scenario"),
+        (
+            ["attacker", "--task", "sparse/ch4-position-v0", "--env-kwargs", "budget", "4"],
+            "--env-kwargs",
+        ),
+        (["attacker", "--task", "sparse/ch4-position-v0", "--algo", "SAC"], "--algo 'SAC'"),
+        (["attacker", "--task", "covariance/ch2-position-v0", "--algo", "DQN"], "--algo 'DQN'"),
+        (["attacker", "--task", "covariance/ch2-position-v0", "--algo", "Foo"], "is no learner"),
+    ],
+)
+def test_bad_task_options_name_the_option(argv, message, tmp_path):
+    with pytest.raises(ValueError, match=None) as info:
+        train_main([*argv, "--runs-root", str(tmp_path)])
+    assert message in str(info.value)
+    assert not list(tmp_path.iterdir())  # refused before a run folder exists
