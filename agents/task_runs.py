@@ -194,6 +194,30 @@ def task_algorithm(entry: TaskEntry, algo: str | None) -> str:
     )
 
 
+def matching_task(gym_id: str, env_kwargs: dict[str, Any], agent: str) -> Any:
+    """The single-player task whose env a run without ``--task`` trained on, or None.
+
+    A task matches when it scores ``agent``, names the run's scenario and
+    :func:`agents.bench.agents.check_trained_on` accepts the run's env id and options (another
+    version of the sparse attack that builds the same env included).
+    """
+    from agents.bench.agents import check_trained_on
+    from fdia_env import tasks
+
+    for name in tasks.names():
+        task = tasks.get(name)
+        if task.is_game or task.player != agent:
+            continue
+        if task.env_kwargs.get("scenario") != env_kwargs.get("scenario"):
+            continue
+        try:
+            check_trained_on("run", gym_id, env_kwargs, task)
+        except (ValueError, TypeError, KeyError):
+            continue
+        return task
+    return None
+
+
 def score_run(task: Any, run_dir: Path) -> Any:
     """``python -m agents.bench score --task NAME --agent RUN_DIR`` as a :class:`Score`."""
     from agents.bench.score import score
@@ -201,8 +225,11 @@ def score_run(task: Any, run_dir: Path) -> Any:
     return score(task, str(run_dir), seeds=range(SCORE_SEEDS))
 
 
-def score_lines(result: Any, task: Any) -> list[str]:
-    """The task score's lines of the final table: normalised first, then raw and % of optimum."""
+def score_lines(result: Any, task: Any, given: bool = True) -> list[str]:
+    """The task score's lines of the final table: normalised first, then raw and % of optimum.
+
+    ``given``: the run was on ``--task``; else it was on the task's env and options.
+    """
     from agents.bench.score import scale_legend
 
     lo, hi = result.normalised_ci
@@ -212,7 +239,8 @@ def score_lines(result: Any, task: Any) -> list[str]:
     pct += ("optimum" if best.certified else "best known") if pct else ""
     n_seeds, n_eps = result.returns.shape
     return [
-        f"task {task.name}: normalised {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] "
+        f"task {task.name}{'' if given else ' (the env and options of the run)'}: "
+        f"normalised {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] "
         f"({scale_legend(task)})",
         f"  raw return {result.mean:.6g} ± {result.ci95:.3g}{pct}; {n_seeds} seeds x {n_eps} "
         "episodes, as python -m agents.bench score",

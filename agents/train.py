@@ -316,7 +316,7 @@ def _summary(
         from fdia_env.tasks import get
         from agents.task_runs import score_lines
 
-        print("\n".join(score_lines(task_score, get(task_score.task))))
+        print("\n".join(score_lines(task_score, get(task_score.task), getattr(run, "task_given", True))))
     print(format_table(run.evaluations))
     return run
 

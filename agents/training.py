@@ -497,8 +497,10 @@ class TrainResult:
         train_seconds: Wall time spent in ``learn`` (across resumes).
         resumed: Whether the run continued an existing folder.
         interrupted: The signal (SIGINT 2, SIGTERM 15) that stopped training early, or None.
-        task_score: With ``--task``: the run's :class:`agents.bench.score.Score` on the task
-            (scores.json's ``task``), else None.
+        task_score: The run's :class:`agents.bench.score.Score` on its task (scores.json's
+            ``task``): the ``--task`` run's, or the task whose env and options the run trained
+            on (:func:`agents.task_runs.matching_task`); else None.
+        task_given: Whether the run was on ``--task``.
     """
 
     run_dir: Path
@@ -509,6 +511,7 @@ class TrainResult:
     resumed: bool = False
     interrupted: int | None = None
     task_score: Any = None
+    task_given: bool = False
 
 
 @dataclass(frozen=True)
@@ -1021,10 +1024,16 @@ def _train_and_score(
     what = f"task {task.name}" if task is not None else env_kwargs["scenario"]
     fields: dict[str, Any] = {}
     task_score = None
-    if task is not None:  # scored as python -m agents.bench score scores the folder
+    if task is None and stop.signum is None:  # a scenario that is a task's: its scale too
+        from agents.task_runs import matching_task
+
+        scored = matching_task(entry.gym_id, env_kwargs, cfg.agent)
+    else:
+        scored = task
+    if scored is not None:  # scored as python -m agents.bench score scores the folder
         from agents.task_runs import score_run
 
-        task_score = score_run(task, run_dir)
+        task_score = score_run(scored, run_dir)
         fields["task"] = task_score.to_dict()
     write_scores(
         run,
@@ -1038,8 +1047,9 @@ def _train_and_score(
     )
     model.logger.close()
     return TrainResult(
-        run_dir, model, evaluations, history, train_seconds, resumed, stop.signum, task_score
-    )
+        run_dir, model, evaluations, history, train_seconds, resumed, stop.signum, task_score,
+        task is not None,
+    )  # fmt: skip
 
 
 def reference_record(reference: Reference | None) -> dict[str, Any] | None:
