@@ -51,7 +51,7 @@ def resolve_task(name: str, command: str) -> Any:
         task = tasks.get(name)
     except ValueError as exc:
         raise ValueError(
-            f"--task: {exc}; list them with python -c \"from fdia_env import tasks; "
+            f'--task: {exc}; list them with python -c "from fdia_env import tasks; '
             'print(*tasks.names(), sep=chr(10))"'
         ) from None
     if task.is_game:

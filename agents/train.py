@@ -37,6 +37,8 @@ DESCRIPTION = "\n\n".join(
         "sparse_attack_v2; an older one by name: --env sparse_attack_v0); "
         "python train.py attacker --scenario grid-ieee14 (the sequential format, with the "
         "scenario's defaults: agents.config.SCENARIO_DEFAULTS); "
+        "python train.py attacker --task sparse/ch4-position-v0 (a benchmark task's env and "
+        "player, scored on the task as python -m agents.bench score scores it); "
         "python train.py game --scenario grid-ieee14; "
         "python train.py attacker --env covariance_attack_v0 --algo SAC; "
         "python train.py defender --algo DQN; "
@@ -313,10 +315,11 @@ def _summary(
     print(f"  run folder: {run.run_dir}")
     task_score = getattr(run, "task_score", None)
     if task_score is not None:
-        from fdia_env.tasks import get
         from agents.task_runs import score_lines
+        from fdia_env.tasks import get
 
-        print("\n".join(score_lines(task_score, get(task_score.task), getattr(run, "task_given", True))))
+        given = getattr(run, "task_given", True)
+        print("\n".join(score_lines(task_score, get(task_score.task), given)))
     print(format_table(run.evaluations))
     return run
 

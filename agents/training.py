@@ -856,9 +856,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
         if task is None:
             check_env_kwargs(entry.gym_id, env_kwargs)
         opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
-        eval_env = make_env(
-            env_thunk(entry.gym_id, env_kwargs, opponent, make=maker), entry.gym_id
-        )
+        eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent, make=maker), entry.gym_id)
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
         checkpoint: CheckpointState | None = None

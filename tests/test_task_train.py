@@ -107,7 +107,7 @@ def test_every_single_player_task_builds_its_env_and_learner(name):
         (["defender", "--task", "sparse/ch4-position-v0"], "train.py attacker --task"),
         (["attacker", "--task", GAME], "train.py game"),
         (["attacker", "--task", "sparse/ch4-position-v0", "--env", "sparse_attack_v0"], "--env "),
-        (["attacker", "--task", "sparse/ch4-position-v0", "--scenario", "ch4-random"], "--scenario"),
+        (["attacker", "--task", "sparse/ch4-position-v0", "--scenario", "ch4-random"], "--scenar"),
         (
             ["attacker", "--task", "sparse/ch4-position-v0", "--env-kwargs", "budget", "4"],
             "--env-kwargs",
