@@ -18,6 +18,7 @@ from typing import Any
 import gymnasium as gym
 from gymnasium import spaces
 
+from agents.config import is_torch_ppo
 from agents.registry import (
     ALGORITHMS,
     BOX_ALGORITHMS,
@@ -85,8 +86,11 @@ def check_task_options(cfg: Any, default_envs: tuple[str, ...]) -> None:
                 f"{option(name)} cannot be combined with --task {cfg.task}: the task fixes its "
                 "env and options (drop the option, or train without --task)"
             )
-    if cfg.num_envs is not None:
-        raise ValueError(f"--num-envs is not supported with --task {cfg.task} (one env)")
+    if cfg.num_envs is not None and not is_torch_ppo(cfg.algo):
+        raise ValueError(
+            f"--num-envs applies to --algo torch-ppo only with --task {cfg.task} (the "
+            "stable-baselines3 learners train on one env of the task)"
+        )
     if cfg.run.resume:
         raise ValueError(f"--resume is not supported with --task {cfg.task} yet")
     if cfg.run.backend != "sb3":

@@ -594,10 +594,9 @@ def task_setup(cfg: TrainConfig) -> RunSetup:
     check_task_options(cfg, defaults)  # the defender command's default or TrainConfig's
     entry = task_entry(cfg)
     algo = task_algorithm(entry, cfg.algo) if not is_torch_ppo(cfg.algo) else TORCH_PPO
-    if algo == TORCH_PPO:
-        raise ValueError(f"--algo torch-ppo is not supported with --task {cfg.task} yet")
     normalize = bool(cfg.normalize_reward)
-    return RunSetup(entry, algo, dict(entry.task.env_kwargs), cfg.hp, normalize, None)
+    num_envs = cfg.num_envs if algo == TORCH_PPO else None
+    return RunSetup(entry, algo, dict(entry.task.env_kwargs), cfg.hp, normalize, num_envs)
 
 
 def say_kept(say: Callable[[str], None], what: str, saved: Any, today: Any) -> None:

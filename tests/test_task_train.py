@@ -40,13 +40,14 @@ def runs(tmp_path_factory):
         ("attacker", "covariance/ch2-position-v0", "PPO"),
         ("defender", "detection-game/ch3-static-defender-v0", "PPO"),
         ("defender", "stealth/ch4-position-dynamic-protect-defender-v0", "A2C"),
+        ("attacker", "covariance/ch2-pv-1-v0", "torch-ppo"),
     ],
 )
 def test_a_task_run_scores_as_agents_bench_score_on_its_folder(
     command, task, algo, runs, tmp_path, capsys
 ):
-    extra = [] if algo != "A2C" else ["--n-steps", "8"]
-    steps = STEPS if algo != "A2C" else ["--total-timesteps", "64"]
+    extra = {"A2C": ["--n-steps", "8"], "torch-ppo": ["--num-envs", "8"]}.get(algo, [])
+    steps = STEPS if algo in ("PPO", "MaskablePPO") else ["--total-timesteps", "64"]
     result = train_main(
         [command, "--task", task, "--algo", algo, *steps, *extra, *TINY, "--runs-root", str(runs)]
     )
@@ -115,6 +116,11 @@ def test_every_single_player_task_builds_its_env_and_learner(name):
         (["attacker", "--task", "sparse/ch4-position-v0", "--algo", "SAC"], "--algo 'SAC'"),
         (["attacker", "--task", "covariance/ch2-position-v0", "--algo", "DQN"], "--algo 'DQN'"),
         (["attacker", "--task", "covariance/ch2-position-v0", "--algo", "Foo"], "is no learner"),
+        (
+            ["attacker", "--task", "system-family/tracking-m6-v0", "--algo", "torch-ppo"],
+            "--algo torch-ppo on --task system-family/tracking-m6-v0",
+        ),
+        (["attacker", "--task", "sparse/ch4-position-v0", "--num-envs", "4"], "--num-envs"),
     ],
 )
 def test_bad_task_options_name_the_option(argv, message, tmp_path):
