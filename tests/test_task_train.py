@@ -128,3 +128,28 @@ def test_bad_task_options_name_the_option(argv, message, tmp_path):
         train_main([*argv, "--runs-root", str(tmp_path)])
     assert message in str(info.value)
     assert not list(tmp_path.iterdir())  # refused before a run folder exists
+
+
+def test_a_scenario_run_on_a_tasks_env_prints_that_tasks_normalised_score(runs, tmp_path, capsys):
+    # the default attacker run (sparse_attack_v2, ch4-position: budget 5, horizon 6, trace) is
+    # the env of sparse/ch4-position-v0: one scale, the one agents.bench score prints
+    result = train_main(["attacker", *STEPS, *TINY, "--runs-root", str(runs)])
+    printed = capsys.readouterr().out
+    scores = json.loads((result.run_dir / "scores.json").read_text())
+    out = tmp_path / "bench.json"
+    task = "sparse/ch4-position-v0"
+    assert score_main(["--task", task, "--agent", str(result.run_dir), "--json", str(out)]) == 0
+    bench = json.loads(out.read_text())
+    assert scores["task"]["task"] == task
+    assert scores["task"]["normalised"] == bench["normalised"]
+    assert f"task {task} (the env and options of the run): normalised" in printed
+    assert f"normalised {bench['normalised']:.4f}" in printed
+    # another budget is no task's env: no task score, the table's ratio labelled as such
+    capsys.readouterr()
+    other = train_main(
+        ["attacker", "--env-kwargs", "budget", "4", *STEPS, *TINY, "--runs-root", str(runs)]
+    )
+    printed = capsys.readouterr().out
+    assert "task" not in json.loads((other.run_dir / "scores.json").read_text())
+    assert "normalised" not in printed
+    assert "% of reference" in printed
