@@ -230,7 +230,7 @@ def score_run(task: Any, run_dir: Path) -> Any:
 
 
 def score_lines(result: Any, task: Any, given: bool = True) -> list[str]:
-    """The task score's lines of the final table: normalised first, then raw and % of optimum.
+    """The task score's lines above the final table: normalised first, then raw and % of optimum.
 
     ``given``: the run was on ``--task``; else it was on the task's env and options.
     """
@@ -238,14 +238,13 @@ def score_lines(result: Any, task: Any, given: bool = True) -> list[str]:
 
     lo, hi = result.normalised_ci
     best = task.references.optimum
-    percent = task.references.ratio(result.mean) if hasattr(task.references, "ratio") else None
-    pct = "" if percent is None or not math.isfinite(percent) else f", {percent:.2%} of the "
-    pct += ("optimum" if best.certified else "best known") if pct else ""
+    percent = task.references.ratio(result.mean)
+    what = "optimum" if best.certified else "best known"
+    pct = f", {percent:.2%} of the {what}" if math.isfinite(percent) else ""
     n_seeds, n_eps = result.returns.shape
+    on = "task" if given else "the run's env is task"
     return [
-        f"task {task.name}{'' if given else ' (the env and options of the run)'}: "
-        f"normalised {result.normalised:.4f} [{lo:.4f}, {hi:.4f}] "
-        f"({scale_legend(task)})",
-        f"  raw return {result.mean:.6g} ± {result.ci95:.3g}{pct}; {n_seeds} seeds x {n_eps} "
-        "episodes, as python -m agents.bench score",
+        f"{on} {task.name}: normalised {result.normalised:.4f} [{lo:.4f}, {hi:.4f}]",
+        f"  ({scale_legend(task)}); raw return {result.mean:.6g} ± {result.ci95:.3g}{pct}",
+        f"  (python -m agents.bench score: {n_seeds} seeds x {n_eps} episodes)",
     ]

@@ -142,7 +142,7 @@ def test_a_scenario_run_on_a_tasks_env_prints_that_tasks_normalised_score(runs, 
     bench = json.loads(out.read_text())
     assert scores["task"]["task"] == task
     assert scores["task"]["normalised"] == bench["normalised"]
-    assert f"task {task} (the env and options of the run): normalised" in printed
+    assert f"the run's env is task {task}: normalised" in printed
     assert f"normalised {bench['normalised']:.4f}" in printed
     # another budget is no task's env: no task score, the table's ratio labelled as such
     capsys.readouterr()
