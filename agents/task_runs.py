@@ -29,8 +29,9 @@ from agents.registry import (
 )
 
 # the options of the attacker/defender commands that would change the task's env, by the
-# TrainConfig field, with their default (a value other than it is refused under --task)
-TASK_FIXED = {"env": "", "scenario": None, "env_kwargs": {}, "opponent": "uniform"}
+# TrainConfig field, with their default (a value other than it is refused under --task; --env
+# too, whose default is the command's)
+TASK_FIXED = {"scenario": None, "env_kwargs": {}, "opponent": "uniform"}
 SCORE_SEEDS = 3  # python -m agents.bench score's default --seeds
 
 
@@ -79,13 +80,14 @@ def check_task_options(cfg: Any, default_envs: tuple[str, ...]) -> None:
         ValueError: Naming the option (``--env``, ``--scenario``, ``--env-kwargs``,
             ``--opponent``, ``--num-envs``, ``--resume``).
     """
-    for name, default in TASK_FIXED.items():
-        value = getattr(cfg, name)
-        if value != default and not (name == "env" and value in default_envs):
-            raise ValueError(
-                f"{option(name)} cannot be combined with --task {cfg.task}: the task fixes its "
-                "env and options (drop the option, or train without --task)"
-            )
+    given = [name for name, default in TASK_FIXED.items() if getattr(cfg, name) != default]
+    if cfg.env not in default_envs:
+        given.insert(0, "env")
+    if given:
+        raise ValueError(
+            f"{option(given[0])} cannot be combined with --task {cfg.task}: the task fixes its "
+            "env and options (drop the option, or train without --task)"
+        )
     if cfg.num_envs is not None and not is_torch_ppo(cfg.algo):
         raise ValueError(
             f"--num-envs applies to --algo torch-ppo only with --task {cfg.task} (the "

@@ -121,6 +121,17 @@ def test_every_single_player_task_builds_its_env_and_learner(name):
             "--algo torch-ppo on --task system-family/tracking-m6-v0",
         ),
         (["attacker", "--task", "sparse/ch4-position-v0", "--num-envs", "4"], "--num-envs"),
+        (
+            [
+                "defender",
+                "--task",
+                "detection-game/ch3-static-defender-v0",
+                "--opponent",
+                "equilibrium",
+            ],
+            "--opponent cannot be combined with --task",
+        ),
+        (["attacker", "--task", "sparse/ch4-position-v0", "--resume"], "--resume"),
     ],
 )
 def test_bad_task_options_name_the_option(argv, message, tmp_path):
