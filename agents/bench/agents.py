@@ -17,7 +17,9 @@
 
 A checkpoint that records the env it was trained on (a run folder's ``config.json``) must have
 been trained on the task's env id and options; one whose spaces differ from the task env's is
-refused too. Every error names the parameter (``agent``, ``algo`` or ``trust_checkpoint``).
+refused too. A ``train.py --task`` run records its task's name (``resolved.task``) and is scored
+on that task only, its recorded options checked against the task's. Every error names the
+parameter (``agent``, ``algo`` or ``trust_checkpoint``).
 """
 
 from __future__ import annotations
