@@ -541,6 +541,9 @@ class RunSettings:
         check_number("sample_timeout_s", self.sample_timeout_s, float, lambda v: v > 0, "> 0")
 
 
+DEFENDER_ENV = "sensor_game_v0"  # the defender command's default env
+
+
 @dataclass
 class TrainConfig:
     """Train one player of a registered env and score it against the analytic optimum.
@@ -551,6 +554,10 @@ class TrainConfig:
     env: str = SPARSE_ENVS[0]
     """Registered env (a bad name lists the valid ones); the sparse attacker's default is its
     newest version, the older ones by name (sparse_attack_v0, sparse_attack_v1)."""
+    task: str | None = None
+    """Benchmark task (fdia_env.tasks.names()): train its scored player on its env exactly as
+    the task builds it and score the run on it as python -m agents.bench score does; excludes
+    --env, --scenario, --env-kwargs and --opponent."""
     scenario: str | None = None
     """Scenario preset (default: the env's first: ch4-position, ch2-position, ch5-game)."""
     env_kwargs: dict[str, str] = field(default_factory=dict)

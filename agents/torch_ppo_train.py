@@ -64,11 +64,16 @@ class TorchPPORun(RunResult):
         policy: The trained policy (SB3-style ``predict``).
         device: The torch device it ran on.
         num_envs: Members of the vector env.
+        task_score: With ``--task``: the run's :class:`agents.bench.score.Score` on the task
+            (scores.json's ``task``), else None.
+        task_given: Whether the run was on ``--task``.
     """
 
     policy: TorchPolicy = field(kw_only=True)
     device: str = field(default="cpu", kw_only=True)
     num_envs: int = field(default=TORCH_PPO_NUM_ENVS, kw_only=True)
+    task_score: Any = field(default=None, kw_only=True)
+    task_given: bool = field(default=True, kw_only=True)
 
 
 def torch_ppo_config(
@@ -119,6 +124,7 @@ def train_torch_ppo_run(
         )
     check_device_available(cfg.run.device)
     device = resolve_device(cfg.run.device)
+    from agents.task_runs import plain_kwargs, score_run
     from agents.training import (
         as_saved,
         check_env_kwargs,
@@ -142,7 +148,9 @@ def train_torch_ppo_run(
         setup = as_saved(setup, run.saved_resolved, cfg.num_envs, say, run.path / "config.json")
         env_kwargs = setup.env_kwargs
         config, hyperparameters = torch_ppo_config(cfg, setup.hp)
-        check_env_kwargs(entry.gym_id, env_kwargs)
+        task = getattr(entry, "task", None)
+        if task is None:
+            check_env_kwargs(entry.gym_id, env_kwargs)
         resume: TrainingState | None = None
         if run.resumed and not run.checkpointed:
             say(run.restart_note())
@@ -156,11 +164,17 @@ def train_torch_ppo_run(
                     "it is not a state of this run's config"
                 )
         try:
-            eval_env = gym.make(entry.gym_id, **env_kwargs)
+            if task is None:
+                eval_env = gym.make(entry.gym_id, **env_kwargs)
+            else:
+                eval_env = entry.make_env(env_kwargs)
             venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, gym.error.Error) as exc:
+            what = flag("env_kwargs") if task is None else f"--algo torch-ppo on --task {task.name}"
             raise ValueError(
-                f"{flag('env_kwargs')}: {entry.gym_id} rejected its options: {exc}"
+                f"{what}: {entry.gym_id} has no torch vector env with these options: {exc}"
+                if task is not None
+                else f"{what}: {entry.gym_id} rejected its options: {exc}"
             ) from None
         stack.callback(eval_env.close)
         stack.callback(venv.close)
@@ -172,11 +186,12 @@ def train_torch_ppo_run(
             cfg,
             {
                 "gym_id": entry.gym_id,
+                **({} if task is None else {"task": task.name}),
                 "algo": TORCH_PPO,
                 "backend": "torch",
                 "device": device,
                 "num_envs": config.num_envs,
-                "env_kwargs": env_kwargs,
+                "env_kwargs": env_kwargs if task is None else plain_kwargs(env_kwargs),
                 "hyperparameters": hyperparameters,
                 "reference": reference_record(reference),
             },
@@ -219,11 +234,15 @@ def train_torch_ppo_run(
         if not history or history[-1]["timesteps"] != result.timesteps:
             history.append(history_record(learned, result.timesteps, result.train_seconds))
             write_jsonl(history_path, history)
+        task_score = None
+        if task is not None:  # scored as python -m agents.bench score scores the folder
+            task_score = score_run(task, run_dir)
+        what = f"task {task.name}" if task is not None else env_kwargs["scenario"]
         write_scores(
             run,
             history,
             reference,
-            f"torch-ppo {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), "
+            f"torch-ppo {cfg.agent} on {entry.gym_id} ({what}), "
             f"seed {cfg.run.seed}, B={config.num_envs} on {device}",
             rows,
             num_timesteps=result.timesteps,
@@ -231,6 +250,7 @@ def train_torch_ppo_run(
             steps_per_second=result.steps_per_second,
             device=device,
             num_envs=config.num_envs,
+            **({} if task_score is None else {"task": task_score.to_dict()}),
         )
         return TorchPPORun(
             run_dir,
@@ -243,4 +263,5 @@ def train_torch_ppo_run(
             policy=result.policy,
             device=device,
             num_envs=config.num_envs,
+            task_score=task_score,
         )

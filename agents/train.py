@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import tyro
 
-from agents.config import GameConfig, SweepConfig, TrainConfig, is_torch_ppo
+from agents.config import DEFENDER_ENV, GameConfig, SweepConfig, TrainConfig, is_torch_ppo
 from agents.evaluate import Evaluation
 
 COMMANDS = ("attacker", "defender", "game", "sweep")
@@ -38,6 +38,8 @@ DESCRIPTION = "\n\n".join(
         "sparse_attack_v2; an older one by name: --env sparse_attack_v0); "
         "python train.py attacker --scenario grid-ieee14 (the sequential format, with the "
         "scenario's defaults: agents.config.SCENARIO_DEFAULTS); "
+        "python train.py attacker --task sparse/ch4-position-v0 (a benchmark task's env and "
+        "player, scored on the task as python -m agents.bench score scores it); "
         "python train.py game --scenario grid-ieee14; "
         "python train.py attacker --env covariance_attack_v0 --algo SAC; "
         "python train.py defender --algo DQN; "
@@ -71,7 +73,7 @@ Command = (
         TrainConfig,
         tyro.conf.subcommand(
             "defender",
-            default=TrainConfig(agent="defender", env="sensor_game_v0"),
+            default=TrainConfig(agent="defender", env=DEFENDER_ENV),
             description="Train a defender against a fixed attacker.",
         ),
     ]
@@ -159,10 +161,17 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
 
 
 def format_table(rows: dict[str, Evaluation]) -> str:
-    """The final table: policy, mean ± 95 % CI, reference, score."""
+    """The final table: policy, mean ± 95 % CI, reference, the score against it.
+
+    The score is the return as a percentage of the reference (the analytic answer of the run's
+    env), or in a game the exploitability; a ``--task`` run's normalised score is printed
+    above the table (:func:`agents.task_runs.score_lines`).
+    """
     ref = next(iter(rows.values()))
     ref_head = f"reference ({ref.reference_name})" if ref.reference_name else "reference"
-    lines = [f"  {'policy':28s} {'mean ± 95% CI':>26s} {ref_head:>26s}  score"]
+    game = any(ev.score_name == "exploitability" for ev in rows.values())
+    score_head = "exploitability" if game else "% of reference"
+    lines = [f"  {'policy':28s} {'mean ± 95% CI':>26s} {ref_head:>26s}  {score_head}"]
     for name, ev in rows.items():
         if ev.ci95 != ev.ci95:  # NaN: one episode
             ci = ""
@@ -305,6 +314,13 @@ def _summary(
     shown = "".join(f" ({mark})" for mark in marks if getattr(run, mark))
     print(headline + shown + tail)
     print(f"  run folder: {run.run_dir}")
+    task_score = getattr(run, "task_score", None)
+    if task_score is not None:
+        from agents.task_runs import score_lines
+        from fdia_env.tasks import get
+
+        given = getattr(run, "task_given", True)
+        print("\n".join(score_lines(task_score, get(task_score.task), given)))
     print(format_table(run.evaluations))
     return run
 

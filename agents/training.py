@@ -62,6 +62,7 @@ from agents.checkpoint import (
     save_replay_buffer,
 )
 from agents.config import (
+    DEFENDER_ENV,
     SPARSE_ENVS,
     TORCH_PPO,
     Hyperparameters,
@@ -109,18 +110,20 @@ def env_thunk(
     opponent: Callable[[], Any] | None = None,
     monitor: bool = False,
     reward: tuple[float, float] | None = None,
+    make: Callable[[dict[str, Any]], gym.Env] | None = None,
 ) -> Callable[[], gym.Env]:
     """A zero-argument factory of the env (a fresh ``opponent()`` each call, if given).
 
     ``reward``: ``(shift, scale)`` of :class:`NormalizedReward` for training (the monitor,
-    outside it, logs the raw returns).
+    outside it, logs the raw returns). ``make``: builds the env from its options (a task's
+    :meth:`~agents.task_runs.TaskEntry.make_env`; None: ``gymnasium.make(gym_id, ...)``).
     """
 
     def thunk() -> gym.Env:
         kwargs = dict(env_kwargs)
         if opponent is not None:
             kwargs["opponent"] = opponent()
-        env = gym.make(gym_id, **kwargs)
+        env = gym.make(gym_id, **kwargs) if make is None else make(kwargs)
         if monitor:
             env = Monitor(env)
         return env if reward is None else NormalizedReward(env, *reward)
@@ -494,6 +497,10 @@ class TrainResult:
         train_seconds: Wall time spent in ``learn`` (across resumes).
         resumed: Whether the run continued an existing folder.
         interrupted: The signal (SIGINT 2, SIGTERM 15) that stopped training early, or None.
+        task_score: The run's :class:`agents.bench.score.Score` on its task (scores.json's
+            ``task``): the ``--task`` run's, or the task whose env and options the run trained
+            on (:func:`agents.task_runs.matching_task`); else None.
+        task_given: Whether the run was on ``--task``.
     """
 
     run_dir: Path
@@ -503,6 +510,8 @@ class TrainResult:
     train_seconds: float = 0.0
     resumed: bool = False
     interrupted: int | None = None
+    task_score: Any = None
+    task_given: bool = False
 
 
 @dataclass(frozen=True)
@@ -562,11 +571,32 @@ def run_setup(
 
 
 def setup_of(cfg: TrainConfig) -> RunSetup:
-    """:func:`run_setup` of the attacker or defender command."""
+    """:func:`run_setup` of the attacker or defender command (:func:`task_setup` with --task)."""
+    if cfg.task is not None:
+        return task_setup(cfg)
     return run_setup(
         cfg.env, cfg.agent, cfg.scenario, cfg.env_kwargs, cfg.algo, cfg.hp, cfg.normalize_reward,
         cfg.num_envs,
     )  # fmt: skip
+
+
+def task_setup(cfg: TrainConfig) -> RunSetup:
+    """The run's setup on ``cfg.task``: its env and options, a learner that fits its actions.
+
+    Raises:
+        ValueError: Naming the option: ``--task`` (unknown, a game, another player's),
+            ``--env``/``--scenario``/``--env-kwargs``/``--opponent`` given with it, or an
+            ``--algo`` that does not fit the task's action space.
+    """
+    from agents.task_runs import check_task_options, task_algorithm, task_entry
+
+    defaults = (SPARSE_ENVS[0],) if cfg.agent == "attacker" else (SPARSE_ENVS[0], DEFENDER_ENV)
+    check_task_options(cfg, defaults)  # the defender command's default or TrainConfig's
+    entry = task_entry(cfg)
+    algo = task_algorithm(entry, cfg.algo) if not is_torch_ppo(cfg.algo) else TORCH_PPO
+    normalize = bool(cfg.normalize_reward)
+    num_envs = cfg.num_envs if algo == TORCH_PPO else None
+    return RunSetup(entry, algo, dict(entry.task.env_kwargs), cfg.hp, normalize, num_envs)
 
 
 def say_kept(say: Callable[[str], None], what: str, saved: Any, today: Any) -> None:
@@ -818,9 +848,14 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
         entry, algo, env_kwargs = setup.entry, setup.algo, setup.env_kwargs
         kwargs = algo_kwargs(algo, setup.hp)
         hyperparameters = resolved_hyperparameters(algo, setup.hp)
-        check_env_kwargs(entry.gym_id, env_kwargs)
+        from agents.task_runs import plain_kwargs
+
+        task = getattr(entry, "task", None)
+        maker = None if task is None else entry.make_env
+        if task is None:
+            check_env_kwargs(entry.gym_id, env_kwargs)
         opponent = opponent_factory(entry, cfg.opponent, env_kwargs)
-        eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent), entry.gym_id)
+        eval_env = make_env(env_thunk(entry.gym_id, env_kwargs, opponent, make=maker), entry.gym_id)
         stack.callback(eval_env.close)
         reference = entry.reference_of(eval_env)
         checkpoint: CheckpointState | None = None
@@ -839,7 +874,7 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         if setup.num_envs is None:
             vec_env: VecEnv = DummyVecEnv(
-                [env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization)]
+                [env_thunk(entry.gym_id, env_kwargs, opponent, True, normalization, maker)]
             )
         else:
             vec_env = native_vec_env(
@@ -865,8 +900,9 @@ def train(cfg: TrainConfig, report: Callable[[str], None] | None = print) -> Tra
             cfg,
             {
                 "gym_id": entry.gym_id,
+                **({} if task is None else {"task": task.name}),
                 "algo": algo,
-                "env_kwargs": env_kwargs,
+                "env_kwargs": env_kwargs if task is None else plain_kwargs(env_kwargs),
                 "hyperparameters": hyperparameters,
                 "num_envs": setup.num_envs,
                 "reward_normalization": None
@@ -981,19 +1017,36 @@ def _train_and_score(
     if not history or history[-1]["timesteps"] != model.num_timesteps:
         history.append(history_record(learned, model.num_timesteps, train_seconds))
         write_jsonl(history_path, history)
+    task = getattr(entry, "task", None)
+    what = f"task {task.name}" if task is not None else env_kwargs["scenario"]
+    fields: dict[str, Any] = {}
+    task_score = None
+    if task is None and stop.signum is None:  # a scenario that is a task's: its scale too
+        from agents.task_runs import matching_task
+
+        scored = matching_task(entry.gym_id, env_kwargs, cfg.agent)
+    else:
+        scored = task
+    if scored is not None:  # scored as python -m agents.bench score scores the folder
+        from agents.task_runs import score_run
+
+        task_score = score_run(scored, run_dir)
+        fields["task"] = task_score.to_dict()
     write_scores(
         run,
         history,
         reference,
-        f"{algo} {cfg.agent} on {entry.gym_id} ({env_kwargs['scenario']}), seed {cfg.run.seed}",
+        f"{algo} {cfg.agent} on {entry.gym_id} ({what}), seed {cfg.run.seed}",
         evaluations,
         num_timesteps=model.num_timesteps,
         train_seconds=train_seconds,
+        **fields,
     )
     model.logger.close()
     return TrainResult(
-        run_dir, model, evaluations, history, train_seconds, resumed, interrupted=stop.signum
-    )
+        run_dir, model, evaluations, history, train_seconds, resumed, stop.signum, task_score,
+        task is not None,
+    )  # fmt: skip
 
 
 def reference_record(reference: Reference | None) -> dict[str, Any] | None:

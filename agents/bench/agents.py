@@ -17,7 +17,9 @@
 
 A checkpoint that records the env it was trained on (a run folder's ``config.json``) must have
 been trained on the task's env id and options; one whose spaces differ from the task env's is
-refused too. Every error names the parameter (``agent``, ``algo`` or ``trust_checkpoint``).
+refused too. A ``train.py --task`` run records its task's name (``resolved.task``) and is scored
+on that task only, its recorded options checked against the task's. Every error names the
+parameter (``agent``, ``algo`` or ``trust_checkpoint``).
 """
 
 from __future__ import annotations
@@ -382,10 +384,43 @@ def run_config(path: Path, source: str) -> tuple[dict[str, Any], dict[str, Any]]
     return config, resolved
 
 
+def _task_options_differ(recorded: dict[str, Any], task: Any) -> list[str]:
+    """The options a ``--task`` run records otherwise than ``task`` sets them.
+
+    An option whose value is an object (a scenario, an opponent policy) is recorded as its
+    text and compared by its presence only: the task's name fixes it.
+    """
+    ours = dict(task.env_kwargs)
+    differ = sorted(set(recorded) ^ set(ours))
+    for key in sorted(set(recorded) & set(ours)):
+        try:
+            value = json.loads(json.dumps(ours[key]))
+        except (TypeError, ValueError):
+            continue
+        if recorded[key] != value:
+            differ.append(key)
+    return differ
+
+
 def _check_run(path: Path, source: str, task: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """:func:`run_config`, then :func:`check_trained_on` with the run's env and options."""
     config, resolved = run_config(path, source)
     env_id = resolved["env" if resolved.get("backend") == "rllib" else "gym_id"]
+    trained_task = resolved.get("task")
+    if trained_task is not None:  # a train.py --task run: built as its task builds its env
+        if trained_task != task.name or env_id != task.env_id:
+            raise ValueError(
+                f"agent {source} was trained on task {trained_task!r} ({env_id}), not on task "
+                f"{task.name} ({task.env_id}): score it on its own task"
+            )
+        differ = _task_options_differ(resolved["env_kwargs"], task)
+        if differ:
+            raise ValueError(
+                f"agent {source}: {path} records other env options for task {task.name} than "
+                f"the task's ({', '.join(differ)}): the run's training options cannot be "
+                "established"
+            )
+        return config, resolved
     check_trained_on(source, env_id, resolved["env_kwargs"], task, config=path)
     return config, resolved
 

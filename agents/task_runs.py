@@ -1,0 +1,252 @@
+"""``train.py attacker|defender --task NAME``: train the scored player of a benchmark task.
+
+The env is built exactly as the task builds it (:meth:`fdia_env.tasks.Task.make_env`: its
+Gymnasium id, options and, for the system family, its entry point); the learners that fit the
+task env's action space are those of :func:`algorithms_for`. At the end the run folder is scored
+on the task by :func:`agents.bench.score.score`, the code of ``python -m agents.bench score``,
+with its default seeds and episodes, so that both give the same number on the same folder.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+from gymnasium import spaces
+
+from agents.config import is_torch_ppo
+from agents.registry import (
+    ALGORITHMS,
+    BOX_ALGORITHMS,
+    DISCRETE_ALGORITHMS,
+    MASKED_ALGORITHMS,
+    Reference,
+    Trainable,
+)
+
+# the options of the attacker/defender commands that would change the task's env, by the
+# TrainConfig field, with their default (a value other than it is refused under --task; --env
+# too, whose default is the command's)
+TASK_FIXED = {"scenario": None, "env_kwargs": {}, "opponent": "uniform"}
+SCORE_SEEDS = 3  # python -m agents.bench score's default --seeds
+
+
+def option(name: str) -> str:
+    """The command-line spelling of a TrainConfig field (``env_kwargs`` → ``--env-kwargs``)."""
+    return "--" + name.replace("_", "-")
+
+
+def resolve_task(name: str, command: str) -> Any:
+    """The task ``name`` for the ``command`` (``attacker`` or ``defender``).
+
+    Raises:
+        ValueError: Naming ``--task``: an unknown name (with close names and how to list the
+            tasks), a game task, or a task whose scored player is not ``command``.
+    """
+    from fdia_env import tasks
+
+    try:
+        task = tasks.get(name)
+    except ValueError as exc:
+        raise ValueError(
+            f'--task: {exc}; list them with python -c "from fdia_env import tasks; '
+            'print(*tasks.names(), sep=chr(10))"'
+        ) from None
+    if task.is_game:
+        raise ValueError(
+            f"--task {name} is a game task (scored by exploitability): train games with "
+            "train.py game (--env sensor_game_v0 --scenario ...); game tasks via --task are not "
+            "supported yet"
+        )
+    if task.player != command:
+        raise ValueError(
+            f"--task {name} scores the {task.player}, not the {command}: use "
+            f"train.py {task.player} --task {name}"
+        )
+    return task
+
+
+def check_task_options(cfg: Any, default_envs: tuple[str, ...]) -> None:
+    """Raise unless ``cfg`` leaves every option that would change the task's env unset.
+
+    ``default_envs``: the values of ``--env`` that mean it was not given (the command's
+    default).
+
+    Raises:
+        ValueError: Naming the option (``--env``, ``--scenario``, ``--env-kwargs``,
+            ``--opponent``, ``--num-envs``, ``--resume``).
+    """
+    given = [name for name, default in TASK_FIXED.items() if getattr(cfg, name) != default]
+    if cfg.env not in default_envs:
+        given.insert(0, "env")
+    if given:
+        raise ValueError(
+            f"{option(given[0])} cannot be combined with --task {cfg.task}: the task fixes its "
+            "env and options (drop the option, or train without --task)"
+        )
+    if cfg.num_envs is not None and not is_torch_ppo(cfg.algo):
+        raise ValueError(
+            f"--num-envs applies to --algo torch-ppo only with --task {cfg.task} (the "
+            "stable-baselines3 learners train on one env of the task)"
+        )
+    if cfg.run.resume:
+        raise ValueError(f"--resume is not supported with --task {cfg.task} yet")
+    if cfg.run.backend != "sb3":
+        raise ValueError(f"--backend {cfg.run.backend} is not supported with --task yet")
+
+
+def algorithms_for(space: gym.Space) -> tuple[str, ...]:
+    """The stable-baselines3 learners that fit an action space (the default first)."""
+    if isinstance(space, spaces.Discrete):
+        return MASKED_ALGORITHMS
+    if isinstance(space, spaces.Box):
+        return BOX_ALGORITHMS
+    if isinstance(space, spaces.MultiBinary | spaces.MultiDiscrete):
+        return tuple(a for a in DISCRETE_ALGORITHMS if a != "DQN")
+    return ()
+
+
+def run_env_name(task_name: str) -> str:
+    """The run folder's env part of a task run: ``task-sparse-ch4-position-v0``."""
+    return "task-" + task_name.replace("/", "-")
+
+
+def plain_kwargs(env_kwargs: Any) -> dict[str, Any]:
+    """The task's env options as config.json records them (objects as their text)."""
+    return json.loads(json.dumps(dict(env_kwargs), default=str))
+
+
+@dataclass(frozen=True)
+class TaskEntry(Trainable):
+    """The learning player of a task, as the drivers use a registry entry.
+
+    Attributes:
+        task: The :class:`fdia_env.tasks.Task`.
+    """
+
+    task: Any = None
+
+    @property
+    def gym_id(self) -> str:
+        """The task's Gymnasium id."""
+        return self.task.env_id
+
+    def make_env(self, env_kwargs: dict[str, Any]) -> gym.Env:
+        """The task's env with ``env_kwargs`` (the task's own)."""
+        from fdia_env.tasks.task import make_pinned
+
+        return make_pinned(self.task.env_id, self.task.entry_point, env_kwargs)
+
+    def reference_of(self, env: gym.Env) -> Reference | None:
+        """The task's stored optimum (or best known value) as the run's reference."""
+        best = self.task.references.optimum
+        objective = self.task.references.objective
+        return Reference(
+            value=float(best.value),
+            name=f"{best.name} (task)",
+            objective="logdet" if objective == "logdet" else "trace",
+            exact=bool(best.certified),
+            cost=float(best.value) < 0,
+            bound=None if best.certified else best.bound,
+        )
+
+
+def task_entry(cfg: Any) -> TaskEntry:
+    """The :class:`TaskEntry` of ``cfg.task`` for ``cfg.agent``, its learners fitted.
+
+    Raises:
+        ValueError: As :func:`resolve_task`; for a task env whose actions no learner fits.
+    """
+    task = resolve_task(cfg.task, cfg.agent)
+    env = task.make_env()
+    try:
+        algorithms = algorithms_for(env.action_space)
+    finally:
+        env.close()
+    if not algorithms:
+        raise ValueError(f"--task {task.name}: no learner fits its action space")
+    return TaskEntry(
+        env=run_env_name(task.name),
+        agent=cfg.agent,
+        scenarios={"task": {}},
+        algorithms=algorithms,
+        reference=None,
+        masked=isinstance(algorithms, tuple) and "MaskablePPO" in algorithms,
+        task=task,
+    )
+
+
+def task_algorithm(entry: TaskEntry, algo: str | None) -> str:
+    """``--algo`` checked against the task's action space (None: the first that fits).
+
+    Raises:
+        ValueError: Naming ``--algo``, the task, and the learners that fit it.
+    """
+    if algo is None:
+        return entry.algorithms[0]
+    key = algo.replace("_", "").replace("-", "").lower()
+    for name in entry.algorithms:
+        if name.lower() == key:
+            return name
+    known = key in {a.lower() for a in ALGORITHMS} or key == "torchppo"
+    what = "does not fit the action space of" if known else "is no learner for"
+    raise ValueError(
+        f"--algo {algo!r} {what} task {entry.task.name}; learners that fit: "
+        f"{', '.join(entry.algorithms)}"
+    )
+
+
+def matching_task(gym_id: str, env_kwargs: dict[str, Any], agent: str) -> Any:
+    """The single-player task whose env a run without ``--task`` trained on, or None.
+
+    A task matches when it scores ``agent``, names the run's scenario and
+    :func:`agents.bench.agents.check_trained_on` accepts the run's env id and options (another
+    version of the sparse attack that builds the same env included).
+    """
+    from agents.bench.agents import check_trained_on
+    from fdia_env import tasks
+
+    for name in tasks.names():
+        task = tasks.get(name)
+        if task.is_game or task.player != agent:
+            continue
+        if task.env_kwargs.get("scenario") != env_kwargs.get("scenario"):
+            continue
+        try:
+            check_trained_on("run", gym_id, env_kwargs, task)
+        except (ValueError, TypeError, KeyError):
+            continue
+        return task
+    return None
+
+
+def score_run(task: Any, run_dir: Path) -> Any:
+    """``python -m agents.bench score --task NAME --agent RUN_DIR`` as a :class:`Score`."""
+    from agents.bench.score import score
+
+    return score(task, str(run_dir), seeds=range(SCORE_SEEDS))
+
+
+def score_lines(result: Any, task: Any, given: bool = True) -> list[str]:
+    """The task score's lines above the final table: normalised first, then raw and % of optimum.
+
+    ``given``: the run was on ``--task``; else it was on the task's env and options.
+    """
+    from agents.bench.score import scale_legend
+
+    lo, hi = result.normalised_ci
+    best = task.references.optimum
+    percent = task.references.ratio(result.mean)
+    what = "optimum" if best.certified else "best known"
+    pct = f", {percent:.2%} of the {what}" if math.isfinite(percent) else ""
+    n_seeds, n_eps = result.returns.shape
+    on = "task" if given else "the run's env is task"
+    return [
+        f"{on} {task.name}: normalised {result.normalised:.4f} [{lo:.4f}, {hi:.4f}]",
+        f"  ({scale_legend(task)}); raw return {result.mean:.6g} ± {result.ci95:.3g}{pct}",
+        f"  (python -m agents.bench score: {n_seeds} seeds x {n_eps} episodes)",
+    ]
