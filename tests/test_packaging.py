@@ -96,7 +96,7 @@ def test_python_train_py_and_python_m_experiments_bench_still_run(tmp_path):
     assert train.returncode == 2
     assert train.stderr.startswith("train.py: error: "), train.stderr
     assert "no_such_env" in train.stderr
-    page = tmp_path / "missing.md"
+    page = tmp_path / "no_such_page"
     bench = subprocess.run(
         [sys.executable, "-m", "experiments", "bench", "--tasks", "hard", "--page", str(page)],
         cwd=ROOT, capture_output=True, text=True, timeout=300,
