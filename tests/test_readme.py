@@ -73,7 +73,7 @@ def test_every_train_command_is_accepted_by_train_py():
     import train
 
     commands = re.findall(r"^python train\.py ([^#\n]*)", section(README, "Train"), flags=re.M)
-    assert len(commands) == 3
+    assert len(commands) == 4
     for command in commands:
         config = train.parse(shlex.split(command))
         assert type(config).__name__ in {"TrainConfig", "GameConfig"}, command
