@@ -165,6 +165,7 @@ def test_a_game_killed_before_its_first_state_starts_again_from_iteration_0(tmp_
     out = capsys.readouterr().out
     assert f"resuming {first.run_dir}: it has no checkpoint" in out
     assert "training starts again from step 0" in out
+
     def played(history):
         return [{k: v for k, v in h.items() if k != "train_seconds"} for h in history]
 
