@@ -142,8 +142,8 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
     else:
         from agents.training import CHECKPOINT_STATE as marker
         from agents.training import train_prefix as prefix_of
-    fresh = cfg.run.backend != "rllib"  # a run without a checkpoint starts from step 0
-    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix_of(cfg), marker, fresh)
+    # a run without a checkpoint (stopped before its first) starts again from step 0
+    run_dir = resume_dir(cfg.run.runs_root, cfg.run.run_dir, prefix_of(cfg), marker, fresh=True)
     config_path = Path(run_dir) / "config.json"
     saved = read_json(config_path, "run config").get("config")
     if not isinstance(saved, dict):

@@ -538,6 +538,28 @@ def test_resume_without_a_saved_state_names_what_is_missing(tmp_path, capsys):
     assert "sparse_attack_v2-rllib-PPO-s0" in err
 
 
+def test_a_run_stopped_before_its_first_state_starts_again_from_step_0(
+    one_iteration_run, tmp_path, capsys
+):
+    import os
+    import shutil
+
+    import train
+
+    run_dir = _copy_run(one_iteration_run, tmp_path)
+    for name in os.listdir(run_dir):  # what a kill before the first state leaves
+        if name not in ("config.json", ".lock"):
+            path = run_dir / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+    capsys.readouterr()
+    result = train.main(["attacker", "--backend", "rllib", "--resume", "--run-dir", str(run_dir)])
+    out = capsys.readouterr().out
+    assert f"resuming {run_dir}: it has no checkpoint" in out
+    assert "training starts again from step 0" in out
+    assert result.run_dir == run_dir and (run_dir / "rllib_state.json").is_file()
+    assert result.timesteps == one_iteration_run.timesteps
+
+
 def test_sigint_stops_after_the_iteration_and_leaves_a_resumable_state(local_ray, tmp_path, capsys):
     import os
     import signal

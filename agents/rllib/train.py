@@ -193,8 +193,8 @@ class Session:
 
     @property
     def resumed(self) -> bool:
-        """Whether the run continues a saved state."""
-        return self.folder.resumed
+        """Whether the run continues a saved state (False for a run started again from 0)."""
+        return self.meta is not None
 
     def seed(self, seed: int) -> int:
         """RLlib's seed: the run's, or a fresh one derived from it after a resume."""
@@ -238,7 +238,8 @@ def open_run(
     seed that holds ``rllib_state.json``) is locked, its config.json must agree with ``cfg``
     (except the training length and how it runs), and its state is read and checked, never
     unpickled (:func:`agents.rllib.state.read_state`); the progress records after the state
-    are dropped.
+    are dropped. A run stopped before its first state starts again from step 0 with its saved
+    options (and says so).
 
     Raises:
         ValueError: Nothing to resume, a run of another backend, options that differ, or a
@@ -246,8 +247,10 @@ def open_run(
         FileExistsError: When a new run's folder exists.
     """
     say = report or (lambda line: None)
-    folder = open_folder(cfg, stack, rllib_prefix(cfg), STATE, report, backend="rllib")
-    if not folder.resumed:
+    folder = open_folder(cfg, stack, rllib_prefix(cfg), STATE, report, backend="rllib", fresh=True)
+    if not folder.checkpointed:  # a new run, or one stopped before its first state: from 0
+        if folder.resumed:
+            say(folder.restart_note())
         return Session(folder)
     run_dir = folder.path
     if with_algorithm:
