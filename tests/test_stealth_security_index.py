@@ -173,3 +173,23 @@ def test_security_index_equals_brute_force_at_every_scale(case):
             assert result.indices.tolist() == truth, (method, prot)
             assert result.lower_bounds.tolist() == truth, (method, prot)
             _check(est, result)
+
+
+@pytest.mark.parametrize("method", ["milp", "brute"])
+@pytest.mark.parametrize("small", [1e-9, 1e-12, 1e-150])
+def test_security_index_is_exact_with_meters_of_very_different_scales(method, small):
+    # a meter whose row is far smaller than the others still reads every attack on its
+    # state: state 0 of the 1-state H below needs both meters 0 and 1 (index 2), and with
+    # meter 1 protected it has no undetectable attack (index inf)
+    base = np.array([[-2.0], [2.0], [0.0], [0.0], [0.0]])
+    H = base * np.array([[1.0], [small], [1.0], [1.0], [1.0]])
+    est = static_estimation(H)
+    for prot, truth in (([], [2.0]), ([1], [np.inf])):
+        assert _brute_indices(base, prot) == truth
+        result = security_index(est, method=method, protected=prot)
+        assert result.indices.tolist() == truth, prot
+        assert result.lower_bounds.tolist() == truth, prot
+        _check(est, result)
+    attack = security_index(est, method=method).attacks[0]
+    np.testing.assert_array_equal(np.flatnonzero(attack), [0, 1])
+    assert attack[1] == pytest.approx(2.0 * small)
