@@ -110,6 +110,7 @@ class _FrontierSearch:
         self.J_used = used_information(problem.system.J, [u for s in self.subsets for u in s])
         self.best_value = -np.inf
         self.best_pairs: list[Pair] = []
+        self.nonfinite = False  # an objective overflowed (a NaN/inf value is never the best)
 
     def run(self) -> tuple[float, list[Pair]]:
         """Search every exactly-c pattern; return the best search value and its pairs."""
@@ -200,6 +201,7 @@ class _FrontierSearch:
             sub = alg.take(info, a - lo, b - lo)
             for code in self.subsets[r]:
                 values = alg.posterior_objective(sub, self.J_used[code])
+                self.nonfinite |= not bool(np.all(np.isfinite(values)))
                 j = int(np.argmax(values))
                 if values[j] > self.best_value:
                     self.best_value = float(values[j])
@@ -272,4 +274,13 @@ def exhaustive(
             )
     search = _FrontierSearch(problem, algebra_for(sys.F, sys.Q, objective, fast), chunk_rows)
     _, pairs = search.run()
+    if search.nonfinite and fast:  # the 2×2 closed forms square entries: |P| ~ 1e155 overflows
+        search = _FrontierSearch(problem, algebra_for(sys.F, sys.Q, objective, False), chunk_rows)
+        _, pairs = search.run()
+    if search.nonfinite:
+        raise ValueError(
+            f"system_or_scenario: the covariances of {sys.name or 'the system'} overflow or "
+            "underflow float64 in the search (a Φ came out NaN or inf), so no optimum is "
+            "certified; rescale its Q, R and P0 toward 1"
+        )
     return result_of(problem, pairs, "exs", evaluations=math.comb(problem.size, problem.budget))
