@@ -237,7 +237,8 @@ def exhaustive(
         horizon: Window length N (default: the preset's).
         objective: ``"trace"`` or ``"logdet"``.
         fast: Use the 2×2 component algebra when the state has two components; ``False`` forces
-            the generic ``np.linalg`` path (for cross-checks).
+            the generic ``np.linalg`` path (for cross-checks). A search whose closed forms
+            overflow (covariances beyond about 1e±155) is run again on the generic path.
         chunk_rows: Most states held per level (bounds memory; larger is slightly faster).
         max_sets: Refuse instances with more than this many sets ``C(M·N, c)`` (default 10⁹,
             minutes on the 2×2 path); ``None`` runs any size.
@@ -250,7 +251,7 @@ def exhaustive(
     Raises:
         ValueError: For a bad budget, horizon, objective or scenario (naming the parameter), or
             an instance above ``max_sets`` (the message gives the number of sets and an
-            estimated run time).
+            estimated run time), or a system whose covariances overflow float64 in the search.
 
     Example:
         >>> result = exhaustive("ch4-position", budget=5, horizon=6)
