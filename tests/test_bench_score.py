@@ -311,6 +311,19 @@ def test_the_runner_refuses_bad_options(capsys):
         assert needle in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("content", ["not json\n", "[1, 2]\n", '{"rows": 3}\n'])
+def test_the_runner_refuses_an_out_file_that_is_no_rows_file(tmp_path, capsys, content):
+    from experiments.cli import main as experiments
+
+    out = tmp_path / "rows.json"
+    out.write_text(content, encoding="utf-8")
+    with pytest.raises(SystemExit) as exc:
+        experiments(["bench", "--tasks", TASK, "--out", str(out), "--no-render"])
+    assert exc.value.code == 2
+    assert f"--out {out}: not a rows file" in capsys.readouterr().err
+    assert out.read_text(encoding="utf-8") == content
+
+
 def test_an_sb3_model_in_a_game_is_scored_on_its_action_distribution():
     from stable_baselines3.common.vec_env import DummyVecEnv
 

@@ -125,6 +125,16 @@ def test_a_missing_reference_key_names_the_file_entry_and_key(references, key, m
         tasks.get(TASK)
 
 
+@pytest.mark.parametrize("kind", ["missing", "a folder"])
+def test_an_unreadable_references_file_is_refused_naming_it(references, kind):
+    path = references(pristine())
+    path.unlink()
+    if kind == "a folder":
+        path.mkdir()
+    with pytest.raises(StoredDataError, match=rf"{path}: cannot be read"):
+        tasks.get(TASK)
+
+
 # ------------------------------------------------------------------------------ payoffs
 
 

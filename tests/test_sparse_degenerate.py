@@ -8,6 +8,7 @@ exhaustive optimum when it reports a proof.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import os
 import signal
@@ -241,3 +242,25 @@ def test_every_sparse_solver_terminates_and_agrees_on_degenerate_systems(
     assert bnb.value <= optimum + tol and bnb.upper_bound >= optimum - tol
     if bnb.proved_optimal:
         assert bnb.value == pytest.approx(optimum, rel=RTOL)
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-200, 1e200, 1e300])
+def test_exhaustive_is_exact_for_a_two_state_system_at_extreme_scales(scale):
+    # the 2x2 closed forms square the covariances' entries (a d - b^2 overflows at 1e155 and
+    # underflows at 1e-162): the optimum still equals the best set by the Joseph recursion
+    system = LinearSystem(
+        F=np.array([[-0.22, -0.09], [-0.46, -0.36]]),
+        Q=np.array([[1.7, -0.8], [-0.8, 0.8]]) * scale,
+        sensors=(
+            Sensor(H=np.array([[0.4, -0.4]]), R=np.array([[1.9 * scale]])),
+            Sensor(H=np.array([[0.26, -1.41]]), R=np.array([[0.28 * scale]])),
+        ),
+        P0=np.eye(2) * scale,
+    )
+    pairs = [(k, i) for k in range(2) for i in range(2)]
+    for budget in (1, 2):
+        sets = list(itertools.combinations(pairs, budget))
+        values = [joseph_value(system, set(s), 2) for s in sets]
+        result = exhaustive(system, budget, 2)
+        assert result.value == pytest.approx(max(values), rel=1e-12)
+        assert result.attacks == sets[int(np.argmax(values))]

@@ -290,11 +290,18 @@ def test_threshold_defender_rewards(est):
         ({"defender": "threshold", "alphas": [0.0, 0.1]}, "alphas must be a non-empty list"),
         ({"defender": "threshold", "alphas": []}, "alphas must be a non-empty list"),
         ({"false_alarm_cost": -1.0}, "false_alarm_cost must be a finite number >= 0"),
+        ({"false_alarm_cost": 10**400}, "false_alarm_cost must be a finite number >= 0"),
+        ({"penalty": -(10**30)}, "penalty must be a finite number >= 0"),
     ],
 )
 def test_bad_defender_options_name_the_parameter(est, kwargs, match):
     with pytest.raises(ValueError, match=match):
         stealth_attack_v0.parallel_env(scenario=est, **kwargs)
+
+
+def test_costs_given_as_python_ints_beyond_int64_are_taken_as_floats(est):
+    env = stealth_attack_v0.parallel_env(scenario=est, penalty=10**30, false_alarm_cost=2**70)
+    assert (env.penalty, env.false_alarm_cost) == (1e30, float(2**70))
 
 
 def test_every_id_is_made_after_only_import_fdia_env_in_a_fresh_process():

@@ -173,3 +173,42 @@ def test_security_index_equals_brute_force_at_every_scale(case):
             assert result.indices.tolist() == truth, (method, prot)
             assert result.lower_bounds.tolist() == truth, (method, prot)
             _check(est, result)
+
+
+@pytest.mark.parametrize("method", ["milp", "brute"])
+@pytest.mark.parametrize("small", [1e-9, 1e-12, 1e-150])
+def test_security_index_is_exact_with_meters_of_very_different_scales(method, small):
+    # a meter whose row is far smaller than the others still reads every attack on its
+    # state: state 0 of the 1-state H below needs both meters 0 and 1 (index 2), and with
+    # meter 1 protected it has no undetectable attack (index inf)
+    base = np.array([[-2.0], [2.0], [0.0], [0.0], [0.0]])
+    H = base * np.array([[1.0], [small], [1.0], [1.0], [1.0]])
+    est = static_estimation(H)
+    for prot, truth in (([], [2.0]), ([1], [np.inf])):
+        assert _brute_indices(base, prot) == truth
+        result = security_index(est, method=method, protected=prot)
+        assert result.indices.tolist() == truth, prot
+        assert result.lower_bounds.tolist() == truth, prot
+        _check(est, result)
+    attack = security_index(est, method=method).attacks[0]
+    np.testing.assert_array_equal(np.flatnonzero(attack), [0, 1])
+    assert attack[1] == pytest.approx(2.0 * small)
+
+
+@pytest.mark.parametrize("scale", [1e-100, 1e10, 1e100])
+def test_budgeted_attack_is_invariant_under_scaling_a_meter_and_its_bound(scale):
+    # scaling meter 0's row of H and its a_max alike leaves every attack as it is: the
+    # shift of the 1-state H below is min(1/1, 1/1, 1/2, 1/2) = 0.5 on all four meters
+    H = np.array([[1.0], [1.0], [2.0], [2.0]])
+    D = np.array([scale, 1.0, 1.0, 1.0])
+    attack = budgeted_attack(H * D[:, None], 4, a_max=D)
+    assert attack.proved and attack.value == pytest.approx(0.5, rel=1e-9)
+
+    # state 0 of this H needs 3 meters (0, 1 and 4): no attack on 2, however small meter 0's
+    # row (and its bound) is
+    H2 = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0], [1.0, 1.0]])
+    D2 = np.array([1e-100, 1.0, 1.0, 1.0, 1.0])
+    assert security_index(H2, method="brute").indices[0] == 3.0
+    for budget in (1, 2):
+        attack = budgeted_attack(H2 * D2[:, None], budget, a_max=D2, target=0)
+        assert attack.value == 0.0 and attack.proved

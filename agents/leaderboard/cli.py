@@ -60,10 +60,19 @@ def select_tasks(spec: str) -> list[Any]:
 
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
-    """The rows written so far ([] when none)."""
+    """The rows written so far ([] when none).
+
+    Raises:
+        ValueError: Naming ``--out`` when the file is not a rows file ``{"rows": [...]}``.
+    """
     if not path.is_file():
         return []
-    data = json.loads(path.read_text(encoding="utf-8"))
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f'--out {path}: not a rows file {{"rows": [...]}} ({exc})') from None
+    if not isinstance(data, dict) or not isinstance(data.get("rows", []), list):
+        raise ValueError(f'--out {path}: not a rows file {{"rows": [...]}}')
     return list(data.get("rows", []))
 
 
@@ -192,9 +201,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "fdia-leaderboard") -> i
         parser.error(str(exc))
     try:
         check_outputs(args)
+        rows = read_rows(args.out)
     except ValueError as exc:
         parser.error(str(exc))
-    rows = read_rows(args.out)
     failed: list[str] = []
     if not args.render_only:
         for task in tasks:

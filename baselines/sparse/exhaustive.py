@@ -110,6 +110,7 @@ class _FrontierSearch:
         self.J_used = used_information(problem.system.J, [u for s in self.subsets for u in s])
         self.best_value = -np.inf
         self.best_pairs: list[Pair] = []
+        self.nonfinite = False  # an objective overflowed (a NaN/inf value is never the best)
 
     def run(self) -> tuple[float, list[Pair]]:
         """Search every exactly-c pattern; return the best search value and its pairs."""
@@ -200,6 +201,7 @@ class _FrontierSearch:
             sub = alg.take(info, a - lo, b - lo)
             for code in self.subsets[r]:
                 values = alg.posterior_objective(sub, self.J_used[code])
+                self.nonfinite |= not bool(np.all(np.isfinite(values)))
                 j = int(np.argmax(values))
                 if values[j] > self.best_value:
                     self.best_value = float(values[j])
@@ -235,7 +237,8 @@ def exhaustive(
         horizon: Window length N (default: the preset's).
         objective: ``"trace"`` or ``"logdet"``.
         fast: Use the 2×2 component algebra when the state has two components; ``False`` forces
-            the generic ``np.linalg`` path (for cross-checks).
+            the generic ``np.linalg`` path (for cross-checks). A search whose closed forms
+            overflow (covariances beyond about 1e±155) is run again on the generic path.
         chunk_rows: Most states held per level (bounds memory; larger is slightly faster).
         max_sets: Refuse instances with more than this many sets ``C(M·N, c)`` (default 10⁹,
             minutes on the 2×2 path); ``None`` runs any size.
@@ -248,7 +251,7 @@ def exhaustive(
     Raises:
         ValueError: For a bad budget, horizon, objective or scenario (naming the parameter), or
             an instance above ``max_sets`` (the message gives the number of sets and an
-            estimated run time).
+            estimated run time), or a system whose covariances overflow float64 in the search.
 
     Example:
         >>> result = exhaustive("ch4-position", budget=5, horizon=6)
@@ -272,4 +275,13 @@ def exhaustive(
             )
     search = _FrontierSearch(problem, algebra_for(sys.F, sys.Q, objective, fast), chunk_rows)
     _, pairs = search.run()
+    if search.nonfinite and fast:  # the 2×2 closed forms square entries: |P| ~ 1e155 overflows
+        search = _FrontierSearch(problem, algebra_for(sys.F, sys.Q, objective, False), chunk_rows)
+        _, pairs = search.run()
+    if search.nonfinite:
+        raise ValueError(
+            f"system_or_scenario: the covariances of {sys.name or 'the system'} overflow or "
+            "underflow float64 in the search (a Φ came out NaN or inf), so no optimum is "
+            "certified; rescale its Q, R and P0 toward 1"
+        )
     return result_of(problem, pairs, "exs", evaluations=math.comb(problem.size, problem.budget))

@@ -270,9 +270,14 @@ def _budget_milp(
     The bound is the shift itself when proved, HiGHS' dual bound when the solve stopped at
     ``time_limit``.
     """
-    # the problem is linear in the bound: solve it with the largest bound scaled to 1 (HiGHS
-    # reads coefficients above 1e20 as infinite) and scale the shift back
-    unit = float(np.max(bound))
+    # the problem is linear in the bound: solve it with the largest bound in units of its
+    # meter's row (the MILP's |a_i| / max |H_i|) scaled to 1 (HiGHS reads coefficients above
+    # 1e20 as infinite, and ones far below 1 as within its tolerances) and scale the shift back
+    rows = np.max(np.abs(est.H), axis=1)
+    with np.errstate(over="ignore"):
+        unit = float(np.max(bound / np.where(rows == 0.0, 1.0, rows)))
+    if not 0.0 < unit < np.inf:
+        unit = float(np.max(bound))
     value, c, limit = _budget_milp_unit(est, t, budget, bound / unit, prot, time_limit)
     value, c, limit = value * unit, c * unit, limit * unit
     over = float(np.max(np.abs(est.H @ c) / bound))
@@ -334,7 +339,7 @@ def _budget_milp_unit(
     # exact clean-up: zero the meters the MILP left off, re-solve c on the chosen meters' zeros
     used = np.flatnonzero(res.x[n:] > 0.5)
     zero = np.setdiff1d(np.arange(m), used)
-    N = null_space(est.H[zero], n)
+    N = null_space(Hn[zero], n)  # rows of max-abs 1: a meter of small scale still counts
     if N.shape[1] == 0 or abs(c[t]) <= 1e-12:
         return 0.0, np.zeros(n), 0.0 if limit is None else max(limit, 0.0)
     c = N @ (N.T @ c)

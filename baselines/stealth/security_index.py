@@ -41,6 +41,7 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -198,6 +199,12 @@ def security_index(
             f"got {est.n}; use 'mincut' or 'milp'"
         )
     start = time.perf_counter()
+    # the index is a property of each row's support, invariant under scaling the rows: solve
+    # on H with rows of max-abs 1, so no tolerance relative to the whole of H mistakes a meter
+    # of small scale for an untouched one; the attacks are scaled back to H's units at the end
+    row_scale = np.max(np.abs(est.H), axis=1)
+    row_scale[row_scale == 0.0] = 1.0
+    user, est = est, SimpleNamespace(H=est.H / row_scale[:, None], m=est.m, n=est.n, grid=est.grid)
     indices = np.full(est.n, np.nan)
     lower = np.full(est.n, np.nan)
     attacks = np.zeros((est.n, est.m))
@@ -230,7 +237,8 @@ def security_index(
         if bound is None:
             bound = indices[k] if exact else 1.0
         lower[k] = min(bound, indices[k])
-        attacks[k], shifts[k] = on_support(a), c  # no rounding residue off the support
+        # no rounding residue off the support; the rows' units back
+        attacks[k], shifts[k] = on_support(a) * row_scale, c
     for arr in (indices, lower, attacks, shifts):
         arr.setflags(write=False)
     return SecurityIndex(
@@ -239,7 +247,7 @@ def security_index(
         shifts=shifts,
         method=method,
         protected=tuple(int(i) for i in prot),
-        meters=est.meters,
+        meters=user.meters,
         seconds=time.perf_counter() - start,
         lower_bounds=lower,
     )

@@ -37,9 +37,13 @@ def check_cost(name: str, value: Any) -> float:
     """``value`` as a finite float >= 0 (``ValueError`` naming ``name`` otherwise)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{name} must be a number >= 0, got {value!r}")
-    if not (np.isfinite(value) and value >= 0.0):
+    try:
+        number = float(value)  # a Python int beyond int64 is no numpy scalar
+    except OverflowError:
+        number = np.inf
+    if not (np.isfinite(number) and number >= 0.0):
         raise ValueError(f"{name} must be a finite number >= 0, got {value}")
-    return float(value)
+    return number
 
 
 DEFAULT_ALPHAS = (0.001, 0.01, 0.05, 0.1, 0.2)

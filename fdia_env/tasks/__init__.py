@@ -33,7 +33,7 @@ from types import MappingProxyType
 from typing import Any
 
 from fdia_env.tasks.catalog import SPECS, TaskSpec
-from fdia_env.tasks.stored import StoredDataError, check_references, recorded
+from fdia_env.tasks.stored import StoredDataError, check_references, read_stored, recorded
 from fdia_env.tasks.task import DIFFICULTIES, FAMILIES, PLAYERS, References, Task
 
 REFERENCES_FILE = "references.json"
@@ -50,7 +50,7 @@ def stored_references() -> Mapping[str, Mapping[str, Any]]:
         StoredDataError: Naming the file (and the entry and key) when its SHA-256 is not the
             recorded one or an entry is malformed (a missing key, a NaN).
     """
-    data = check_references(REFERENCES_PATH, REFERENCES_PATH.read_bytes(), recorded().REFERENCES)
+    data = check_references(REFERENCES_PATH, read_stored(REFERENCES_PATH), recorded().REFERENCES)
     return MappingProxyType(data)
 
 

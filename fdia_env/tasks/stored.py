@@ -30,6 +30,17 @@ class StoredDataError(ValueError):
     """A stored reference or payoff file that is changed, malformed or out of its folder."""
 
 
+def read_stored(path: Path) -> bytes:
+    """The bytes of the stored file ``path`` (``StoredDataError`` naming it if unreadable)."""
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise StoredDataError(
+            f"{path}: cannot be read ({exc.strerror or exc}); reinstall fdia_env or restore "
+            "the file from the repository"
+        ) from None
+
+
 def sha256_bytes(data: bytes) -> str:
     """The SHA-256 of ``data`` (hex)."""
     return hashlib.sha256(data).hexdigest()
