@@ -21,7 +21,7 @@ import pytest
 from gymnasium import spaces
 
 import fdia_env  # noqa: F401 - registers the ids
-from fdia_env.envs.actions import check_action, check_batch_actions
+from fdia_env.actions import check_action, check_batch_actions
 from fdia_env.registration import ENVS, get_env
 
 pytestmark = pytest.mark.filterwarnings("ignore")

@@ -146,9 +146,14 @@ def test_general_update_steps_only_the_active_members_and_leaves_the_others(back
         whole.step(used, None, None, False)
         part.step(used, None, None, False, active=xp.asarray(active))
         P_whole, P_part = xp.to_numpy(whole.P), xp.to_numpy(part.P)
-        np.testing.assert_array_equal(P_part[active], P_whole[active])
+        phi_whole, phi_part = xp.to_numpy(whole.phi)[active], xp.to_numpy(part.phi)[active]
+        if backend == "numpy":  # bit for bit: numpy's solve runs member by member
+            np.testing.assert_array_equal(P_part[active], P_whole[active])
+            np.testing.assert_array_equal(phi_part, phi_whole)
+        else:  # torch's batched solve may pick another kernel for another batch size (1 ulp)
+            np.testing.assert_allclose(P_part[active], P_whole[active], rtol=1e-14, atol=0)
+            np.testing.assert_allclose(phi_part, phi_whole, rtol=1e-14, atol=0)
         np.testing.assert_array_equal(P_part[~active], before[~active])
-        np.testing.assert_array_equal(xp.to_numpy(part.phi)[active], xp.to_numpy(whole.phi)[active])
         for sim in (whole, part):  # continue both from the same state
             sim._set_P(xp.asarray(P_whole))
     part.step(used, None, None, False, active=xp.asarray(np.zeros(B, dtype=bool)))

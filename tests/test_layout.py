@@ -257,7 +257,13 @@ def test_every_consumer_of_detector_statistics_reads_one_table():
 # The library's layers, lowest first: a module may import from its own layer and the layers
 # below it, never from one above (docs/guide/layout.md draws the same map). Longest prefix wins.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("fdia_env._validation", "fdia_env.backend", "fdia_env.episode", "fdia_env.registration"),
+    (
+        "fdia_env._validation",
+        "fdia_env.actions",
+        "fdia_env.backend",
+        "fdia_env.episode",
+        "fdia_env.registration",
+    ),
     ("fdia_env.systems", "fdia_env.kalman"),
     ("fdia_env.scenarios",),
     ("fdia_env.attacks", "fdia_env.defenses", "fdia_env.detection"),

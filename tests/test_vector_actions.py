@@ -1,4 +1,4 @@
-"""The native vector env checks a step's actions once (fdia_env.envs.actions) and the models
+"""The native vector env checks a step's actions once (fdia_env.actions) and the models
 act on the checked array: any integer dtype that casts safely to int64 acts as int64 (as
 ``Discrete.contains`` takes each member), and every bad batch is still refused with the message
 naming the player and the member."""
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from fdia_env.actions import check_batch_actions, check_vector_actions
 from fdia_env.backend import get_backend
-from fdia_env.envs.actions import check_batch_actions, check_vector_actions
 
 
 def _venv(env_id: str, B: int, **kwargs) -> gym.vector.VectorEnv:

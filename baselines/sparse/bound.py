@@ -73,6 +73,11 @@ GRAM_ENTRIES = 1 << 22
 # a backward-stable inverse errs by ``P δΛ P`` with ``‖δΛ‖ ≲ eps ‖Λ‖``, so an entry of G with
 # ``G ⪯ I`` errs by at most about ``eps ‖Λ‖ ‖P‖``; the constant covers the few operations.
 GRAM_ROUNDING = 64.0
+# The tail enumeration (baselines.sparse.tail) is exact in exact arithmetic; its float path
+# differs from the reference recursion by a few ulps times the condition number of I − G_DD.
+# Tail bounds are raised by this relative amount (of max(|Φ|, 1) for log det) so that rounding
+# can never make them invalid.
+SAFETY = 1e-9
 # Leverage above which ``1 − l_q`` is recomputed from information sums (no cancellation).
 HIGH_LEVERAGE = 0.5
 # A high-leverage pair's smoother terms are used only where the recomputed ``1 − l_q`` is at
@@ -251,14 +256,13 @@ def gram_floor(posts: np.ndarray) -> np.ndarray:
 
     The Gram entries carry a rounding of about ``GRAM_ROUNDING · eps · κ`` (κ the condition
     number of the (R, T, n, n) posteriors, the largest over the steps); a denominator below
-    that over :data:`baselines.sparse.tail.SAFETY` would let the rounding, amplified by its
+    that over :data:`SAFETY` would let the rounding, amplified by its
     inverse, exceed the safety margin, so the bound is ``inf`` there (valid, uninformative).
     """
     w = np.linalg.eigvalsh(posts)
     with np.errstate(divide="ignore", invalid="ignore"):
         kappa = np.where(w[..., 0] > 0.0, w[..., -1] / w[..., 0], np.inf)
     kappa = kappa.reshape(len(posts), -1).max(axis=1)
-    from baselines.sparse.tail import SAFETY  # tail imports this module
 
     return GRAM_ROUNDING * np.finfo(float).eps * kappa / SAFETY
 

@@ -58,6 +58,7 @@ from math import comb
 import numpy as np
 
 from baselines.sparse.bound import (
+    SAFETY,
     allocation_bound,
     forward,
     measurement_factors,
@@ -65,7 +66,7 @@ from baselines.sparse.bound import (
     root_bound,
 )
 from baselines.sparse.problem import Pair, SparseProblem, make_problem
-from baselines.sparse.tail import SAFETY, downdate_floor, well_conditioned
+from baselines.sparse.tail import downdate_floor, well_conditioned
 from fdia_env.kalman import objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
 from fdia_env.scenarios import Scenario

@@ -48,15 +48,11 @@ from math import comb
 
 import numpy as np
 
-from baselines.sparse.bound import GRAM_ROUNDING, unit_information
+from baselines.sparse.bound import GRAM_ROUNDING, SAFETY, unit_information
 from baselines.sparse.problem import SparseProblem
 from fdia_env.kalman import objective, predict_cov
 from fdia_env.kalman.linalg import mT, spd_inv, sym
 
-# The enumeration is exact in exact arithmetic; its float path differs from the reference
-# recursion by a few ulps times the condition number of I − G_DD. Tail bounds are raised by
-# this relative amount (of max(|Φ|, 1) for log det) so that rounding can never make them invalid.
-SAFETY = 1e-9
 # Largest number of (row, subset) small problems materialised at once.
 CHUNK = 1 << 15
 # Grid of the table: σ_j = SIGMA_0 · SIGMA_RATIO^j, j = 0..; σ beyond the last point: no bound.

@@ -212,7 +212,7 @@ class AttackModel(ABC, BatchOfOneModel):
     # backend ``xp`` (the vector env sets it before ``batch_reset``; the single env uses numpy);
     # ``batch_backends`` names the backends a model implements. On both backends the env has
     # checked the actions' type, shape and range (and on torch the device) before
-    # ``batch_apply``, once per step (fdia_env.envs.actions): ``batch_apply`` takes them as
+    # ``batch_apply``, once per step (fdia_env.actions): ``batch_apply`` takes them as
     # valid. On torch, sensor sets may be (B, M) boolean masks, not bitmasks. The arrays a
     # ``batch_*`` method returns are not changed afterwards (a step makes new ones).
 
@@ -263,9 +263,9 @@ def check_space(space: spaces.Space, action: Any, who: str) -> Any:
     """The meaning of ``action`` if ``space`` accepts it, else ``ValueError`` naming ``who``.
 
     The models' own check for a direct call: the envs' rule,
-    :func:`fdia_env.envs.actions.check_action` (Gymnasium's ``contains``).
+    :func:`fdia_env.actions.check_action` (Gymnasium's ``contains``).
     """
-    from fdia_env.envs.actions import check_action  # the envs package imports the models
+    from fdia_env.actions import check_action
 
     return check_action(space, action, who)
 

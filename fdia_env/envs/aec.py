@@ -8,7 +8,7 @@ from pettingzoo.utils.agent_selector import AgentSelector
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from fdia_env.envs.actions import check_action
+from fdia_env.actions import check_action
 
 
 class FdiaAECEnv(parallel_to_aec_wrapper):

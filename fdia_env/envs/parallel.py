@@ -12,9 +12,9 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_agent, check_choice, check_int
+from fdia_env.actions import check_step_actions
 from fdia_env.attacks.base import AttackModel
 from fdia_env.defenses.base import DefenseModel
-from fdia_env.envs.actions import check_step_actions
 from fdia_env.envs.render import render_ansi, render_rgb
 from fdia_env.envs.simulation import Simulation
 from fdia_env.episode import EpisodeSpec

@@ -77,9 +77,9 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from fdia_env._validation import check_choice, check_int
+from fdia_env.actions import check_action
 from fdia_env.attacks.sparse import ILLEGAL_ACTIONS, SparseAttack
 from fdia_env.attacks.subsets import SubsetChoice, game_sizes
-from fdia_env.envs.actions import check_action
 from fdia_env.envs.parallel import FdiaParallelEnv, check_reset_args, end_step
 from fdia_env.envs.policy import PolicyBase, observation_array
 from fdia_env.episode import EpisodeSpec

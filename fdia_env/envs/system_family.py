@@ -106,9 +106,9 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import check_choice, check_int
+from fdia_env.actions import check_action
 from fdia_env.attacks.sparse import MAX_SENSORS, SparseAttack
 from fdia_env.defenses import PerfectDetection
-from fdia_env.envs.actions import check_action
 from fdia_env.envs.factory import episode_spec
 from fdia_env.envs.family import NumberedFamily, check_range
 from fdia_env.envs.grid_family import GridFamily

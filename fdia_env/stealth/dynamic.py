@@ -14,7 +14,7 @@ from fdia_env._validation import (
     check_positions,
     check_positive,
 )
-from fdia_env.envs.actions import check_step_actions
+from fdia_env.actions import check_step_actions
 from fdia_env.scenarios import resolve
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.dynamic_model import ACTIONS, DynamicModel

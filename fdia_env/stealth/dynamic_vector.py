@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.envs.actions import check_vector_actions
+from fdia_env.actions import check_vector_actions
 from fdia_env.stealth.dynamic import MAX_LOG_ERROR, MAX_RATIO, StealthDynamicEnv
 from fdia_env.stealth.vector_base import StealthVectorBase, entry_point
 

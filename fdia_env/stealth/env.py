@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fdia_env._validation import MAX_SCALE, check_choice, check_int, check_positive
-from fdia_env.envs.actions import check_step_actions
+from fdia_env.actions import check_step_actions
 from fdia_env.stealth.base import StealthParallelEnv, check_cost
 from fdia_env.stealth.static import (
     StaticEstimation,

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from fdia_env.actions import check_vector_actions
 from fdia_env.backend import NUMPY
-from fdia_env.envs.actions import check_vector_actions
 from fdia_env.stealth.env import MAX_RATIO, StealthAttackEnv
 from fdia_env.stealth.static import rounding_residual
 from fdia_env.stealth.vector_base import StealthVectorBase, entry_point

@@ -53,8 +53,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from fdia_env._validation import check_agent, check_int
+from fdia_env.actions import check_vector_actions
 from fdia_env.backend import NUMPY, get_backend
-from fdia_env.envs.actions import check_vector_actions
 from fdia_env.envs.engine import BatchedSimulation
 from fdia_env.envs.opponents import FixedMix
 from fdia_env.envs.parallel import FdiaParallelEnv, attacker_reward, check_reset_args

@@ -50,8 +50,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from fdia_env.actions import check_vector_actions
 from fdia_env.backend import NUMPY
-from fdia_env.envs.actions import check_vector_actions
 from fdia_env.envs.parallel import attacker_reward
 from fdia_env.envs.sequential import STOP, SequentialSetEnv, group_illegal
 from fdia_env.vector import env as vector_env
