@@ -28,7 +28,7 @@ import scipy.stats
 from gymnasium import spaces
 
 from agents.registry import Reference, by_gym_id, parallel_of
-from fdia_env.envs.actions import check_action
+from fdia_env.actions import check_action
 from fdia_env.envs.policy import MaskedPolicyBase, Policy, batch_size
 
 _CHECKED_SPACES = (spaces.Discrete, spaces.Box, spaces.MultiBinary, spaces.MultiDiscrete)
@@ -41,7 +41,7 @@ class InvalidActionError(ValueError):
 def checked_action(policy: Any, env: gym.Env, action: Any) -> Any:
     """``action`` if it is an element of ``env``'s action space (the env's own check).
 
-    The check is the env's (:func:`fdia_env.envs.actions.check_action`, Gymnasium's
+    The check is the env's (:func:`fdia_env.actions.check_action`, Gymnasium's
     ``Space.contains`` for other spaces): nothing is converted, so a float, a string, a list
     or None for a ``Discrete`` action is refused, not rounded. A ``Discrete`` action is passed
     on as a Python int (the same integer).
