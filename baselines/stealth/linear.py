@@ -117,7 +117,7 @@ def optimal_linear_attack(A: Any, C: Any, Q: Any, R: Any, delta: float) -> Linea
 
     Example:
         >>> attack = optimal_linear_attack([[0.9]], [[1.0]], [[1.0]], [[1.0]], 0.0)
-        >>> attack.T.tolist(), round(attack.value / attack.clean, 4)
+        >>> attack.T.round(12).tolist(), round(attack.value / attack.clean, 4)
         ([[-1.0]], 32.24)
     """
     if isinstance(delta, bool) or not isinstance(delta, (int, float, np.integer, np.floating)):
