@@ -167,6 +167,34 @@ def _stealth(instance: str, scenario: str, budget: int) -> TaskSpec:
     )
 
 
+def _stealth_box(
+    instance: str, scenario: str, budget: int, a_max: float, protected: tuple[str, ...] = ()
+) -> TaskSpec:
+    kwargs: dict[str, Any] = {
+        "scenario": scenario,
+        "budget": budget,
+        "action": "box_shift",
+        "a_max": a_max,
+        "dynamics": "expected",
+    }
+    guarded = ""
+    if protected:
+        kwargs["protected"] = list(protected)
+        guarded = f" (meter{'s' if len(protected) > 1 else ''} {', '.join(protected)} protected)"
+    return TaskSpec(
+        f"stealth/{instance}-v0",
+        "stealth",
+        "attacker",
+        STEALTH_ATTACKER,
+        kwargs,
+        "fdia_env.stealth.stealth_attack_v0",
+        f"{scenario}: shift a set of state estimates together, as far as injections of at most "
+        f"{a_max:g} pu allow, past the chi2 bad-data test with at most {budget} meters"
+        f"{guarded}; maximise the expected undetected shift",
+        episodes=10,
+    )
+
+
 def _stealth_dynamic(instance: str, scenario: str, a_max: float, horizon: int) -> TaskSpec:
     return TaskSpec(
         f"stealth/{instance}-v0",
@@ -267,6 +295,10 @@ SPECS: tuple[TaskSpec, ...] = (
     _covariance("ch2-pv-1", "ch2-pv-1", 3000.0, "trace"),
     _covariance("ch2-pv-2", "ch2-pv-2", 3000.0, "trace"),
     _covariance("ch2-pv-2-logdet", "ch2-pv-2", 3000.0, "logdet"),
+    _covariance("ieee14", "grid-ieee14", 0.01, "trace"),
+    _covariance("ieee14-logdet", "grid-ieee14", 0.01, "logdet"),
+    _covariance("ieee30", "grid-ieee30", 0.01, "trace"),
+    _covariance("ieee30-logdet", "grid-ieee30", 0.01, "logdet"),
     _game("ch5-game", "ch5-game", "attacker", power=100.0),
     _game("ch5-game", "ch5-game", "defender", power=100.0),
     _game("m10", "game-m10", "attacker", power=100.0),
@@ -287,6 +319,8 @@ SPECS: tuple[TaskSpec, ...] = (
     _game("ieee14", "grid-ieee14", "defender"),
     _game("ieee118", "grid-ieee118", "attacker"),
     _game("ieee118", "grid-ieee118", "defender"),
+    _game("ieee14-strong-k1", "grid-ieee14", "attacker", power=1.0, max_subset_size=1),
+    _game("ieee30-strong", "grid-ieee30", "attacker", power=1.0, max_subset_size=1),
     _bayes("ch5-game-informed", "ch5-game", "attacker", "informed", power=100.0),
     _bayes("ch5-game-informed", "ch5-game", "defender", "informed", power=100.0),
     _bayes("ch5-game-uninformed", "ch5-game", "attacker", "uninformed", power=100.0),
@@ -298,6 +332,9 @@ SPECS: tuple[TaskSpec, ...] = (
     _detection("ch3-static", "ch3-static", 240.0, "attacker"),
     _detection("ch3-tracking", "ch3-tracking", 7.5, "attacker"),
     _stealth("ieee14-b3", "grid-ieee14", 3),
+    _stealth_box("ieee14-box-b12", "grid-ieee14", 12, 0.05),
+    _stealth_box("ieee14-box-b8-protected", "grid-ieee14", 8, 0.05, ("trafo3@6",)),
+    _stealth_box("ieee14-box-b12-protected", "grid-ieee14", 12, 0.05, ("trafo3@6",)),
     _stealth_dynamic("ch4-position-dynamic-bias", "ch4-position", 0.25, 10),
     _stealth_protect("ch4-position-dynamic-protect", "ch4-position", 3, 1.0, 6),
     _family("tracking-m6", "trace", 1_000_000, 20, num_sensors=6, budget=4, horizon=4),
