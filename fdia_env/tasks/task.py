@@ -147,6 +147,10 @@ class References:
             raise ValueError(f"metric must be one of {list(METRICS)}, got {self.metric!r}")
         if not self.optimum.value != self.random.mean:
             raise ValueError("optimum equals random play: the normalised score is undefined")
+        if self.objective != "logdet" and self.optimum.value == 0.0:
+            raise ValueError("optimum is 0: the ratio of a return to it is undefined")
+        if self.objective == "cost" and self.random.mean == 0.0:
+            raise ValueError("random play's cost is 0: its ratio to the optimum is undefined")
         object.__setattr__(self, "heuristics", MappingProxyType(dict(self.heuristics)))
         object.__setattr__(self, "solvers", MappingProxyType(dict(self.solvers)))
 
