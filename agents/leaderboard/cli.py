@@ -126,7 +126,7 @@ def _probe_folder(option: str, folder: Path) -> None:
         fd, probe = tempfile.mkstemp(dir=folder, prefix=".probe.")
         os.close(fd)
         os.unlink(probe)
-    except FileExistsError:
+    except (FileExistsError, NotADirectoryError):
         raise OutputPathError(f"{option} {folder}: a parent is not a folder") from None
     except OSError as exc:
         raise OutputPathError(f"{option} {folder}: cannot be written ({exc.strerror})") from None
