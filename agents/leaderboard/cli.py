@@ -238,7 +238,9 @@ def build_parser(prog: str) -> argparse.ArgumentParser:
     parser.add_argument(
         "--first-seed", type=int, default=0, help="the first training seed (default 0)"
     )
-    parser.add_argument("--timesteps", type=int, default=20_000, help="training steps per run")
+    parser.add_argument(
+        "--timesteps", type=int, default=20_000, help="training env steps per run (default 20,000)"
+    )
     parser.add_argument(
         "--hp",
         nargs=2,
