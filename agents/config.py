@@ -665,11 +665,17 @@ class GameConfig:
                 f"{flag('expected_rewards')} must be true or false, got {self.expected_rewards!r}"
             )
         check_env_kwargs_format(self.env_kwargs)
-        if self.iterations is None and not self.converges:
-            self.iterations = GAME_ITERATIONS
         for name in ("iterations", "steps_per_iteration", "final_eval_episodes"):
             if getattr(self, name) is not None:
                 check_number(name, getattr(self, name), *_AT_LEAST_1)
+
+    @property
+    def n_iterations(self) -> int:
+        """``--iterations``, else :data:`GAME_ITERATIONS`.
+
+        A run that :attr:`converges` without ``--iterations`` runs to its fixed point instead.
+        """
+        return GAME_ITERATIONS if self.iterations is None else self.iterations
 
     @property
     def converges(self) -> bool:

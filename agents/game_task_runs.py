@@ -26,7 +26,9 @@ from agents.registry import Trainable
 # the game command's options that would change the task's game, with their defaults
 GAME_FIXED = {"env": "sensor_game_v0", "scenario": None, "env_kwargs": {}}
 EXACT = "exact"
-LIST_TASKS = 'list them with python -c "from fdia_env import tasks; print(*tasks.names(), sep=chr(10))"'
+LIST_TASKS = (
+    'list them with python -c "from fdia_env import tasks; print(*tasks.names(), sep=chr(10))"'
+)
 
 
 def option(name: str) -> str:

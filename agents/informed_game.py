@@ -103,9 +103,7 @@ def run_informed_population(
     history: list[dict[str, Any]] = []
     start = time.perf_counter()
     for it in range(1, iterations + 1):
-        if (stop is not None and stop()) or (
-            converge and history and at_fixed_point(method, pops)
-        ):
+        if (stop is not None and stop()) or (converge and history and at_fixed_point(method, pops)):
             break
         attack, defence = best_responses(game, x, y)
         against_x = np.einsum("i,sij->sj", x, game.matrices)[np.arange(S), list(attack)]
@@ -194,7 +192,7 @@ def run_informed_task(
         def on_iteration(rec: dict[str, Any], pops: dict[str, list[Any]]) -> None:
             write_json(
                 run_dir / STATE,
-                {"populations": pops, "history": history_so_far + [rec]},
+                {"populations": pops, "history": [*history_so_far, rec]},
             )
             history_so_far.append(rec)
             if report is not None:
@@ -202,7 +200,7 @@ def run_informed_task(
 
         history_so_far: list[dict[str, Any]] = []
         # double oracle adds a new strategy in every iteration before its fixed point
-        iterations = cfg.iterations or m + n**S
+        iterations = m + n**S if cfg.converges and cfg.iterations is None else cfg.n_iterations
         history = run_informed_population(
             cfg.method, game, iterations, cfg.converges, lambda: stop.requested, on_iteration
         )
@@ -262,7 +260,7 @@ def informed_evaluations(
         with entry.make_resolved(
             env_kwargs, opponent=opponent(other, seed=derived_seed(seed, 1))
         ) as env:
-            rows[label] = evaluate(
-                policy(probs, seed=seed), env, cfg.final_eval_episodes, seed, entry.reference_of(env)
-            )
+            player = policy(probs, seed=seed)
+            reference = entry.reference_of(env)
+            rows[label] = evaluate(player, env, cfg.final_eval_episodes, seed, reference)
     return rows

@@ -50,13 +50,13 @@ from agents.config import (
     GameConfig,
     Hyperparameters,
     algo_kwargs,
-    scenario_defaults,
-    with_defaults,
     check_device_available,
     resolve_device,
     resolved_hyperparameters,
+    scenario_defaults,
+    with_defaults,
 )
-from agents.evaluate import Evaluation, evaluate
+from agents.evaluate import Evaluation, evaluate, solve_cached
 from agents.interrupt import StopRequest, StopTrainingCallback
 from agents.lifecycle import game_scores, open_run, tensorboard
 from agents.plots import exploitability_curve
@@ -89,7 +89,7 @@ from agents.training import (
     saved_hyperparameters,
     say_kept,
 )
-from baselines.game import MixedStrategyPolicy, solve_zero_sum
+from baselines.game import MixedStrategyPolicy
 from fdia_env.envs.opponents import FixedMix
 
 if TYPE_CHECKING:
@@ -351,7 +351,9 @@ def game_setup(cfg: GameConfig) -> RunSetup:
         entry = task.entries["attacker"]
         name = entry.default_algorithm if task.algo == EXACT else task.algo
         defaults = scenario_defaults(entry.env, task.scenario, task.env_kwargs)
-        normalize = defaults.normalize_reward if cfg.normalize_reward is None else cfg.normalize_reward
+        normalize = cfg.normalize_reward
+        if normalize is None:
+            normalize = defaults.normalize_reward
         hp = with_defaults(name, cfg.hp, defaults)
         return RunSetup(entry, name, task.env_kwargs, hp, bool(normalize))
     algo = None if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT else cfg.algo
@@ -544,7 +546,9 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         scale = resolved.get("reward_scale", scale)
         if run.checkpointed:
             state = _read_state(run_dir / STATE)
-            run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")
+            run.check_not_shorter(
+                "iterations", cfg.n_iterations, len(state["history"]), "iterations"
+            )
             names = policy_names(state)
             if algo == EXACT:
                 models = {s: [ConstantPolicy(a) for a in state["populations"][s]] for s in SIDES}
@@ -581,7 +585,8 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         stop = run.watch_signals()
         # a --task run's exact answers: PSRO's meta-game from the exact payoffs (double oracle)
-        game = MatrixGame(entries, env_kwargs, L, value, exact_meta=task is not None and algo == EXACT)
+        exact_meta = task is not None and algo == EXACT
+        game = MatrixGame(entries, env_kwargs, L, value, exact_meta=exact_meta)
         oracle: Oracle
         if algo == EXACT:
             oracle = ExactOracle(L)
@@ -594,7 +599,9 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             )  # fmt: skip
         loop = _population_state(state, names, models, n)
         # --task's double oracle: to its fixed point (each iteration before it adds a strategy)
-        iterations = cfg.iterations or n["defender"] + n["attacker"]
+        iterations = cfg.n_iterations
+        if cfg.converges and cfg.iterations is None:
+            iterations = n["defender"] + n["attacker"]
         history = _iterate(cfg, run_dir, loop, oracle, game, stop, report, iterations)
         if not history:  # stopped before the first iteration finished
             run.discard()  # a new run's folder (the lock released first)
@@ -878,7 +885,7 @@ def _final_evaluations(
 ) -> dict[str, Evaluation]:
     """Each side's learned mix and LP equilibrium mix, played against the other learned mix."""
     seed = derived_seed(cfg.run.seed, 20_000)
-    x_eq, y_eq, _ = solve_zero_sum(reference.payoff)
+    x_eq, y_eq, _ = solve_cached(reference.payoff)
     rows = {}
     for label, side, probs, other in (
         ("attacker mix (learned)", "attacker", y, x),

@@ -504,7 +504,9 @@ def _game_run(folder: Path, env: gym.Env, task: Any, source: str) -> LoadedAgent
             probs, seed=0
         )
     except ValueError as exc:
-        raise ValueError(f"agent {source}: {scores_path}: {key!r} is no mixed strategy ({exc})")
+        raise ValueError(
+            f"agent {source}: {scores_path}: {key!r} is no mixed strategy ({exc})"
+        ) from None
     support = int(np.count_nonzero(probs.max(axis=0) if probs.ndim == 2 else probs))
     what = f"{scores.get('method', '?')} with {resolved.get('algo', '?')} best responses"
     return LoadedAgent(
