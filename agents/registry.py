@@ -225,6 +225,34 @@ def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference |
 
 _GAMES: dict[tuple[str, float, str, int | None], tuple[Any, tuple]] = {}
 _MAX_GAMES = 8
+_BAYESIAN: dict[tuple, tuple[Any, Any]] = {}
+
+
+def _cached_bayesian_game(env: FdiaParallelEnv, build: Callable[[Any], Any]) -> Any:
+    """``build(env)``: the typed game's BayesianGame, kept for the last few games.
+
+    The game's LP solution (a cached property) is kept with it: on game-m10 with an informed
+    attacker the LP takes seconds, and a run asks for the game for every view it scores. A hit
+    is used only for the same scenario (:func:`_same_scenario`) and the same typed attack
+    (types, priors, attacker model, power, largest subset).
+    """
+    attack = env.attack
+    key = (
+        str(getattr(env.scenario, "name", id(env.scenario))),
+        tuple(attack.types),
+        tuple(float(p) for p in attack.priors),
+        str(attack.attacker_model),
+        float(attack.power),
+        attack.max_subset_size,
+    )
+    hit = _BAYESIAN.get(key)
+    if hit is not None and _same_scenario(hit[0], env.scenario):
+        return hit[1]
+    game = build(env)
+    if len(_BAYESIAN) >= _MAX_GAMES:
+        _BAYESIAN.pop(next(iter(_BAYESIAN)))
+    _BAYESIAN[key] = (env.scenario, game)
+    return game
 
 
 def _equal(a: Any, b: Any) -> bool:
@@ -302,7 +330,7 @@ def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Referen
     from baselines.game import MixedStrategyPolicy, TypedMixedStrategyPolicy, bayesian_game_of
 
     attack = env.attack
-    game = bayesian_game_of(env)
+    game = _cached_bayesian_game(env, bayesian_game_of)
     sol = game.solution
     name = f"Bayesian equilibrium (LP, {attack.attacker_model} attacker)"
     payoff = game.mean_payoff if game.attacker == "uninformed" else None

@@ -207,6 +207,10 @@ def main(argv: Sequence[str] | None = None) -> object:
         from agents.rllib.sweep import run_sweep
 
         return run_sweep(cfg)
+    if isinstance(cfg, GameConfig) and cfg.task is not None:  # before any backend or resume
+        from agents.game_task_runs import game_task_setup
+
+        game_task_setup(cfg)
     torch_ppo = isinstance(cfg, TrainConfig) and is_torch_ppo(cfg.algo)
     if torch_ppo and cfg.run.backend != "sb3":
         raise ValueError("--algo torch-ppo runs in this process (--backend sb3, the default)")
