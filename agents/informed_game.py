@@ -137,7 +137,13 @@ def run_informed_population(
 
 
 def run_informed_task(
-    cfg: Any, entries: dict[str, Any], env_kwargs: dict[str, Any], report: Any = print
+    cfg: Any,
+    entries: dict[str, Any],
+    env_kwargs: dict[str, Any],
+    prefix: str,
+    state_file: str,
+    result: Callable[..., Any],
+    report: Any = print,
 ) -> Any:
     """``train.py game --task`` on an informed-attacker Bayesian game task (exact answers).
 
@@ -146,10 +152,14 @@ def run_informed_task(
             ``--iterations``, ``--final-eval-episodes``, the run settings).
         entries: Each side's :class:`agents.game_task_runs.GameTaskEntry`.
         env_kwargs: The task's env options.
+        prefix: The run folder's name without its time.
+        state_file: The name of the folder's loop state (the game runs' ``state.json``).
+        result: Builds the result (:class:`agents.selfplay.SelfPlayResult`).
         report: Called with one line per iteration (None: silent).
 
     Returns:
-        An :class:`agents.selfplay.SelfPlayResult` (``y`` is (S, n), one mix per type).
+        ``result(...)``: an :class:`agents.selfplay.SelfPlayResult` whose ``y`` is (S, n), one
+        mix per type.
 
     Raises:
         FileExistsError: When the run folder exists.
@@ -160,7 +170,6 @@ def run_informed_task(
     from agents.population import report_line
     from agents.runs import write_json
     from agents.seeding import seed_everything
-    from agents.selfplay import STATE, SelfPlayResult, game_prefix
     from agents.training import make_env
 
     attacker = entries["attacker"]
@@ -171,7 +180,7 @@ def run_informed_task(
     value = float(game.value)
     S, m, n = game.matrices.shape
     with ExitStack() as stack:
-        run = open_run(cfg, stack, game_prefix(cfg), STATE, report, fresh=True)
+        run = open_run(cfg, stack, prefix, state_file, report, fresh=True)
         run_dir = run.path
         run.begin()
         run.write_config(
@@ -191,7 +200,7 @@ def run_informed_task(
 
         def on_iteration(rec: dict[str, Any], pops: dict[str, list[Any]]) -> None:
             write_json(
-                run_dir / STATE,
+                run_dir / state_file,
                 {"populations": pops, "history": [*history_so_far, rec]},
             )
             history_so_far.append(rec)
@@ -206,7 +215,7 @@ def run_informed_task(
         )
         if not history:
             run.discard()
-            return SelfPlayResult(
+            return result(
                 run_dir, cfg.method, np.zeros(0), np.zeros(0), value, [], interrupted=stop.signum
             )
         x, y = np.array(history[-1]["x"]), np.array(history[-1]["y"])
@@ -226,7 +235,7 @@ def run_informed_task(
             value,
             f"{cfg.method.upper()} (exact best responses) on task {task.name}",
         )
-        return SelfPlayResult(
+        return result(
             run_dir, cfg.method, x, y, value, history, evaluations, pops, seconds,
             interrupted=stop.signum,
         )  # fmt: skip

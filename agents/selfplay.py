@@ -512,7 +512,10 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             from agents.game_task_runs import score_game_run
             from agents.informed_game import run_informed_task
 
-            return score_game_run(task, run_informed_task(cfg, entries, env_kwargs, report))
+            run = run_informed_task(
+                cfg, entries, env_kwargs, game_prefix(cfg), STATE, SelfPlayResult, report
+            )
+            return score_game_run(task, run)
     reference = _game_reference(cfg, entries, algo, kwargs, env_kwargs)
     expected = expected_rewards(cfg, algo)
     trusted = cfg.run.trust_checkpoint
