@@ -199,3 +199,31 @@ def test_every_game_task_builds_its_game_as_the_task_builds_it(name):
     other = "defender" if spec.player == "attacker" else "attacker"
     with setup.entries[other].make_resolved(setup.env_kwargs) as env:
         assert env.unwrapped.agent == other
+
+
+@pytest.mark.parametrize(("scenario", "most"), [("ch5-game", 10), ("game-m10", 40)])
+def test_double_oracle_on_the_informed_game_ends_at_the_bayesian_lp_equilibrium(scenario, most):
+    from agents.informed_game import run_informed_population
+    from baselines.game import bayesian_game
+
+    game = bayesian_game(scenario, ("independent", "dependent"), (0.5, 0.5), "informed", 100.0)
+    history = run_informed_population("psro", game, 1000, converge=True)
+    assert len(history) <= most  # its fixed point (ch5-game: 6 iterations, game-m10: 13)
+    x, y = np.array(history[-1]["x"]), np.array(history[-1]["y"])
+    assert y.shape == (2, game.matrices.shape[2])  # one mix per type
+    value = game.solution.value  # the LP of baselines.game.lp.solve_bayesian
+    assert game.payoff(x, y) == pytest.approx(value, rel=1e-9)
+    assert game.defender_worst_case(x) == pytest.approx(value, rel=1e-9)
+    assert game.attacker_worst_case(y) == pytest.approx(value, rel=1e-9)
+
+
+def test_fictitious_play_on_the_informed_game_approaches_the_equilibrium():
+    from agents.informed_game import run_informed_population
+    from baselines.game import bayesian_game
+
+    game = bayesian_game("ch5-game", ("independent", "dependent"), (0.5, 0.5), "informed", 100.0)
+    history = run_informed_population("fsp", game, 200, converge=True)
+    assert len(history) == 200  # the average moves with every answer: no fixed point
+    nash_conv = [rec["nash_conv"] for rec in history]
+    # 7.36 after the first answers, 0.30 (3 % of the value 9.727) after 200
+    assert nash_conv[-1] < 0.05 * game.solution.value < nash_conv[0]
