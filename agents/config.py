@@ -383,7 +383,8 @@ GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57", "grid-ieee118")
 SPARSE_ENVS = ("sparse_attack_v2", "sparse_attack_v1", "sparse_attack_v0")
 """The sparse attack's versions train.py trains, the newest (its default env) first."""
 GAME_ITERATIONS = 8
-"""``train.py game``'s default ``--iterations`` (but a ``--task`` run's exact best responses)."""
+"""``train.py game``'s default ``--iterations`` (a ``--task`` run of PSRO with exact best
+responses runs to its fixed point instead: :attr:`GameConfig.converges`)."""
 GAME_EXPECTED_REWARDS = ("grid-ieee14",)
 """Sensor-game presets whose SB3 best responses train on the expected reward over the other
 side's mix by default (``train.py game --expected-rewards``): there the defender's strategies
