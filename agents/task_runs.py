@@ -58,9 +58,8 @@ def resolve_task(name: str, command: str) -> Any:
         ) from None
     if task.is_game:
         raise ValueError(
-            f"--task {name} is a game task (scored by exploitability): train games with "
-            "train.py game (--env sensor_game_v0 --scenario ...); game tasks via --task are not "
-            "supported yet"
+            f"--task {name} is a game task (scored by exploitability): train both players "
+            f"with train.py game --task {name}"
         )
     if task.player != command:
         raise ValueError(

@@ -282,7 +282,7 @@ def open_run(
     if isinstance(cfg, TrainConfig):
         folder.check_not_shorter("total_timesteps", cfg.total_timesteps, session.steps)
     elif cfg.method != "selfplay" and cfg.env not in CONTINUOUS_GAMES:  # one record each
-        folder.check_not_shorter("iterations", cfg.iterations, done, "iterations")
+        folder.check_not_shorter("iterations", cfg.n_iterations, done, "iterations")
     return session
 
 
@@ -436,7 +436,7 @@ def _start_selfplay(
     """
     per_iteration = _per_iteration(cfg, run, hyperparameters)
     algo, stop = _start(
-        run, cfg, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game", env_kwargs,
+        run, cfg, cfg.env, env_kwargs, cfg.n_iterations * per_iteration, "game", env_kwargs,
         hyperparameters, reference,
     )  # fmt: skip
     return per_iteration, algo, stop
@@ -445,9 +445,9 @@ def _start_selfplay(
 def _iterate_selfplay(
     cfg: GameConfig, algo: Any, run: Session, stop: Any, per_iteration: int, on_iteration: Any
 ) -> tuple[list[dict[str, Any]], int, float]:
-    """:func:`_iterate` over the self-play drivers' ``cfg.iterations`` iterations."""
+    """:func:`_iterate` over the self-play drivers' ``cfg.n_iterations`` iterations."""
     return _iterate(
-        algo, cfg.iterations * per_iteration, run, stop, on_iteration,
+        algo, cfg.n_iterations * per_iteration, run, stop, on_iteration,
         progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
     )  # fmt: skip
 
@@ -475,7 +475,7 @@ def _per_iteration(cfg: GameConfig, run: Session, hyperparameters: dict[str, Any
     n_steps = hyperparameters["n_steps"]
     per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
     run.folder.check_not_shorter(
-        "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+        "iterations", cfg.n_iterations, run.steps // per_iteration, "iterations"
     )
     return per_iteration
 
@@ -593,11 +593,11 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
 
     Other methods (psro, fsp, ibr) run :func:`psro_rllib`.
 
-    ``cfg.iterations`` iterations of ``cfg.steps_per_iteration`` env steps each; after each the
+    ``cfg.n_iterations`` iterations of ``cfg.steps_per_iteration`` env steps each; after each the
     exploitability of the players' current mixes and of their average over the second half of
     the iterations so far is computed on the exact payoff matrix. The result's ``x``/``y`` are
     the average mixes (the last-iterate figures are in the history). ``--resume`` continues
-    to ``cfg.iterations`` in all (both modules' weights, optimizer states and counters, and the
+    to ``cfg.n_iterations`` in all (both modules' weights, optimizer states and counters, and the
     mixes averaged so far, restored).
 
     Raises:
@@ -785,7 +785,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
     as its fixed opponent). The run folder holds config.json, progress.jsonl (one record per
     iteration), scores.json, each best response's weights (``policies/<side>_<k>.pt``) and
     ``rllib_state.json`` (populations, meta-game, mixes, after every iteration), from which
-    ``--resume`` continues to ``cfg.iterations`` in all (PSRO's meta-game needs the earlier
+    ``--resume`` continues to ``cfg.n_iterations`` in all (PSRO's meta-game needs the earlier
     policies: they are rebuilt from their weights, never unpickled).
 
     Raises:
@@ -824,7 +824,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
 
         game = MatrixGame(entries, env_kwargs, L, value)
         history = run_population(
-            cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, cfg.steps_per_iteration,
+            cfg.method, oracle, game, loop, cfg.n_iterations, cfg.run.seed, cfg.steps_per_iteration,
             lambda: stop.requested, on_iteration,
         )  # fmt: skip
         pops, meta, x, y = loop.actions, loop.meta, loop.x, loop.y
