@@ -315,12 +315,14 @@ def _rllib(run_dir: Path, env: gym.Env, config: dict[str, Any], source: str) -> 
 
     from agents.config import Hyperparameters
     from agents.rllib.config import ppo_config
-    from agents.rllib.envs import is_masked, make_view
+    from agents.rllib.envs import TASK_ENV, is_masked, make_view
     from agents.rllib.policy import RLlibPolicy
     from agents.rllib.state import read_state
 
     resolved = config.get("resolved", {})
     gym_id, env_kwargs = resolved.get("env"), dict(resolved.get("env_kwargs", {}))
+    if resolved.get("task") is not None:  # a --task run: the task's env (its options objects)
+        gym_id, env_kwargs = TASK_ENV, {"task": resolved["task"]}
     net = resolved.get("hyperparameters", {}).get("net_arch")
     meta, payload = read_state(run_dir)
     key = f"rl_module/{DEFAULT_MODULE_ID}"
