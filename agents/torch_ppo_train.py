@@ -166,6 +166,7 @@ def train_torch_ppo_run(
                     f"{resume.iteration} iterations of {config.num_envs} x {config.num_steps}: "
                     "it is not a state of this run's config"
                 )
+            say(f"resuming {run.path} from its training state at {resume.timesteps} steps")
         try:
             if task is None:
                 eval_env = gym.make(entry.gym_id, **env_kwargs)

@@ -44,7 +44,7 @@ class TorchVectorOf(gym.vector.VectorEnv):
         )
         obs_space = self.envs.single_observation_space
         if not isinstance(obs_space, spaces.Box):
-            self.envs.close()
+            self.close()
             raise ValueError(f"the env's observation space must be a Box, got {obs_space}")
         self.num_envs = num_envs
         self.device = str(torch.device(device))
@@ -106,7 +106,8 @@ class TorchVectorOf(gym.vector.VectorEnv):
             return torch.ones((self.num_envs, n), dtype=torch.bool, device=self.device)
         return self._tensor(np.stack(self.envs.call("action_masks")), torch.bool)
 
-    def close(self, **kwargs: Any) -> None:
-        """Close the copies."""
-        self.envs.close()
-        self.closed = True
+    def close_extras(self, **kwargs: Any) -> None:
+        """Close the copies (:meth:`close` calls it once)."""
+        envs = getattr(self, "envs", None)  # None: refused before the copies were built
+        if envs is not None:
+            envs.close()

@@ -131,9 +131,11 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
 
     So ``train.py attacker --resume`` continues the latest run of its env, algo and seed with
     its own settings; an option given explicitly must agree with it (checked by the trainer),
-    except the training length, which may be extended.
+    except the training length, which may be extended. A run's ``--task`` is kept; another one
+    is refused here (:func:`agents.lifecycle.check_same_task`).
     """
     from agents.checkpoint import read_json
+    from agents.lifecycle import check_same_task
     from agents.runs import config_from_dict, resume_dir
 
     if cfg.run.backend == "rllib":
@@ -160,7 +162,10 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
     if "--env-kwargs" in argv:  # given again: parsed as given (tyro reads a non-empty dict
         default.env_kwargs = {}  # default as --env-kwargs.NAME options), checked by the trainer
     command = next(a for a in argv if a in COMMANDS)
-    return tyro.cli(type(cfg), args=argv[argv.index(command) + 1 :], default=default)
+    resumed = tyro.cli(type(cfg), args=argv[argv.index(command) + 1 :], default=default)
+    # before the task's options are checked against the run's (its --env, say)
+    check_same_task(saved.get("task"), getattr(resumed, "task", None), Path(run_dir))
+    return resumed
 
 
 def format_table(rows: dict[str, Evaluation]) -> str:
