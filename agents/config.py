@@ -559,8 +559,9 @@ class TrainConfig:
     newest version, the older ones by name (sparse_attack_v0, sparse_attack_v1)."""
     task: str | None = None
     """Benchmark task (fdia_env.tasks.names()): train its scored player on its env exactly as
-    the task builds it and score the run on it as python -m agents.bench score does; excludes
-    --env, --scenario, --env-kwargs and --opponent."""
+    the task builds it and score the run on it as python -m agents.bench score does; takes
+    every --algo that fits the task's actions, --backend rllib and --resume (which keeps the
+    run's task); excludes --env, --scenario, --env-kwargs and --opponent."""
     scenario: str | None = None
     """Scenario preset (default: the env's first: ch4-position, ch2-position, ch5-game)."""
     env_kwargs: dict[str, str] = field(default_factory=dict)
