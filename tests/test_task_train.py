@@ -46,7 +46,7 @@ def runs(tmp_path_factory):
         ("attacker", "sparse/ch4-pv-case1-logdet-v0", "A2C"),
         ("attacker", "sparse/tracking-m6-1000004-v0", "torch-ppo"),
         ("attacker", "system-family/tracking-m6-v0", "torch-ppo"),
-        ("attacker", "detection-game/ch3-static-attacker-v0", "SAC"),
+        ("attacker", "covariance/ch2-pv-2-v0", "SAC"),
         ("attacker", "covariance/ch2-position-logdet-v0", "A2C"),
         ("attacker", "stealth/ieee14-b3-v0", "PPO"),
     ],
@@ -54,7 +54,13 @@ def runs(tmp_path_factory):
 def test_a_task_run_scores_as_agents_bench_score_on_its_folder(
     command, task, algo, runs, tmp_path, capsys
 ):
-    extra = {"A2C": ["--n-steps", "8"], "torch-ppo": ["--num-envs", "8"]}.get(algo, [])
+    replay = ["--learning-starts", "16", "--batch-size", "16"]  # gradient steps within 64
+    extra = {
+        "A2C": ["--n-steps", "8"],
+        "DQN": replay,
+        "SAC": replay,
+        "torch-ppo": ["--num-envs", "8", "--n-steps", "4"],
+    }.get(algo, [])
     steps = STEPS if algo in ("PPO", "MaskablePPO") else ["--total-timesteps", "64"]
     result = train_main(
         [command, "--task", task, "--algo", algo, *steps, *extra, *TINY, "--runs-root", str(runs)]
@@ -62,6 +68,8 @@ def test_a_task_run_scores_as_agents_bench_score_on_its_folder(
     printed = capsys.readouterr().out
     scores = json.loads((result.run_dir / "scores.json").read_text())
     config = json.loads((result.run_dir / "config.json").read_text())
+    # PPO: 2 rollouts of 64; torch-ppo: 2 iterations of 8 members x 4 steps
+    assert scores["num_timesteps"] == (128 if algo in ("PPO", "MaskablePPO") else 64)
     assert config["resolved"]["task"] == task
     assert config["resolved"]["gym_id"] == tasks.get(task).env_id
     out = tmp_path / "bench.json"
