@@ -382,6 +382,9 @@ _GRID_GAME = ScenarioDefaults(
 GRID_PRESETS = ("grid-ieee14", "grid-ieee30", "grid-ieee57", "grid-ieee118")
 SPARSE_ENVS = ("sparse_attack_v2", "sparse_attack_v1", "sparse_attack_v0")
 """The sparse attack's versions train.py trains, the newest (its default env) first."""
+GAME_ITERATIONS = 8
+"""``train.py game``'s default ``--iterations`` (a ``--task`` run of PSRO with exact best
+responses runs to its fixed point instead: :attr:`GameConfig.converges`)."""
 GAME_EXPECTED_REWARDS = ("grid-ieee14",)
 """Sensor-game presets whose SB3 best responses train on the expected reward over the other
 side's mix by default (``train.py game --expected-rewards``): there the defender's strategies
@@ -556,8 +559,9 @@ class TrainConfig:
     newest version, the older ones by name (sparse_attack_v0, sparse_attack_v1)."""
     task: str | None = None
     """Benchmark task (fdia_env.tasks.names()): train its scored player on its env exactly as
-    the task builds it and score the run on it as python -m agents.bench score does; excludes
-    --env, --scenario, --env-kwargs and --opponent."""
+    the task builds it and score the run on it as python -m agents.bench score does; takes
+    every --algo that fits the task's actions, --backend rllib and --resume (which keeps the
+    run's task); excludes --env, --scenario, --env-kwargs and --opponent."""
     scenario: str | None = None
     """Scenario preset (default: the env's first: ch4-position, ch2-position, ch5-game)."""
     env_kwargs: dict[str, str] = field(default_factory=dict)
@@ -623,6 +627,12 @@ class GameConfig:
     selfplay (--backend rllib: both players learning at once, scored by their average mix)."""
     env: str = "sensor_game_v0"
     """Registered two-player env."""
+    task: str | None = None
+    """Benchmark game task (fdia_env.tasks.names(), e.g. sensor-game/ch5-game-attacker-v0):
+    play its game exactly as the task builds it, train both players, and score the task's
+    player's final mix on the task as python -m agents.bench score does. Best responses
+    default to exact (PSRO is then double oracle and reaches the game value); excludes --env,
+    --scenario and --env-kwargs."""
     scenario: str | None = None
     """Scenario preset (default: the env's first, ch5-game)."""
     env_kwargs: dict[str, str] = field(default_factory=dict)
@@ -630,8 +640,10 @@ class GameConfig:
     algo: str | None = None
     """Best-response oracle: PPO, A2C or DQN (default: PPO), torch-ppo (on --device), or exact
     (the exact best response on the payoff matrix: nothing is learned)."""
-    iterations: int = 8
-    """Iterations; each trains one attacker and one defender best response."""
+    iterations: int | None = None
+    """Iterations; each trains one attacker and one defender best response (default 8; with
+    --task, PSRO and exact best responses: until the equilibrium is reached, double oracle's
+    fixed point)."""
     steps_per_iteration: int = 3_000
     """Environment steps per best response."""
     final_eval_episodes: int = 1_000
@@ -656,7 +668,26 @@ class GameConfig:
             )
         check_env_kwargs_format(self.env_kwargs)
         for name in ("iterations", "steps_per_iteration", "final_eval_episodes"):
-            check_number(name, getattr(self, name), *_AT_LEAST_1)
+            if getattr(self, name) is not None:
+                check_number(name, getattr(self, name), *_AT_LEAST_1)
+
+    @property
+    def n_iterations(self) -> int:
+        """``--iterations``, else :data:`GAME_ITERATIONS`.
+
+        A run that :attr:`converges` without ``--iterations`` runs to its fixed point instead.
+        """
+        return GAME_ITERATIONS if self.iterations is None else self.iterations
+
+    @property
+    def converges(self) -> bool:
+        """Whether the run is a ``--task`` run of PSRO with exact best responses (double oracle).
+
+        Such a run (``--task``'s default) iterates until the equilibrium is reached unless
+        ``--iterations`` is given.
+        """
+        exact = self.algo is None or str(self.algo).strip().lower() == "exact"
+        return self.task is not None and exact and self.method == "psro"
 
 
 def _check_tuple(name: str, values: object, kind: type, ok: Callable[[float], bool], allowed: str):

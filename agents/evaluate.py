@@ -507,15 +507,40 @@ def _bayesian_score(
     return float(expl), extras
 
 
+_SOLVED: dict[int, tuple[np.ndarray, tuple]] = {}
+_MAX_SOLVED = 8
+
+
+def solve_cached(L: np.ndarray) -> tuple:
+    """``baselines.game.solve_zero_sum(L)``, kept for the last few read-only matrices.
+
+    A read-only matrix (the registry's cached games) cannot change, so its LP solution
+    (seconds for a 1,023-strategy game) is computed once however many evaluations score
+    against it.
+    """
+    from baselines.game import solve_zero_sum
+
+    if np.asarray(L).flags.writeable:
+        return solve_zero_sum(L)
+    hit = _SOLVED.get(id(L))
+    if hit is not None and hit[0] is L:
+        return hit[1]
+    out = solve_zero_sum(L)
+    if len(_SOLVED) >= _MAX_SOLVED:
+        _SOLVED.pop(next(iter(_SOLVED)))
+    _SOLVED[id(L)] = (L, out)
+    return out
+
+
 def _game_score(
     reference: Reference, env: gym.Env, strategy: np.ndarray
 ) -> tuple[float, dict[str, float]]:
-    from baselines.game import exploitability, solve_zero_sum
+    from baselines.game import exploitability
 
     if reference.bayes is not None:
         return _bayesian_score(reference, env, strategy)
     L = reference.payoff
-    x_eq, y_eq, value = solve_zero_sum(L)
+    x_eq, y_eq, value = solve_cached(L)
     parallel = parallel_of(env)
     agent = env.unwrapped.agent
     if agent == "attacker":

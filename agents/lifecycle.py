@@ -5,8 +5,9 @@ A driver checks its options and builds what it trains, then:
 1. :func:`open_run` finds the run folder: a new one's path (not created yet), or, with
    ``--resume``, the folder to continue (``--run-dir``, or the latest of this prefix holding the
    driver's checkpoint marker). A resumed folder is locked at once, its ``config.json`` must
-   agree with the given options (except the training length and how the run executes:
-   :data:`agents.runs.RESUMABLE`), and the temporary files a kill left are removed;
+   agree with the given options (its ``--task`` included; except the training length and how
+   the run executes: :data:`agents.runs.RESUMABLE`), and the temporary files a kill left are
+   removed;
 2. :meth:`RunFolder.check_not_shorter` refuses a resume that would shorten the run;
 3. :meth:`RunFolder.begin` creates and locks a new folder (removed again if the launch fails
    before its first checkpoint), once the model is built;
@@ -301,8 +302,9 @@ def open_run(
             driver starts again from step 0 (:attr:`RunFolder.checkpointed` is False).
 
     Raises:
-        ValueError: Nothing to resume, a folder in use, a run of another backend, options
-            that differ from the saved ones, or a corrupt config.json.
+        ValueError: Nothing to resume, a folder in use, a run of another backend, another
+            ``--task`` than the run's (:func:`check_same_task`), options that differ from the
+            saved ones, or a corrupt config.json.
         FileExistsError: When a new run's folder exists.
     """
     say = report or _silent
@@ -325,10 +327,33 @@ def open_run(
             f"cannot resume {run_dir} with --backend {backend}: it is not an "
             f"{'RLlib' if backend == 'rllib' else backend} run"
         )
+    check_same_task(options.get("task"), getattr(cfg, "task", None), run_dir)
     check_resumable(options, config_dict(cfg), run_dir)
     for stale in remove_stale_temp_files(run_dir):
         say(f"removed a temporary file left by an interrupted write: {stale}")
     return RunFolder(run_dir, marker, stack, options, resolved)
+
+
+def check_same_task(saved: Any, given: Any, run_dir: Path) -> None:
+    """Raise unless a resume names the task its run was trained on (``--task``; None: none).
+
+    A run trained on a task is resumed on that task, and a run trained without ``--task`` is
+    resumed without it: a run folder holds one env's training.
+
+    Raises:
+        ValueError: Naming ``--task``, the run folder and the run's own task.
+    """
+    if saved == given:
+        return
+    if saved is None:
+        raise ValueError(
+            f"--task {given}: {run_dir} was trained without --task; resume it without --task, "
+            "or start a new run"
+        )
+    raise ValueError(
+        f"--task {given}: {run_dir} was trained on task {saved}; resume it with --task {saved} "
+        "(or without --task: a resume keeps the run's task), or start a new run"
+    )
 
 
 TENSORBOARD_NOTICE = (

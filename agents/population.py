@@ -72,12 +72,15 @@ class MatrixGame:
         payoff: (m, n) the attacker's payoff, defender actions × attacker actions (for the
             uninformed Bayesian game, ``L̄ = Σ_s p_s L_s``).
         value: The game value (LP).
+        exact_meta: PSRO reads its meta-game from ``payoff`` (the pure strategies' exact
+            payoffs) instead of playing the populations in the env (:func:`grow_meta`).
     """
 
     entries: dict[str, Any]
     env_kwargs: dict[str, Any]
     payoff: np.ndarray
     value: float
+    exact_meta: bool = False
 
     @property
     def sizes(self) -> dict[str, int]:
@@ -250,6 +253,21 @@ def grow_meta(
     return out
 
 
+def at_fixed_point(method: str, actions: dict[str, list[Any]]) -> bool:
+    """Whether the last iteration's answers leave the loop where it was (it has converged).
+
+    PSRO: both answers were already in their populations, so the meta-game, the mixes and the
+    next answers repeat (with exact answers: double oracle's end, an equilibrium of the full
+    game). IBR: both answers repeat the previous ones (a pure equilibrium). FSP's average moves
+    with every answer: never.
+    """
+    if method == "psro":
+        return all(actions[s] and actions[s][-1] in actions[s][:-1] for s in SIDES)
+    if method == "ibr":
+        return all(len(actions[s]) > 1 and actions[s][-1] == actions[s][-2] for s in SIDES)
+    return False
+
+
 def report_line(rec: dict[str, Any]) -> str:
     """One iteration's line: best responses, their gaps, exploitabilities, NashConv."""
     return (
@@ -384,7 +402,9 @@ def run_population(
         # how far each answer is from an exact best response to the mix it answered
         gap_att = float((x @ L).max() - (x @ L)[state.actions["attacker"][-1]])
         gap_def = float((L @ y)[state.actions["defender"][-1]] - (L @ y).min())
-        if method == "psro":
+        if method == "psro" and game.exact_meta:
+            state.meta = np.asarray(L)[np.ix_(state.actions["defender"], state.actions["attacker"])]
+        elif method == "psro":
             state.meta = grow_meta(
                 state.meta,
                 state.policies,

@@ -16,6 +16,7 @@ as its reference).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -222,8 +223,66 @@ def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference |
     return Reference(value, "game value (LP)", "trace", True, L, MixedStrategyPolicy(y, seed=0))
 
 
-_GAMES: dict[tuple[int, float, str, int | None], tuple[Any, tuple]] = {}
+_GAMES: dict[tuple[str, float, str, int | None], tuple[Any, tuple]] = {}
 _MAX_GAMES = 8
+_BAYESIAN: dict[tuple, tuple[Any, Any]] = {}
+
+
+def _cached_bayesian_game(env: FdiaParallelEnv, build: Callable[[Any], Any]) -> Any:
+    """``build(env)``: the typed game's BayesianGame, kept for the last few games.
+
+    The game's LP solution (a cached property) is kept with it: on game-m10 with an informed
+    attacker the LP takes seconds, and a run asks for the game for every view it scores. A hit
+    is used only for the same scenario (:func:`_same_scenario`) and the same typed attack
+    (types, priors, attacker model, power, largest subset).
+    """
+    attack = env.attack
+    key = (
+        str(getattr(env.scenario, "name", id(env.scenario))),
+        tuple(attack.types),
+        tuple(float(p) for p in attack.priors),
+        str(attack.attacker_model),
+        float(attack.power),
+        attack.max_subset_size,
+    )
+    hit = _BAYESIAN.get(key)
+    if hit is not None and _same_scenario(hit[0], env.scenario):
+        return hit[1]
+    game = build(env)
+    if len(_BAYESIAN) >= _MAX_GAMES:
+        _BAYESIAN.pop(next(iter(_BAYESIAN)))
+    _BAYESIAN[key] = (env.scenario, game)
+    return game
+
+
+def _equal(a: Any, b: Any) -> bool:
+    """Equal values, arrays compared entry by entry (mappings and sequences by their items)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.shape(a) == np.shape(b) and bool(np.array_equal(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b, strict=True))
+    return bool(a == b)
+
+
+def _same_scenario(a: Any, b: Any) -> bool:
+    """Whether two scenarios are one game's: the same object, or equal fields and systems."""
+    if a is b:
+        return True
+    if type(a) is not type(b) or not dataclasses.is_dataclass(a):
+        return False
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if f.name == "system":
+            if type(x) is not type(y) or not all(
+                _equal(getattr(x, k, None), getattr(y, k, None))
+                for k in ("F", "Q", "H", "R", "Gu", "T", "name")
+            ):
+                return False
+        elif not _equal(x, y):
+            return False
+    return True
 
 
 def _solved_game(
@@ -234,14 +293,16 @@ def _solved_game(
     A grid preset's game (596 × 595 on grid-ieee14) takes seconds to build and solve, and a
     run asks for it for every view it scores; a game whose matrix the benchmark stores
     (:func:`fdia_env.tasks.payoffs.stored_payoff`: IEEE 118, minutes to build) is read.
-    Keyed by the scenario object (presets are built once per process), which the cache holds
-    so its id is not reused.
+    Keyed by the scenario's name and the game's options; a hit is used only for a scenario
+    equal to the one it was solved for (:func:`_same_scenario`: a preset rebuilt by every env
+    is the same scenario, not the same object).
     """
     from baselines.game import payoff_matrix, solve_zero_sum
 
-    key = (id(scenario), float(power), str(allocation), max_subset_size)
+    key = (str(getattr(scenario, "name", id(scenario))), float(power), str(allocation))
+    key += (max_subset_size,)
     hit = _GAMES.get(key)
-    if hit is not None and hit[0] is scenario:
+    if hit is not None and _same_scenario(hit[0], scenario):
         return hit[1]
     from fdia_env.tasks.payoffs import stored_payoff
 
@@ -269,7 +330,7 @@ def bayesian_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Referen
     from baselines.game import MixedStrategyPolicy, TypedMixedStrategyPolicy, bayesian_game_of
 
     attack = env.attack
-    game = bayesian_game_of(env)
+    game = _cached_bayesian_game(env, bayesian_game_of)
     sol = game.solution
     name = f"Bayesian equilibrium (LP, {attack.attacker_model} attacker)"
     payoff = game.mean_payoff if game.attacker == "uninformed" else None

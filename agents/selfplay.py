@@ -53,8 +53,10 @@ from agents.config import (
     check_device_available,
     resolve_device,
     resolved_hyperparameters,
+    scenario_defaults,
+    with_defaults,
 )
-from agents.evaluate import Evaluation, evaluate
+from agents.evaluate import Evaluation, evaluate, solve_cached
 from agents.interrupt import StopRequest, StopTrainingCallback
 from agents.lifecycle import game_scores, open_run, tensorboard
 from agents.plots import exploitability_curve
@@ -68,6 +70,7 @@ from agents.population import (
     MatrixGame,
     Oracle,
     PopulationState,
+    at_fixed_point,
     initial_action,
     report_line,
     run_population,
@@ -86,7 +89,7 @@ from agents.training import (
     saved_hyperparameters,
     say_kept,
 )
-from baselines.game import MixedStrategyPolicy, solve_zero_sum
+from baselines.game import MixedStrategyPolicy
 from fdia_env.envs.opponents import FixedMix
 
 if TYPE_CHECKING:
@@ -113,6 +116,8 @@ class SelfPlayResult:
         populations: The learned pure strategies (actions) of each side, in order.
         train_seconds: Wall time of the iterations.
         interrupted: The signal (SIGINT 2, SIGTERM 15) that stopped the run early, or None.
+        task_score: A ``--task`` run's :class:`agents.bench.score.Score` of its player's final
+            mix on the task (scores.json's ``task``), else None.
     """
 
     run_dir: Path
@@ -125,6 +130,7 @@ class SelfPlayResult:
     populations: dict[str, list[int]] = field(default_factory=dict)
     train_seconds: float = 0.0
     interrupted: int | None = None
+    task_score: Any = None
 
 
 class ExpectedOpponentEnv(gym.Env):
@@ -323,13 +329,33 @@ def game_algo(cfg: GameConfig) -> str:
     Raises:
         ValueError: For an algorithm that does not apply (listing the valid ones).
     """
+    if cfg.task is not None:  # exact by default
+        from agents.game_task_runs import game_task_setup
+
+        return game_task_setup(cfg).algo
     if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT:
         return EXACT
     return game_setup(cfg).algo
 
 
 def game_setup(cfg: GameConfig) -> RunSetup:
-    """The game's options resolved with its scenario's defaults (:func:`run_setup`)."""
+    """The game's options resolved with its scenario's defaults (:func:`run_setup`).
+
+    With ``--task``: the task's options as they are (no preset applied), the learners' defaults
+    from the scenario's table where its conditions hold.
+    """
+    if cfg.task is not None:
+        from agents.game_task_runs import game_task_setup
+
+        task = game_task_setup(cfg)
+        entry = task.entries["attacker"]
+        name = entry.default_algorithm if task.algo == EXACT else task.algo
+        defaults = scenario_defaults(entry.env, task.scenario, task.env_kwargs)
+        normalize = cfg.normalize_reward
+        if normalize is None:
+            normalize = defaults.normalize_reward
+        hp = with_defaults(name, cfg.hp, defaults)
+        return RunSetup(entry, name, task.env_kwargs, hp, bool(normalize))
     algo = None if isinstance(cfg.algo, str) and cfg.algo.strip().lower() == EXACT else cfg.algo
     return run_setup(
         cfg.env, "attacker", cfg.scenario, cfg.env_kwargs, algo, cfg.hp, cfg.normalize_reward
@@ -354,11 +380,22 @@ def expected_rewards(cfg: GameConfig, algo: str) -> bool:
         return False
     if cfg.expected_rewards is not None:
         return cfg.expected_rewards
+    if cfg.task is not None:
+        from fdia_env.tasks import get as get_task
+
+        return get_task(cfg.task).env_kwargs.get("scenario") in GAME_EXPECTED_REWARDS
     return cfg.scenario in GAME_EXPECTED_REWARDS
 
 
 def game_prefix(cfg: GameConfig) -> str:
-    """Run folder name without its time: ``<env>-<method>-<algo>-s<seed>``."""
+    """Run folder name without its time: ``<env>-<method>-<algo>-s<seed>``.
+
+    A ``--task`` run's env part is the task's: ``task-sensor-game-ch5-game-attacker-v0``.
+    """
+    if cfg.task is not None:
+        from agents.task_runs import run_env_name
+
+        return run_prefix(f"{run_env_name(cfg.task)}-{cfg.method}", game_algo(cfg), cfg.run.seed)
     return run_prefix(f"{cfg.env}-{cfg.method}", game_algo(cfg), cfg.run.seed)
 
 
@@ -453,14 +490,32 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
     say = report or (lambda line: None)
     if cfg.method not in METHODS:
         raise ValueError(f"unknown method {cfg.method!r}; valid methods: {', '.join(METHODS)}")
-    if cfg.env not in game_names():
+    task = None
+    if cfg.task is not None:  # the task's game, as the task builds it
+        from agents.game_task_runs import game_task_setup
+
+        task_setup = game_task_setup(cfg)
+        task, entries = task_setup.task, dict(task_setup.entries)
+    elif cfg.env not in game_names():
         raise ValueError(f"unknown game {cfg.env!r}; valid games: {', '.join(game_names())}")
+    else:
+        entries = {side: get(cfg.env, side) for side in SIDES}
     check_device_available(cfg.run.device)
-    entries = {side: get(cfg.env, side) for side in SIDES}
     algo = game_algo(cfg)
     setup = game_setup(cfg)
     kwargs, hyperparameters, torch_config = _learner_options(cfg, algo, setup.hp)
     env_kwargs = setup.env_kwargs
+    if task is not None and algo == EXACT:
+        from agents.game_task_runs import is_informed
+
+        if is_informed(task):  # no matrix game: exact answers per type (agents.informed_game)
+            from agents.game_task_runs import score_game_run
+            from agents.informed_game import run_informed_task
+
+            run = run_informed_task(
+                cfg, entries, env_kwargs, game_prefix(cfg), STATE, SelfPlayResult, report
+            )
+            return score_game_run(task, run)
     reference = _game_reference(cfg, entries, algo, kwargs, env_kwargs)
     expected = expected_rewards(cfg, algo)
     trusted = cfg.run.trust_checkpoint
@@ -494,7 +549,9 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
         scale = resolved.get("reward_scale", scale)
         if run.checkpointed:
             state = _read_state(run_dir / STATE)
-            run.check_not_shorter("iterations", cfg.iterations, len(state["history"]), "iterations")
+            run.check_not_shorter(
+                "iterations", cfg.n_iterations, len(state["history"]), "iterations"
+            )
             names = policy_names(state)
             if algo == EXACT:
                 models = {s: [ConstantPolicy(a) for a in state["populations"][s]] for s in SIDES}
@@ -511,6 +568,10 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             run.begin()
             names = {side: [] for side in SIDES}
             models = {side: [] for side in SIDES}
+        if task is not None:
+            from agents.game_task_runs import task_resolved
+
+            on_task = task_resolved(task)  # the task, its player's view and its options
         run.write_config(
             "game",
             cfg,
@@ -521,11 +582,14 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                 "reward_scale": scale,
                 "expected_rewards": expected,
                 "reference": {"name": reference.name, "value": value},
+                **({} if task is None else on_task),
             },
         )
         seed_everything(cfg.run.seed, cfg.run.torch_threads)
         stop = run.watch_signals()
-        game = MatrixGame(entries, env_kwargs, L, value)
+        # a --task run's exact answers: PSRO's meta-game from the exact payoffs (double oracle)
+        exact_meta = task is not None and algo == EXACT
+        game = MatrixGame(entries, env_kwargs, L, value, exact_meta=exact_meta)
         oracle: Oracle
         if algo == EXACT:
             oracle = ExactOracle(L)
@@ -537,7 +601,11 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
                 expected,
             )  # fmt: skip
         loop = _population_state(state, names, models, n)
-        history = _iterate(cfg, run_dir, loop, oracle, game, stop, report)
+        # --task's double oracle: to its fixed point (each iteration before it adds a strategy)
+        iterations = cfg.n_iterations
+        if cfg.converges and cfg.iterations is None:
+            iterations = n["defender"] + n["attacker"]
+        history = _iterate(cfg, run_dir, loop, oracle, game, stop, report, iterations)
         if not history:  # stopped before the first iteration finished
             run.discard()  # a new run's folder (the lock released first)
             return SelfPlayResult(
@@ -551,13 +619,14 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             game_scores(cfg.method, value, x, y, history, history[-1]["timesteps"], train_seconds),
             evaluations,
         )
+        on = f"task {task.name}" if task is not None else cfg.env
         exploitability_curve(
             run_dir / "learning_curve.png",
             history,
             value,
-            f"{cfg.method.upper()} ({algo} best responses) on {cfg.env} ({env_kwargs['scenario']})",
+            f"{cfg.method.upper()} ({algo} best responses) on {on} ({env_kwargs['scenario']})",
         )
-        return SelfPlayResult(
+        result = SelfPlayResult(
             run_dir,
             cfg.method,
             x,
@@ -569,6 +638,11 @@ def run_selfplay(cfg: GameConfig, report: Callable[[str], None] | None = print) 
             train_seconds,
             interrupted=stop.signum,
         )
+        if task is not None:  # scored as python -m agents.bench score scores the folder
+            from agents.game_task_runs import score_game_run
+
+            return score_game_run(task, result)
+        return result
 
 
 def _game_reference(
@@ -761,11 +835,14 @@ def _iterate(
     game: MatrixGame,
     stop: StopRequest,
     report: Callable[[str], None] | None,
+    iterations: int,
 ) -> list[dict[str, Any]]:
-    """The iterations from the state's last one to ``cfg.iterations`` (or a stop request).
+    """The iterations from the state's last one to ``iterations`` (or a stop request).
 
-    After each finished iteration its policies are saved and ``state.json`` is rewritten
-    (atomically, last). Returns the history of all finished iterations.
+    A run that :attr:`~agents.config.GameConfig.converges` also stops at the loop's fixed
+    point (:func:`~agents.population.at_fixed_point`). After each finished iteration its
+    policies are saved and ``state.json`` is rewritten (atomically, last). Returns the history
+    of all finished iterations.
     """
     tb = tensorboard(run_dir / "tb", purge_from=len(loop.history) + 1 if loop.history else None)
 
@@ -788,9 +865,14 @@ def _iterate(
             return tqdm(steps, desc=f"{cfg.method} on {cfg.env}", unit="iter")
 
     steps = 0 if isinstance(oracle, ExactOracle) else cfg.steps_per_iteration  # exact: none
+
+    def done() -> bool:
+        converged = cfg.converges and bool(loop.history)
+        return stop.requested or (converged and at_fixed_point(cfg.method, loop.actions))
+
     history = run_population(
-        cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, steps,
-        lambda: stop.requested, on_iteration, progress,
+        cfg.method, oracle, game, loop, iterations, cfg.run.seed, steps, done, on_iteration,
+        progress,
     )  # fmt: skip
     tb.close()
     return history
@@ -806,7 +888,7 @@ def _final_evaluations(
 ) -> dict[str, Evaluation]:
     """Each side's learned mix and LP equilibrium mix, played against the other learned mix."""
     seed = derived_seed(cfg.run.seed, 20_000)
-    x_eq, y_eq, _ = solve_zero_sum(reference.payoff)
+    x_eq, y_eq, _ = solve_cached(reference.payoff)
     rows = {}
     for label, side, probs, other in (
         ("attacker mix (learned)", "attacker", y, x),

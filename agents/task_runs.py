@@ -2,9 +2,13 @@
 
 The env is built exactly as the task builds it (:meth:`fdia_env.tasks.Task.make_env`: its
 Gymnasium id, options and, for the system family, its entry point); the learners that fit the
-task env's action space are those of :func:`algorithms_for`. At the end the run folder is scored
-on the task by :func:`agents.bench.score.score`, the code of ``python -m agents.bench score``,
-with its default seeds and episodes, so that both give the same number on the same folder.
+task env's action space are those of :func:`algorithms_for` (``--algo``: stable-baselines3's
+and torch-ppo, which trains on :func:`task_torch_env`) and :func:`rllib_fits`
+(``--backend rllib``). A ``--resume`` of a task run keeps its task (:func:`check_resumed_task`)
+and rebuilds the task's env, never the options config.json records as text. At the end the run
+folder is scored on the task by :func:`agents.bench.score.score`, the code of ``python -m
+agents.bench score``, with its default seeds and episodes, so that both give the same number on
+the same folder.
 """
 
 from __future__ import annotations
@@ -16,9 +20,10 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 from gymnasium import spaces
 
-from agents.config import is_torch_ppo
+from agents.config import TORCH_PPO, is_torch_ppo
 from agents.registry import (
     ALGORITHMS,
     BOX_ALGORITHMS,
@@ -33,6 +38,10 @@ from agents.registry import (
 # too, whose default is the command's)
 TASK_FIXED = {"scenario": None, "env_kwargs": {}, "opponent": "uniform"}
 SCORE_SEEDS = 3  # python -m agents.bench score's default --seeds
+# torch-ppo's default --num-envs on a task without a native torch vector env: copies of the
+# task's env stepped on the host (agents.torch_vector), not a batch on the device
+TASK_COPIES = 16
+BACKENDS = ("sb3", "rllib")  # the --backend values a task run takes
 
 
 def option(name: str) -> str:
@@ -58,9 +67,8 @@ def resolve_task(name: str, command: str) -> Any:
         ) from None
     if task.is_game:
         raise ValueError(
-            f"--task {name} is a game task (scored by exploitability): train games with "
-            "train.py game (--env sensor_game_v0 --scenario ...); game tasks via --task are not "
-            "supported yet"
+            f"--task {name} is a game task (scored by exploitability): train both players "
+            f"with train.py game --task {name}"
         )
     if task.player != command:
         raise ValueError(
@@ -74,11 +82,11 @@ def check_task_options(cfg: Any, default_envs: tuple[str, ...]) -> None:
     """Raise unless ``cfg`` leaves every option that would change the task's env unset.
 
     ``default_envs``: the values of ``--env`` that mean it was not given (the command's
-    default).
+    default). ``--resume`` and ``--backend rllib`` are accepted (the drivers check the rest).
 
     Raises:
         ValueError: Naming the option (``--env``, ``--scenario``, ``--env-kwargs``,
-            ``--opponent``, ``--num-envs``, ``--resume``).
+            ``--opponent``, ``--num-envs``, ``--backend``).
     """
     given = [name for name, default in TASK_FIXED.items() if getattr(cfg, name) != default]
     if cfg.env not in default_envs:
@@ -91,23 +99,86 @@ def check_task_options(cfg: Any, default_envs: tuple[str, ...]) -> None:
     if cfg.num_envs is not None and not is_torch_ppo(cfg.algo):
         raise ValueError(
             f"--num-envs applies to --algo torch-ppo only with --task {cfg.task} (the "
-            "stable-baselines3 learners train on one env of the task)"
+            "stable-baselines3 learners train on one env of the task, RLlib on its own)"
         )
-    if cfg.run.resume:
-        raise ValueError(f"--resume is not supported with --task {cfg.task} yet")
-    if cfg.run.backend != "sb3":
-        raise ValueError(f"--backend {cfg.run.backend} is not supported with --task yet")
+    if cfg.run.backend not in BACKENDS:
+        raise ValueError(
+            f"--backend {cfg.run.backend} is not supported with --task; use one of "
+            f"{', '.join(BACKENDS)}"
+        )
+
+
+def torch_ppo_fits(space: gym.Space) -> bool:
+    """Whether torch-ppo's policy fits an action space: ``Discrete`` or a bounded 1-D ``Box``."""
+    if isinstance(space, spaces.Discrete):
+        return True
+    return (
+        isinstance(space, spaces.Box)
+        and len(space.shape) == 1
+        and bool(np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high)))
+    )
+
+
+def rllib_fits(space: gym.Space) -> bool:
+    """Whether RLlib PPO (``--backend rllib``) fits an action space: ``Discrete``, float ``Box``.
+
+    RLlib's catalog has no distribution for ``MultiBinary`` actions nor for an integer ``Box``.
+    """
+    if isinstance(space, spaces.Discrete):
+        return True
+    return isinstance(space, spaces.Box) and np.issubdtype(space.dtype, np.floating)
 
 
 def algorithms_for(space: gym.Space) -> tuple[str, ...]:
-    """The stable-baselines3 learners that fit an action space (the default first)."""
+    """The ``--algo`` learners that fit an action space (the default first).
+
+    stable-baselines3's (MaskablePPO first on ``Discrete`` actions, SAC on ``Box``, PPO on
+    ``MultiBinary``), then torch-ppo where :func:`torch_ppo_fits`.
+    """
     if isinstance(space, spaces.Discrete):
-        return MASKED_ALGORITHMS
-    if isinstance(space, spaces.Box):
-        return BOX_ALGORITHMS
-    if isinstance(space, spaces.MultiBinary | spaces.MultiDiscrete):
-        return tuple(a for a in DISCRETE_ALGORITHMS if a != "DQN")
-    return ()
+        sb3: tuple[str, ...] = MASKED_ALGORITHMS
+    elif isinstance(space, spaces.Box):
+        sb3 = BOX_ALGORITHMS
+    elif isinstance(space, spaces.MultiBinary | spaces.MultiDiscrete):
+        sb3 = tuple(a for a in DISCRETE_ALGORITHMS if a != "DQN")
+    else:
+        return ()
+    return (*sb3, TORCH_PPO) if torch_ppo_fits(space) else sb3
+
+
+def learners_for(space: gym.Space) -> str:
+    """The learners that fit an action space as one phrase, for the errors that list them."""
+    rllib = ", and --backend rllib (PPO)" if rllib_fits(space) else ""
+    return f"--algo {', '.join(algorithms_for(space))}{rllib}"
+
+
+def has_native_torch_env(task: Any) -> bool:
+    """Whether the task's env has a native torch vector env (else torch-ppo steps copies)."""
+    from fdia_env.registration import torch_ids
+
+    return task.entry_point is None and task.env_id in torch_ids()
+
+
+def task_torch_env(
+    task: Any, env_kwargs: dict[str, Any], num_envs: int, device: str
+) -> gym.vector.VectorEnv:
+    """The torch vector env torch-ppo trains on for ``task`` (``env_kwargs``: the task's).
+
+    The env's native torch vector env (``backend="torch"``, the task's options) where it has
+    one (:func:`has_native_torch_env`), else ``num_envs`` copies of the task's env
+    (:class:`agents.torch_vector.TorchVectorOf`): the system family, whose env is an entry
+    point of its own, and the views without a native vector env.
+    """
+    if has_native_torch_env(task):
+        from agents.torch_ppo import make_torch_env
+
+        return make_torch_env(task.env_id, num_envs, device, **env_kwargs)
+    from agents.torch_vector import TorchVectorOf
+    from fdia_env.tasks.task import make_pinned
+
+    return TorchVectorOf(
+        lambda: make_pinned(task.env_id, task.entry_point, env_kwargs), num_envs, device
+    )
 
 
 def run_env_name(task_name: str) -> str:
@@ -126,9 +197,11 @@ class TaskEntry(Trainable):
 
     Attributes:
         task: The :class:`fdia_env.tasks.Task`.
+        action_space: The task env's action space (what the learners must fit).
     """
 
     task: Any = None
+    action_space: Any = None
 
     @property
     def gym_id(self) -> str:
@@ -164,40 +237,61 @@ def task_entry(cfg: Any) -> TaskEntry:
     task = resolve_task(cfg.task, cfg.agent)
     env = task.make_env()
     try:
-        algorithms = algorithms_for(env.action_space)
+        space = env.action_space
     finally:
         env.close()
+    algorithms = algorithms_for(space)
     if not algorithms:
-        raise ValueError(f"--task {task.name}: no learner fits its action space")
+        raise ValueError(f"--task {task.name}: no learner fits its action space {space}")
     return TaskEntry(
         env=run_env_name(task.name),
         agent=cfg.agent,
         scenarios={"task": {}},
         algorithms=algorithms,
         reference=None,
-        masked=isinstance(algorithms, tuple) and "MaskablePPO" in algorithms,
+        masked="MaskablePPO" in algorithms,
         task=task,
+        action_space=space,
     )
+
+
+def _key(algo: str) -> str:
+    return algo.replace("_", "").replace("-", "").lower()
 
 
 def task_algorithm(entry: TaskEntry, algo: str | None) -> str:
     """``--algo`` checked against the task's action space (None: the first that fits).
 
     Raises:
-        ValueError: Naming ``--algo``, the task, and the learners that fit it.
+        ValueError: Naming ``--algo``, the task, its action space and the learners that fit
+            it (:func:`learners_for`).
     """
     if algo is None:
         return entry.algorithms[0]
-    key = algo.replace("_", "").replace("-", "").lower()
     for name in entry.algorithms:
-        if name.lower() == key:
+        if _key(name) == _key(algo):
             return name
-    known = key in {a.lower() for a in ALGORITHMS} or key == "torchppo"
+    known = _key(algo) in {_key(a) for a in (*ALGORITHMS, TORCH_PPO)}
     what = "does not fit the action space of" if known else "is no learner for"
     raise ValueError(
-        f"--algo {algo!r} {what} task {entry.task.name}; learners that fit: "
-        f"{', '.join(entry.algorithms)}"
+        f"--algo {algo!r} {what} task {entry.task.name} ({entry.action_space}); learners that "
+        f"fit: {learners_for(entry.action_space)}"
     )
+
+
+def check_rllib_fits(entry: TaskEntry) -> None:
+    """Raise unless RLlib PPO (``--backend rllib``) fits the task's action space.
+
+    Raises:
+        ValueError: Naming ``--backend rllib``, the task, its action space and the learners
+            that fit it.
+    """
+    if not rllib_fits(entry.action_space):
+        raise ValueError(
+            f"--backend rllib (PPO) does not fit the action space of task {entry.task.name} "
+            f"({entry.action_space}); learners that fit: {learners_for(entry.action_space)} "
+            "(--backend sb3)"
+        )
 
 
 def matching_task(gym_id: str, env_kwargs: dict[str, Any], agent: str) -> Any:

@@ -77,7 +77,7 @@ class TorchPPORun(RunResult):
 
 
 def torch_ppo_config(
-    cfg: TrainConfig, hp: Hyperparameters | None = None
+    cfg: TrainConfig, hp: Hyperparameters | None = None, num_envs: int | None = None
 ) -> tuple[TorchPPOConfig, dict[str, Any]]:
     """The :class:`TorchPPOConfig` of a train command, and its resolved hyperparameters.
 
@@ -85,13 +85,16 @@ def torch_ppo_config(
         cfg: The command.
         hp: Its hyperparameters with the scenario's defaults (:func:`agents.training.setup_of`,
             e.g. no observation normalisation on the grid presets); None: ``cfg.hp`` alone.
+        num_envs: The members (the run's setup's: ``--num-envs``, or a task's default); None:
+            ``cfg.num_envs``, or :data:`~agents.config.TORCH_PPO_NUM_ENVS` without it.
 
     Raises:
         ValueError: For a hyperparameter that does not apply to torch-ppo (naming where it
             does), or ``--n-epochs``/``--n-steps`` values torch-ppo rejects.
     """
     hp = resolved_hyperparameters(TORCH_PPO, cfg.hp if hp is None else hp)
-    num_envs = TORCH_PPO_NUM_ENVS if cfg.num_envs is None else cfg.num_envs
+    if num_envs is None:
+        num_envs = TORCH_PPO_NUM_ENVS if cfg.num_envs is None else cfg.num_envs
     try:
         config = TorchPPOConfig.from_hyperparameters(hp, cfg.total_timesteps, num_envs)
     except (TypeError, ValueError) as exc:
@@ -124,7 +127,7 @@ def train_torch_ppo_run(
         )
     check_device_available(cfg.run.device)
     device = resolve_device(cfg.run.device)
-    from agents.task_runs import plain_kwargs, score_run
+    from agents.task_runs import plain_kwargs, score_run, task_torch_env
     from agents.training import (
         as_saved,
         check_env_kwargs,
@@ -139,7 +142,7 @@ def train_torch_ppo_run(
     # the scenario's env options and hyperparameters (train.py's table), as the SB3 learners'
     setup = setup_of(cfg)
     entry = setup.entry
-    torch_ppo_config(cfg, setup.hp)  # checked before the run folder exists
+    torch_ppo_config(cfg, setup.hp, setup.num_envs)  # checked before the run folder exists
 
     with ExitStack() as stack:
         run = open_run(cfg, stack, train_prefix(cfg), CHECKPOINT, report, fresh=True)
@@ -147,7 +150,7 @@ def train_torch_ppo_run(
         say = report or (lambda _: None)
         setup = as_saved(setup, run.saved_resolved, cfg.num_envs, say, run.path / "config.json")
         env_kwargs = setup.env_kwargs
-        config, hyperparameters = torch_ppo_config(cfg, setup.hp)
+        config, hyperparameters = torch_ppo_config(cfg, setup.hp, setup.num_envs)
         task = getattr(entry, "task", None)
         if task is None:
             check_env_kwargs(entry.gym_id, env_kwargs)
@@ -163,18 +166,21 @@ def train_torch_ppo_run(
                     f"{resume.iteration} iterations of {config.num_envs} x {config.num_steps}: "
                     "it is not a state of this run's config"
                 )
+            say(f"resuming {run.path} from its training state at {resume.timesteps} steps")
         try:
             if task is None:
                 eval_env = gym.make(entry.gym_id, **env_kwargs)
-            else:
+                venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
+            else:  # the native torch vector env, or copies of the task's env
                 eval_env = entry.make_env(env_kwargs)
-            venv = make_torch_env(entry.gym_id, config.num_envs, device, **env_kwargs)
+                venv = task_torch_env(task, env_kwargs, config.num_envs, device)
         except (TypeError, ValueError, gym.error.Error) as exc:
-            what = flag("env_kwargs") if task is None else f"--algo torch-ppo on --task {task.name}"
+            if task is not None:
+                raise ValueError(
+                    f"--algo torch-ppo on --task {task.name}: its torch vector env: {exc}"
+                ) from None
             raise ValueError(
-                f"{what}: {entry.gym_id} has no torch vector env with these options: {exc}"
-                if task is not None
-                else f"{what}: {entry.gym_id} rejected its options: {exc}"
+                f"{flag('env_kwargs')}: {entry.gym_id} rejected its options: {exc}"
             ) from None
         stack.callback(eval_env.close)
         stack.callback(venv.close)

@@ -44,6 +44,9 @@ DESCRIPTION = "\n\n".join(
         "python train.py attacker --env covariance_attack_v0 --algo SAC; "
         "python train.py defender --algo DQN; "
         "python train.py game --method psro; "
+        "python train.py game --task sensor-game/m10-strong-defender-v0 (a benchmark game "
+        "task: both players by double oracle with exact best responses, the task's player "
+        "scored as python -m agents.bench score scores it); "
         "python train.py attacker --resume (continues the latest run of that env, algo, seed); "
         "python train.py attacker --algo torch-ppo --device cuda --num-envs 4096 "
         "--total-timesteps 2000000 (PPO with env, rollout buffer and policy on the device).",
@@ -128,9 +131,11 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
 
     So ``train.py attacker --resume`` continues the latest run of its env, algo and seed with
     its own settings; an option given explicitly must agree with it (checked by the trainer),
-    except the training length, which may be extended.
+    except the training length, which may be extended. A run's ``--task`` is kept; another one
+    is refused here (:func:`agents.lifecycle.check_same_task`).
     """
     from agents.checkpoint import read_json
+    from agents.lifecycle import check_same_task
     from agents.runs import config_from_dict, resume_dir
 
     if cfg.run.backend == "rllib":
@@ -157,7 +162,10 @@ def with_saved_options(cfg: TrainConfig | GameConfig, argv: Sequence[str]):
     if "--env-kwargs" in argv:  # given again: parsed as given (tyro reads a non-empty dict
         default.env_kwargs = {}  # default as --env-kwargs.NAME options), checked by the trainer
     command = next(a for a in argv if a in COMMANDS)
-    return tyro.cli(type(cfg), args=argv[argv.index(command) + 1 :], default=default)
+    resumed = tyro.cli(type(cfg), args=argv[argv.index(command) + 1 :], default=default)
+    # before the task's options are checked against the run's (its --env, say)
+    check_same_task(saved.get("task"), getattr(resumed, "task", None), Path(run_dir))
+    return resumed
 
 
 def format_table(rows: dict[str, Evaluation]) -> str:
@@ -204,6 +212,10 @@ def main(argv: Sequence[str] | None = None) -> object:
         from agents.rllib.sweep import run_sweep
 
         return run_sweep(cfg)
+    if isinstance(cfg, GameConfig) and cfg.task is not None:  # before any backend or resume
+        from agents.game_task_runs import game_task_setup
+
+        game_task_setup(cfg)
     torch_ppo = isinstance(cfg, TrainConfig) and is_torch_ppo(cfg.algo)
     if torch_ppo and cfg.run.backend != "sb3":
         raise ValueError("--algo torch-ppo runs in this process (--backend sb3, the default)")
@@ -261,9 +273,10 @@ def main(argv: Sequence[str] | None = None) -> object:
                 f"{game.train_seconds:.0f} s (seed {cfg.run.seed}); last mean returns: {returns}",
                 marks=(),
             )
+        on = f"task {cfg.task}" if cfg.task is not None else cfg.env
         return _summary(
             game,
-            f"\n{game.method.upper()}{' (RLlib PPO)' if rllib else ''} on {cfg.env}: "
+            f"\n{game.method.upper()}{' (RLlib PPO)' if rllib else ''} on {on}: "
             f"{len(game.history)} iterations",
             f", {last['timesteps']} steps in {game.train_seconds:.0f} s (seed {cfg.run.seed}); "
             f"NashConv {last['nash_conv']:.4g} = {last['relative_nash_conv']:.2%} of the value "
@@ -316,11 +329,18 @@ def _summary(
     print(f"  run folder: {run.run_dir}")
     task_score = getattr(run, "task_score", None)
     if task_score is not None:
-        from agents.task_runs import score_lines
         from fdia_env.tasks import get
 
-        given = getattr(run, "task_given", True)
-        print("\n".join(score_lines(task_score, get(task_score.task), given)))
+        task = get(task_score.task)
+        if task.is_game:  # a game --task run: its player's final mix
+            from agents.game_task_runs import score_lines as game_score_lines
+
+            print("\n".join(game_score_lines(task_score, task)))
+        else:
+            from agents.task_runs import score_lines
+
+            given = getattr(run, "task_given", True)
+            print("\n".join(score_lines(task_score, task, given)))
     print(format_table(run.evaluations))
     return run
 

@@ -583,19 +583,32 @@ def setup_of(cfg: TrainConfig) -> RunSetup:
 def task_setup(cfg: TrainConfig) -> RunSetup:
     """The run's setup on ``cfg.task``: its env and options, a learner that fits its actions.
 
+    torch-ppo's members are ``--num-envs``, by default :data:`agents.config.TORCH_PPO_NUM_ENVS`
+    on a native torch vector env and :data:`agents.task_runs.TASK_COPIES` copies of the task's
+    env on the others.
+
     Raises:
         ValueError: Naming the option: ``--task`` (unknown, a game, another player's),
             ``--env``/``--scenario``/``--env-kwargs``/``--opponent`` given with it, or an
             ``--algo`` that does not fit the task's action space.
     """
-    from agents.task_runs import check_task_options, task_algorithm, task_entry
+    from agents.task_runs import (
+        TASK_COPIES,
+        check_task_options,
+        has_native_torch_env,
+        task_algorithm,
+        task_entry,
+    )
 
     defaults = (SPARSE_ENVS[0],) if cfg.agent == "attacker" else (SPARSE_ENVS[0], DEFENDER_ENV)
     check_task_options(cfg, defaults)  # the defender command's default or TrainConfig's
     entry = task_entry(cfg)
-    algo = task_algorithm(entry, cfg.algo) if not is_torch_ppo(cfg.algo) else TORCH_PPO
+    algo = task_algorithm(entry, cfg.algo)
     normalize = bool(cfg.normalize_reward)
-    num_envs = cfg.num_envs if algo == TORCH_PPO else None
+    num_envs = None
+    if algo == TORCH_PPO:
+        copies = None if has_native_torch_env(entry.task) else TASK_COPIES
+        num_envs = cfg.num_envs if cfg.num_envs is not None else copies
     return RunSetup(entry, algo, dict(entry.task.env_kwargs), cfg.hp, normalize, num_envs)
 
 
@@ -641,12 +654,16 @@ def as_saved(
     """
     if not resolved:
         return setup
-    env_kwargs = saved_env_kwargs(setup.env_kwargs, resolved, say)
+    if getattr(setup.entry, "task", None) is not None:
+        env_kwargs = task_env_kwargs(setup.entry.task, setup.env_kwargs, resolved, config_path)
+    else:
+        env_kwargs = saved_env_kwargs(setup.env_kwargs, resolved, say)
     if not isinstance(env_kwargs, dict) or not isinstance(env_kwargs.get("scenario"), str):
-        raise ValueError(
-            f"run config {config_path} is corrupt: resolved.env_kwargs must be a JSON object "
-            f"naming the scenario, got {env_kwargs!r:.80}"
-        )
+        if getattr(setup.entry, "task", None) is None:  # a task's (the family's: no scenario)
+            raise ValueError(
+                f"run config {config_path} is corrupt: resolved.env_kwargs must be a JSON "
+                f"object naming the scenario, got {env_kwargs!r:.80}"
+            )
     members = setup.num_envs
     if setup.algo != TORCH_PPO:  # torch-ppo's members are its own (--num-envs, checked)
         members = resolved.get("num_envs", num_envs)
@@ -661,6 +678,40 @@ def as_saved(
             say_kept(say, "native vector env members", members, setup.num_envs)
     hp = saved_hyperparameters(setup.algo, setup.hp, resolved, say, config_path)
     return replace(setup, env_kwargs=env_kwargs, num_envs=members, hp=hp)
+
+
+def task_env_kwargs(
+    task: Any,
+    env_kwargs: dict[str, Any],
+    resolved: dict[str, Any],
+    config_path: Path = Path("config.json"),
+) -> dict[str, Any]:
+    """A resumed ``--task`` run's env options: ``env_kwargs``, the task's own.
+
+    config.json records them as text where they are objects (a scenario, a system family, an
+    opponent policy: :func:`agents.task_runs.plain_kwargs`), which could not rebuild the env;
+    the record must be the task's, and the task's objects are used.
+
+    Args:
+        task: The run's :class:`fdia_env.tasks.Task`.
+        env_kwargs: Its env options (``task.env_kwargs``).
+        resolved: The run's saved ``resolved`` entry.
+        config_path: The run's config.json (named in errors).
+
+    Raises:
+        ValueError: For a ``resolved`` entry of another task or other options (naming
+            ``config_path``).
+    """
+    from agents.task_runs import plain_kwargs
+
+    recorded = resolved.get("env_kwargs")
+    if resolved.get("task") != task.name or recorded != plain_kwargs(env_kwargs):
+        raise ValueError(
+            f"run config {config_path} records another env than task {task.name} builds "
+            f"(resolved.task {resolved.get('task')!r}, resolved.env_kwargs {recorded!r:.120}): "
+            "it cannot be resumed on the task; start a new run"
+        )
+    return env_kwargs
 
 
 def saved_hyperparameters(

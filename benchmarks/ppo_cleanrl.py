@@ -160,10 +160,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     warnings.filterwarnings("ignore", message=".*is out of date.*")  # tasks pin their -v0
-    print(
-        f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, "
-        f"1 torch thread; B = {args.num_envs}, T = {args.num_steps}, 4 minibatches, 4 epochs, "
-        f"64x64; median of {args.repeats} x {args.steps} steps"
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}")
+    print(  # its own line: benchmarks/report.py keeps it (the page names the machine once)
+        f"settings: 1 torch thread; B = {args.num_envs}, T = {args.num_steps}, 4 minibatches, "
+        f"4 epochs, 64x64; median of {args.repeats} x {args.steps} steps"
     )
     print(f"{'task':<36}{'torch-ppo':>12}{'CleanRL-style':>15}{'ratio':>8}  (steps/s)")
     for name in args.tasks:

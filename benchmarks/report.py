@@ -261,6 +261,35 @@ _stealth = _figures(
 )
 
 
+def _reset(action: str) -> Figure:
+    line = rf"^{action}\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)x$"
+    return Figure(
+        f"system-family env's reset, {action} actions, each system's setup kept "
+        "(`family_reset.py`; target ≤ 1 ms)",
+        Read(line, "{m[1]} ms ({m[3]}× faster)"),
+        Read(line, "every system prepared afresh {m[2]} ms"),
+    )
+
+
+_family_reset = _figures(_reset("bitmask"), _reset("sequential"))
+
+PPO_TASKS = ("sparse/tracking-m6-1000004-v0", "covariance/ch2-pv-2-v0")
+"""The tasks ``ppo_cleanrl.py`` measures by default."""
+
+
+def _ppo(task: str) -> Figure:
+    line = rf"^{re.escape(task)}\s+([\d,]+)\s+([\d,]+)\s+([\d.]+)x$"
+    return Figure(
+        f"torch-ppo's training steps/s vs a CleanRL-style PPO on `{task}` (`ppo_cleanrl.py`, "
+        "the same env and settings; target ≥ 1.0×)",
+        Read(line, "{m[3]}× ({m[1]} steps/s)"),
+        Read(line, "CleanRL-style {m[2]} steps/s"),
+    )
+
+
+_ppo_cleanrl = _figures(*(_ppo(task) for task in PPO_TASKS))
+
+
 @dataclass(frozen=True)
 class Bench:
     """One benchmark: its script, arguments (full and ``--quick``) and what it measures."""
@@ -327,6 +356,24 @@ BENCHES_BY_NAME = (
         _train_fps,
     ),
     Bench(
+        "ppo_cleanrl",
+        "ppo_cleanrl.py",
+        (),
+        ("--steps", "20000", "--repeats", "1"),
+        "torch-ppo's training steps/s against CleanRL's ppo.py loop on the same torch vector "
+        "env and settings, in turns in one process (target >= 1.0x)",
+        _ppo_cleanrl,
+    ),
+    Bench(
+        "family_reset",
+        "family_reset.py",
+        (),
+        (),
+        "the system-family env's reset with each system's setup kept against every system "
+        "prepared afresh, same process (target <= 1 ms)",
+        _family_reset,
+    ),
+    Bench(
         "sparse",
         "sparse.py",
         (),
@@ -376,6 +423,8 @@ ORDER = (
     "single_view",
     "vector",
     "train_fps",
+    "ppo_cleanrl",
+    "family_reset",
     "env_step",
     "backends",
     "grid",

@@ -211,3 +211,33 @@ def test_the_warm_up_steps_once_with_each_action_and_a_zero_burst_takes_none():
     timing.warm_up(env, [1, 2, 3], sync=lambda: synced.append(True))
     assert env.actions == [1, 2, 3] and synced == [True]
     assert timing.burst(env, [4], 0.0) == 0.0 and env.actions == [1, 2, 3]  # no step
+
+
+FAMILY_RESET_OUTPUT = """machine: x86_64, 2 CPUs
+action        cached ms   fresh ms   ratio
+bitmask           0.226     26.274  116.1x
+sequential        0.533     25.824   48.5x"""
+
+PPO_CLEANRL_OUTPUT = """machine: x86_64, 2 cores, torch 2.13.0+cpu, 1 torch thread; B = 256, T = 16
+task                                   torch-ppo  CleanRL-style   ratio  (steps/s)
+sparse/tracking-m6-1000004-v0              3,940          4,669   0.84x
+covariance/ch2-pv-2-v0                     4,730          6,159   0.77x"""
+
+
+def test_the_family_reset_and_cleanrl_benchmarks_are_in_the_report():
+    by_name = {b.name: b for b in report.BENCHES}
+    reset, ppo = by_name["family_reset"], by_name["ppo_cleanrl"]
+    assert (reset.script, ppo.script) == ("family_reset.py", "ppo_cleanrl.py")
+    assert all((ROOT / "benchmarks" / b.script).is_file() for b in report.BENCHES)
+    assert [r[1:] for r in reset.summary(FAMILY_RESET_OUTPUT)] == [
+        ("0.226 ms (116.1× faster)", "every system prepared afresh 26.274 ms"),
+        ("0.533 ms (48.5× faster)", "every system prepared afresh 25.824 ms"),
+    ]
+    assert [r[1:] for r in ppo.summary(PPO_CLEANRL_OUTPUT)] == [
+        ("0.84× (3,940 steps/s)", "CleanRL-style 4,669 steps/s"),
+        ("0.77× (4,730 steps/s)", "CleanRL-style 6,159 steps/s"),
+    ]
+    # the rows name the tasks the script measures by default
+    source = (ROOT / "benchmarks" / "ppo_cleanrl.py").read_text()
+    defaults = re.search(r"^TASKS = \((.*)\)$", source, re.M)[1]
+    assert re.findall(r'"([^"]+)"', defaults) == list(report.PPO_TASKS)

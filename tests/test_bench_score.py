@@ -230,29 +230,6 @@ def test_learned_rows_render_as_mean_and_ci_over_seeds(task, tmp_path):
         write_section(page, "new")
 
 
-def test_the_runner_trains_scores_and_renders(tmp_path, capsys):
-    from experiments.cli import main as experiments
-
-    page = tmp_path / "board.txt"
-    page.write_text("# Benchmark\n\n<!-- leaderboard:start -->\n<!-- leaderboard:end -->\n")
-    out = tmp_path / "rows.json"
-    code = experiments(
-        ["bench", "--tasks", TASK, "--algo", "PPO", "--seeds", "1", "--timesteps", "64",
-         "--episodes", "2", "--hp", "n_steps", "64", "--hp", "batch_size", "32", "--hp",
-         "n_epochs", "1", "--out", str(out), "--page", str(page),
-         "--figures", str(tmp_path / "fig")]
-    )  # fmt: skip
-    assert code == 0
-    rows = json.loads(out.read_text())["rows"]
-    assert [(r["task"], r["method"], r["seed"], r["timesteps"]) for r in rows] == [
-        (TASK, "PPO", 0, 64)
-    ]
-    assert np.isfinite(rows[0]["normalised"])
-    assert rows[0]["hyperparameters"] == {"n_steps": 64, "batch_size": 32, "n_epochs": 1}
-    assert f"| PPO | {rows[0]['normalised']:.3f} |" in page.read_text()
-    assert (tmp_path / "fig" / "benchmark_sparse.png").is_file()
-
-
 def test_load_agent_gives_the_random_policy(task):
     with task.make_env() as env:
         loaded = load_agent("random", task, env)
@@ -298,32 +275,6 @@ def test_an_rllib_run_state_scores_as_its_module_plays(task, tmp_path):
     assert alone.mean == result.mean
 
 
-def test_the_runner_refuses_bad_options(capsys):
-    from experiments.cli import main as experiments
-
-    for argv, needle in (
-        (["--hp", "no_such", "1"], "unknown hyperparameters ['no_such']"),
-        (["--algo", "Nope"], "--algo must name learners"),
-        (["--tasks", "sparse/none-v0"], "tasks must be 'all'"),
-    ):
-        with pytest.raises(SystemExit):
-            experiments(["bench", *argv, "--no-render"])
-        assert needle in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("content", ["not json\n", "[1, 2]\n", '{"rows": 3}\n'])
-def test_the_runner_refuses_an_out_file_that_is_no_rows_file(tmp_path, capsys, content):
-    from experiments.cli import main as experiments
-
-    out = tmp_path / "rows.json"
-    out.write_text(content, encoding="utf-8")
-    with pytest.raises(SystemExit) as exc:
-        experiments(["bench", "--tasks", TASK, "--out", str(out), "--no-render"])
-    assert exc.value.code == 2
-    assert f"--out {out}: not a rows file" in capsys.readouterr().err
-    assert out.read_text(encoding="utf-8") == content
-
-
 def test_an_sb3_model_in_a_game_is_scored_on_its_action_distribution():
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -361,36 +312,6 @@ def test_a_game_with_a_subset_size_limit_scores_its_equilibrium_one_and_random_z
     assert expl.normalised == pytest.approx(1.0, abs=1e-9)
     rand = score_policy(game, "random", seeds=(0,), episodes=2)
     assert rand.normalised == pytest.approx(0.0, abs=1e-9)
-
-
-def test_the_runner_resumes_missing_runs_and_goes_on_after_a_failure(tmp_path, monkeypatch, capsys):
-    import experiments.bench.run as run
-    from experiments.cli import main as experiments
-
-    out = tmp_path / "rows.json"
-    done = {"task": TASK, "method": "PPO", "seed": 0, "timesteps": 64, "normalised": 0.5}
-    other = {**done, "seed": 1, "timesteps": 128}  # another budget: not a row of this one
-    out.write_text(json.dumps({"rows": [done, other]}))
-    calls = []
-
-    def fake_row(task, algo, seed, timesteps, episodes=None, hp=None):
-        calls.append(seed)
-        if seed == 1:
-            raise RuntimeError("boom")
-        return {**done, "seed": seed, "raw": 1.0, "train_seconds": 0.1, "normalised": 0.25}
-
-    monkeypatch.setattr(run, "learner_row", fake_row)
-    argv = ["bench", "--tasks", TASK, "--algo", "PPO", "--seeds", "3", "--timesteps", "64",
-            "--out", str(out), "--no-render"]  # fmt: skip
-    assert experiments([*argv, "--missing"]) == 1
-    assert calls == [1, 2]  # seed 0 has a row at 64 steps; seed 1 only at 128
-    err = capsys.readouterr().err
-    assert f"FAILED {TASK} PPO seed 1: RuntimeError: boom" in err and "1 run(s) failed" in err
-    rows = json.loads(out.read_text())["rows"]
-    assert sorted((r["seed"], r["timesteps"]) for r in rows) == [(0, 64), (1, 128), (2, 64)]
-    calls.clear()
-    assert experiments(argv) == 1  # without --missing every seed trains again
-    assert calls == [0, 1, 2]
 
 
 def test_torch_ppo_makes_several_updates_on_a_short_budget():
@@ -699,42 +620,6 @@ def test_table_page_a_folder_a_missing_file_or_a_read_only_one_is_a_clear_error(
         assert bench(["table", "--page", str(page)]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"error: --page {page}: {message}")
-
-
-def test_the_runner_refuses_bad_output_paths_before_training(tmp_path, capsys):
-    from experiments.cli import main as experiments
-
-    page = tmp_path / "board.txt"
-    page.write_text("# Benchmark\n\n<!-- leaderboard:start -->\n<!-- leaderboard:end -->\n")
-    a_file = tmp_path / "a_file"
-    a_file.write_text("x")
-    rows = tmp_path / "rows.json"
-    for argv, needle in (
-        (["--out", str(tmp_path), "--page", str(page)], f"--out {tmp_path}: is a folder"),
-        (["--out", str(rows), "--page", str(tmp_path)], f"--page {tmp_path}: is a folder"),
-        (
-            ["--out", str(rows), "--page", str(tmp_path / "none.txt")],
-            f"--page {tmp_path / 'none.txt'}: does not exist",
-        ),
-        (
-            ["--out", str(rows), "--page", str(page), "--figures", str(a_file)],
-            f"--figures {a_file}: is a file",
-        ),
-    ):
-        with pytest.raises(SystemExit):
-            experiments(
-                [
-                    "bench",
-                    "--tasks",
-                    TASK,
-                    "--render-only",
-                    "--figures",
-                    str(tmp_path / "fig"),
-                    *argv,
-                ]
-            )
-        assert needle in capsys.readouterr().err
-    assert page.read_text().count("leaderboard") == 2  # nothing rendered
 
 
 def test_a_task_whose_optimum_is_only_bounded_says_what_1_is():

@@ -88,7 +88,7 @@ def test_train_py_and_experiments_bench_are_the_installed_modules():
 
 
 def test_python_train_py_and_python_m_experiments_bench_still_run(tmp_path):
-    """The checkout's commands, from the root; the runner refuses a missing page up front."""
+    """The checkout's commands, from the root; the runner refuses to run without --out."""
     train = subprocess.run(
         [sys.executable, "train.py", "attacker", "--env", "no_such_env"],
         cwd=ROOT, capture_output=True, text=True, timeout=300,
@@ -96,13 +96,17 @@ def test_python_train_py_and_python_m_experiments_bench_still_run(tmp_path):
     assert train.returncode == 2
     assert train.stderr.startswith("train.py: error: "), train.stderr
     assert "no_such_env" in train.stderr
-    page = tmp_path / "no_such_page"
+    page = tmp_path / "page.md"
     bench = subprocess.run(
         [sys.executable, "-m", "experiments", "bench", "--tasks", "hard", "--page", str(page)],
         cwd=ROOT, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert bench.returncode == 2
-    assert f"python -m experiments bench: error: --page {page}: does not exist" in bench.stderr
+    assert (
+        "python -m experiments bench: error: the following arguments are required: --out"
+        in bench.stderr
+    )
+    assert not page.exists()
 
 
 # --- metadata: license and version -----------------------------------------------------------

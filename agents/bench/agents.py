@@ -3,7 +3,9 @@
 :func:`load_agent` accepts, as ``agent``:
 
 - a ``train.py`` run folder (stable-baselines3, torch-ppo or RLlib backend: the folder's
-  ``config.json`` says which, and which env and options the agent was trained on);
+  ``config.json`` says which, and which env and options the agent was trained on); a
+  ``train.py game`` run folder, on a game task, is the final mix of the task's player (its
+  ``scores.json``'s ``x`` or ``y``);
 - a model file: a stable-baselines3 model description ``.json`` (tensors-only, written by
   ``train.py``), a torch-ppo policy ``.json`` (:func:`agents.torch_ppo.save_policy`), or a
   stable-baselines3 ``.zip``, which is unpickled when loaded and so is refused unless the user
@@ -48,8 +50,8 @@ class LoadedAgent:
     Attributes:
         policy: The policy (``predict(obs, deterministic=..., action_masks=...)``), or the
             string ``"random"``.
-        kind: ``"random"``, ``"callable"``, ``"sb3"``, ``"sb3-zip"``, ``"torch-ppo"`` or
-            ``"rllib"``.
+        kind: ``"random"``, ``"callable"``, ``"sb3"``, ``"sb3-zip"``, ``"torch-ppo"``,
+            ``"rllib"`` or ``"game"`` (a game run's final mix).
         source: What the user gave.
         description: One line for the report (kind, algorithm, steps trained).
     """
@@ -313,12 +315,14 @@ def _rllib(run_dir: Path, env: gym.Env, config: dict[str, Any], source: str) -> 
 
     from agents.config import Hyperparameters
     from agents.rllib.config import ppo_config
-    from agents.rllib.envs import is_masked, make_view
+    from agents.rllib.envs import TASK_ENV, is_masked, make_view
     from agents.rllib.policy import RLlibPolicy
     from agents.rllib.state import read_state
 
     resolved = config.get("resolved", {})
     gym_id, env_kwargs = resolved.get("env"), dict(resolved.get("env_kwargs", {}))
+    if resolved.get("task") is not None:  # a --task run: the task's env (its options objects)
+        gym_id, env_kwargs = TASK_ENV, {"task": resolved["task"]}
     net = resolved.get("hyperparameters", {}).get("net_arch")
     meta, payload = read_state(run_dir)
     key = f"rl_module/{DEFAULT_MODULE_ID}"
@@ -425,15 +429,108 @@ def _check_run(path: Path, source: str, task: Any) -> tuple[dict[str, Any], dict
     return config, resolved
 
 
+def _game_env_id(config: dict[str, Any], task: Any) -> str | None:
+    """The Gymnasium id of the view of the task's player in a game run's env (None: none)."""
+    from fdia_env.registration import get_env
+
+    name = config.get("config", {}).get("env") if isinstance(config.get("config"), dict) else None
+    try:
+        return get_env(name).views.get(task.player) if isinstance(name, str) else None
+    except (KeyError, ValueError):
+        return None
+
+
+def _game_run(folder: Path, env: gym.Env, task: Any, source: str) -> LoadedAgent:
+    """The final mix of the task's player in a ``train.py game`` run (its ``scores.json``).
+
+    A game run trains both players of one game, so it scores on the game task of either
+    player whose env and options it was trained on: a ``--task`` run on its own task and the
+    other player's task of the same game (both recorded options equal), a run without ``--task``
+    where :func:`check_trained_on` accepts its env's view of that player and its options.
+    """
+    import numpy as np
+
+    from baselines.game import MixedStrategyPolicy, TypedMixedStrategyPolicy
+
+    config_path = folder / "config.json"
+    config = _read_json(config_path, "run config")
+    if not getattr(task, "is_game", False):
+        raise ValueError(
+            f"agent {source} is a train.py game run (a mixed strategy for each player of a "
+            f"game); task {task.name} is not a game: score the run on a game task"
+        )
+    resolved = config.get("resolved")
+    env_kwargs = resolved.get("env_kwargs") if isinstance(resolved, dict) else None
+    if not isinstance(resolved, dict) or not isinstance(env_kwargs, dict):
+        raise ValueError(
+            f"agent {source}: {config_path} records no resolved env options: the run's "
+            "training options cannot be established (score an intact train.py run)"
+        )
+    trained_task = resolved.get("task")
+    env_id = _game_env_id(config, task)
+    if isinstance(trained_task, str):
+        differ = _task_options_differ(env_kwargs, task)
+        if differ or env_id != task.env_id:
+            raise ValueError(
+                f"agent {source} was trained on task {trained_task!r}, whose game is not task "
+                f"{task.name}'s: score it on its own task (or the other player's of its game)"
+            )
+    elif env_id is None:
+        raise ValueError(
+            f"agent {source}: the game run's env has no {task.player} view: it was trained on "
+            f"another game than task {task.name}"
+        )
+    else:
+        check_trained_on(source, env_id, env_kwargs, task, config=config_path)
+    scores_path = folder / "scores.json"
+    if not scores_path.is_file():
+        raise ValueError(
+            f"agent {source}: the game run holds no scores.json (no iteration finished; "
+            "resume it with train.py game --resume)"
+        )
+    scores = _read_json(scores_path, "run scores")
+    key = "y" if task.player == "attacker" else "x"
+    try:
+        probs = np.asarray(scores.get(key), dtype=np.float64)
+    except (TypeError, ValueError):
+        probs = np.zeros(0)
+    n = int(getattr(env.action_space, "n", -1))
+    if probs.ndim not in (1, 2) or probs.shape[-1] != n or not np.all(np.isfinite(probs)):
+        raise ValueError(
+            f"agent {source}: {scores_path} holds no final mix of the {task.player} over the "
+            f"task env's {n} actions ({key!r} is {scores.get(key)!r:.80}): it was trained on "
+            "another game"
+        )
+    try:
+        policy = (TypedMixedStrategyPolicy if probs.ndim == 2 else MixedStrategyPolicy)(
+            probs, seed=0
+        )
+    except ValueError as exc:
+        raise ValueError(
+            f"agent {source}: {scores_path}: {key!r} is no mixed strategy ({exc})"
+        ) from None
+    support = int(np.count_nonzero(probs.max(axis=0) if probs.ndim == 2 else probs))
+    what = f"{scores.get('method', '?')} with {resolved.get('algo', '?')} best responses"
+    return LoadedAgent(
+        policy,
+        "game",
+        source,
+        f"train.py game run ({what}, {scores.get('iterations', '?')} iterations): the "
+        f"{task.player}'s final mix, {support} of {n} actions",
+    )
+
+
 def _run_folder(
     folder: Path, env: gym.Env, task: Any, source: str, algo: str | None, trusted: bool
 ) -> LoadedAgent:
     config_path = folder / "config.json"
     config = _read_json(config_path, "run config")
+    if config.get("command") == "game":
+        return _game_run(folder, env, task, source)
     if config.get("command") not in ("attacker", "defender"):
         raise ValueError(
-            f"agent {source} is a train.py {config.get('command')!r} run; score an attacker or "
-            "defender run (one player's policy)"
+            f"agent {source} is a train.py {config.get('command')!r} run; score an attacker, "
+            "defender or game run"
         )
     config, resolved = _check_run(config_path, source, task)
     if resolved.get("backend") == "rllib":

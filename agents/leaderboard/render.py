@@ -3,8 +3,10 @@
 For every task: random play, each heuristic and the certified reference from the task's stored
 references (:attr:`fdia_env.tasks.Task.references`, normalised with ``task.normalise``), then
 each learner of the rows: the mean of its seeds' normalised scores with the 95 % Student-t
-interval over the seeds, its raw mean return, and the budget it trained with. One bar plot per
-task family (normalised score per method, with the intervals) goes to ``docs/figures/``.
+interval over the seeds, its raw mean return, and the budget it trained with; seeds whose run
+failed are named with their error (a learner whose every seed failed shows "failed"). One bar
+plot per task family (normalised score per method, with the intervals) goes to the figures
+folder, which the page links relative to itself.
 """
 
 from __future__ import annotations
@@ -43,30 +45,49 @@ def reference_entries(task: Any) -> list[dict[str, Any]]:
     ]  # fmt: skip
 
 
+def _error(row: dict[str, Any]) -> str:
+    """A failed row's error on one line of a Markdown table (at most 160 characters)."""
+    text = " ".join(str(row.get("error", "unknown error")).split()).replace("|", "\\|")
+    return text if len(text) <= 160 else text[:159] + "…"
+
+
 def learner_entries(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One entry per learner (method) of one task's rows: the seeds' mean ± 95 % CI."""
+    """One entry per learner (method) of one task's rows: the seeds' mean ± 95 % CI.
+
+    Failed runs (:func:`agents.leaderboard.rows.failed`) count in no mean; the note names their
+    seeds and errors, and a learner with no other run gets NaN scores and ``failed`` True.
+    """
+    from agents.leaderboard.rows import failed
+
     by_method: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in rows:
         by_method[row["method"]].append(row)
     out = []
     for method, group in by_method.items():
         group = sorted(group, key=lambda r: r["seed"])
-        mean, half = seed_interval(r["normalised"] for r in group)
-        raw = float(np.mean([r.get("raw", r["mean"]) for r in group]))
-        steps = sorted({r["timesteps"] for r in group})
-        note = (
-            f"{len(group)} seed{'s' * (len(group) != 1)}, "
-            f"{', '.join(f'{s:,}' for s in steps)} steps, "
-            f"{np.mean([r['train_seconds'] for r in group]):.0f} s per seed"
-        )
+        done = [r for r in group if not failed(r)]
+        broken = [r for r in group if failed(r)]
+        mean, half = seed_interval(r["normalised"] for r in done)
+        raw_values = [r.get("raw", r.get("mean")) for r in done]
+        raw = float(np.mean(raw_values)) if done and None not in raw_values else math.nan
+        notes = []
+        if done:
+            steps = sorted({r["timesteps"] for r in done})
+            notes.append(
+                f"{len(done)} seed{'s' * (len(done) != 1)}, "
+                f"{', '.join(f'{s:,}' for s in steps)} steps, "
+                f"{np.mean([r['train_seconds'] for r in done]):.0f} s per seed"
+            )
+        notes += [f"seed {r['seed']} failed: {_error(r)}" for r in broken]
         out.append(
             {
                 "method": method,
                 "normalised": mean,
                 "ci95": half,
                 "raw": raw,
-                "note": note,
-                "per_seed": [r["normalised"] for r in group],
+                "note": "; ".join(notes),
+                "per_seed": [r["normalised"] for r in done],
+                "failed": not done,
             }
         )
     return out
@@ -86,7 +107,7 @@ def task_table(task: Any, rows: list[dict[str, Any]]) -> str:
         "|---|---|---|---|",
     ]
     for entry in reference_entries(task) + learner_entries(rows):
-        norm = _num(entry["normalised"])
+        norm = "failed" if entry.get("failed") else _num(entry["normalised"])
         if entry["ci95"] is not None and math.isfinite(entry["ci95"]):
             norm += f" ± {entry['ci95']:.3f}"
         lines.append(
@@ -123,6 +144,8 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
     for i, t in enumerate(tasks):
         entries = per_task[t.name]
         for k, e in enumerate(entries):
+            if not math.isfinite(e["normalised"]):  # a learner whose every run failed
+                continue
             name = label(e["method"])
             ci = e["ci95"]
             ax.bar(
@@ -138,7 +161,10 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
             if e["normalised"] < FLOOR:  # far below random play: the bar is cut, its value written
                 x = i + (k - (len(entries) - 1) / 2) * width
                 ax.text(x, FLOOR, f"{e['normalised']:.1f}", fontsize=6, ha="center", va="bottom")
-    low = min((e["normalised"] for entries in per_task.values() for e in entries), default=0.0)
+    low = min(
+        (e["normalised"] for v in per_task.values() for e in v if math.isfinite(e["normalised"])),
+        default=0.0,
+    )
     ax.set_ylim(max(FLOOR, min(-0.1, low - 0.1)), 1.15)
     ax.axhline(0.0, color="k", lw=0.6)
     ax.axhline(1.0, color="k", lw=0.6, ls="--")
@@ -151,9 +177,21 @@ def family_plot(path: Path, family: str, tasks: list[Any], rows: dict[str, list]
 
 
 def leaderboard(
-    tasks: list[Any], rows: list[dict[str, Any]], figures: Path | None, header: str
+    tasks: list[Any],
+    rows: list[dict[str, Any]],
+    figures: Path | None,
+    header: str,
+    figures_link: str = "figures",
 ) -> str:
-    """The leaderboard section: ``header``, one table per task, one figure per family."""
+    """The leaderboard section: ``header``, one table per task, one figure per family.
+
+    Args:
+        tasks: The tasks, in the page's order.
+        rows: The learners' rows (of these tasks and others).
+        figures: The folder the family plots are written to (None: no plots).
+        header: The section's first paragraph.
+        figures_link: The figures folder as the page links it (relative to the page).
+    """
     by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in rows:
         by_task[row["task"]].append(row)
@@ -166,20 +204,27 @@ def leaderboard(
         if figures is not None:
             name = f"benchmark_{re.sub(r'[^a-z0-9]+', '_', family.lower())}.png"
             family_plot(figures / name, family, group, by_task)
-            parts.append(f"![normalised scores on the {family} tasks](figures/{name})")
+            parts.append(f"![normalised scores on the {family} tasks]({figures_link}/{name})")
         parts.extend(task_table(t, by_task.get(t.name, [])) for t in group)
     return "\n\n".join(parts)
 
 
-def write_section(page: Path, section: str) -> None:
+def write_section(page: Path, section: str, title: str = "Leaderboard") -> None:
     """Replace the text between the leaderboard markers of ``page`` with ``section``.
 
+    A page that does not exist is created: ``# title`` and the markers around ``section``. The
+    page is replaced atomically.
+
     Raises:
-        ValueError: When the page lacks the markers (naming the page).
+        ValueError: When an existing page lacks the markers (naming the page).
     """
-    text = page.read_text(encoding="utf-8")
+    from agents.runs import atomic_write
+
+    page = Path(page)
+    text = page.read_text(encoding="utf-8") if page.exists() else f"# {title}\n\n{START}\n{END}\n"
     if START not in text or END not in text:
         raise ValueError(f"page {page} has no {START} … {END} markers for the leaderboard")
     head, rest = text.split(START, 1)
     _, tail = rest.split(END, 1)
-    page.write_text(f"{head}{START}\n\n{section}\n\n{END}{tail}", encoding="utf-8")
+    new = f"{head}{START}\n\n{section}\n\n{END}{tail}"
+    atomic_write(page, lambda fh: fh.write(new.encode("utf-8")))

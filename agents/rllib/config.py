@@ -32,7 +32,14 @@ from typing import Any
 
 from agents.config import HYPERPARAMETERS, Hyperparameters, check_number, flag
 from agents.rllib import ZeroStepsSampled
-from agents.rllib.envs import MODULES, is_masked, make_multi_agent, make_view, register_envs
+from agents.rllib.envs import (
+    MODULES,
+    TASK_ENV,
+    is_masked,
+    make_multi_agent,
+    make_view,
+    register_envs,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -152,9 +159,10 @@ def ppo_config(
     """The ``PPOConfig`` of ``env`` (a name of :func:`agents.rllib.envs.register_envs`).
 
     Args:
-        env: A module (multi-agent: one RL module per player, named after it) or a Gymnasium
-            id (single-agent).
-        env_config: The env kwargs (``scenario``, ...; a view also takes ``opponent``).
+        env: A module (multi-agent: one RL module per player, named after it), a Gymnasium
+            id (single-agent) or :data:`~agents.rllib.envs.TASK_ENV` (a benchmark task's env).
+        env_config: The env kwargs (``scenario``, ...; a view also takes ``opponent``;
+            ``{"task": NAME}`` for a task's env).
         hp: Hyperparameters (None fields: :data:`RLLIB_DEFAULTS`).
         num_env_runners: Remote env runners (0: sample in the driver process).
         envs_per_env_runner: Envs stepped together by each env runner.
@@ -215,7 +223,11 @@ def ppo_config(
     else:
         with make_view(env, env_config) as probe:
             config = config.rl_module(rl_module_spec=spec(probe.observation_space))
-            single_agent = probe.unwrapped.agent
+            single_agent = getattr(probe.unwrapped, "agent", None)
+        if env == TASK_ENV:  # the system family's env names no player
+            from fdia_env.tasks import get as get_task
+
+            single_agent = get_task(env_config["task"]).player
     if train_agents is not None and env not in MODULES:
         raise ValueError("train_agents applies to multi-agent envs (a module name) only")
 

@@ -4,7 +4,10 @@
 
 - each PettingZoo module (``"sparse_attack_v0"``, ``"sensor_game_v0"``, ...) as an RLlib
   ``MultiAgentEnv`` (:class:`FdiaMultiAgentEnv`, one agent id per player);
-- each Gymnasium view (``"fdia_env/SparseAttack-v0"``, ...) as a single-agent env.
+- each Gymnasium view (``"fdia_env/SparseAttack-v0"``, ...) as a single-agent env;
+- :data:`TASK_ENV`: the env of a single-player benchmark task (``env_config={"task": NAME}``),
+  built as the task builds it (:meth:`fdia_env.tasks.Task.make_env`, the system family's entry
+  point included).
 
 ``env_config`` holds the env kwargs (``scenario``, ``budget``, ...); a view also takes
 ``opponent``, the other player's fixed mix as a list of probabilities (default uniform).
@@ -33,6 +36,7 @@ from fdia_env.envs.parallel import FdiaParallelEnv
 from fdia_env.registration import ENV_NAMES, GYM_IDS, load
 
 MODULES = ENV_NAMES  # the multi-agent env names: every entry of the table of environments
+TASK_ENV = "fdia_env/Task"  # a benchmark task's env, named by env_config["task"]
 OBS, MASK = "observations", "action_mask"  # RLlib's action-masking module reads these keys
 
 
@@ -162,9 +166,13 @@ def make_view(gym_id: str, env_config: Mapping[str, Any] | None = None) -> gym.E
     ``env_config["opponent"]``, if given, is the other player's fixed mix: a list of
     probabilities (a :class:`~fdia_env.envs.opponents.FixedMix`) or a policy object.
 
+    ``gym_id`` :data:`TASK_ENV` is :func:`make_task_env`'s.
+
     Raises:
         ValueError: For an unknown id.
     """
+    if gym_id == TASK_ENV:
+        return make_task_env(env_config)
     if gym_id not in GYM_IDS:
         raise ValueError(f"gym_id must be one of {', '.join(GYM_IDS)}, got {gym_id!r}")
     kwargs = _config(env_config)
@@ -181,6 +189,30 @@ def make_view(gym_id: str, env_config: Mapping[str, Any] | None = None) -> gym.E
     return env
 
 
+def make_task_env(env_config: Mapping[str, Any] | None = None) -> gym.Env:
+    """The env of the single-player task ``env_config["task"]``, masked as :func:`make_view`.
+
+    The task fixes every option: ``env_config`` holds its name only.
+
+    Raises:
+        ValueError: For an unknown task, a game task, or other keys than ``task``.
+    """
+    from fdia_env import tasks
+
+    config = _config(env_config)
+    if set(config) != {"task"}:
+        raise ValueError(f"env_config of {TASK_ENV} must be {{'task': NAME}}, got {config!r}")
+    task = tasks.get(config["task"])
+    if task.is_game:
+        raise ValueError(f"{TASK_ENV}: task {task.name} is a game (two players)")
+    env = task.make_env()
+    if isinstance(env.action_space, spaces.Discrete) and callable(
+        getattr(env.unwrapped, "action_masks", None)
+    ):
+        env = MaskedObservation(env)
+    return env
+
+
 class _Creator:
     """A picklable env creator bound to one name (a module or a Gymnasium id)."""
 
@@ -190,6 +222,8 @@ class _Creator:
     def __call__(self, env_config: Mapping[str, Any] | None = None) -> Any:
         # an env runner builds its env, then its RL module: the default module is masked there
         register_default_module()
+        if self.name == TASK_ENV:
+            return make_task_env(env_config)
         if self.name in GYM_IDS:
             return make_view(self.name, env_config)
         return make_multi_agent(self.name, env_config)
@@ -203,7 +237,7 @@ def register_envs() -> list[str]:
     ``PPOConfig().environment(name)`` runs on every env, masked players included.
     """
     register_default_module()
-    names = [*MODULES, *GYM_IDS]
+    names = [*MODULES, *GYM_IDS, TASK_ENV]
     for name in names:
         register_env(name, _Creator(name))
     return names

@@ -107,9 +107,12 @@ class RLlibTrainResult(RunResult):
 
     Attributes:
         policy: The learned policy (:class:`~agents.rllib.policy.RLlibPolicy`).
+        task_score: With ``--task``: the run's :class:`agents.bench.score.Score` on the task
+            (scores.json's ``task``), else None.
     """
 
     policy: Any = field(kw_only=True)
+    task_score: Any = field(default=None, kw_only=True)
 
 
 def _iterate(
@@ -219,11 +222,19 @@ class Session:
 
 
 def rllib_prefix(cfg: TrainConfig | GameConfig) -> str:
-    """Run folder name without its time: ``<env>[-<agent>|-<method>]-rllib-PPO-s<seed>``."""
+    """Run folder name without its time: ``<env>[-<agent>|-<method>]-rllib-PPO-s<seed>``.
+
+    A ``--task`` run's env part is the task's (``task-sparse-ch4-position-v0``).
+    """
     if isinstance(cfg, GameConfig):
         return run_prefix(f"{cfg.env}-{cfg.method}", f"rllib-{ALGO}", cfg.run.seed)
-    entry = get(cfg.env, cfg.agent)
-    return run_prefix(run_name(entry.env, cfg.agent), f"rllib-{ALGO}", cfg.run.seed)
+    if cfg.task is not None:
+        from agents.task_runs import resolve_task, run_env_name
+
+        env = run_env_name(resolve_task(cfg.task, cfg.agent).name)
+    else:
+        env = get(cfg.env, cfg.agent).env
+    return run_prefix(run_name(env, cfg.agent), f"rllib-{ALGO}", cfg.run.seed)
 
 
 def open_run(
@@ -282,7 +293,7 @@ def open_run(
     if isinstance(cfg, TrainConfig):
         folder.check_not_shorter("total_timesteps", cfg.total_timesteps, session.steps)
     elif cfg.method != "selfplay" and cfg.env not in CONTINUOUS_GAMES:  # one record each
-        folder.check_not_shorter("iterations", cfg.iterations, done, "iterations")
+        folder.check_not_shorter("iterations", cfg.n_iterations, done, "iterations")
     return session
 
 
@@ -322,8 +333,10 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
     from agents.training import check_env_kwargs, final_evaluations, saved_env_kwargs
 
     check_algo(cfg.algo)
-    entry = get(cfg.env, cfg.agent)
     hyperparameters = rllib_hyperparameters(cfg.hp)
+    if cfg.task is not None:
+        return _train_rllib_task(cfg, hyperparameters, report)
+    entry = get(cfg.env, cfg.agent)
     env_kwargs = entry.env_kwargs(cfg.scenario, **parse_env_kwargs(cfg.env_kwargs))
     check_env_kwargs(entry.gym_id, env_kwargs)
     env_config, eval_env = env_config_of(entry, env_kwargs, cfg.opponent)
@@ -365,6 +378,61 @@ def train_rllib(cfg: TrainConfig, report: Callable[[str], None] | None = print) 
         )
 
 
+def _train_rllib_task(
+    cfg: TrainConfig, hyperparameters: dict[str, Any], report: Callable[[str], None] | None
+) -> RLlibTrainResult:
+    """:func:`train_rllib` on ``--task``: the task's env (:data:`~agents.rllib.envs.TASK_ENV`).
+
+    config.json records the task, its Gymnasium id and its options (objects as text); at the
+    end the run folder is scored on the task as ``python -m agents.bench score`` scores it
+    (scores.json's ``task``).
+    """
+    from agents.rllib.envs import TASK_ENV, is_masked
+    from agents.rllib.policy import policy_of
+    from agents.task_runs import check_rllib_fits, plain_kwargs, score_run
+    from agents.training import final_evaluations, task_env_kwargs, task_setup
+
+    setup = task_setup(cfg)  # the options a task fixes, and the task's learners
+    entry, task, env_kwargs = setup.entry, setup.entry.task, setup.env_kwargs
+    check_rllib_fits(entry)
+    env_config = {"task": task.name}
+    with ExitStack() as stack:
+        eval_env = entry.make_env(env_kwargs)
+        stack.callback(eval_env.close)
+        run = open_run(cfg, stack, report)
+        if run.folder.resumed:  # the run's record must be the task's
+            saved = run.folder.saved_resolved
+            task_env_kwargs(task, env_kwargs, saved, run.run_dir / "config.json")
+        reference = entry.reference_of(eval_env)
+        recorded = {"env": task.env_id, "task": task.name, "env_kwargs": plain_kwargs(env_kwargs)}
+        algo, stop = _start(
+            run, cfg, TASK_ENV, env_config, cfg.total_timesteps, cfg.agent, env_kwargs,
+            hyperparameters, reference, recorded,
+        )  # fmt: skip
+        history, steps, seconds = _iterate(
+            algo,
+            cfg.total_timesteps,
+            run,
+            stop,
+            progress=cfg.run.progress_bar,
+            desc=f"RLlib PPO {cfg.agent} on task {task.name}",
+            checkpoint_every=cfg.checkpoint_freq,
+        )
+        masked = is_masked(_view_space(TASK_ENV, env_config))
+        policy = policy_of(algo, None, eval_env.action_space, masked)
+        seed = derived_seed(cfg.run.seed, 10_000)
+        rows = final_evaluations(policy, ALGO, eval_env, reference, cfg.final_eval_episodes, seed)
+        evaluations = {f"learned (RLlib {ALGO})": rows.pop(f"learned ({ALGO})"), **rows}
+        algo.save_to_path(str((run.run_dir / "checkpoint").resolve()))
+        task_score = score_run(task, run.run_dir)  # as python -m agents.bench score scores it
+        fields = {"task": task_score.to_dict()}
+        run.folder.write_scores(_run_scores(run, history, steps, seconds, **fields), evaluations)
+        return RLlibTrainResult(
+            run.run_dir, evaluations, history, steps, seconds, run.resumed, stop.signum,
+            policy=policy, task_score=task_score,
+        )  # fmt: skip
+
+
 def _view_space(gym_id: str, env_config: dict[str, Any]) -> Any:
     from agents.rllib.envs import make_view
 
@@ -403,11 +471,13 @@ def _start(
     env_kwargs: dict[str, Any],
     hyperparameters: dict[str, Any],
     reference: Any,
+    recorded: dict[str, Any] | None = None,
 ) -> tuple[Any, Any]:
     """The lifecycle steps every RLlib driver shares, after :func:`open_run`.
 
     Seed, start Ray, build the algorithm (a resumed run's state loaded into it), write
-    config.json and watch SIGINT/SIGTERM.
+    config.json (``recorded``: its ``resolved`` entries in place of ``env`` and ``env_kwargs``,
+    a task run's) and watch SIGINT/SIGTERM.
 
     Returns:
         The algorithm (stopped when the run's exit stack closes) and the stop request.
@@ -418,7 +488,7 @@ def _start(
     algo = _ppo(cfg, env, env_config, seed, total).build_algo()
     run.folder.stack.callback(algo.stop)
     begin(run, algo)
-    _write_config(run, command, cfg, env, env_kwargs, hyperparameters, reference)
+    _write_config(run, command, cfg, env, env_kwargs, hyperparameters, reference, recorded)
     return algo, run.folder.watch_signals()
 
 
@@ -436,7 +506,7 @@ def _start_selfplay(
     """
     per_iteration = _per_iteration(cfg, run, hyperparameters)
     algo, stop = _start(
-        run, cfg, cfg.env, env_kwargs, cfg.iterations * per_iteration, "game", env_kwargs,
+        run, cfg, cfg.env, env_kwargs, cfg.n_iterations * per_iteration, "game", env_kwargs,
         hyperparameters, reference,
     )  # fmt: skip
     return per_iteration, algo, stop
@@ -445,9 +515,9 @@ def _start_selfplay(
 def _iterate_selfplay(
     cfg: GameConfig, algo: Any, run: Session, stop: Any, per_iteration: int, on_iteration: Any
 ) -> tuple[list[dict[str, Any]], int, float]:
-    """:func:`_iterate` over the self-play drivers' ``cfg.iterations`` iterations."""
+    """:func:`_iterate` over the self-play drivers' ``cfg.n_iterations`` iterations."""
     return _iterate(
-        algo, cfg.iterations * per_iteration, run, stop, on_iteration,
+        algo, cfg.n_iterations * per_iteration, run, stop, on_iteration,
         progress=cfg.run.progress_bar, desc=f"RLlib self-play on {cfg.env}",
     )  # fmt: skip
 
@@ -475,7 +545,7 @@ def _per_iteration(cfg: GameConfig, run: Session, hyperparameters: dict[str, Any
     n_steps = hyperparameters["n_steps"]
     per_iteration = math.ceil(cfg.steps_per_iteration / n_steps) * n_steps
     run.folder.check_not_shorter(
-        "iterations", cfg.iterations, run.steps // per_iteration, "iterations"
+        "iterations", cfg.n_iterations, run.steps // per_iteration, "iterations"
     )
     return per_iteration
 
@@ -495,6 +565,7 @@ def _write_config(
     env_kwargs: dict[str, Any],
     hyperparameters: dict[str, Any],
     reference: Any,
+    recorded: dict[str, Any] | None = None,
 ) -> None:
     from agents.training import reference_record
 
@@ -506,6 +577,7 @@ def _write_config(
             "env": env,
             "algo": ALGO,
             "env_kwargs": env_kwargs,
+            **(recorded or {}),
             "hyperparameters": hyperparameters,
             "reference": reference_record(reference),
         },
@@ -593,11 +665,11 @@ def selfplay_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print
 
     Other methods (psro, fsp, ibr) run :func:`psro_rllib`.
 
-    ``cfg.iterations`` iterations of ``cfg.steps_per_iteration`` env steps each; after each the
+    ``cfg.n_iterations`` iterations of ``cfg.steps_per_iteration`` env steps each; after each the
     exploitability of the players' current mixes and of their average over the second half of
     the iterations so far is computed on the exact payoff matrix. The result's ``x``/``y`` are
     the average mixes (the last-iterate figures are in the history). ``--resume`` continues
-    to ``cfg.iterations`` in all (both modules' weights, optimizer states and counters, and the
+    to ``cfg.n_iterations`` in all (both modules' weights, optimizer states and counters, and the
     mixes averaged so far, restored).
 
     Raises:
@@ -785,7 +857,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
     as its fixed opponent). The run folder holds config.json, progress.jsonl (one record per
     iteration), scores.json, each best response's weights (``policies/<side>_<k>.pt``) and
     ``rllib_state.json`` (populations, meta-game, mixes, after every iteration), from which
-    ``--resume`` continues to ``cfg.iterations`` in all (PSRO's meta-game needs the earlier
+    ``--resume`` continues to ``cfg.n_iterations`` in all (PSRO's meta-game needs the earlier
     policies: they are rebuilt from their weights, never unpickled).
 
     Raises:
@@ -824,7 +896,7 @@ def psro_rllib(cfg: GameConfig, report: Callable[[str], None] | None = print) ->
 
         game = MatrixGame(entries, env_kwargs, L, value)
         history = run_population(
-            cfg.method, oracle, game, loop, cfg.iterations, cfg.run.seed, cfg.steps_per_iteration,
+            cfg.method, oracle, game, loop, cfg.n_iterations, cfg.run.seed, cfg.steps_per_iteration,
             lambda: stop.requested, on_iteration,
         )  # fmt: skip
         pops, meta, x, y = loop.actions, loop.meta, loop.x, loop.y
