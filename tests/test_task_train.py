@@ -204,6 +204,7 @@ LEARNERS = {
     "covariance/": (BOX, True),
     "detection-game/": (BOX, True),
     "stealth/ieee14-b3-v0": (MULTI_BINARY, False),
+    "stealth/ieee14-box-": (MULTI_BINARY, False),
     "stealth/ch4-position-dynamic-bias-v0": (BOX, True),
     "stealth/ch4-position-dynamic-protect-defender-v0": (MULTI_BINARY, False),
 }
