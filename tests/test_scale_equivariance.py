@@ -10,7 +10,8 @@ and v2 in their sequential formats), the covariance attack and the detection gam
 
 At 1e±200 the 2-state kernels divided by an underflowed ``a d − b²`` (``ZeroDivisionError``) or
 overflowed it (NaN traces, −inf log-determinants), and the correlation feature ``b / sqrt(a d)``
-read 0 (a sum of a huge bias covariance too: the detection game at power 1e300).
+read 0 (a sum of a huge bias covariance too: the detection game at power 1e300). The scales
+beyond float64's reach are refused when the system is built (tests/test_system_validation.py).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ from fdia_env import (
     sparse_attack_v1,
     sparse_attack_v2,
 )
-from fdia_env._validation import MAX_COVARIANCE
 from fdia_env.systems import LinearSystem, Sensor, tracking_system
 
 torch = pytest.importorskip("torch")
@@ -349,37 +349,6 @@ def test_a_native_numpy_member_equals_its_single_env_bit_for_bit_at_extreme_scal
             v_obs, v_rew, *_ = venv.step(np.array([a, 1]))
             assert v_rew[0] == rew["attacker"]
             np.testing.assert_array_equal(v_obs[0], obs["attacker"]["observation"])
-
-
-# --- beyond float64's reach: refused by name ------------------------------------------------------
-
-
-def _with_q(scale: float) -> LinearSystem:
-    """The 2-state system with only its process noise scaled."""
-    system = two_state(1.0)
-    return LinearSystem(F=system.F, Q=system.Q * scale, sensors=system.sensors)
-
-
-@pytest.mark.parametrize(
-    ("make", "name"),
-    [
-        (lambda: two_state(1e305), "Sensor.R entries"),  # R = 1.9e305
-        (lambda: _with_q(1e308), "LinearSystem.Q entries"),  # a trace of 2.5e308 overflows
-        (lambda: two_state(1e-304), "Sensor.R is too small for its H"),  # H' R⁻¹ H = 7.1e304
-        (lambda: two_state(1e-308), "Sensor.R is too small for its H"),  # H' R⁻¹ H overflows
-    ],
-)
-def test_scales_beyond_float64s_reach_are_refused_by_name(make, name):
-    with pytest.raises(ValueError, match=rf"{name}.*at most 1e\+304 in magnitude"):
-        make()
-
-
-def test_p0_beyond_float64s_reach_is_refused_by_name():
-    system = two_state(1.0)
-    for P0, what in ((1e305, "LinearSystem.P0 entries"), (1e-305, "LinearSystem.P0 is too small")):
-        with pytest.raises(ValueError, match=rf"{what}.*at most 1e\+304"):
-            LinearSystem(F=system.F, Q=system.Q, sensors=system.sensors, P0=P0 * np.eye(2))
-    assert MAX_COVARIANCE == 1e304
 
 
 @pytest.mark.parametrize(
