@@ -20,6 +20,14 @@ MAX_POWER = 1e300
 # system scale and window sums on top) inside float64's 1.8e308.
 MAX_SCALE = 1e100
 
+# Largest admissible entry of a system's covariances (Q, R, P0) and informations (H' R⁻¹ H,
+# P0⁻¹). The filter is exact at any scale up to it (the covariances of a system whose Q, R and
+# P0 are scaled by s are s times those at scale 1); the factor of ~1.8e4 left to float64's
+# 1.8e308 keeps sums over the state, the error's growth over a window and sampled squared errors
+# finite (a trace, or a squared error, of covariances near 1e308 overflows). An information of
+# 1e304 is a covariance of 1e-304 seen from the other side: its inverse must stay a normal float.
+MAX_COVARIANCE = 1e304
+
 
 def as_float_array(name: str, value: Any, expected: str) -> np.ndarray:
     """``value`` as a float64 array (a copy), or ``ValueError`` naming ``name``.
@@ -117,6 +125,24 @@ def check_psd(name: str, arr: np.ndarray, *, strict: bool = False) -> None:
     if not strict and lowest < -1e-10 * scale:
         raise ValueError(
             f"{name} must be positive semidefinite; its smallest eigenvalue is {lowest:.6g}"
+        )
+
+
+def check_magnitude(name: str, arr: np.ndarray, what: str = "entries") -> None:
+    """Raise ``ValueError`` unless every entry of ``arr`` is at most :data:`MAX_COVARIANCE`.
+
+    Args:
+        name: The parameter, as the message names it.
+        arr: The covariance (or the information derived from it) to check.
+        what: What of ``name`` ``arr`` is, as the message says it (``"entries"``, or e.g.
+            ``"is too small for its H: its information H' R⁻¹ H"``).
+    """
+    largest = float(np.max(np.abs(arr))) if np.size(arr) else 0.0
+    if not largest <= MAX_COVARIANCE:  # NaN/inf too
+        raise ValueError(
+            f"{name} {what} must be at most {MAX_COVARIANCE:g} in magnitude (a filter's "
+            f"covariances and informations inside float64's range with room for sums and "
+            f"squared errors), got {largest:g}"
         )
 
 

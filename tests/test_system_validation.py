@@ -21,6 +21,45 @@ def _system(F, Q=None, sensors=(POS,), **kw):
     return LinearSystem(F=F, Q=np.eye(n) if Q is None else Q, sensors=sensors, **kw)
 
 
+# --- covariance scale: the filter's covariances and informations inside float64's reach -------
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: Sensor(H=[[1.0, 0.0]], R=[[2e304]]), r"Sensor\.R entries must be at most"),
+        (  # the information H' R⁻¹ H = 2e304: its inverse would underflow
+            lambda: Sensor(H=[[1.41421356, 0.0]], R=[[1e-304]]),
+            r"Sensor\.R is too small for its H: its information H' R⁻¹ H must be at most",
+        ),
+        (  # a subnormal R: the information overflows to inf
+            lambda: Sensor(H=[[1.0, 0.0]], R=[[3e-309]]),
+            r"Sensor\.R is too small for its H",
+        ),
+        (lambda: _system(np.eye(2), Q=1e308 * np.eye(2)), r"LinearSystem\.Q entries must be"),
+        (lambda: _system(np.eye(2), P0=2e304 * np.eye(2)), r"LinearSystem\.P0 entries must be"),
+        (
+            lambda: _system(np.eye(2), P0=np.diag([1.0, 1e-305])),
+            r"LinearSystem\.P0 is too small: its information P0⁻¹ must be at most",
+        ),
+    ],
+)
+def test_covariances_beyond_float64s_reach_are_refused_naming_the_parameter_and_range(
+    make, message
+):
+    # a system of scale 1e308 has a trace of inf; at 1e-308 an information of inf
+    with pytest.raises(ValueError, match=message + r".* 1e\+304 in magnitude"):
+        make()
+
+
+def test_the_covariance_scale_limits_are_inclusive_and_q_has_no_lower_one():
+    _system(0.5 * np.eye(2), Q=1e304 * np.eye(2), sensors=(Sensor(H=[[1.0, 0.0]], R=[[1e304]]),))
+    _system(0.5 * np.eye(2), Q=1e-320 * np.eye(2), P0=2e-304 * np.eye(2))  # a tiny Q: fine
+    Sensor(H=[[1e-3, 0.0]], R=[[1e-305]])  # a small R with a small H: an information of 1e299
+    # the detection guide's extreme tracking index: process noise of 2.5e-301 next to R = 9
+    assert tracking_system(1e-150, [3.0]).Q.max() == pytest.approx(1e-300)
+
+
 # --- every preset and every single-sensor subset still builds ---------------------------------
 
 

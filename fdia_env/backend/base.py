@@ -13,6 +13,9 @@ from typing import Any
 
 import numpy as np
 
+# the largest |e| of Backend.unit_scale: 2**±1020 and its reciprocal are normal floats
+UNIT_EXPONENT = 1020
+
 
 class Backend(ABC):
     """An array namespace: numpy, or torch on one device.
@@ -209,6 +212,15 @@ class Backend(ABC):
     @abstractmethod
     def flip_last2(self, a: Any) -> Any:
         """``a[..., ::-1, ::-1]``."""
+
+    @abstractmethod
+    def unit_scale(self, m: Any) -> tuple[Any, Any]:
+        """Powers of two ``c = 2**-e`` that put ``c·m`` in [0.5, 1) (``e`` clamped to ±1020).
+
+        Returns ``(c, e)``, both float64. Multiplying by ``c`` is exact (no rounding) for every
+        normal result, so a formula evaluated on ``c``-scaled inputs rounds exactly as the
+        unscaled one wherever that one neither overflows nor underflows.
+        """
 
     # --- randomness -----------------------------------------------------------------------
     @abstractmethod

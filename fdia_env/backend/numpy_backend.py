@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from fdia_env.backend.base import Backend
+from fdia_env.backend.base import UNIT_EXPONENT, Backend
 
 
 class NumpyBackend(Backend):
@@ -123,6 +123,11 @@ class NumpyBackend(Backend):
     def flip_last2(self, a: np.ndarray) -> np.ndarray:
         """``a[..., ::-1, ::-1]`` (a view)."""
         return a[..., ::-1, ::-1]
+
+    def unit_scale(self, m: Any) -> tuple[np.ndarray, np.ndarray]:
+        """See :meth:`Backend.unit_scale`."""
+        e = np.clip(np.frexp(m)[1], -UNIT_EXPONENT, UNIT_EXPONENT)
+        return np.ldexp(1.0, -e), e.astype(np.float64)
 
     def generator(self, seed: int | None) -> np.random.Generator:
         """``np.random.default_rng(seed)``."""

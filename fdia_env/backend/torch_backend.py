@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from fdia_env.backend.base import Backend
+from fdia_env.backend.base import UNIT_EXPONENT, Backend
 
 _DEVICE_TYPES = ("cpu", "cuda")
 
@@ -242,6 +242,11 @@ class TorchBackend(Backend):
     def flip_last2(self, a: torch.Tensor) -> torch.Tensor:
         """``a[..., ::-1, ::-1]`` (a copy: torch has no negative strides)."""
         return torch.flip(a, (-2, -1))
+
+    def unit_scale(self, m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """See :meth:`Backend.unit_scale`."""
+        e = torch.frexp(m).exponent.clamp(-UNIT_EXPONENT, UNIT_EXPONENT)
+        return torch.ldexp(torch.ones_like(m), -e), e.to(torch.float64)
 
     def generator(self, seed: int | None) -> torch.Generator:
         """A ``torch.Generator`` on the device, seeded (from entropy when None)."""

@@ -776,12 +776,7 @@ class BatchedSimulation:
         # env's float kernel), the generic objective of M where a bias reached the filter (the
         # single env's engine step): each member by its own state, as its single env
         a, b, d = self._c
-        if self.spec.objective == "trace":
-            phi = a + d
-        else:
-            det = a * d - b * b
-            with np.errstate(divide="ignore", invalid="ignore"):
-                phi = xp.where(det > 0, xp.log(det), -np.inf)
+        phi = a + d if self.spec.objective == "trace" else small.logdet2((a, b, d))
         if self._clean or self.all_consistent():
             return phi
         return xp.where(self.consistent, phi, self._objective_of_M())
@@ -827,7 +822,7 @@ class BatchedSimulation:
             a0, _, d0 = self._start2
             out[1] = xp.clip(xp.log(a / a0), -30.0, 30.0)
             out[2] = xp.clip(xp.log(d / d0), -30.0, 30.0)
-            out[3] = xp.clip(b / xp.sqrt(a * d), -1.0, 1.0)
+            out[3] = xp.clip(small.corr2(a, b, d), -1.0, 1.0)
             col = 4
         else:
             M = self.M
@@ -838,7 +833,7 @@ class BatchedSimulation:
                 upper = M.reshape(len(M), -1)[:, self._iu_flat]
             else:
                 upper = M[:, i, j]
-            corr = upper / xp.sqrt(var[:, i] * var[:, j])
+            corr = small.corr2(var[:, i], upper, var[:, j])
             out[1 + n : 1 + n + len(i)] = xp.clip(corr, -1.0, 1.0).T
             col = 1 + n + len(i)
         if self.sampled:

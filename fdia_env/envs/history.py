@@ -17,7 +17,6 @@ therefore equal the single env bit for bit while the table holds them.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -97,15 +96,10 @@ class HistoryTable:
         # small.shape_features2 and the objective, elementwise (the same numpy logarithm)
         lv1 = np.minimum(np.maximum(np.log(a / self._scale[0]), -30.0), 30.0)
         lv2 = np.minimum(np.maximum(np.log(d / self._scale[2]), -30.0), 30.0)
-        corr = np.minimum(np.maximum(b / np.sqrt(a * d), -1.0), 1.0)
+        corr = np.minimum(np.maximum(small.corr2(a, b, d), -1.0), 1.0)
         self.feats64[:, ids] = np.stack([lv1, lv2, corr])
         self.feats[:, ids] = self.feats64[:, ids]
-        if self._objective == "trace":
-            self.phi[ids] = a + d
-        else:
-            det = a * d - b * b
-            with np.errstate(divide="ignore", invalid="ignore"):
-                self.phi[ids] = np.where(det > 0, np.log(det), -math.inf)
+        self.phi[ids] = a + d if self._objective == "trace" else small.logdet2((a, b, d))
         self.size += U
         return ids
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fdia_env.backend import NUMPY, namespace
+from fdia_env.backend import NUMPY, Backend, namespace
 
 
 def mT(a: np.ndarray) -> np.ndarray:
@@ -102,6 +102,7 @@ def logdet_sum2(P: np.ndarray, S: np.ndarray) -> np.ndarray:
 
 _COFACTOR_SIGNS = np.array([[1.0, -1.0], [-1.0, 1.0]])
 _TINY = float(np.finfo(np.float64).tiny)
+_HUGE = float(np.finfo(np.float64).max)
 
 
 def inv2(a: np.ndarray) -> np.ndarray:
@@ -110,31 +111,30 @@ def inv2(a: np.ndarray) -> np.ndarray:
     ``a[..., ::-1, ::-1]`` transposed is ``[[d, b], [c, a]]``; the sign pattern and the
     determinant finish the adjugate formula. On component views this is many times faster than
     ``np.linalg.inv``'s per-matrix LAPACK call, and exact to rounding.
+
+    Entries beyond ~1e154 overflow the determinant, entries below ~1e-154 underflow it (a
+    covariance of 1e-300): where any determinant is not a normal float, every matrix is scaled
+    by the power of two ``s`` that puts its largest entry in [0.5, 1) and the inverse is ``s``
+    times the scaled one's. Scaling by a power of two is exact, so a matrix inside the range
+    gets the same bits either way (a member's inverse does not depend on the rest of its batch).
     """
     xp = namespace(a)
-    if xp is not NUMPY:
-        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
-        if not xp.all(xp.isfinite(det)):  # huge entries: as below, rescale (or give up: NaN)
-            scale = a.abs().amax(dim=(-2, -1), keepdim=True)
-            if not xp.all(xp.isfinite(scale)) or xp.any(scale == 0.0):
-                return xp.inv(a)
-            return inv2(a / scale) / scale
-        signs = xp.asarray(_COFACTOR_SIGNS)
-        return mT(xp.flip_last2(a)) * (signs / det[..., None, None])
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
         det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
-    if not np.all(np.isfinite(det)) or np.any(np.abs(det) < _TINY):
-        # entries beyond ~1e154 overflow the determinant, entries below ~1e-154 underflow it
-        # (a covariance of 1e-300): invert a / max|a| instead
-        scale = np.abs(a).max(axis=(-2, -1), keepdims=True)
-        if not np.all(np.isfinite(scale)) or np.any(scale == 0.0):
-            # NaN/inf entries (a diverged iterate) or a zero matrix: no rescaling helps;
-            # LAPACK gives NaN/inf or its error
-            return np.linalg.inv(a)
-        a = a / scale
-        det = (a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0])[..., None, None]
-        return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / (det * scale))
-    return np.swapaxes(a[..., ::-1, ::-1], -1, -2) * (_COFACTOR_SIGNS / det[..., None, None])
+    if not xp.all((det >= _TINY) & (det <= _HUGE)):
+        # NaN/inf entries (a diverged iterate) stay NaN/inf; a singular matrix gives inf/NaN
+        big = abs(a).amax(dim=(-2, -1)) if xp is not NUMPY else np.abs(a).max(axis=(-2, -1))
+        s = xp.unit_scale(big)[0][..., None, None]
+        a = a * s
+        det = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return _adjugate(a, xp) * (xp.asarray(_COFACTOR_SIGNS) / det[..., None, None]) * s
+    return _adjugate(a, xp) * (xp.asarray(_COFACTOR_SIGNS) / det[..., None, None])
+
+
+def _adjugate(a: np.ndarray, xp: Backend) -> np.ndarray:
+    """``[[d, b], [c, a]]`` of (..., 2, 2) ``[[a, b], [c, d]]`` (the adjugate before its signs)."""
+    return mT(xp.flip_last2(a))
 
 
 def trace(a: np.ndarray) -> np.ndarray:

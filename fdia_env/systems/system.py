@@ -4,6 +4,12 @@ Validation when a system is built (every preset passes):
 
 - numeric, finite, correctly shaped matrices; ``F`` non-empty and square; ``T > 0``; ``name`` a
   string; ``sensors`` a non-empty sequence of :class:`Sensor`;
+- **scale**: the entries of ``Q``, ``R``, ``P0`` and of the informations ``H_i' R_i⁻¹ H_i`` and
+  ``P0⁻¹`` at most :data:`~fdia_env._validation.MAX_COVARIANCE` (1e304) in magnitude. Inside it
+  every env is exact at any scale (Q, R and P0 scaled by s give s times the covariances, down to
+  about 1e-303 and up to 1e304); beyond it a trace or a sampled squared error overflows float64,
+  or an information's inverse underflows. ``Q`` has no lower limit (a process noise of 1e-300
+  next to a measurement noise of 1 is the tracking model at σ_v = 1e-150);
 - **detectability** of ``(F, H)`` with all sensors: the PBH test ``rank [F − μI; H] = n`` at
   every eigenvalue with ``|μ| >= 1 − 1e-9`` (unstable or marginal), rank decided by the smallest
   singular value against ``1e-9 · max(1, |F|, |H|)``: a mode that grows (or persists) unseen
@@ -29,7 +35,13 @@ from typing import Any
 import numpy as np
 from scipy.linalg import block_diag
 
-from fdia_env._validation import as_matrix, as_vector, check_positive, check_psd
+from fdia_env._validation import (
+    as_matrix,
+    as_vector,
+    check_magnitude,
+    check_positive,
+    check_psd,
+)
 
 PBH_TOL = 1e-9  # relative tolerance of the PBH rank tests and of "marginal" (|μ| >= 1 − tol)
 _SAME_EIGENVALUE = 1e-12  # eigenvalues this close (relative) share one PBH rank test
@@ -125,6 +137,10 @@ class Sensor:
             raise ValueError(f"Sensor.H must be a non-empty matrix, got shape {H.shape}")
         R = as_matrix("Sensor.R", self.R, shape=(H.shape[0], H.shape[0]))
         check_psd("Sensor.R", R, strict=True)
+        check_magnitude("Sensor.R", R)
+        with np.errstate(all="ignore"):
+            information = H.T @ np.linalg.solve(R, H)
+        check_magnitude("Sensor.R", information, "is too small for its H: its information H' R⁻¹ H")
         if not isinstance(self.name, str):
             raise ValueError(f"Sensor.name must be a string, got {self.name!r}")
         object.__setattr__(self, "H", H)
@@ -194,6 +210,7 @@ class LinearSystem:
             raise ValueError(f"LinearSystem.F must be square, got shape {F.shape}")
         Q = as_matrix("LinearSystem.Q", self.Q, shape=(n, n))
         check_psd("LinearSystem.Q", Q)
+        check_magnitude("LinearSystem.Q", Q)
         zero_d = isinstance(self.sensors, np.ndarray) and self.sensors.ndim == 0  # not iterable
         if (
             isinstance(self.sensors, Sensor | str)
@@ -222,6 +239,10 @@ class LinearSystem:
         x0 = as_vector("LinearSystem.x0", np.zeros(n) if self.x0 is None else self.x0, n)
         P0 = as_matrix("LinearSystem.P0", np.eye(n) if self.P0 is None else self.P0, shape=(n, n))
         check_psd("LinearSystem.P0", P0, strict=True)
+        check_magnitude("LinearSystem.P0", P0)
+        with np.errstate(all="ignore"):
+            information = np.linalg.inv(P0)
+        check_magnitude("LinearSystem.P0", information, "is too small: its information P0⁻¹")
         if self.G is None:
             if self.u is not None:
                 raise ValueError("LinearSystem.u was given without LinearSystem.G")
