@@ -27,7 +27,7 @@ import numpy as np
 import scipy.stats
 from gymnasium import spaces
 
-from agents.registry import Reference, by_gym_id, parallel_of
+from agents.registry import Reference, by_gym_id, equilibrium, parallel_of
 from fdia_env.actions import check_action
 from fdia_env.envs.policy import MaskedPolicyBase, Policy, batch_size
 
@@ -510,12 +510,12 @@ def _bayesian_score(
 def _game_score(
     reference: Reference, env: gym.Env, strategy: np.ndarray
 ) -> tuple[float, dict[str, float]]:
-    from baselines.game import exploitability, solve_zero_sum
+    from baselines.game import exploitability
 
     if reference.bayes is not None:
         return _bayesian_score(reference, env, strategy)
     L = reference.payoff
-    x_eq, y_eq, value = solve_zero_sum(L)
+    x_eq, y_eq, value = equilibrium(L)
     parallel = parallel_of(env)
     agent = env.unwrapped.agent
     if agent == "attacker":

@@ -72,7 +72,7 @@ from agents.population import (
     report_line,
     run_population,
 )
-from agents.registry import Reference, Trainable, game_names, get
+from agents.registry import Reference, Trainable, equilibrium, game_names, get
 from agents.runs import run_prefix, write_json
 from agents.seeding import derived_seed, seed_everything
 from agents.training import (
@@ -86,7 +86,7 @@ from agents.training import (
     saved_hyperparameters,
     say_kept,
 )
-from baselines.game import MixedStrategyPolicy, solve_zero_sum
+from baselines.game import MixedStrategyPolicy
 from fdia_env.envs.opponents import FixedMix
 
 if TYPE_CHECKING:
@@ -806,7 +806,7 @@ def _final_evaluations(
 ) -> dict[str, Evaluation]:
     """Each side's learned mix and LP equilibrium mix, played against the other learned mix."""
     seed = derived_seed(cfg.run.seed, 20_000)
-    x_eq, y_eq, _ = solve_zero_sum(reference.payoff)
+    x_eq, y_eq, _ = equilibrium(reference.payoff)
     rows = {}
     for label, side, probs, other in (
         ("attacker mix (learned)", "attacker", y, x),
