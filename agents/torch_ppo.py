@@ -28,6 +28,7 @@ the host during a rollout except what the env itself needs (its few Python-level
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
@@ -365,8 +366,13 @@ class TorchPolicy:
 
     def __init__(self, model: ActorCritic, seed: int = 0) -> None:
         self.model = model.eval()
+        self.seed = int(seed)
         self.device = next(model.parameters()).device
-        self.generator = torch.Generator(device=self.device).manual_seed(int(seed))
+        self.generator = torch.Generator(device=self.device).manual_seed(self.seed)
+
+    def snapshot(self) -> TorchPolicy:
+        """A policy on a copy of the weights and statistics (later training leaves it as is)."""
+        return TorchPolicy(copy.deepcopy(self.model), self.seed)
 
     @property
     def spec(self) -> PolicySpec:
