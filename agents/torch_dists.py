@@ -1,13 +1,16 @@
 """The log-probabilities and entropies of torch-ppo's policies, without distribution objects.
 
-- :func:`masked_categorical`: ``log π(a)`` and the entropy of ``softmax`` over the legal
-  actions, as one fused autograd function. The illegal logits are replaced by the dtype's
-  minimum (``torch.where(mask, logits, finfo.min)``), the log-softmax is taken once, and the
-  backward pass is the closed form ``∂ log π(a)/∂z = e_a − p``, ``∂H/∂z = −p ⊙ (log p + H)``:
-  no per-call ``Categorical``, no exponential of the masked entries (on the CPU ``exp`` of a
-  value below -88 takes a slow path, ten times and more the normal cost), and exactly zero
-  gradient on an illegal logit. Equal to ``torch.distributions.Categorical`` over the masked
-  logits to round-off (``tests/test_torch_dists.py``).
+- :func:`masked_categorical`: ``log π(a)`` and the entropy of ``softmax`` over the legal actions,
+  as one fused autograd function. The illegal logits are replaced by the dtype's minimum
+  (``torch.where(mask, logits, finfo.min)``), the log-softmax is taken once, and the backward pass
+  is the closed form ``∂ log π(a)/∂z = e_a − p``, ``∂H/∂z = −p ⊙ (log p + H)``: no per-call
+  ``Categorical``, no ``exp`` of the masked entries (on the CPU ``exp`` of a value below -88 takes
+  a slow path, ten times and more the normal cost: ``p`` comes from ``softmax``, whose own
+  exponential has none), and exactly zero gradient on an illegal logit (the backward pass
+  multiplies by ``p`` and ``p log p``, both 0 there, never by ``log p``, the dtype's minimum, which
+  ``Categorical``'s own backward multiplies by the incoming gradient and overflows to NaN once that
+  exceeds 1). Equal to ``torch.distributions.Categorical`` over the masked logits to round-off
+  (``tests/test_torch_dists.py``).
 - :func:`normal_log_prob` and :func:`normal_entropy`: the diagonal Gaussian's, summed over the
   action dimensions, written as ``torch.distributions.Normal`` computes them (same operations,
   same results bit for bit) without building one.
@@ -22,11 +25,6 @@ import torch
 
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
 _ENTROPY_CONST = 0.5 + 0.5 * math.log(2 * math.pi)
-
-PLOGP_FLOOR = -1e4
-"""``log p`` is floored here in the entropy's ``p log p`` terms: below about -104 (float32;
--745 in float64) ``p`` is exactly 0 and the term is 0 either way, and the floor keeps the
-backward pass finite for an illegal action, whose ``log p`` is the dtype's minimum."""
 
 
 def mask_logits(logits: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
@@ -47,7 +45,7 @@ class _MaskedCategorical(torch.autograd.Function):
         z = mask_logits(logits, mask)
         logp_all = torch.log_softmax(z, -1)
         p = torch.softmax(z, -1)  # its own exp: 0 on an illegal action, no slow path
-        plogp = p * logp_all.clamp_min(PLOGP_FLOOR)
+        plogp = p * logp_all  # 0 · finfo.min = 0 on an illegal action
         entropy = -plogp.sum(-1)
         index = action.long().unsqueeze(-1)
         ctx.save_for_backward(p, plogp, entropy, index)
@@ -57,10 +55,13 @@ class _MaskedCategorical(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad_logp, grad_entropy):
         p, plogp, entropy, index = ctx.saved_tensors
-        # dH/dz = -(p log p + p H); d log p_a/dz = e_a - p; an illegal entry has p = 0: 0
-        grad = plogp.addcmul(p, entropy.unsqueeze(-1)).mul_(-grad_entropy.unsqueeze(-1))
-        grad.sub_(p * grad_logp.unsqueeze(-1))
-        grad.scatter_add_(-1, index, grad_logp.unsqueeze(-1))
+        # dH/dz = -(p log p + p H), d log p_a/dz = e_a - p: with g, h the incoming gradients
+        # of H and log p_a, -g p log p - p (g H + h) + h e_a (no log p itself: an illegal
+        # entry, p = 0 and p log p = 0, gets exactly 0 whatever g is)
+        g, h = grad_entropy.unsqueeze(-1), grad_logp.unsqueeze(-1)
+        grad = p * (g * entropy.unsqueeze(-1) + h).neg_()
+        grad.addcmul_(plogp, g, value=-1.0)
+        grad.scatter_add_(-1, index, h)
         return grad, None, None
 
 
