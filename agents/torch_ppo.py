@@ -53,7 +53,8 @@ from agents.checkpoint import (
     tensor_file,
 )
 from agents.options import check_int, check_real
-from agents.torch_dists import (
+from agents.torch_ops import (
+    Tanh,
     categorical_log_prob,
     gumbel_max,
     mask_logits,
@@ -196,7 +197,7 @@ def _layer(n_in: int, n_out: int, std: float) -> nn.Linear:
 def _mlp(n_in: int, hidden: tuple[int, ...], n_out: int, out_std: float) -> nn.Sequential:
     layers: list[nn.Module] = []
     for size in hidden:
-        layers += [_layer(n_in, size, math.sqrt(2)), nn.Tanh()]
+        layers += [_layer(n_in, size, math.sqrt(2)), Tanh()]
         n_in = size
     return nn.Sequential(*layers, _layer(n_in, n_out, out_std))
 
@@ -309,7 +310,7 @@ class ActorCritic(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The log-probability log π(action | x) and the entropy of π(· | x), each (N,).
 
-        Discrete: :func:`agents.torch_dists.masked_categorical` (one fused masked
+        Discrete: :func:`agents.torch_ops.masked_categorical` (one fused masked
         log-softmax); Box: the Gaussian's, as ``torch.distributions.Normal`` computes them.
         """
         out = self.actor(x)

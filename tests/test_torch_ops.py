@@ -6,7 +6,8 @@ import pytest
 import torch
 from torch.distributions import Categorical, Normal
 
-from agents.torch_dists import (
+from agents.torch_ops import (
+    Tanh,
     categorical_log_prob,
     gumbel_max,
     mask_logits,
@@ -119,3 +120,44 @@ def test_normal_log_prob_and_entropy_are_torch_distributions_bit_for_bit(seed):
     dist = Normal(mean, std, validate_args=False)
     assert torch.equal(normal_log_prob(mean, std, value), dist.log_prob(value).sum(-1))
     assert torch.equal(normal_entropy(std), dist.entropy().sum(-1))
+
+
+def _ulps(y: torch.Tensor, exact: torch.Tensor) -> float:
+    """The largest error of float32 ``y`` in units in the last place of the exact value."""
+    e = exact.float()
+    ulp = (torch.nextafter(e.abs(), torch.tensor(float("inf"))) - e.abs()).double()
+    return float(((y.double() - exact).abs() / ulp).max())
+
+
+def test_tanh_is_torchs_to_round_off_over_the_whole_range():
+    g = torch.Generator().manual_seed(0)
+    magnitudes = torch.logspace(-30, 30, 20_001, dtype=torch.float64)
+    x = torch.cat([magnitudes, -magnitudes, torch.randn(50_000, generator=g) * 3]).float()
+    x = torch.cat([x, torch.tensor([0.0, -0.0, float("inf"), float("-inf")])])
+    y = Tanh()(x)
+    exact = torch.tanh(x.double())
+    assert _ulps(y, exact) <= 2.0  # torch's own kernel: 0.5
+    assert torch.equal(y[-4:], torch.tensor([0.0, -0.0, 1.0, -1.0]))
+    assert torch.equal(torch.signbit(y[-4:]), torch.tensor([False, True, False, True]))
+    x64 = x.double()
+    torch.testing.assert_close(Tanh()(x64), torch.tanh(x64), rtol=4e-16, atol=0)
+
+
+def test_tanh_gradient_is_torchs_backward_of_its_output():
+    x = (torch.randn(256, 64) * 2).requires_grad_()
+    grad = torch.randn(256, 64)
+    y = Tanh()(x)
+    (g,) = torch.autograd.grad(y, x, grad)
+    torch.testing.assert_close(g, grad * (1 - y.detach() ** 2), rtol=0, atol=1e-6)
+    (ref,) = torch.autograd.grad(torch.tanh(x), x, grad)
+    torch.testing.assert_close(g, ref, rtol=0, atol=1e-6)
+    x64 = torch.randn(5, 4, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(Tanh(), (x64,))
+
+
+def test_tanh_of_a_view_and_of_other_dtypes():
+    x = torch.randn(64, 32)
+    view = x.t()[::2]  # not contiguous
+    torch.testing.assert_close(Tanh()(view), torch.tanh(view), rtol=0, atol=3e-7)
+    half = x.bfloat16()
+    assert torch.equal(Tanh()(half), torch.tanh(half))  # no NumPy bfloat16: torch's

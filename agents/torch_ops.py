@@ -1,4 +1,4 @@
-"""The log-probabilities and entropies of torch-ppo's policies, without distribution objects.
+"""The operations torch-ppo writes itself: log-probabilities and entropies, and tanh on the CPU.
 
 - :func:`masked_categorical`: ``log π(a)`` and the entropy of ``softmax`` over the legal actions,
   as one fused autograd function. The illegal logits are replaced by the dtype's minimum
@@ -10,18 +10,26 @@
   multiplies by ``p`` and ``p log p``, both 0 there, never by ``log p``, the dtype's minimum, which
   ``Categorical``'s own backward multiplies by the incoming gradient and overflows to NaN once that
   exceeds 1). Equal to ``torch.distributions.Categorical`` over the masked logits to round-off
-  (``tests/test_torch_dists.py``).
+  (``tests/test_torch_ops.py``).
 - :func:`normal_log_prob` and :func:`normal_entropy`: the diagonal Gaussian's, summed over the
   action dimensions, written as ``torch.distributions.Normal`` computes them (same operations,
   same results bit for bit) without building one.
 - :func:`gumbel_max`: a draw from ``softmax(z)`` by Gumbel-max with a given generator.
+- :class:`Tanh`: ``nn.Tanh`` whose CPU forward is NumPy's ``tanh`` (float32 and float64; other
+  devices and dtypes: ``torch.tanh``) and whose backward is torch's ``tanh_backward``. torch's own
+  CPU kernel is correctly rounded (0.5 ulp) but costs about 4 ns an element, as much as the
+  layer's matrix product for these 64-wide layers; NumPy's SIMD ``tanh`` is within 1.4 ulp
+  (measured on 10⁵ points over ±10³⁰) and four to six times faster. The values are those of
+  ``torch.tanh`` to round-off (``tests/test_torch_ops.py``).
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
+from torch import nn
 
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
 _ENTROPY_CONST = 0.5 + 0.5 * math.log(2 * math.pi)
@@ -107,3 +115,39 @@ def normal_log_prob(mean: torch.Tensor, std: torch.Tensor, value: torch.Tensor) 
 def normal_entropy(std: torch.Tensor) -> torch.Tensor:
     """Entropy of the diagonal Gaussian, summed over the last dimension (as ``Normal``'s)."""
     return (_ENTROPY_CONST + torch.log(std)).sum(-1)
+
+
+def _tanh(x: torch.Tensor) -> torch.Tensor:
+    """``tanh(x)``: NumPy's on a CPU float32/float64 tensor (no copy in or out), else torch's."""
+    if x.device.type != "cpu" or x.dtype not in (torch.float32, torch.float64):
+        return torch.tanh(x)
+    x = x.detach().contiguous()
+    out = torch.empty_like(x)
+    np.tanh(x.numpy(), out=out.numpy())
+    return out
+
+
+class _Tanh(torch.autograd.Function):
+    """tanh with torch's backward ``g (1 − y²)`` from the saved output."""
+
+    @staticmethod
+    def forward(ctx, x):
+        y = _tanh(x)
+        ctx.save_for_backward(y)
+        return y
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad):
+        (y,) = ctx.saved_tensors
+        return torch.ops.aten.tanh_backward(grad, y)
+
+
+class Tanh(nn.Module):
+    """``nn.Tanh`` with NumPy's forward on the CPU (see the module docstring); no state."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``tanh(x)`` elementwise, differentiable."""
+        if torch.is_grad_enabled() and x.requires_grad:
+            return _Tanh.apply(x)
+        return _tanh(x)
