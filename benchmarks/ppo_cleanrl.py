@@ -10,15 +10,22 @@ older commit, e.g. ``git worktree add --detach /tmp/torch-ppo-base <commit>``) t
 speed-up of this checkout's loop over the old one. The env alone (uniformly random legal
 actions drawn on the device, no learner) is timed as well: the ceiling a learner approaches.
 
+With ``--eval-freq N`` torch-ppo (and the baseline) also run as ``train.py`` runs them, with
+an evaluation (``agents.evaluate.evaluate``, ``--eval-episodes`` episodes of the task's single
+env, scored against its reference) every N steps: this checkout's on a snapshot of the policy in
+a background thread (:mod:`agents.background`), the baseline's inline with the baseline's own
+``agents/evaluate.py`` (which solved a game's LP again at every evaluation).
+
 Every contender runs in this process, in turns within each round (the first round warms up
 and is dropped), with the same seed in a round and ``--threads`` torch threads; the figures are
-medians over the rounds of wall-clock and CPU-time (this process) rates. Printed: steps/s of
-each, torch-ppo's ratio to the CleanRL-style loop (target: at least 1.0x) and to the baseline,
-and the mean episode return of the last iteration of torch-ppo and of the baseline (the same
-algorithm: equal up to the round-off the loops differ by; docs/guide/training.md says which).
+medians over the rounds of wall-clock and CPU-time (this process, every thread) rates. Printed:
+steps/s of each, torch-ppo's ratio to the CleanRL-style loop (target: at least 1.0x) and to the
+baseline, and the mean episode return of the last iteration of torch-ppo and of the baseline
+(the same algorithm: equal up to the round-off the loops differ by; docs/guide/training.md says
+which).
 
     python benchmarks/ppo_cleanrl.py [--steps 200000] [--repeats 3] [--tasks NAME ...]
-        [--baseline DIR] [--clock wall|cpu]
+        [--baseline DIR] [--eval-freq 0] [--clock wall|cpu] [--threads 1]
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -43,6 +51,9 @@ import torch
 from torch import nn
 from torch.distributions import Categorical, Normal
 
+from agents.background import Background
+from agents.evaluate import evaluate
+from agents.registry import by_gym_id
 from agents.torch_ppo import TorchPPOConfig, make_torch_env, train_torch_ppo
 from fdia_env.tasks import get as get_task
 
@@ -188,18 +199,19 @@ def env_only(env: gym.vector.VectorEnv, cfg: TorchPPOConfig, seed: int) -> int:
     return steps * B
 
 
-def load_baseline(root: Path) -> ModuleType:
-    """``root``'s ``agents/torch_ppo.py`` as the module ``torch_ppo_baseline``.
+def load_baseline(root: Path, name: str = "torch_ppo") -> ModuleType:
+    """``root``'s ``agents/<name>.py`` as the module ``<name>_baseline``.
 
-    Its own imports (``agents.checkpoint``, ``agents.options``) resolve to this checkout's.
+    Its own imports (``agents.checkpoint``, ``agents.registry``, ...) resolve to this
+    checkout's.
 
     Raises:
-        FileNotFoundError: When ``root`` holds no ``agents/torch_ppo.py``.
+        FileNotFoundError: When ``root`` holds no ``agents/<name>.py``.
     """
-    path = Path(root) / "agents" / "torch_ppo.py"
+    path = Path(root) / "agents" / f"{name}.py"
     if not path.is_file():
-        raise FileNotFoundError(f"--baseline {root}: no agents/torch_ppo.py there")
-    spec = importlib.util.spec_from_file_location("torch_ppo_baseline", path)
+        raise FileNotFoundError(f"--baseline {root}: no agents/{name}.py there")
+    spec = importlib.util.spec_from_file_location(f"{name}_baseline", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up by name
     spec.loader.exec_module(module)
@@ -209,11 +221,54 @@ def load_baseline(root: Path) -> ModuleType:
 Contender = Callable[[gym.vector.VectorEnv, TorchPPOConfig, int], tuple[int, float]]
 
 
-def _ppo(train: Callable) -> Contender:
-    """A contender running a ``train_torch_ppo`` (this checkout's or the baseline's)."""
+class Evaluations:
+    """What a run's evaluations need: the task's single env, its reference, the schedule."""
+
+    def __init__(self, task_name: str, freq: int, episodes: int) -> None:
+        task = get_task(task_name)
+        self.env = task.make_env()
+        self.reference = by_gym_id(task.env_id).reference_of(self.env)
+        self.freq, self.episodes = freq, episodes
+
+    def log(self, evaluate_now: Callable[[Any, int], None]) -> Callable[[dict, Any], None]:
+        """A ``log`` callback calling ``evaluate_now(policy, timesteps)`` every ``freq`` steps."""
+        due = [self.freq]
+
+        def log(record: dict, policy: Any) -> None:
+            if record["timesteps"] >= due[0]:
+                due[0] = (record["timesteps"] // self.freq + 1) * self.freq
+                evaluate_now(policy, record["timesteps"])
+
+        return log
+
+
+def _ppo(train: Callable, evals: Evaluations | None = None, old_evaluate: Any = None) -> Contender:
+    """A contender running a ``train_torch_ppo`` (this checkout's or the baseline's).
+
+    With ``evals``: evaluations as ``train.py`` makes them, on a snapshot in a background thread
+    (this checkout's), or inline with ``old_evaluate`` (the baseline's ``evaluate``).
+    """
 
     def run(env: gym.vector.VectorEnv, cfg: TorchPPOConfig, seed: int) -> tuple[int, float]:
-        result = train(env, cfg, seed=seed)
+        if evals is None:
+            result = train(env, cfg, seed=seed)
+        elif old_evaluate is not None:
+
+            def inline(policy: Any, timesteps: int) -> None:
+                old_evaluate(policy, evals.env, evals.episodes, seed, evals.reference)
+
+            result = train(env, cfg, seed=seed, log=evals.log(inline))
+        else:
+            with Background() as jobs:
+
+                def deferred(policy: Any, timesteps: int) -> None:
+                    snapshot = policy.snapshot()
+                    jobs.submit(
+                        evaluate, snapshot, evals.env, evals.episodes, seed, evals.reference
+                    )
+
+                result = train(env, cfg, seed=seed, log=evals.log(deferred))
+                jobs.drain()
         last = result.history[-1]["mean_return"] if result.history else float("nan")
         return result.timesteps, last
 
@@ -222,6 +277,24 @@ def _ppo(train: Callable) -> Contender:
 
 def _plain(run: Callable[[gym.vector.VectorEnv, TorchPPOConfig, int], int]) -> Contender:
     return lambda env, cfg, seed: (run(env, cfg, seed), float("nan"))
+
+
+def contenders_for(task_name: str, args: argparse.Namespace) -> dict[str, Contender]:
+    """The loops timed on a task: torch-ppo, the baseline's, CleanRL-style, the env alone."""
+    out: dict[str, Contender] = {"torch-ppo": _ppo(train_torch_ppo)}
+    evals = None
+    if args.eval_freq:
+        evals = Evaluations(task_name, args.eval_freq, args.eval_episodes)
+        out["torch-ppo + evaluations"] = _ppo(train_torch_ppo, evals)
+    if args.baseline is not None:
+        old = load_baseline(args.baseline).train_torch_ppo
+        out["baseline"] = _ppo(old)
+        if evals is not None:
+            old_evaluate = load_baseline(args.baseline, "evaluate").evaluate
+            out["baseline + evaluations"] = _ppo(old, evals, old_evaluate)
+    out["CleanRL-style"] = _plain(cleanrl_ppo)
+    out["env only"] = _plain(env_only)
+    return out
 
 
 def measure(
@@ -257,22 +330,22 @@ def main(argv: Sequence[str] | None = None) -> dict[str, dict[str, tuple[float, 
     p.add_argument("--threads", type=int, default=1, help="torch threads (torch.set_num_threads)")
     p.add_argument("--baseline", type=Path, help="a checkout of an older commit to time too")
     p.add_argument(
+        "--eval-freq", type=int, default=0, help="also time runs evaluating every N steps"
+    )
+    p.add_argument("--eval-episodes", type=int, default=10, help="episodes per evaluation")
+    p.add_argument(
         "--clock", choices=("wall", "cpu"), default="wall", help="the clock of the ratios"
     )
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     warnings.filterwarnings("ignore", message=".*is out of date.*")  # tasks pin their -v0
-    contenders: dict[str, Contender] = {"torch-ppo": _ppo(train_torch_ppo)}
-    if args.baseline is not None:
-        contenders["baseline"] = _ppo(load_baseline(args.baseline).train_torch_ppo)
-    contenders["CleanRL-style"] = _plain(cleanrl_ppo)
-    contenders["env only"] = _plain(env_only)
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, "
         f"{args.threads} torch thread(s); B = {args.num_envs}, T = {args.num_steps}, "
         f"4 minibatches, 4 epochs, 64x64; median of {args.repeats} x {args.steps} steps; "
         f"ratios on {args.clock}-clock rates"
         + (f"; baseline: {args.baseline}" if args.baseline is not None else "")
+        + (f"; evaluations every {args.eval_freq:,} steps" if args.eval_freq else "")
     )
     col = 1 if args.clock == "cpu" else 0
     results = {}
@@ -284,20 +357,24 @@ def main(argv: Sequence[str] | None = None) -> dict[str, dict[str, tuple[float, 
             norm_obs=False,
             norm_reward=False,
         )
-        rates = measure(name, contenders, cfg, args.repeats)
+        rates = measure(name, contenders_for(name, args), cfg, args.repeats)
         results[name] = rates
         print(f"\n{name}")
-        print(f"  {'':<15}{'wall':>11}{'CPU':>11}  (steps/s){'last mean return':>22}")
+        print(f"  {'':<25}{'wall':>11}{'CPU':>11}  (steps/s){'last mean return':>22}")
         for who, (wall, cpu, last) in rates.items():
             ret = "" if np.isnan(last) else f"{last:22.6g}"
-            print(f"  {who:<15}{wall:>11,.0f}{cpu:>11,.0f}{'':10}{ret}")
-        ours = rates["torch-ppo"][col]
-        line = f"  torch-ppo / CleanRL-style: {ours / rates['CleanRL-style'][col]:.2f}x"
-        if "baseline" in rates:
-            line += f"; torch-ppo / baseline: {ours / rates['baseline'][col]:.2f}x"
-        line += f"; torch-ppo / env only: {ours / rates['env only'][col]:.2f}x"
-        print(line)
+            print(f"  {who:<25}{wall:>11,.0f}{cpu:>11,.0f}{'':10}{ret}")
+        print("  " + "; ".join(f"{a} / {b}: {r:.2f}x" for a, b, r in ratios(rates, col)))
     return results
+
+
+def ratios(rates: dict[str, tuple[float, float, float]], col: int) -> list[tuple[str, str, float]]:
+    """The printed ratios of column ``col`` (0 wall, 1 CPU): torch-ppo to the references."""
+    pairs = [("torch-ppo", "CleanRL-style"), ("torch-ppo", "baseline")]
+    pairs += [("torch-ppo + evaluations", "baseline + evaluations")]
+    pairs += [("torch-ppo + evaluations", "torch-ppo"), ("baseline + evaluations", "baseline")]
+    pairs += [("torch-ppo", "env only")]
+    return [(a, b, rates[a][col] / rates[b][col]) for a, b in pairs if a in rates and b in rates]
 
 
 if __name__ == "__main__":

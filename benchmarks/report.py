@@ -147,6 +147,30 @@ _train_fps = _figures(
     )
 )
 
+PPO_TASKS = (
+    "sparse/tracking-m6-1000004-v0",
+    "covariance/ch2-pv-2-v0",
+    "sensor-game/m10-strong-defender-v0",
+)
+"""The tasks of ``ppo_cleanrl.py``'s default run, one summary row each."""
+
+
+def _ppo_task(task: str) -> Figure:
+    block = rf"^{re.escape(task)}\n(?:  .*\n)*?"
+    ours = (
+        block
+        + r"  torch-ppo\s+[\d,]+\s+([\d,]+).*\n(?:  .*\n)*?  torch-ppo / CleanRL-style: ([\d.]+)x"
+    )
+    return Figure(
+        f"torch-ppo's steps/s vs a CleanRL-style PPO on the same env and settings, `{task}`, "
+        "B = 256, CPU time (`ppo_cleanrl.py --clock cpu`; target ≥ 1×)",
+        Read(ours, "{m[2]}× ({m[1]} steps/s)"),
+        Read(block + r"  CleanRL-style\s+[\d,]+\s+([\d,]+)", "CleanRL-style {m[1]} steps/s"),
+    )
+
+
+_ppo_cleanrl = _figures(*(_ppo_task(task) for task in PPO_TASKS))
+
 _env_step = _figures(
     Figure(
         "`gymnasium.make` view, expected dynamics (`env_step.py`; target 50,000 steps/s)",
@@ -327,6 +351,16 @@ BENCHES_BY_NAME = (
         _train_fps,
     ),
     Bench(
+        "ppo_cleanrl",
+        "ppo_cleanrl.py",
+        ("--clock", "cpu", "--steps", "65536", "--repeats", "3"),
+        ("--clock", "cpu", "--steps", "16384", "--repeats", "1"),
+        "torch-ppo's training steps/s against a CleanRL-style PPO on the same torch vector env "
+        "and settings, and the env alone with random legal actions (target >= 1x on CPU time, "
+        "one torch thread)",
+        _ppo_cleanrl,
+    ),
+    Bench(
         "sparse",
         "sparse.py",
         (),
@@ -376,6 +410,7 @@ ORDER = (
     "single_view",
     "vector",
     "train_fps",
+    "ppo_cleanrl",
     "env_step",
     "backends",
     "grid",
