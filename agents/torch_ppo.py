@@ -7,10 +7,18 @@ set of (T, B, ...) tensors there, and the actor-critic acts and learns there; no
 the host during a rollout except what the env itself needs (its few Python-level checks).
 
 - Discrete actions with action masks (the sparse attacker): the logits of illegal actions are set
-  to the dtype's minimum before sampling, so an illegal action has probability 0 exactly.
+  to the dtype's minimum before sampling, so an illegal action has probability 0 exactly; the
+  log-probabilities and the entropy are one fused masked log-softmax with a closed-form backward
+  (:func:`agents.torch_ops.masked_categorical`), no distribution objects.
 - Box actions (the covariance attacker, the detection defender): a Gaussian policy in the
   normalised space [-1, 1]^k (state-independent log std), clipped to it and mapped affinely to the
   env's bounds; the log-probability is of the unclipped draw (as CleanRL).
+- Speed: one pass of the actor per rollout step (the draw and its log-probability), rollouts
+  under ``torch.no_grad``, preallocated (T, B, ...) buffers, host syncs only to ask whether a
+  member was truncated (each step) and three times per iteration (all actions legal, the
+  episodes ended, the finite check), Adam's ``foreach`` step, tanh on the CPU from NumPy
+  (:class:`agents.torch_ops.Tanh`). Threads are the caller's: ``train.py`` runs one torch thread
+  (``--torch-threads``), the fastest for these 64-wide networks.
 - GAE(λ), the clipped surrogate, minibatch epochs, advantage normalisation, gradient clipping,
   optional linear learning-rate decay; running normalisation of observations and of rewards (by
   the running std of the return), both kept in the policy (saved with its weights).
