@@ -14,7 +14,9 @@ With ``--eval-freq N`` torch-ppo (and the baseline) also run as ``train.py`` run
 an evaluation (``agents.evaluate.evaluate``, ``--eval-episodes`` episodes of the task's single
 env, scored against its reference) every N steps: this checkout's on a snapshot of the policy in
 a background thread (:mod:`agents.background`), the baseline's inline with the baseline's own
-``agents/evaluate.py`` (which solved a game's LP again at every evaluation).
+``agents/evaluate.py`` (which solved a game's LP again at every evaluation); this checkout's
+evaluations inline too (``+ inline evals``), to tell the background thread's share from the
+rest.
 
 Every contender runs in this process, in turns within each round (the first round warms up
 and is dropped), with the same seed in a round and ``--threads`` torch threads; the figures are
@@ -25,7 +27,7 @@ baseline, and the mean episode return of the last iteration of torch-ppo and of 
 which).
 
     python benchmarks/ppo_cleanrl.py [--steps 200000] [--repeats 3] [--tasks NAME ...]
-        [--baseline DIR] [--eval-freq 0] [--clock wall|cpu] [--threads 1]
+        [--baseline DIR] [--eval-freq 0] [--clock wall|cpu] [--threads 1 [2 ...]]
 """
 
 from __future__ import annotations
@@ -246,7 +248,8 @@ def _ppo(train: Callable, evals: Evaluations | None = None, old_evaluate: Any = 
     """A contender running a ``train_torch_ppo`` (this checkout's or the baseline's).
 
     With ``evals``: evaluations as ``train.py`` makes them, on a snapshot in a background thread
-    (this checkout's), or inline with ``old_evaluate`` (the baseline's ``evaluate``).
+    (this checkout's), or inline with ``old_evaluate`` (the baseline's ``evaluate``, or this
+    checkout's to time the background thread's share).
     """
 
     def run(env: gym.vector.VectorEnv, cfg: TorchPPOConfig, seed: int) -> tuple[int, float]:
@@ -286,15 +289,32 @@ def contenders_for(task_name: str, args: argparse.Namespace) -> dict[str, Conten
     if args.eval_freq:
         evals = Evaluations(task_name, args.eval_freq, args.eval_episodes)
         out["torch-ppo + evaluations"] = _ppo(train_torch_ppo, evals)
+        out["torch-ppo + inline evals"] = _ppo(train_torch_ppo, evals, evaluate)
     if args.baseline is not None:
         old = load_baseline(args.baseline).train_torch_ppo
         out["baseline"] = _ppo(old)
         if evals is not None:
             old_evaluate = load_baseline(args.baseline, "evaluate").evaluate
             out["baseline + evaluations"] = _ppo(old, evals, old_evaluate)
+    for n in args.threads[1:]:
+        out[f"torch-ppo, {n} threads"] = _threads(n, out["torch-ppo"])
     out["CleanRL-style"] = _plain(cleanrl_ppo)
     out["env only"] = _plain(env_only)
     return out
+
+
+def _threads(n: int, run: Contender) -> Contender:
+    """``run`` with ``torch.set_num_threads(n)``, the process's setting restored after it."""
+
+    def threaded(env: gym.vector.VectorEnv, cfg: TorchPPOConfig, seed: int) -> tuple[int, float]:
+        before = torch.get_num_threads()
+        torch.set_num_threads(n)
+        try:
+            return run(env, cfg, seed)
+        finally:
+            torch.set_num_threads(before)
+
+    return threaded
 
 
 def measure(
@@ -327,7 +347,13 @@ def main(argv: Sequence[str] | None = None) -> dict[str, dict[str, tuple[float, 
     p.add_argument("--num-envs", type=int, default=256, help="members B")
     p.add_argument("--num-steps", type=int, default=16, help="rollout length T per member")
     p.add_argument("--tasks", nargs="+", default=list(TASKS), help="benchmark task names")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (torch.set_num_threads)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        nargs="+",
+        default=[1],
+        help="torch threads of every loop; more values time torch-ppo with those too",
+    )
     p.add_argument("--baseline", type=Path, help="a checkout of an older commit to time too")
     p.add_argument(
         "--eval-freq", type=int, default=0, help="also time runs evaluating every N steps"
@@ -337,11 +363,11 @@ def main(argv: Sequence[str] | None = None) -> dict[str, dict[str, tuple[float, 
         "--clock", choices=("wall", "cpu"), default="wall", help="the clock of the ratios"
     )
     args = p.parse_args(argv)
-    torch.set_num_threads(args.threads)
+    torch.set_num_threads(args.threads[0])
     warnings.filterwarnings("ignore", message=".*is out of date.*")  # tasks pin their -v0
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}, "
-        f"{args.threads} torch thread(s); B = {args.num_envs}, T = {args.num_steps}, "
+        f"{args.threads[0]} torch thread(s); B = {args.num_envs}, T = {args.num_steps}, "
         f"4 minibatches, 4 epochs, 64x64; median of {args.repeats} x {args.steps} steps; "
         f"ratios on {args.clock}-clock rates"
         + (f"; baseline: {args.baseline}" if args.baseline is not None else "")
@@ -373,6 +399,8 @@ def ratios(rates: dict[str, tuple[float, float, float]], col: int) -> list[tuple
     pairs = [("torch-ppo", "CleanRL-style"), ("torch-ppo", "baseline")]
     pairs += [("torch-ppo + evaluations", "baseline + evaluations")]
     pairs += [("torch-ppo + evaluations", "torch-ppo"), ("baseline + evaluations", "baseline")]
+    pairs += [("torch-ppo + evaluations", "torch-ppo + inline evals")]
+    pairs += [(a, "torch-ppo") for a in rates if a.startswith("torch-ppo, ")]
     pairs += [("torch-ppo", "env only")]
     return [(a, b, rates[a][col] / rates[b][col]) for a, b in pairs if a in rates and b in rates]
 
