@@ -27,7 +27,7 @@ import numpy as np
 import scipy.stats
 from gymnasium import spaces
 
-from agents.registry import Reference, by_gym_id, parallel_of
+from agents.registry import Reference, by_gym_id, equilibrium, parallel_of
 from fdia_env.actions import check_action
 from fdia_env.envs.policy import MaskedPolicyBase, Policy, batch_size
 
@@ -507,31 +507,6 @@ def _bayesian_score(
     return float(expl), extras
 
 
-_SOLVED: dict[int, tuple[np.ndarray, tuple]] = {}
-_MAX_SOLVED = 8
-
-
-def solve_cached(L: np.ndarray) -> tuple:
-    """``baselines.game.solve_zero_sum(L)``, kept for the last few read-only matrices.
-
-    A read-only matrix (the registry's cached games) cannot change, so its LP solution
-    (seconds for a 1,023-strategy game) is computed once however many evaluations score
-    against it.
-    """
-    from baselines.game import solve_zero_sum
-
-    if np.asarray(L).flags.writeable:
-        return solve_zero_sum(L)
-    hit = _SOLVED.get(id(L))
-    if hit is not None and hit[0] is L:
-        return hit[1]
-    out = solve_zero_sum(L)
-    if len(_SOLVED) >= _MAX_SOLVED:
-        _SOLVED.pop(next(iter(_SOLVED)))
-    _SOLVED[id(L)] = (L, out)
-    return out
-
-
 def _game_score(
     reference: Reference, env: gym.Env, strategy: np.ndarray
 ) -> tuple[float, dict[str, float]]:
@@ -540,7 +515,7 @@ def _game_score(
     if reference.bayes is not None:
         return _bayesian_score(reference, env, strategy)
     L = reference.payoff
-    x_eq, y_eq, value = solve_cached(L)
+    x_eq, y_eq, value = equilibrium(L)
     parallel = parallel_of(env)
     agent = env.unwrapped.agent
     if agent == "attacker":

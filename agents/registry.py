@@ -17,6 +17,7 @@ as its reference).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -223,6 +224,34 @@ def game_reference(env: FdiaParallelEnv, agent: str = "attacker") -> Reference |
     return Reference(value, "game value (LP)", "trace", True, L, MixedStrategyPolicy(y, seed=0))
 
 
+_EQUILIBRIA: dict[tuple, tuple[np.ndarray, np.ndarray, float]] = {}
+_MAX_EQUILIBRIA = 8
+
+
+def equilibrium(L: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`baselines.game.solve_zero_sum` of ``L``, solved once per matrix (read-only).
+
+    Every evaluation of a game policy scores it against the same payoff matrix; HiGHS takes
+    seconds on the 1,023 × 1,023 games, so the equilibrium is kept for the last few matrices,
+    keyed by their contents (a BLAKE2 digest of the bytes: a matrix changed in place is solved
+    again).
+    """
+    from baselines.game import solve_zero_sum
+
+    L = np.ascontiguousarray(L, dtype=np.float64)
+    key = (L.shape, hashlib.blake2b(L.view(np.uint8), digest_size=32).digest())
+    hit = _EQUILIBRIA.get(key)
+    if hit is None:
+        x, y, value = solve_zero_sum(L)
+        x.setflags(write=False)
+        y.setflags(write=False)
+        hit = (x, y, value)
+        if len(_EQUILIBRIA) >= _MAX_EQUILIBRIA:
+            _EQUILIBRIA.pop(next(iter(_EQUILIBRIA)))
+        _EQUILIBRIA[key] = hit
+    return hit
+
+
 _GAMES: dict[tuple[str, float, str, int | None], tuple[Any, tuple]] = {}
 _MAX_GAMES = 8
 _BAYESIAN: dict[tuple, tuple[Any, Any]] = {}
@@ -297,7 +326,7 @@ def _solved_game(
     equal to the one it was solved for (:func:`_same_scenario`: a preset rebuilt by every env
     is the same scenario, not the same object).
     """
-    from baselines.game import payoff_matrix, solve_zero_sum
+    from baselines.game import payoff_matrix
 
     key = (str(getattr(scenario, "name", id(scenario))), float(power), str(allocation))
     key += (max_subset_size,)
@@ -310,7 +339,7 @@ def _solved_game(
     if L is None:
         L = payoff_matrix(scenario, power, allocation, max_subset_size)
         L.setflags(write=False)
-    solved = (L, *solve_zero_sum(L))
+    solved = (L, *equilibrium(L))
     if len(_GAMES) >= _MAX_GAMES:
         _GAMES.pop(next(iter(_GAMES)))
     _GAMES[key] = (scenario, solved)

@@ -56,7 +56,7 @@ from agents.config import (
     scenario_defaults,
     with_defaults,
 )
-from agents.evaluate import Evaluation, evaluate, solve_cached
+from agents.evaluate import Evaluation, evaluate
 from agents.interrupt import StopRequest, StopTrainingCallback
 from agents.lifecycle import game_scores, open_run, tensorboard
 from agents.plots import exploitability_curve
@@ -75,7 +75,7 @@ from agents.population import (
     report_line,
     run_population,
 )
-from agents.registry import Reference, Trainable, game_names, get
+from agents.registry import Reference, Trainable, equilibrium, game_names, get
 from agents.runs import run_prefix, write_json
 from agents.seeding import derived_seed, seed_everything
 from agents.training import (
@@ -888,7 +888,7 @@ def _final_evaluations(
 ) -> dict[str, Evaluation]:
     """Each side's learned mix and LP equilibrium mix, played against the other learned mix."""
     seed = derived_seed(cfg.run.seed, 20_000)
-    x_eq, y_eq, _ = solve_cached(reference.payoff)
+    x_eq, y_eq, _ = equilibrium(reference.payoff)
     rows = {}
     for label, side, probs, other in (
         ("attacker mix (learned)", "attacker", y, x),

@@ -7,10 +7,18 @@ set of (T, B, ...) tensors there, and the actor-critic acts and learns there; no
 the host during a rollout except what the env itself needs (its few Python-level checks).
 
 - Discrete actions with action masks (the sparse attacker): the logits of illegal actions are set
-  to the dtype's minimum before sampling, so an illegal action has probability 0 exactly.
+  to the dtype's minimum before sampling, so an illegal action has probability 0 exactly; the
+  log-probabilities and the entropy are one fused masked log-softmax with a closed-form backward
+  (:func:`agents.torch_ops.masked_categorical`), no distribution objects.
 - Box actions (the covariance attacker, the detection defender): a Gaussian policy in the
   normalised space [-1, 1]^k (state-independent log std), clipped to it and mapped affinely to the
   env's bounds; the log-probability is of the unclipped draw (as CleanRL).
+- Speed: one pass of the actor per rollout step (the draw and its log-probability), rollouts
+  under ``torch.no_grad``, preallocated (T, B, ...) buffers, host syncs only to ask whether a
+  member was truncated (each step) and three times per iteration (all actions legal, the
+  episodes ended, the finite check), Adam's ``foreach`` step, tanh on the CPU from NumPy
+  (:class:`agents.torch_ops.Tanh`). Threads are the caller's: ``train.py`` runs one torch thread
+  (``--torch-threads``), the fastest for these 64-wide networks.
 - GAE(λ), the clipped surrogate, minibatch epochs, advantage normalisation, gradient clipping,
   optional linear learning-rate decay; running normalisation of observations and of rewards (by
   the running std of the return), both kept in the policy (saved with its weights).
@@ -28,6 +36,7 @@ the host during a rollout except what the env itself needs (its few Python-level
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
@@ -52,6 +61,15 @@ from agents.checkpoint import (
     tensor_file,
 )
 from agents.options import check_int, check_real
+from agents.torch_ops import (
+    Tanh,
+    categorical_log_prob,
+    gumbel_max,
+    mask_logits,
+    masked_categorical,
+    normal_entropy,
+    normal_log_prob,
+)
 
 ALGO = "torch-ppo"
 FORMAT = "fdia_env-torch-ppo-v1"
@@ -187,7 +205,7 @@ def _layer(n_in: int, n_out: int, std: float) -> nn.Linear:
 def _mlp(n_in: int, hidden: tuple[int, ...], n_out: int, out_std: float) -> nn.Sequential:
     layers: list[nn.Module] = []
     for size in hidden:
-        layers += [_layer(n_in, size, math.sqrt(2)), nn.Tanh()]
+        layers += [_layer(n_in, size, math.sqrt(2)), Tanh()]
         n_in = size
     return nn.Sequential(*layers, _layer(n_in, n_out, out_std))
 
@@ -293,25 +311,33 @@ class ActorCritic(nn.Module):
         out = self.actor(x)
         if self.box:
             return out, self.log_std.exp().expand_as(out)
-        if mask is not None:
-            out = out.masked_fill(~mask, torch.finfo(out.dtype).min)
-        return out, None
+        return mask_logits(out, mask), None
 
     def log_prob_entropy(
         self, x: torch.Tensor, action: torch.Tensor, mask: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The log-probability log π(action | x) and the entropy of π(· | x), each (N,)."""
+        """The log-probability log π(action | x) and the entropy of π(· | x), each (N,).
+
+        Discrete: :func:`agents.torch_ops.masked_categorical` (one fused masked
+        log-softmax); Box: the Gaussian's, as ``torch.distributions.Normal`` computes them.
+        """
+        out = self.actor(x)
+        if self.box:
+            std = self.log_std.exp().expand_as(out)  # a NaN mean passes: Diverged reports it
+            return normal_log_prob(out, std, action), normal_entropy(std)
+        return masked_categorical(out, action, mask)
+
+    def act(
+        self, x: torch.Tensor, mask: torch.Tensor | None, generator: torch.Generator | None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """A rollout step's draw and its log-probability, from one pass of the actor."""
         a, b = self.distribution(x, mask)
         if self.box:
-            dist = torch.distributions.Normal(a, b, validate_args=False)  # NaN: Diverged
-            return dist.log_prob(action).sum(-1), dist.entropy().sum(-1)
-        logp_all = torch.log_softmax(a, -1)
-        probs = logp_all.exp()
-        plogp = probs * logp_all
-        if mask is not None:
-            plogp = torch.where(mask, plogp, torch.zeros_like(plogp))
-        logp = logp_all.gather(-1, action.long().unsqueeze(-1)).squeeze(-1)
-        return logp, -plogp.sum(-1)
+            noise = torch.randn(a.shape, generator=generator, device=a.device, dtype=a.dtype)
+            action = a + b * noise
+            return action, normal_log_prob(a, b, action)
+        action = gumbel_max(a, generator)
+        return action, categorical_log_prob(a, action)
 
     def sample(
         self,
@@ -329,9 +355,7 @@ class ActorCritic(nn.Module):
             return a + b * noise
         if deterministic:
             return a.argmax(-1)
-        u = torch.rand(a.shape, generator=generator, device=a.device, dtype=a.dtype)
-        gumbel = -torch.log(-torch.log(u.clamp_min(1e-20)))
-        return (a + gumbel).argmax(-1)  # Gumbel-max: a draw from softmax(a)
+        return gumbel_max(a, generator)
 
     def to_env(self, action: torch.Tensor) -> torch.Tensor:
         """The env's action: discrete as is; Box clipped to [-1, 1] and mapped to its bounds."""
@@ -351,8 +375,13 @@ class TorchPolicy:
 
     def __init__(self, model: ActorCritic, seed: int = 0) -> None:
         self.model = model.eval()
+        self.seed = int(seed)
         self.device = next(model.parameters()).device
-        self.generator = torch.Generator(device=self.device).manual_seed(int(seed))
+        self.generator = torch.Generator(device=self.device).manual_seed(self.seed)
+
+    def snapshot(self) -> TorchPolicy:
+        """A policy on a copy of the weights and statistics (later training leaves it as is)."""
+        return TorchPolicy(copy.deepcopy(self.model), self.seed)
 
     @property
     def spec(self) -> PolicySpec:
@@ -542,7 +571,9 @@ def train_torch_ppo(
             bias.zero_()
             bias[0] = math.log(config.stop_prob / (1 - config.stop_prob) * (spec.n - 1))
     gen = torch.Generator(device=device).manual_seed(seed)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=1e-5)
+    params = list(model.parameters())
+    # foreach: one kernel per step for all tensors, the single-tensor loop's results bit for bit
+    optimizer = torch.optim.Adam(params, lr=config.learning_rate, eps=1e-5, foreach=True)
     masked = spec.kind == "discrete"
     d = spec.obs_dim
     act_shape = () if masked else (spec.n,)
@@ -599,8 +630,7 @@ def train_torch_ppo(
                     model.update_obs_stats(next_obs)
                 x = model.normalize(next_obs)
                 mask = env.action_masks() if masked else None
-                action = model.sample(x, mask, gen)
-                logp, _ = model.log_prob_entropy(x, action, mask)
+                action, logp = model.act(x, mask, gen)  # one pass of the actor
                 obs_buf[t] = x
                 act_buf[t] = action
                 logp_buf[t] = logp
@@ -632,15 +662,17 @@ def train_torch_ppo(
 
         b_obs, b_act = obs_buf.reshape(B * T, d), act_buf.reshape(B * T, *act_shape)
         b_logp, b_adv, b_ret = logp_buf.reshape(-1), adv.reshape(-1), returns.reshape(-1)
-        b_mask = mask_buf.reshape(B * T, spec.n) if masked else None
+        # a rollout where every action was legal needs no masking (one host sync)
+        b_mask = mask_buf.reshape(B * T, spec.n) if masked and not mask_buf.all() else None
         mb = B * T // config.num_minibatches
         first_bad = torch.zeros((), device=device, dtype=torch.int8)  # 1 loss, 2 gradient
         for _ in range(config.update_epochs):
             order = torch.randperm(B * T, generator=gen, device=device)
             for k in range(config.num_minibatches):
                 idx = order[k * mb : (k + 1) * mb]
+                obs = b_obs[idx]
                 new_logp, entropy = model.log_prob_entropy(
-                    b_obs[idx], b_act[idx], None if b_mask is None else b_mask[idx]
+                    obs, b_act[idx], None if b_mask is None else b_mask[idx]
                 )
                 ratio = (new_logp - b_logp[idx]).exp()
                 a = b_adv[idx]
@@ -649,11 +681,11 @@ def train_torch_ppo(
                 pg_loss = torch.max(
                     -a * ratio, -a * ratio.clamp(1 - config.clip_coef, 1 + config.clip_coef)
                 ).mean()
-                v_loss = 0.5 * ((model.value(b_obs[idx]) - b_ret[idx]) ** 2).mean()
+                v_loss = 0.5 * ((model.value(obs) - b_ret[idx]) ** 2).mean()
                 loss = pg_loss - config.ent_coef * entropy.mean() + config.vf_coef * v_loss
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                norm = nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
+                norm = nn.utils.clip_grad_norm_(params, config.max_grad_norm)
                 now = torch.where(~torch.isfinite(loss.detach()), 1, 2 * ~torch.isfinite(norm))
                 first_bad = torch.where(first_bad == 0, now.to(first_bad.dtype), first_bad)
                 optimizer.step()
@@ -733,6 +765,8 @@ def _restore(
     try:
         model.load_state_dict(resume.model, strict=True)
         optimizer.load_state_dict(_to_cpu(resume.optimizer))  # a copy: Adam updates in place
+        for group in optimizer.param_groups:  # a state saved without foreach keeps its speed
+            group["foreach"] = True
         gen.set_state(resume.generator.cpu())
         ret_stats.copy_(resume.ret_stats.to(ret_stats))
     except (KeyError, RuntimeError, ValueError, TypeError) as exc:

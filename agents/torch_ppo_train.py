@@ -2,16 +2,19 @@
 
 The same run folder and scoring as the stable-baselines3 runs (:mod:`agents.training`):
 ``config.json``, ``evaluations.jsonl`` (an :func:`agents.evaluate.evaluate` of the policy every
-``eval_freq`` steps, at iteration boundaries), ``model.json`` / ``model.pt`` (the final policy in
-the tensor-only format of :func:`agents.torch_ppo.save_policy`), ``scores.json`` and
+``eval_freq`` steps, at iteration boundaries: of a snapshot of the weights, run by a background
+thread while training goes on, :mod:`agents.background`), ``model.json`` / ``model.pt`` (the final
+policy in the tensor-only format of :func:`agents.torch_ppo.save_policy`), ``scores.json`` and
 ``learning_curve.png``; the final table scores the learned policy, the analytic answer and random
-play against the registry's reference. Training runs on ``--device`` with ``--num-envs`` members
-of the torch vector env. ``checkpoints/state.json`` + ``state.pt`` hold the training state
-(weights, Adam's moments, the device generator, the return statistics, the counters; tensors only,
-SHA-256 checked) every ``--checkpoint-freq`` steps and when training ends or is stopped
-(SIGINT/SIGTERM end it after the current iteration), so ``--resume`` continues a stopped run; the
-env members start fresh episodes there. Not supported here: ``--opponent equilibrium`` (a fixed
-mix is drawn on the device: the uniform one).
+play against the registry's reference. Training runs on ``--device`` with ``--num-envs`` members of
+the torch vector env. ``checkpoints/state.json`` + ``state.pt`` hold the training state (weights,
+Adam's moments, the device generator, the return statistics, the counters; tensors only, SHA-256
+checked) every ``--checkpoint-freq`` steps and when training ends or is stopped (SIGINT/SIGTERM end
+it after the current iteration), so ``--resume`` continues a stopped run; the env members start
+fresh episodes there. The checkpoints are written by the same background thread, after the
+evaluations queued before them: a run killed at any moment resumes from a checkpoint whose
+evaluations are on disk. Not supported here: ``--opponent equilibrium`` (a fixed mix is drawn on
+the device: the uniform one).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from agents.background import Background
 from agents.config import (
     TORCH_PPO,
     TORCH_PPO_NUM_ENVS,
@@ -209,13 +213,19 @@ def train_torch_ppo_run(
         eval_seed = derived_seed(cfg.run.seed, 10_000)
         state = {"next": (done // cfg.eval_freq + 1) * cfg.eval_freq if cfg.eval_freq else 0}
 
+        # evaluations and checkpoint writes run in order on one worker while training goes on
+        jobs = stack.enter_context(Background("torch-ppo-evaluations"))
+
+        def evaluation(policy: TorchPolicy, timesteps: int, seconds: float) -> None:
+            ev = evaluate(policy, eval_env, cfg.eval_episodes, eval_seed, reference)
+            history.append(history_record(ev, timesteps, seconds))
+            write_jsonl(history_path, history)
+
         def on_iteration(record: dict[str, float], policy: TorchPolicy) -> None:
             if not cfg.eval_freq or record["timesteps"] < state["next"]:
                 return
             state["next"] = (record["timesteps"] // cfg.eval_freq + 1) * cfg.eval_freq
-            ev = evaluate(policy, eval_env, cfg.eval_episodes, eval_seed, reference)
-            history.append(history_record(ev, record["timesteps"], record["seconds"]))
-            write_jsonl(history_path, history)
+            jobs.submit(evaluation, policy.snapshot(), record["timesteps"], record["seconds"])
 
         try:
             result = train_torch_ppo(
@@ -225,11 +235,13 @@ def train_torch_ppo_run(
                 stop=lambda: stop.requested,
                 log=on_iteration,
                 resume=resume,
-                checkpoint=lambda st: save_training_state(st, run_dir / CHECKPOINT),
+                checkpoint=lambda st: jobs.submit(save_training_state, st, run_dir / CHECKPOINT),
                 checkpoint_freq=cfg.checkpoint_freq,
             )
         except Diverged as exc:
+            jobs.drain()  # the last good checkpoint and its evaluations are written
             raise run.diverged(exc) from None
+        jobs.drain()
         save_policy(result.policy, run_dir / "model.json", config, result.timesteps)
 
         final_seed = derived_seed(cfg.run.seed, 20_000)
