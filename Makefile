@@ -38,9 +38,10 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 
 # single-threaded BLAS: the tiny LAPACK calls of the suite run several times slower with two
-# threads on a 2-core machine that is doing anything else
+# threads on a 2-core machine that is doing anything else; one pytest worker per core
+# (pytest-xdist), each test file on one worker
 test: lint
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n auto --dist loadfile
 
 # the documentation site, warnings as errors (python docs/screenshot.py then checks it renders)
 docs: $(STAMP)
