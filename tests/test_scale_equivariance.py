@@ -42,7 +42,7 @@ pytestmark = pytest.mark.filterwarnings("ignore")
 
 
 def two_state(s: float) -> LinearSystem:
-    """The red team's system (issue 42): Q, R and P0 scaled by ``s``."""
+    """The red team's system: Q, R and P0 scaled by ``s``."""
     return LinearSystem(
         F=np.array([[-0.22, -0.09], [-0.46, -0.36]]),
         Q=np.array([[1.7, -0.8], [-0.8, 0.8]]) * s,
